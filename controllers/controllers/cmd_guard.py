@@ -1,0 +1,72 @@
+"""Safety filter for velocity commands: reject non-finite values, clamp, and time out."""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Optional, Sequence, Tuple
+
+
+@dataclass(frozen=True)
+class GuardResult:
+    """What the guard made of one command."""
+
+    accepted: bool
+    command: Tuple[float, ...]
+    clamped: bool = False
+    reason: str = ''
+
+
+class CommandGuard:
+    """Holds the last valid command and applies limits and a timeout (all times in seconds).
+
+    The clock is the caller's (simulated time in the simulator), so the guard itself is pure.
+    A rejected command zeroes the held command: a controller that sends garbage must not leave
+    the robot driving on its previous command.
+    """
+
+    def __init__(self, limits: Sequence[float], timeout: float) -> None:
+        if any(not (lim > 0.0 and math.isfinite(lim)) for lim in limits):
+            raise ValueError(f'limits must be finite and > 0, got {list(limits)}')
+        if not (timeout > 0.0 and math.isfinite(timeout)):
+            raise ValueError(f'timeout must be finite and > 0, got {timeout}')
+        self._limits = tuple(float(lim) for lim in limits)
+        self._timeout = float(timeout)
+        self._command = tuple(0.0 for _ in self._limits)
+        self._stamp: Optional[float] = None
+
+    @property
+    def timeout(self) -> float:
+        return self._timeout
+
+    @property
+    def limits(self) -> Tuple[float, ...]:
+        return self._limits
+
+    def submit(self, command: Sequence[float], now: float) -> GuardResult:
+        if len(command) != len(self._limits):
+            raise ValueError(f'expected {len(self._limits)} components, got {len(command)}')
+        if not all(math.isfinite(c) for c in command):
+            self.stop()
+            return GuardResult(False, self._command,
+                               reason=f'non-finite command {list(command)} rejected; stopping')
+        clamped = tuple(max(-lim, min(lim, float(c))) for c, lim in zip(command, self._limits))
+        self._command = clamped
+        self._stamp = now
+        return GuardResult(True, clamped, clamped=clamped != tuple(float(c) for c in command))
+
+    def active_command(self, now: float) -> Tuple[float, ...]:
+        """The command to apply at time ``now``: zero once the last one is older than timeout."""
+        if self._stamp is None or now - self._stamp > self._timeout or now < self._stamp:
+            return tuple(0.0 for _ in self._limits)
+        return self._command
+
+    def expiry(self) -> Optional[float]:
+        """The time after which the held command no longer applies (None: nothing held)."""
+        return None if self._stamp is None else self._stamp + self._timeout
+
+    def timed_out(self, now: float) -> bool:
+        return self._stamp is not None and (now - self._stamp > self._timeout)
+
+    def stop(self) -> None:
+        self._command = tuple(0.0 for _ in self._limits)
+        self._stamp = None

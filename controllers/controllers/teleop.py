@@ -1,0 +1,223 @@
+"""Keyboard teleop for the mini robot (the report's buttons), or a timed script of commands."""
+from __future__ import annotations
+
+import os
+import select
+import signal
+import sys
+import termios
+import threading
+import time
+import tty
+from typing import Optional
+
+import rclpy
+from geometry_msgs.msg import Twist, TwistStamped
+from rcl_interfaces.msg import FloatingPointRange, ParameterDescriptor
+from rclpy.duration import Duration
+from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
+from rclpy.node import Node
+from rclpy.qos import QoSProfile
+from rclpy.signals import SignalHandlerOptions
+
+from controllers.teleop_core import HELP, TeleopError, TeleopScript, TeleopState, parse_script
+
+
+def _float(description: str, lo: float, hi: float) -> ParameterDescriptor:
+    return ParameterDescriptor(description=description, read_only=True,
+                               floating_point_range=[FloatingPointRange(
+                                   from_value=lo, to_value=hi, step=0.0)])
+
+
+class TeleopNode(Node):
+
+    def __init__(self, **kwargs) -> None:
+        super().__init__('teleop', **kwargs)
+        self.declare_parameter('max_speed', 0.2, _float('Speed at 100 % [m/s]', 1e-3, 10.0))
+        self.declare_parameter('max_turn', 0.2, _float('Turn rate at 100 % [rad/s]', 1e-3, 20.0))
+        self.declare_parameter('speed', 0.5, _float(
+            'Initial speed level, a fraction of max_speed and max_turn (the report: 0.5)',
+            0.0, 1.0))
+        self.declare_parameter('publish_rate', 20.0, _float(
+            'Rate of cmd_vel while a motion is active [Hz]', 0.5, 200.0))
+        self.declare_parameter('stamped', False, ParameterDescriptor(
+            description='Publish geometry_msgs/TwistStamped instead of Twist', read_only=True))
+        self.declare_parameter('script', '', ParameterDescriptor(
+            description='Timed commands, e.g. "forward 2s, left 1.5s, stop"; empty: keyboard',
+            read_only=True))
+        self.declare_parameter('wait_for_subscriber', 10.0, _float(
+            'Script mode: wall seconds to wait for a cmd_vel subscriber before starting',
+            0.0, 600.0))
+        get = lambda name: self.get_parameter(name).value  # noqa: E731
+        self.state = TeleopState(get('max_speed'), get('max_turn'), get('speed'))
+        self.script: Optional[TeleopScript] = None
+        if get('script').strip():
+            self.script = parse_script(get('script'), get('max_speed'), get('max_turn'),
+                                       get('speed'))
+        self._stamped = get('stamped')
+        self.wait_for_subscriber = get('wait_for_subscriber')
+        self._pub = self.create_publisher(TwistStamped if self._stamped else Twist, 'cmd_vel',
+                                          QoSProfile(depth=10))
+        self._lock = threading.Lock()
+        self._script_start = None
+        self._script_step = None
+        self.finished = threading.Event()
+        self._timer = self.create_timer(1.0 / get('publish_rate'), self._on_timer)
+        if self.script is not None:
+            self._timer.cancel()  # started by start_script() once a subscriber is there
+        self.get_logger().info(
+            f'publishing on {self._pub.topic_name}; '
+            + (f'script of {len(self.script.steps)} steps, {self.script.duration:.2f} s'
+               if self.script else 'keyboard mode'))
+
+    # --- keyboard mode ------------------------------------------------------------------
+    def press(self, key: str) -> Optional[str]:
+        with self._lock:
+            change = self.state.press(key)
+        if change is not None:
+            self.publish_current()
+        return change
+
+    def _on_timer(self) -> None:
+        if self.script is not None:
+            self._script_tick()
+            return
+        with self._lock:
+            active = self.state.motion != 'stop'
+        if active:
+            self.publish_current()
+
+    def publish_current(self) -> None:
+        with self._lock:
+            v, w = self.state.twist()
+        self.publish_twist(v, w)
+
+    def publish_twist(self, v: float, w: float) -> None:
+        twist = Twist()
+        twist.linear.x, twist.angular.z = float(v), float(w)
+        if self._stamped:
+            msg = TwistStamped(twist=twist)
+            msg.header.stamp = self.get_clock().now().to_msg()
+            self._pub.publish(msg)
+        else:
+            self._pub.publish(twist)
+
+    def wait_for_delivery(self, timeout_sec: float) -> bool:
+        """Wait until reliable subscribers acknowledged what was published (before exit)."""
+        return self._pub.wait_for_all_acked(Duration(seconds=timeout_sec))
+
+    def subscriber_count(self) -> int:
+        return self._pub.get_subscription_count()
+
+    # --- script mode --------------------------------------------------------------------
+    def start_script(self) -> None:
+        self._script_start = None
+        self._timer.reset()
+
+    def _script_tick(self) -> None:
+        now = self.get_clock().now()
+        if now.nanoseconds == 0:
+            return  # use_sim_time and no /clock yet
+        if self._script_start is None:
+            self._script_start = now
+        elapsed = (now - self._script_start).nanoseconds * 1e-9
+        step = self.script.command_at(elapsed)
+        if step is None:
+            self.publish_twist(0.0, 0.0)
+            self.get_logger().info(f'script done after {elapsed:.2f} s')
+            self._timer.cancel()
+            self.finished.set()
+            return
+        if step is not self._script_step:
+            self._script_step = step
+            self.get_logger().info(f't={elapsed:6.2f} s  {step.name:8s} v={step.v:+.3f} m/s '
+                                   f'w={step.w:+.3f} rad/s for {step.duration:g} s')
+        self.publish_twist(step.v, step.w)
+
+
+def _wait_for_subscriber(node: TeleopNode, executor, timeout: float) -> bool:
+    # Wall time: with use_sim_time the clock does not run before the simulator does.
+    end = time.monotonic() + timeout
+    while time.monotonic() < end:
+        if node.subscriber_count() > 0:
+            return True
+        executor.spin_once(timeout_sec=0.05)
+    return node.subscriber_count() > 0
+
+
+def _run_script(node: TeleopNode, executor) -> int:
+    if node.wait_for_subscriber > 0 and not _wait_for_subscriber(
+            node, executor, node.wait_for_subscriber):
+        node.get_logger().error(f'no subscriber on {node._pub.topic_name} after '
+                                f'{node.wait_for_subscriber:g} s; is the simulator running?')
+        return 1
+    node.start_script()
+    while rclpy.ok() and not node.finished.is_set():
+        executor.spin_once(timeout_sec=0.1)
+    return 0
+
+
+def _run_keyboard(node: TeleopNode, executor) -> int:
+    if not os.isatty(sys.stdin.fileno()):
+        node.get_logger().error('stdin is not a terminal: run in a terminal, or give '
+                                '-p script:="forward 2s, left 1.5s, stop"')
+        return 1
+    spinner = threading.Thread(target=executor.spin, daemon=True)
+    spinner.start()
+    print(HELP, flush=True)
+    fd = sys.stdin.fileno()
+    saved = termios.tcgetattr(fd)
+    try:
+        tty.setraw(fd)
+        while rclpy.ok():
+            ready, _, _ = select.select([sys.stdin], [], [], 0.1)
+            if not ready:
+                continue
+            key = os.read(fd, 1).decode(errors='ignore')
+            if key in ('\x03', '\x04'):  # Ctrl-C, Ctrl-D
+                break
+            change = node.press(key)
+            if change is not None:
+                v, w = node.state.twist()
+                sys.stdout.write(f'\r{change:10s} v={v:+.3f} m/s w={w:+.3f} rad/s\r\n')
+                sys.stdout.flush()
+    finally:
+        termios.tcsetattr(fd, termios.TCSADRAIN, saved)
+    return 0
+
+
+def _raise_interrupt(_signum, _frame) -> None:
+    raise KeyboardInterrupt
+
+
+def main(args=None) -> int:
+    # rclpy's own handlers would shut the context down before the zero twist could go out.
+    rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
+    signal.signal(signal.SIGINT, _raise_interrupt)
+    signal.signal(signal.SIGTERM, _raise_interrupt)
+    try:
+        node = TeleopNode()
+    except (TeleopError, rclpy.exceptions.ParameterException) as exc:
+        rclpy.logging.get_logger('teleop').fatal(f'cannot start: {exc}')
+        rclpy.try_shutdown()
+        return 1
+    executor = SingleThreadedExecutor()
+    executor.add_node(node)
+    code = 0
+    try:
+        code = _run_script(node, executor) if node.script else _run_keyboard(node, executor)
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    finally:
+        # Never leave the robot driving: a zero twist, whatever ended the session.
+        if rclpy.ok():
+            node.publish_twist(0.0, 0.0)
+            node.wait_for_delivery(1.0)
+        executor.shutdown(timeout_sec=0.5)
+        node.destroy_node()
+        rclpy.try_shutdown()
+    return code
+
+
+if __name__ == '__main__':
+    sys.exit(main())

@@ -1,0 +1,1 @@
+"""Camera-based perception. Vision sorting for the pipeline cell is planned (issue 5)."""

@@ -1,0 +1,1 @@
+"""Bring-up of the simulator with its nodes, and demo checks."""

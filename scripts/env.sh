@@ -1,0 +1,22 @@
+# Source this file to use the workspace: the venv, the ROS packages installed in it, and ros_ws.
+# (bash or zsh)  source scripts/env.sh
+_rs_root="$(cd "$(dirname "${BASH_SOURCE[0]:-$0}")/.." && pwd)"
+# shellcheck disable=SC1091
+source "$_rs_root/.venv/bin/activate"
+# The pip-installed ROS packages live in the venv prefix; the ament index must see them.
+case ":${AMENT_PREFIX_PATH:-}:" in
+  *":$_rs_root/.venv:"*) ;;
+  *) export AMENT_PREFIX_PATH="$_rs_root/.venv${AMENT_PREFIX_PATH:+:$AMENT_PREFIX_PATH}" ;;
+esac
+# shellcheck disable=SC1091
+source "$_rs_root/ros_ws/install/setup.bash"
+# ros2cli is not pip-installable: put each package's lib/<pkg> (where `ros2 run` looks) on PATH.
+for _rs_dir in "$_rs_root"/ros_ws/install/*/lib/*/; do
+  _rs_pkg="$(basename "$(dirname "$(dirname "$_rs_dir")")")"
+  if [ "$(basename "$_rs_dir")" = "$_rs_pkg" ]; then
+    _rs_abs="$(cd "$_rs_dir" && pwd)"
+    case ":$PATH:" in *":$_rs_abs:"*) ;; *) PATH="$_rs_abs:$PATH" ;; esac
+  fi
+done
+export PATH
+unset _rs_root _rs_dir _rs_pkg _rs_abs

@@ -1,0 +1,95 @@
+#!/usr/bin/env bash
+# Create .venv with the pinned packages and build ros_ws. Idempotent: each stage re-runs only
+# when its inputs changed, so a second run takes a few seconds.
+set -euo pipefail
+
+ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
+VENV="$ROOT/.venv"
+WS="$ROOT/ros_ws"
+STAMPS="$VENV/.stamps"
+PYTHON="${PYTHON:-python3}"
+
+log() { printf '[setup] %s\n' "$*"; }
+die() { printf '[setup] error: %s\n' "$*" >&2; exit 1; }
+
+hash_of() { sha256sum | cut -c1-32; }
+
+# --- 1. system prerequisites --------------------------------------------------------------
+# A C/C++ compiler builds the rosidl type support of ros_ws/src/sim_interfaces; venv and
+# ensurepip are split out of python3 on Debian and Ubuntu.
+missing=()
+command -v "$PYTHON" >/dev/null || die "$PYTHON not found; install Python 3.10-3.13"
+"$PYTHON" - <<'PY' || die "Python 3.10-3.13 is required"
+import sys
+sys.exit(0 if (3, 10) <= sys.version_info[:2] <= (3, 13) else 1)
+PY
+command -v cc >/dev/null || missing+=(gcc)
+command -v c++ >/dev/null || missing+=(g++)
+command -v make >/dev/null || missing+=(make)
+"$PYTHON" -c 'import ensurepip, venv' 2>/dev/null || missing+=("python3-venv")
+if [ ${#missing[@]} -gt 0 ]; then
+  pkgs="build-essential python3-venv python3-dev"
+  if command -v apt-get >/dev/null && [ "$(id -u)" = 0 ]; then
+    log "installing system packages: $pkgs"
+    apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq $pkgs >/dev/null
+  elif command -v apt-get >/dev/null && sudo -n true 2>/dev/null; then
+    log "installing system packages with sudo: $pkgs"
+    sudo apt-get update -qq && sudo DEBIAN_FRONTEND=noninteractive apt-get install -y -qq $pkgs
+  else
+    die "missing ${missing[*]}; run: sudo apt-get install $pkgs"
+  fi
+fi
+
+# --- 2. virtualenv with exact pins ------------------------------------------------------------
+pyver="$("$PYTHON" -c 'import sys; print("%d.%d" % sys.version_info[:2])')"
+if [ -x "$VENV/bin/python" ]; then
+  venv_ver="$("$VENV/bin/python" -c 'import sys; print("%d.%d" % sys.version_info[:2])' \
+    2>/dev/null || echo none)"
+  if [ "$venv_ver" != "$pyver" ]; then
+    log ".venv was made with Python $venv_ver, rebuilding with $pyver"
+    rm -rf "$VENV"
+  fi
+fi
+if [ ! -x "$VENV/bin/python" ]; then
+  log "creating .venv with $("$PYTHON" --version)"
+  "$PYTHON" -m venv "$VENV"
+fi
+mkdir -p "$STAMPS"
+req_hash="$(cat "$ROOT/requirements.txt" | hash_of)"
+if [ "$(cat "$STAMPS/requirements" 2>/dev/null)" != "$req_hash" ]; then
+  log "installing pinned packages (requirements.txt)"
+  "$VENV/bin/python" -m pip install -q --disable-pip-version-check --upgrade pip==24.3.1
+  "$VENV/bin/python" -m pip install -q --disable-pip-version-check -r "$ROOT/requirements.txt"
+  # The ROS wheels were built on a manylinux host: their CMake exports name that host's Python.
+  "$VENV/bin/python" "$ROOT/scripts/fix_wheel_cmake_paths.py" "$VENV"
+  echo "$req_hash" > "$STAMPS/requirements"
+  rm -f "$STAMPS/workspace"
+fi
+
+# --- 3. colcon workspace ----------------------------------------------------------------------
+# Rebuild when anything but Python source changed (the build is --symlink-install, so edits of
+# existing .py files are live); new or removed files change the listing and trigger a build.
+ws_hash="$(cd "$WS/src" && {
+  find -L . -type f ! -path '*/__pycache__/*' ! -name '*.pyc' | LC_ALL=C sort
+  find -L . -type f ! -path '*/__pycache__/*' ! -name '*.py' ! -name '*.pyc' -print0 \
+    | LC_ALL=C sort -z | xargs -0 cat
+} | hash_of)"
+if [ "$(cat "$STAMPS/workspace" 2>/dev/null)" != "$ws_hash" ] || [ ! -f "$WS/install/setup.bash" ]; then
+  log "building ros_ws with colcon"
+  mkdir -p "$WS/log"
+  (
+    cd "$WS"
+    export AMENT_PREFIX_PATH="$VENV" CMAKE_PREFIX_PATH="$VENV"
+    export PATH="$VENV/bin:$PATH"
+    # shellcheck disable=SC1091
+    source "$VENV/bin/activate"
+    colcon --log-base log build --symlink-install \
+      --event-handlers console_cohesion+ status- \
+      --cmake-args -DBUILD_TESTING=OFF -DPython3_EXECUTABLE="$VENV/bin/python" \
+      > "$WS/log/last_build_output.txt" 2>&1 || {
+        tail -60 "$WS/log/last_build_output.txt" >&2
+        die "colcon build failed (full output: ros_ws/log/last_build_output.txt)"; }
+  )
+  echo "$ws_hash" > "$STAMPS/workspace"
+fi
+log "ready: source scripts/env.sh to use the workspace"

@@ -1,0 +1,1 @@
+"""PyBullet simulator for ROS 2: a ROS-free world core and a thin node around it."""

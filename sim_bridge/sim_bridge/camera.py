@@ -1,0 +1,99 @@
+"""Pinhole camera model matching PyBullet's OpenGL projection, and a reusable image buffer."""
+from __future__ import annotations
+
+import array
+import math
+from dataclasses import dataclass
+from typing import Sequence, Tuple
+
+import numpy as np
+
+
+@dataclass(frozen=True)
+class Intrinsics:
+    width: int
+    height: int
+    fx: float
+    fy: float
+    cx: float
+    cy: float
+
+    @property
+    def k(self) -> Tuple[float, ...]:
+        """Row-major 3x3 camera matrix (sensor_msgs/CameraInfo.k)."""
+        return (self.fx, 0.0, self.cx, 0.0, self.fy, self.cy, 0.0, 0.0, 1.0)
+
+    @property
+    def p(self) -> Tuple[float, ...]:
+        """Row-major 3x4 projection matrix of a monocular camera (CameraInfo.p)."""
+        return (self.fx, 0.0, self.cx, 0.0, 0.0, self.fy, self.cy, 0.0, 0.0, 0.0, 1.0, 0.0)
+
+    def project(self, point_optical: Sequence[float]) -> Tuple[float, float]:
+        """Pixel (u, v) of a point in the optical frame; pixel centres are integers (ROS)."""
+        x, y, z = point_optical
+        return self.fx * x / z + self.cx, self.fy * y / z + self.cy
+
+
+def intrinsics_from_fov(width: int, height: int, vertical_fov_deg: float) -> Intrinsics:
+    """Intrinsics of PyBullet's computeProjectionMatrixFOV(fov, width/height, near, far).
+
+    OpenGL maps the vertical field of view onto the image height and keeps square pixels.
+    The optical axis lands at the image centre, width/2 in continuous coordinates where a
+    pixel spans [i, i+1); ROS puts pixel centres at integers, hence cx = (width - 1)/2.
+    """
+    fy = 0.5 * height / math.tan(math.radians(vertical_fov_deg) / 2.0)
+    return Intrinsics(width, height, fy, fy, (width - 1) / 2.0, (height - 1) / 2.0)
+
+
+def projection_matrix(width: int, height: int, vertical_fov_deg: float, near: float,
+                      far: float) -> Tuple[float, ...]:
+    """The column-major OpenGL matrix PyBullet's computeProjectionMatrixFOV returns."""
+    f = 1.0 / math.tan(math.radians(vertical_fov_deg) / 2.0)
+    aspect = width / height
+    return (f / aspect, 0.0, 0.0, 0.0,
+            0.0, f, 0.0, 0.0,
+            0.0, 0.0, (far + near) / (near - far), -1.0,
+            0.0, 0.0, 2.0 * far * near / (near - far), 0.0)
+
+
+def view_matrix_from_optical(position: Sequence[float], rotation: np.ndarray
+                             ) -> Tuple[float, ...]:
+    """Column-major OpenGL view matrix of a camera whose optical frame has this world pose.
+
+    Optical frame: z forward, x right, y down. OpenGL's camera looks along -z with y up, so its
+    axes are (x, -y, -z) of the optical frame.
+    """
+    r_gl = np.column_stack((rotation[:, 0], -rotation[:, 1], -rotation[:, 2]))
+    view = np.eye(4)
+    view[:3, :3] = r_gl.T
+    view[:3, 3] = -r_gl.T @ np.asarray(position, dtype=float)
+    return tuple(view.T.ravel())
+
+
+def look_at_rotation(position: Sequence[float], target: Sequence[float]) -> np.ndarray:
+    """Rotation of an optical frame at ``position`` looking at ``target`` with world z up."""
+    z = np.asarray(target, float) - np.asarray(position, float)
+    z /= np.linalg.norm(z)
+    up = np.array([0.0, 0.0, 1.0]) if abs(z[2]) < 0.999 else np.array([1.0, 0.0, 0.0])
+    x = np.cross(z, up)
+    x /= np.linalg.norm(x)
+    y = np.cross(z, x)
+    return np.column_stack((x, y, z))
+
+
+class ImageBuffer:
+    """One rgb8 byte buffer reused for every frame.
+
+    rclpy copies a numpy array into Image.data element by element (about 140 ms at 640x480);
+    an ``array.array('B')`` is taken as is, and writing into a numpy view of it costs a memcpy.
+    """
+
+    def __init__(self, width: int, height: int) -> None:
+        self.width, self.height = width, height
+        self.data = array.array('B', bytes(width * height * 3))
+        self._view = np.frombuffer(self.data, dtype=np.uint8).reshape(height, width, 3)
+
+    def fill_from_rgba(self, rgba: np.ndarray) -> array.array:
+        rgba = np.asarray(rgba, dtype=np.uint8).reshape(self.height, self.width, 4)
+        self._view[...] = rgba[:, :, :3]
+        return self.data

@@ -1,0 +1,105 @@
+"""One place that advances the physics: applies guarded commands, steps, schedules outputs."""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Dict, List, Protocol
+
+import numpy as np
+
+from controllers.cmd_guard import CommandGuard, GuardResult
+from sim_bridge.world import SimWorld
+
+
+class StepSink(Protocol):
+    """Receives what a step produces; the ROS node implements it by publishing."""
+
+    def on_clock(self, time_ns: int) -> None: ...
+
+    def on_state(self, robot: str, time_ns: int) -> None: ...
+
+    def camera_wanted(self, index: int) -> bool: ...
+
+    def on_camera(self, index: int, rgba: np.ndarray, time_ns: int) -> None: ...
+
+    def on_command_timeout(self, robot: str) -> None: ...
+
+
+@dataclass(frozen=True)
+class DriveLimits:
+    max_speed: float = 0.2
+    max_turn: float = 0.2
+    cmd_vel_timeout: float = 0.5
+
+
+class SimRunner:
+    """Advances a SimWorld step by step.
+
+    Each step: the command of every driven robot is taken from its guard (which zeroes it once
+    it is older than the timeout, in simulated time), physics advances one fixed step, then
+    /clock is due, robot states are due every ``state_period`` steps, and each camera is due at
+    its own rate, and only rendered when the sink wants it (someone subscribes).
+    """
+
+    def __init__(self, world: SimWorld, limits: DriveLimits, state_rate: float) -> None:
+        if not (state_rate > 0.0 and math.isfinite(state_rate)):
+            raise ValueError(f'state_rate must be > 0, got {state_rate}')
+        self.world = world
+        self.state_period = max(1, round(1.0 / (state_rate * world.time_step)))
+        self.guards: Dict[str, CommandGuard] = {
+            name: CommandGuard((limits.max_speed, limits.max_turn), limits.cmd_vel_timeout)
+            for name, robot in world.robots.items() if robot.geometry is not None}
+        self._applied: Dict[str, tuple] = {name: (0.0, 0.0) for name in self.guards}
+        self._timed_out: Dict[str, bool] = {name: False for name in self.guards}
+        dt_ns = round(world.time_step * 1e9)
+        self._camera_period_ns: List[int] = [
+            max(dt_ns, round(1e9 / cam.config.rate)) for cam in world.cameras]
+        self._camera_next_ns: List[int] = [0 for _ in world.cameras]
+
+    def command(self, robot: str, v: float, w: float) -> GuardResult:
+        """Take a body twist for a driven robot and apply it at once (or stop on bad input)."""
+        result = self.guards[robot].submit((v, w), self.world.sim_time)
+        self._apply(robot, result.command)
+        self._timed_out[robot] = False
+        return result
+
+    def advance(self, steps: int, sink: StepSink) -> None:
+        world = self.world
+        for _ in range(steps):
+            now = world.sim_time
+            for name, guard in self.guards.items():
+                command = guard.active_command(now)
+                if command != self._applied[name]:
+                    self._apply(name, command)
+                if guard.timed_out(now) and not self._timed_out[name]:
+                    self._timed_out[name] = True
+                    sink.on_command_timeout(name)
+            world.step()
+            t_ns = world.sim_time_ns
+            sink.on_clock(t_ns)
+            if world.step_count % self.state_period == 0:
+                for name in world.robots:
+                    sink.on_state(name, t_ns)
+            for i, cam in enumerate(world.cameras):
+                if t_ns >= self._camera_next_ns[i]:
+                    # Keep the camera's own grid of due times, skipping frames nobody wanted.
+                    period = self._camera_period_ns[i]
+                    self._camera_next_ns[i] = (t_ns // period + 1) * period
+                    if sink.camera_wanted(i):
+                        sink.on_camera(i, world.render(cam), t_ns)
+
+    def reset(self) -> None:
+        self.world.reset()
+        for name, guard in self.guards.items():
+            guard.stop()
+            self._applied[name] = (0.0, 0.0)
+            self._timed_out[name] = False
+
+    def stop_all(self) -> None:
+        for name, guard in self.guards.items():
+            guard.stop()
+            self._apply(name, (0.0, 0.0))
+
+    def _apply(self, robot: str, command: tuple) -> None:
+        self.world.robots[robot].set_body_twist(*command)
+        self._applied[robot] = tuple(command)

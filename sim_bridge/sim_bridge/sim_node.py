@@ -1,0 +1,326 @@
+"""ROS 2 node around SimRunner: parameters, topics, services and real-time pacing."""
+from __future__ import annotations
+
+import sys
+import time
+from pathlib import Path
+from typing import List
+
+import rclpy
+from builtin_interfaces.msg import Time
+from geometry_msgs.msg import Twist, TwistStamped
+from nav_msgs.msg import Odometry
+from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
+from rclpy.clock import Clock, ClockType
+from rclpy.executors import ExternalShutdownException
+from rclpy.node import Node
+from rclpy.qos import QoSProfile, qos_profile_sensor_data
+from rosgraph_msgs.msg import Clock as ClockMsg
+from sensor_msgs.msg import CameraInfo, Image, JointState
+from sim_interfaces.srv import StepSimulation
+from std_srvs.srv import Trigger
+
+from sim_bridge.camera import ImageBuffer
+from sim_bridge.pacing import Pacer, RtfMeter
+from sim_bridge.runner import DriveLimits, SimRunner
+from sim_bridge.world import SimWorld, WorldError, resolve_resource
+from sim_bridge.world_config import WorldConfigError, load_world
+
+DEFAULT_WORLD = 'package://sim_bridge/worlds/mini_robot.yaml'
+MAX_STEPS_PER_REQUEST = 100_000
+# Ground truth: tiny but non-zero covariance (zero often reads as "unknown").
+GROUND_TRUTH_COVARIANCE = [1e-9 if i % 7 == 0 else 0.0 for i in range(36)]
+
+
+class SimConfigError(ValueError):
+    """A parameter combination the simulator cannot run with."""
+
+
+def _float(description: str, lo: float, hi: float) -> ParameterDescriptor:
+    return ParameterDescriptor(description=description, read_only=True,
+                               floating_point_range=[FloatingPointRange(
+                                   from_value=lo, to_value=hi, step=0.0)])
+
+
+class SimNode(Node):
+
+    def __init__(self, **kwargs) -> None:
+        super().__init__('sim_node', **kwargs)
+        ro = ParameterDescriptor
+        self.declare_parameter('world', DEFAULT_WORLD, ro(
+            description='World YAML: a path or package://<pkg>/<path>', read_only=True))
+        self.declare_parameter('gui', False, ro(
+            description='Open the PyBullet GUI (needs a display)', read_only=True))
+        self.declare_parameter('time_step', 1.0 / 240.0, _float(
+            'Fixed physics step [s]', 1e-4, 0.05))
+        self.declare_parameter('real_time_factor', 1.0, _float(
+            'Pacing: simulated seconds per wall second; 0 runs as fast as possible', 0.0, 100.0))
+        self.declare_parameter('synchronous', False, ro(
+            description='Lock-step: physics advances only on ~/step requests', read_only=True))
+        self.declare_parameter('state_publish_rate', 100.0, _float(
+            'Rate of joint_states and odom [Hz of simulated time]', 0.1, 10000.0))
+        self.declare_parameter('max_speed', 0.2, _float(
+            'Linear speed limit of diff-drive bases [m/s]', 1e-3, 10.0))
+        self.declare_parameter('max_turn', 0.2, _float(
+            'Turn rate limit of diff-drive bases [rad/s]', 1e-3, 20.0))
+        self.declare_parameter('cmd_vel_timeout', 0.5, _float(
+            'Stop a base when its last cmd_vel is older than this [s of simulated time]',
+            1e-3, 60.0))
+        self.declare_parameter('use_stamped_vel', False, ro(
+            description='Take geometry_msgs/TwistStamped on cmd_vel instead of Twist',
+            read_only=True))
+        self.declare_parameter('rtf_log_period', 10.0, _float(
+            'Log the achieved real-time factor every this many wall seconds; 0 disables',
+            0.0, 3600.0))
+        self.declare_parameter('max_steps_per_tick', 64, ParameterDescriptor(
+            description='Most physics steps run between two rounds of callbacks',
+            read_only=True, integer_range=[IntegerRange(from_value=1, to_value=10000, step=1)]))
+
+        p = {name: self.get_parameter(name).value for name in (
+            'world', 'gui', 'time_step', 'real_time_factor', 'synchronous', 'state_publish_rate',
+            'max_speed', 'max_turn', 'cmd_vel_timeout', 'use_stamped_vel', 'rtf_log_period',
+            'max_steps_per_tick')}
+        if p['state_publish_rate'] * p['time_step'] > 1.0 + 1e-9:
+            raise SimConfigError(
+                f'state_publish_rate {p["state_publish_rate"]} Hz exceeds the physics rate '
+                f'{1.0 / p["time_step"]:.1f} Hz (1/time_step)')
+        world_path = resolve_resource(p['world'])
+        config = load_world(world_path)
+        self._world = SimWorld(config, time_step=p['time_step'], gui=p['gui'])
+        self._runner = SimRunner(self._world, DriveLimits(
+            p['max_speed'], p['max_turn'], p['cmd_vel_timeout']), p['state_publish_rate'])
+        self._synchronous = p['synchronous']
+        self._paused = False
+        self._pacer = Pacer(p['time_step'], p['real_time_factor'], p['max_steps_per_tick'])
+        self._rtf = RtfMeter()
+        self._rtf_log_period = p['rtf_log_period']
+        self._last_rtf_log = time.monotonic()
+
+        reliable = QoSProfile(depth=10)
+        self._clock_pub = self.create_publisher(ClockMsg, '/clock', reliable)
+        self._clock_msg = ClockMsg()
+        self._joint_pubs, self._odom_pubs, self._odom_frames = {}, {}, {}
+        for name, robot in self._world.robots.items():
+            ns = robot.config.namespace
+            prefix = robot.config.frame_prefix
+            self._joint_pubs[name] = self.create_publisher(
+                JointState, _topic(ns, 'joint_states'), reliable)
+            self._odom_pubs[name] = self.create_publisher(Odometry, _topic(ns, 'odom'), reliable)
+            self._odom_frames[name] = (prefix + 'odom', prefix + 'base_link')
+            if name in self._runner.guards:
+                msg_type = TwistStamped if p['use_stamped_vel'] else Twist
+                self.create_subscription(msg_type, _topic(ns, 'cmd_vel'),
+                                         lambda msg, n=name: self._on_cmd_vel(n, msg), reliable)
+        self._image_pubs, self._info_pubs = [], []
+        self._image_msgs: List[Image] = []
+        self._info_msgs: List[CameraInfo] = []
+        self._buffers: List[ImageBuffer] = []
+        for cam in self._world.cameras:
+            c = cam.config
+            ns = self._world.robots[c.robot].config.namespace if c.robot else ''
+            self._image_pubs.append(self.create_publisher(
+                Image, _topic(ns, f'{c.name}/image_raw'), qos_profile_sensor_data))
+            self._info_pubs.append(self.create_publisher(
+                CameraInfo, _topic(ns, f'{c.name}/camera_info'), qos_profile_sensor_data))
+            buffer = ImageBuffer(c.width, c.height)
+            self._buffers.append(buffer)
+            self._image_msgs.append(Image(height=c.height, width=c.width, encoding='rgb8',
+                                          is_bigendian=0, step=3 * c.width, data=buffer.data))
+            self._image_msgs[-1].header.frame_id = c.frame_id
+            k = cam.intrinsics
+            self._info_msgs.append(CameraInfo(
+                height=c.height, width=c.width, distortion_model='plumb_bob',
+                d=[0.0] * 5, k=list(k.k), r=[1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0],
+                p=list(k.p)))
+            self._info_msgs[-1].header.frame_id = c.frame_id
+
+        self.create_service(Trigger, '~/reset', self._on_reset)
+        self.create_service(Trigger, '~/pause', self._on_pause)
+        self.create_service(Trigger, '~/resume', self._on_resume)
+        self.create_service(StepSimulation, '~/step', self._on_step)
+        # The simulator is the time source: it paces itself on the steady wall clock.
+        self._steady = Clock(clock_type=ClockType.STEADY_TIME)
+        rtf = p['real_time_factor']
+        period = 0.0 if rtf == 0.0 else p['time_step'] / rtf
+        self._timer = self.create_timer(period, self._on_tick, clock=self._steady)
+        self._publish_clock(self._world.sim_time_ns)
+        for name in self._world.robots:
+            self.on_state(name, self._world.sim_time_ns)
+
+        self.get_logger().info(
+            f'world {world_path} with robots {sorted(self._world.robots)} and cameras '
+            f'{[c.config.name for c in self._world.cameras]}; dt {p["time_step"]:.6f} s, '
+            + ('lock-step (synchronous)' if self._synchronous else
+               'as fast as possible' if rtf == 0.0 else f'real-time factor {rtf:g}')
+            + f'; limits {p["max_speed"]} m/s, {p["max_turn"]} rad/s, '
+            f'cmd_vel timeout {p["cmd_vel_timeout"]} s')
+
+    # --- stepping -------------------------------------------------------------------------
+    def _on_tick(self) -> None:
+        if self._synchronous or self._paused:
+            return
+        wall = time.monotonic()
+        if self._pacer.as_fast_as_possible:
+            # Step for about 2 ms, then let the executor serve callbacks.
+            deadline = wall + 0.002
+            steps = 0
+            while steps < self._pacer.max_burst and time.monotonic() < deadline:
+                self._runner.advance(1, self)
+                steps += 1
+        else:
+            steps = self._pacer.steps_due(wall)
+            self._runner.advance(steps, self)
+            self._pacer.record(steps)
+        if steps:
+            self._note_progress()
+
+    def _note_progress(self) -> None:
+        wall = time.monotonic()
+        self._rtf.add(wall, self._world.sim_time)
+        if self._rtf_log_period > 0.0 and wall - self._last_rtf_log >= self._rtf_log_period:
+            self._last_rtf_log = wall
+            rtf = self._rtf.value()
+            if rtf is not None:
+                self.get_logger().info(f'real-time factor {rtf:.2f} '
+                                       f'(sim time {self._world.sim_time:.1f} s)')
+
+    # --- StepSink: what a step produces -----------------------------------------------------
+    def on_clock(self, time_ns: int) -> None:
+        self._publish_clock(time_ns)
+
+    def on_state(self, robot: str, time_ns: int) -> None:
+        stamp = _stamp(time_ns)
+        sim_robot = self._world.robots[robot]
+        js = sim_robot.joint_states()
+        msg = JointState(name=js.names, position=js.positions, velocity=js.velocities,
+                         effort=js.efforts)
+        msg.header.stamp = stamp
+        self._joint_pubs[robot].publish(msg)
+        base = sim_robot.base_state()
+        odom = Odometry()
+        odom.header.stamp = stamp
+        odom.header.frame_id, odom.child_frame_id = self._odom_frames[robot]
+        pose, twist = odom.pose.pose, odom.twist.twist
+        pose.position.x, pose.position.y, pose.position.z = base.position
+        (pose.orientation.x, pose.orientation.y, pose.orientation.z,
+         pose.orientation.w) = base.orientation
+        twist.linear.x, twist.linear.y, twist.linear.z = (float(v) for v in base.linear)
+        twist.angular.x, twist.angular.y, twist.angular.z = (float(v) for v in base.angular)
+        odom.pose.covariance = GROUND_TRUTH_COVARIANCE
+        odom.twist.covariance = GROUND_TRUTH_COVARIANCE
+        self._odom_pubs[robot].publish(odom)
+
+    def camera_wanted(self, index: int) -> bool:
+        return self._image_pubs[index].get_subscription_count() > 0
+
+    def on_camera(self, index: int, rgba, time_ns: int) -> None:
+        stamp = _stamp(time_ns)
+        image = self._image_msgs[index]
+        self._buffers[index].fill_from_rgba(rgba)
+        image.header.stamp = stamp
+        self._image_pubs[index].publish(image)
+        info = self._info_msgs[index]
+        info.header.stamp = stamp
+        self._info_pubs[index].publish(info)
+
+    def on_command_timeout(self, robot: str) -> None:
+        self.get_logger().info(f'{robot}: no cmd_vel for {self._runner.guards[robot].timeout} s;'
+                               ' stopping', throttle_duration_sec=5.0)
+
+    def _publish_clock(self, time_ns: int) -> None:
+        self._clock_msg.clock = _stamp(time_ns)
+        self._clock_pub.publish(self._clock_msg)
+
+    # --- subscriptions and services --------------------------------------------------------
+    def _on_cmd_vel(self, robot: str, msg) -> None:
+        twist = msg.twist if isinstance(msg, TwistStamped) else msg
+        result = self._runner.command(robot, twist.linear.x, twist.angular.z)
+        if not result.accepted:
+            self.get_logger().warn(f'{robot}/cmd_vel: {result.reason}', throttle_duration_sec=1.0)
+        elif result.clamped:
+            self.get_logger().warn(
+                f'{robot}/cmd_vel ({twist.linear.x:.3f} m/s, {twist.angular.z:.3f} rad/s) '
+                f'clamped to ({result.command[0]:.3f}, {result.command[1]:.3f})',
+                throttle_duration_sec=1.0)
+
+    def _on_reset(self, _request, response):
+        self._runner.reset()
+        for name in self._world.robots:
+            self.on_state(name, self._world.sim_time_ns)
+        response.success, response.message = True, 'robots returned to their start poses'
+        self.get_logger().info('world reset')
+        return response
+
+    def _on_pause(self, _request, response):
+        if self._synchronous:
+            response.success, response.message = False, 'synchronous mode: use ~/step'
+        else:
+            self._paused = True
+            response.success, response.message = True, f'paused at {self._world.sim_time:.3f} s'
+        return response
+
+    def _on_resume(self, _request, response):
+        if self._synchronous:
+            response.success, response.message = False, 'synchronous mode: use ~/step'
+        else:
+            self._paused = False
+            self._pacer.restart()
+            self._rtf.reset()
+            response.success, response.message = True, 'resumed'
+        return response
+
+    def _on_step(self, request, response):
+        if not (self._synchronous or self._paused):
+            response.success = False
+            response.message = 'step needs synchronous:=true or a paused simulation'
+        elif not (1 <= request.steps <= MAX_STEPS_PER_REQUEST):
+            response.success = False
+            response.message = f'steps must be within 1..{MAX_STEPS_PER_REQUEST}'
+        else:
+            self._runner.advance(request.steps, self)
+            self._note_progress()
+            response.success = True
+        response.step_count = self._world.step_count
+        response.sim_time = _stamp(self._world.sim_time_ns)
+        return response
+
+    def destroy_node(self) -> None:
+        # Leave no robot driving on a stale command.
+        self._runner.stop_all()
+        self._world.close()
+        super().destroy_node()
+
+
+def _topic(namespace: str, name: str) -> str:
+    # Relative names, so a node namespace or remapping applies on top of the robot namespace.
+    return f'{namespace}/{name}' if namespace else name
+
+
+def _stamp(time_ns: int) -> Time:
+    return Time(sec=time_ns // 1_000_000_000, nanosec=time_ns % 1_000_000_000)
+
+
+def main(args=None) -> int:
+    rclpy.init(args=args)
+    try:
+        node = SimNode()
+    except (SimConfigError, WorldConfigError, WorldError, FileNotFoundError) as exc:
+        rclpy.logging.get_logger('sim_node').fatal(f'cannot start: {exc}')
+        rclpy.try_shutdown()
+        return 1
+    except rclpy.exceptions.ParameterException as exc:
+        rclpy.logging.get_logger('sim_node').fatal(f'bad parameter: {exc}')
+        rclpy.try_shutdown()
+        return 1
+    try:
+        rclpy.spin(node)
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    finally:
+        node.destroy_node()
+        rclpy.try_shutdown()
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())

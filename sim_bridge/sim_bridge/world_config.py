@@ -1,0 +1,264 @@
+"""World description files: robots, obstacles and cameras, loaded from YAML and validated."""
+from __future__ import annotations
+
+import math
+import re
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Dict, List, Optional, Tuple
+
+import yaml
+
+Vec3 = Tuple[float, float, float]
+
+
+class WorldConfigError(ValueError):
+    """A world file that cannot be used; the message names the file and the field."""
+
+
+@dataclass(frozen=True)
+class Pose:
+    x: float = 0.0
+    y: float = 0.0
+    z: float = 0.0
+    yaw: float = 0.0
+
+
+@dataclass(frozen=True)
+class DiffDriveConfig:
+    left_wheel_joint: str
+    right_wheel_joint: str
+    wheel_radius: float
+    wheel_separation: float
+    # Stall torque of each wheel motor [N m]; also the velocity motor's force limit.
+    wheel_effort: float
+
+
+@dataclass(frozen=True)
+class RobotConfig:
+    name: str
+    urdf: str
+    namespace: str
+    pose: Pose
+    frame_prefix: str = ''
+    drive: Optional[DiffDriveConfig] = None
+
+
+@dataclass(frozen=True)
+class CameraConfig:
+    name: str
+    width: int
+    height: int
+    rate: float
+    vertical_fov_deg: float
+    near: float
+    far: float
+    # Either mounted on a robot link (an optical frame: z forward, x right, y down) ...
+    robot: Optional[str] = None
+    link: Optional[str] = None
+    # ... or fixed in the world, looking from position to look_at.
+    position: Optional[Vec3] = None
+    look_at: Optional[Vec3] = None
+    frame_id: str = ''
+
+
+@dataclass(frozen=True)
+class ObstacleConfig:
+    shape: str
+    size: Tuple[float, ...]
+    position: Vec3
+    yaw: float = 0.0
+    color: Tuple[float, float, float, float] = (0.6, 0.6, 0.6, 1.0)
+
+
+@dataclass(frozen=True)
+class WorldConfig:
+    source: str
+    gravity: float = -9.81
+    # Size of the visible floor patch [m]; the collision plane is infinite.
+    floor_size: float = 4.0
+    robots: List[RobotConfig] = field(default_factory=list)
+    obstacles: List[ObstacleConfig] = field(default_factory=list)
+    cameras: List[CameraConfig] = field(default_factory=list)
+
+    def robot(self, name: str) -> RobotConfig:
+        for robot in self.robots:
+            if robot.name == name:
+                return robot
+        raise KeyError(name)
+
+
+_NAME = re.compile(r'^[A-Za-z][A-Za-z0-9_]*$')
+
+
+def load_world(path: str | Path) -> WorldConfig:
+    path = Path(path)
+    if not path.is_file():
+        raise WorldConfigError(f'world file {path} does not exist')
+    try:
+        data = yaml.safe_load(path.read_text())
+    except yaml.YAMLError as exc:
+        raise WorldConfigError(f'{path}: not valid YAML: {exc}') from None
+    return parse_world(data, str(path))
+
+
+def parse_world(data: Any, source: str = '<memory>') -> WorldConfig:
+    r = _Reader(source)
+    if not isinstance(data, dict):
+        raise WorldConfigError(f'{source}: the top level must be a mapping')
+    r.only(data, 'world', {'gravity', 'floor_size', 'robots', 'obstacles', 'cameras'})
+    robots = [_robot(r, item, i) for i, item in enumerate(r.list(data, 'robots', 'world'))]
+    names = [rb.name for rb in robots]
+    if len(set(names)) != len(names):
+        raise WorldConfigError(f'{source}: robot names must be unique, got {names}')
+    namespaces = [rb.namespace for rb in robots]
+    if len(set(namespaces)) != len(namespaces):
+        raise WorldConfigError(f'{source}: robot namespaces must be unique, got {namespaces}')
+    obstacles = [_obstacle(r, item, i)
+                 for i, item in enumerate(r.list(data, 'obstacles', 'world'))]
+    cameras = [_camera(r, item, i, robots)
+               for i, item in enumerate(r.list(data, 'cameras', 'world'))]
+    return WorldConfig(source=source,
+                       gravity=r.number(data, 'gravity', 'world', default=-9.81),
+                       floor_size=r.number(data, 'floor_size', 'world', default=4.0, lo=0.1),
+                       robots=robots, obstacles=obstacles, cameras=cameras)
+
+
+def _robot(r: '_Reader', item: Any, i: int) -> RobotConfig:
+    where = f'robots[{i}]'
+    r.only(item, where, {'name', 'urdf', 'namespace', 'pose', 'frame_prefix', 'drive'})
+    name = r.name(item, 'name', where)
+    namespace = r.string(item, 'namespace', where, default=name).strip('/')
+    if namespace and not all(_NAME.match(part) for part in namespace.split('/')):
+        raise WorldConfigError(f'{r.source}: {where}.namespace "{namespace}" is not a ROS name')
+    pose_data = item.get('pose', {}) or {}
+    r.only(pose_data, where + '.pose', {'x', 'y', 'z', 'yaw'})
+    pose = Pose(*(r.number(pose_data, k, where + '.pose', default=0.0)
+                  for k in ('x', 'y', 'z', 'yaw')))
+    drive = None
+    if item.get('drive') is not None:
+        d = item['drive']
+        dw = where + '.drive'
+        r.only(d, dw, {'type', 'left_wheel_joint', 'right_wheel_joint', 'wheel_radius',
+                       'wheel_separation', 'wheel_effort'})
+        if d.get('type') != 'diff_drive':
+            raise WorldConfigError(f'{r.source}: {dw}.type must be "diff_drive", '
+                                   f'got {d.get("type")!r}')
+        drive = DiffDriveConfig(
+            left_wheel_joint=r.string(d, 'left_wheel_joint', dw),
+            right_wheel_joint=r.string(d, 'right_wheel_joint', dw),
+            wheel_radius=r.number(d, 'wheel_radius', dw, lo=1e-4),
+            wheel_separation=r.number(d, 'wheel_separation', dw, lo=1e-4),
+            wheel_effort=r.number(d, 'wheel_effort', dw, lo=1e-6))
+    return RobotConfig(name=name, urdf=r.string(item, 'urdf', where), namespace=namespace,
+                       pose=pose, frame_prefix=r.string(item, 'frame_prefix', where, default=''),
+                       drive=drive)
+
+
+def _obstacle(r: '_Reader', item: Any, i: int) -> ObstacleConfig:
+    where = f'obstacles[{i}]'
+    r.only(item, where, {'shape', 'size', 'position', 'yaw', 'color'})
+    shape = r.string(item, 'shape', where)
+    sizes = {'box': 3, 'cylinder': 2, 'sphere': 1}
+    if shape not in sizes:
+        raise WorldConfigError(f'{r.source}: {where}.shape must be one of {sorted(sizes)}')
+    size = r.vector(item, 'size', where, sizes[shape], lo=1e-4)
+    color = r.vector(item, 'color', where, 4, lo=0.0, hi=1.0, default=(0.6, 0.6, 0.6, 1.0))
+    return ObstacleConfig(shape=shape, size=size, position=r.vector(item, 'position', where, 3),
+                          yaw=r.number(item, 'yaw', where, default=0.0), color=color)
+
+
+def _camera(r: '_Reader', item: Any, i: int, robots: List[RobotConfig]) -> CameraConfig:
+    where = f'cameras[{i}]'
+    r.only(item, where, {'name', 'robot', 'link', 'position', 'look_at', 'width', 'height',
+                         'rate', 'vertical_fov_deg', 'near', 'far', 'frame_id'})
+    name = r.name(item, 'name', where)
+    robot = item.get('robot')
+    cam = dict(
+        name=name,
+        width=int(r.number(item, 'width', where, default=320, lo=8, hi=4096, integer=True)),
+        height=int(r.number(item, 'height', where, default=240, lo=8, hi=4096, integer=True)),
+        rate=r.number(item, 'rate', where, default=15.0, lo=1e-3, hi=1000.0),
+        vertical_fov_deg=r.number(item, 'vertical_fov_deg', where, default=60.0, lo=1.0,
+                                  hi=170.0),
+        near=r.number(item, 'near', where, default=0.01, lo=1e-5),
+        far=r.number(item, 'far', where, default=10.0, lo=1e-3))
+    if cam['far'] <= cam['near']:
+        raise WorldConfigError(f'{r.source}: {where}: far must be greater than near')
+    if robot is not None:
+        if robot not in {rb.name for rb in robots}:
+            raise WorldConfigError(f'{r.source}: {where}.robot "{robot}" is not a robot of '
+                                   'this world')
+        link = r.string(item, 'link', where)
+        prefix = next(rb.frame_prefix for rb in robots if rb.name == robot)
+        return CameraConfig(robot=robot, link=link,
+                            frame_id=r.string(item, 'frame_id', where, default=prefix + link),
+                            **cam)
+    position = r.vector(item, 'position', where, 3)
+    look_at = r.vector(item, 'look_at', where, 3)
+    if math.dist(position, look_at) < 1e-6:
+        raise WorldConfigError(f'{r.source}: {where}: position and look_at coincide')
+    return CameraConfig(position=position, look_at=look_at,
+                        frame_id=r.string(item, 'frame_id', where,
+                                          default=name + '_optical_frame'), **cam)
+
+
+class _Reader:
+    """Typed field access that raises WorldConfigError naming file and field."""
+
+    def __init__(self, source: str) -> None:
+        self.source = source
+
+    def fail(self, where: str, key: str, what: str) -> WorldConfigError:
+        return WorldConfigError(f'{self.source}: {where}.{key} {what}')
+
+    def only(self, data: Any, where: str, allowed: set) -> None:
+        if not isinstance(data, dict):
+            raise WorldConfigError(f'{self.source}: {where} must be a mapping')
+        unknown = sorted(set(data) - allowed)
+        if unknown:
+            raise WorldConfigError(f'{self.source}: {where}: unknown keys {unknown}; '
+                                   f'allowed: {sorted(allowed)}')
+
+    def list(self, data: dict, key: str, where: str) -> list:
+        value = data.get(key, []) or []
+        if not isinstance(value, list):
+            raise self.fail(where, key, 'must be a list')
+        return value
+
+    def string(self, data: dict, key: str, where: str, default: Optional[str] = None) -> str:
+        value = data.get(key, default)
+        if value is None:
+            raise self.fail(where, key, 'is required')
+        if not isinstance(value, str):
+            raise self.fail(where, key, f'must be a string, got {value!r}')
+        return value
+
+    def name(self, data: dict, key: str, where: str) -> str:
+        value = self.string(data, key, where)
+        if not _NAME.match(value):
+            raise self.fail(where, key, f'"{value}" must be a ROS name ([A-Za-z][A-Za-z0-9_]*)')
+        return value
+
+    def number(self, data: dict, key: str, where: str, default: Optional[float] = None,
+               lo: float = -math.inf, hi: float = math.inf, integer: bool = False) -> float:
+        value = data.get(key, default)
+        if value is None:
+            raise self.fail(where, key, 'is required')
+        if isinstance(value, bool) or not isinstance(value, (int, float)):
+            raise self.fail(where, key, f'must be a number, got {value!r}')
+        if integer and int(value) != value:
+            raise self.fail(where, key, f'must be an integer, got {value}')
+        if not math.isfinite(value) or not (lo <= value <= hi):
+            raise self.fail(where, key, f'must be finite and within [{lo}, {hi}], got {value}')
+        return float(value)
+
+    def vector(self, data: dict, key: str, where: str, n: int, lo: float = -math.inf,
+               hi: float = math.inf, default: Optional[tuple] = None) -> tuple:
+        value = data.get(key, default)
+        if value is None:
+            raise self.fail(where, key, 'is required')
+        if not isinstance(value, (list, tuple)) or len(value) != n:
+            raise self.fail(where, key, f'must be a list of {n} numbers, got {value!r}')
+        tmp = {str(i): v for i, v in enumerate(value)}
+        return tuple(self.number(tmp, str(i), f'{where}.{key}', lo=lo, hi=hi) for i in range(n))
