@@ -35,14 +35,17 @@ class Intrinsics:
 
 
 def intrinsics_from_fov(width: int, height: int, vertical_fov_deg: float) -> Intrinsics:
-    """Intrinsics of PyBullet's computeProjectionMatrixFOV(fov, width/height, near, far).
+    """Intrinsics of the images PyBullet's TinyRenderer draws with computeProjectionMatrixFOV.
 
-    OpenGL maps the vertical field of view onto the image height and keeps square pixels.
-    The optical axis lands at the image centre, width/2 in continuous coordinates where a
-    pixel spans [i, i+1); ROS puts pixel centres at integers, hence cx = (width - 1)/2.
+    OpenGL maps the vertical field of view onto the image height with square pixels, so
+    fx = fy = (height/2) / tan(fov/2). The principal point is where TinyRenderer actually puts
+    the optical axis, measured with rendered markers (tests/unit/test_camera_model.py): it
+    samples pixel column i at x = i and, rows being flipped, row r at y = r + 1, so with ROS's
+    integer pixel centres cx = width/2 and cy = height/2 - 1 (not the (n-1)/2 of an ideal
+    pixel-centre sampler).
     """
     fy = 0.5 * height / math.tan(math.radians(vertical_fov_deg) / 2.0)
-    return Intrinsics(width, height, fy, fy, (width - 1) / 2.0, (height - 1) / 2.0)
+    return Intrinsics(width, height, fy, fy, width / 2.0, height / 2.0 - 1.0)
 
 
 def projection_matrix(width: int, height: int, vertical_fov_deg: float, near: float,

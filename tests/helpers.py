@@ -1,0 +1,107 @@
+"""Helpers for graph tests: node processes, a probe node, and condition waits."""
+from __future__ import annotations
+
+import os
+import shutil
+import signal
+import subprocess
+import threading
+import time
+from pathlib import Path
+from typing import Callable, Dict, List, Optional
+
+import rclpy
+from rclpy.executors import SingleThreadedExecutor
+from rclpy.node import Node
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def wait_for(condition: Callable[[], bool], timeout: float = 10.0, period: float = 0.01,
+             what: str = 'condition') -> None:
+    end = time.monotonic() + timeout
+    while time.monotonic() < end:
+        if condition():
+            return
+        time.sleep(period)
+    raise TimeoutError(f'timed out after {timeout} s waiting for {what}')
+
+
+class NodeProcess:
+    """A node executable run as its own process, its output kept in a log file."""
+
+    def __init__(self, executable: str, ros_args: List[str], log_dir: Path,
+                 name: Optional[str] = None, env: Optional[Dict[str, str]] = None,
+                 stdin=subprocess.DEVNULL) -> None:
+        path = shutil.which(executable)
+        if path is None:
+            raise FileNotFoundError(f'{executable} not on PATH (source scripts/env.sh)')
+        self.name = name or executable
+        self.log_path = log_dir / f'{self.name}.log'
+        self._log = open(self.log_path, 'w')
+        cmd = [path, '--ros-args'] + ros_args
+        self.proc = subprocess.Popen(cmd, stdout=self._log, stderr=subprocess.STDOUT,
+                                     stdin=stdin, env={**os.environ, **(env or {})},
+                                     start_new_session=True)
+
+    def output(self) -> str:
+        self._log.flush()
+        return self.log_path.read_text()
+
+    def alive(self) -> bool:
+        return self.proc.poll() is None
+
+    def stop(self, sig: int = signal.SIGINT, timeout: float = 10.0) -> int:
+        if self.proc.poll() is None:
+            self.proc.send_signal(sig)
+            try:
+                self.proc.wait(timeout)
+            except subprocess.TimeoutExpired:
+                self.proc.kill()
+                self.proc.wait()
+        self._log.close()
+        return self.proc.returncode
+
+
+class Probe:
+    """An rclpy node spun in a background thread, for subscribing and calling from tests."""
+
+    def __init__(self, name: str = 'test_probe') -> None:
+        self.context = rclpy.Context()
+        rclpy.init(context=self.context)
+        self.node = Node(name, context=self.context)
+        self.executor = SingleThreadedExecutor(context=self.context)
+        self.executor.add_node(self.node)
+        self._thread = threading.Thread(target=self._spin, daemon=True)
+        self._running = True
+        self._thread.start()
+
+    def _spin(self) -> None:
+        while self._running and self.context.ok():
+            self.executor.spin_once(timeout_sec=0.02)
+
+    def collect(self, msg_type, topic: str, qos=10) -> List:
+        """Subscribe and return a list that fills with (receive_monotonic, msg) pairs."""
+        received: List = []
+        self.node.create_subscription(msg_type, topic,
+                                      lambda m: received.append((time.monotonic(), m)), qos)
+        return received
+
+    def call(self, srv_type, name: str, request, timeout: float = 10.0):
+        client = self.node.create_client(srv_type, name)
+        if not client.wait_for_service(timeout_sec=timeout):
+            raise TimeoutError(f'service {name} not available')
+        future = client.call_async(request)
+        wait_for(future.done, timeout, what=f'reply of {name}')
+        return future.result()
+
+    def close(self) -> None:
+        self._running = False
+        self._thread.join(2.0)
+        self.executor.shutdown()
+        self.node.destroy_node()
+        rclpy.try_shutdown(context=self.context)
+
+
+def stamp_s(stamp) -> float:
+    return stamp.sec + stamp.nanosec * 1e-9

@@ -1,0 +1,57 @@
+"""World YAML loading and its error messages."""
+import pytest
+
+from sim_bridge.world_config import WorldConfigError, load_world, parse_world
+from sim_bridge.world import resolve_resource
+
+ROBOT = {'name': 'r1', 'urdf': 'package://robot_description/urdf/mini_robot.urdf'}
+
+
+def test_default_world_loads():
+    cfg = load_world(resolve_resource('package://sim_bridge/worlds/mini_robot.yaml'))
+    robot = cfg.robot('mini_robot')
+    assert robot.namespace == 'mini_robot'
+    assert robot.drive.wheel_radius == 0.03 and robot.drive.wheel_separation == 0.113
+    assert len(cfg.obstacles) >= 3
+    cam = cfg.cameras[0]
+    assert (cam.width, cam.height, cam.rate) == (320, 240, 15.0)
+    assert cam.frame_id == 'camera_optical_frame'
+
+
+def test_defaults_and_frame_prefix():
+    cfg = parse_world({'robots': [dict(ROBOT, frame_prefix='r1/')],
+                       'cameras': [{'name': 'cam', 'robot': 'r1', 'link': 'camera_link'}]})
+    assert cfg.robots[0].namespace == 'r1'
+    assert cfg.cameras[0].frame_id == 'r1/camera_link'
+
+
+@pytest.mark.parametrize('data, fragment', [
+    ([], 'mapping'),
+    ({'robots': [{'name': 'r1'}]}, 'urdf is required'),
+    ({'robots': [dict(ROBOT, colour=1)]}, 'unknown keys'),
+    ({'robots': [ROBOT, ROBOT]}, 'unique'),
+    ({'robots': [dict(ROBOT, name='1bad')]}, 'ROS name'),
+    ({'robots': [dict(ROBOT, pose={'x': 'far'})]}, 'must be a number'),
+    ({'robots': [dict(ROBOT, pose={'yaw': float('nan')})]}, 'finite'),
+    ({'robots': [dict(ROBOT, drive={'type': 'mecanum'})]}, 'diff_drive'),
+    ({'obstacles': [{'shape': 'cone', 'size': [1], 'position': [0, 0, 0]}]}, 'shape'),
+    ({'obstacles': [{'shape': 'box', 'size': [1, 1], 'position': [0, 0, 0]}]}, '3 numbers'),
+    ({'cameras': [{'name': 'c', 'robot': 'ghost', 'link': 'x'}]}, 'not a robot'),
+    ({'cameras': [{'name': 'c', 'position': [0, 0, 1], 'look_at': [0, 0, 1]}]}, 'coincide'),
+    ({'cameras': [{'name': 'c', 'position': [0, 0, 1], 'look_at': [0, 0, 0],
+                   'width': 0}]}, 'width'),
+    ({'cameras': [{'name': 'c', 'position': [0, 0, 1], 'look_at': [0, 0, 0], 'near': 2,
+                   'far': 1}]}, 'far must be greater'),
+])
+def test_bad_worlds_are_rejected_with_the_field_named(data, fragment):
+    with pytest.raises(WorldConfigError, match=fragment):
+        parse_world(data, 'test.yaml')
+
+
+def test_missing_and_malformed_files(tmp_path):
+    with pytest.raises(WorldConfigError, match='does not exist'):
+        load_world(tmp_path / 'nope.yaml')
+    bad = tmp_path / 'bad.yaml'
+    bad.write_text('robots: [unclosed')
+    with pytest.raises(WorldConfigError, match='not valid YAML'):
+        load_world(bad)
