@@ -1,0 +1,184 @@
+"""The PyBullet world core: contact-driven motion, reset, command safety over sim time."""
+import math
+
+import numpy as np
+import pytest
+
+from sim_bridge.runner import DriveLimits, SimRunner
+from sim_bridge.world import SimWorld, WorldError, resolve_resource, yaw_from_quaternion
+from sim_bridge.world_config import load_world, parse_world
+
+DEFAULT = resolve_resource('package://sim_bridge/worlds/mini_robot.yaml')
+
+
+class Recorder:
+    """A StepSink that records what the runner asked to publish."""
+
+    def __init__(self, want_camera=False):
+        self.clock, self.states, self.frames, self.timeouts = [], [], [], []
+        self.want_camera = want_camera
+
+    def on_clock(self, t):
+        self.clock.append(t)
+
+    def on_state(self, robot, t):
+        self.states.append((robot, t))
+
+    def camera_wanted(self, i):
+        return self.want_camera
+
+    def on_camera(self, i, rgba, t):
+        self.frames.append((i, rgba.shape, t))
+
+    def on_command_timeout(self, robot):
+        self.timeouts.append(robot)
+
+
+@pytest.fixture
+def world():
+    w = SimWorld(load_world(DEFAULT))
+    yield w
+    w.close()
+
+
+def _settle(runner, sink, seconds=0.5):
+    runner.advance(round(seconds / runner.world.time_step), sink)
+
+
+def test_drive_forward_by_wheel_contact(world):
+    runner, sink = SimRunner(world, DriveLimits(), 100.0), Recorder()
+    robot = world.robots['mini_robot']
+    _settle(runner, sink)
+    x0 = robot.base_state().position[0]
+    for _ in range(20):  # 2 s with a command every 0.1 s, inside the timeout
+        runner.command('mini_robot', 0.1, 0.0)
+        runner.advance(24, sink)
+    state = robot.base_state()
+    assert state.linear[0] == pytest.approx(0.1, rel=0.01)
+    assert state.position[0] - x0 == pytest.approx(0.2, rel=0.03)
+    js = robot.joint_states()
+    left = js.velocities[js.names.index('left_wheel_joint')]
+    assert left == pytest.approx(0.1 / 0.03, rel=0.01)
+
+
+def test_turn_in_place(world):
+    runner, sink = SimRunner(world, DriveLimits(), 100.0), Recorder()
+    robot = world.robots['mini_robot']
+    _settle(runner, sink)
+    steps = round(math.pi / 2 / 0.2 / world.time_step)
+    for i in range(0, steps, 24):
+        runner.command('mini_robot', 0.0, 0.2)
+        runner.advance(min(24, steps - i), sink)
+    runner.command('mini_robot', 0.0, 0.0)
+    _settle(runner, sink)
+    state = robot.base_state()
+    assert yaw_from_quaternion(state.orientation) == pytest.approx(math.pi / 2, rel=0.03)
+    assert math.hypot(*state.position[:2]) < 0.005
+
+
+def test_command_times_out_in_simulated_time(world):
+    runner, sink = SimRunner(world, DriveLimits(cmd_vel_timeout=0.5), 100.0), Recorder()
+    runner.command('mini_robot', 0.1, 0.0)
+    runner.advance(round(0.45 / world.time_step), sink)
+    assert sink.timeouts == []
+    assert world.robots['mini_robot'].wheel_targets[0] > 0
+    runner.advance(round(0.1 / world.time_step), sink)
+    assert sink.timeouts == ['mini_robot']
+    assert world.robots['mini_robot'].wheel_targets == (0.0, 0.0)
+
+
+def test_nan_command_stops_the_robot(world):
+    runner, sink = SimRunner(world, DriveLimits(), 100.0), Recorder()
+    runner.command('mini_robot', 0.1, 0.0)
+    result = runner.command('mini_robot', math.nan, 0.0)
+    assert not result.accepted
+    assert world.robots['mini_robot'].wheel_targets == (0.0, 0.0)
+
+
+def test_clamped_command_drives_at_the_limit(world):
+    runner, sink = SimRunner(world, DriveLimits(max_speed=0.2), 100.0), Recorder()
+    result = runner.command('mini_robot', 5.0, 0.0)
+    assert result.clamped and result.command == (0.2, 0.0)
+    assert world.robots['mini_robot'].wheel_targets == pytest.approx((0.2 / 0.03,) * 2)
+
+
+def test_outputs_are_scheduled_by_simulated_time(world):
+    runner = SimRunner(world, DriveLimits(), state_rate=100.0)
+    sink = Recorder(want_camera=True)
+    runner.advance(240, sink)
+    assert len(sink.clock) == 240
+    assert sink.clock[-1] == 240 * round(world.time_step * 1e9)
+    assert len(sink.states) == 240 // runner.state_period
+    # The 15 Hz camera: a frame at the first step, then on its own 1/15 s grid.
+    stamps = np.array([t for _, _, t in sink.frames])
+    assert len(stamps) == 16
+    dt_ns = round(world.time_step * 1e9)
+    assert np.all(np.abs(np.diff(stamps[1:]) - 1e9 / 15) <= dt_ns)
+    assert sink.frames[0][1] == (240, 320, 4)
+
+
+def test_camera_not_rendered_without_subscribers(world):
+    runner, sink = SimRunner(world, DriveLimits(), 100.0), Recorder(want_camera=False)
+    runner.advance(240, sink)
+    assert sink.frames == []
+
+
+def test_reset_returns_to_the_start_pose(world):
+    runner, sink = SimRunner(world, DriveLimits(), 100.0), Recorder()
+    robot = world.robots['mini_robot']
+    for _ in range(10):
+        runner.command('mini_robot', 0.2, 0.2)
+        runner.advance(24, sink)
+    assert math.hypot(*robot.base_state().position[:2]) > 0.1
+    runner.reset()
+    state = robot.base_state()
+    assert state.position == pytest.approx((0.0, 0.0, 0.0), abs=1e-9)
+    assert yaw_from_quaternion(state.orientation) == pytest.approx(0.0, abs=1e-9)
+    assert robot.wheel_targets == (0.0, 0.0)
+    t_before = world.sim_time
+    _settle(runner, sink)
+    assert world.sim_time > t_before  # time is not reset
+    assert math.hypot(*robot.base_state().position[:2]) < 0.002
+
+
+def test_start_pose_is_the_odom_origin(tmp_path):
+    data = {'robots': [{'name': 'r', 'urdf': str(resolve_resource(
+        'package://robot_description/urdf/mini_robot.urdf')), 'pose': {'x': 1.0, 'y': -2.0,
+        'z': 0.0305, 'yaw': 1.0}}]}
+    w = SimWorld(parse_world(data, str(tmp_path / 'w.yaml')))
+    try:
+        pos, _ = w.robots['r'].base_link_world()
+        assert pos == pytest.approx((1.0, -2.0, 0.0305), abs=1e-6)
+        assert w.robots['r'].base_state().position == pytest.approx((0, 0, 0), abs=1e-6)
+    finally:
+        w.close()
+
+
+def test_missing_urdf_and_bad_drive_joint(tmp_path):
+    with pytest.raises(WorldError, match='does not exist'):
+        SimWorld(parse_world({'robots': [{'name': 'r', 'urdf': 'missing.urdf'}]},
+                             str(tmp_path / 'w.yaml')))
+    urdf = str(resolve_resource('package://robot_description/urdf/mini_robot.urdf'))
+    with pytest.raises(WorldError, match='not a movable joint'):
+        SimWorld(parse_world({'robots': [{'name': 'r', 'urdf': urdf, 'drive': {
+            'type': 'diff_drive', 'left_wheel_joint': 'camera_joint',
+            'right_wheel_joint': 'right_wheel_joint', 'wheel_radius': 0.03,
+            'wheel_separation': 0.113, 'wheel_effort': 0.1}}]}, str(tmp_path / 'w.yaml')))
+
+
+def test_robot_camera_sees_an_obstacle_ahead(tmp_path):
+    urdf = str(resolve_resource('package://robot_description/urdf/mini_robot.urdf'))
+    data = {'robots': [{'name': 'r', 'urdf': urdf, 'pose': {'z': 0.0305}}],
+            'obstacles': [{'shape': 'box', 'size': [0.1, 0.3, 0.2], 'position': [0.4, 0, 0.1],
+                           'color': [1, 0, 0, 1]}],
+            'cameras': [{'name': 'camera', 'robot': 'r', 'link': 'camera_optical_frame'}]}
+    w = SimWorld(parse_world(data, str(tmp_path / 'w.yaml')))
+    try:
+        img = w.render(w.cameras[0])
+        red = (img[:, :, 0] > 120) & (img[:, :, 1] < 60) & (img[:, :, 2] < 60)
+        rows, cols = np.nonzero(red)
+        assert red.sum() > 500
+        # Straight ahead: centred left-right around the principal point.
+        assert cols.mean() == pytest.approx(w.cameras[0].intrinsics.cx, abs=3)
+    finally:
+        w.close()
