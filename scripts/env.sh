@@ -8,8 +8,11 @@ case ":${AMENT_PREFIX_PATH:-}:" in
   *":$_rs_root/.venv:"*) ;;
   *) export AMENT_PREFIX_PATH="$_rs_root/.venv${AMENT_PREFIX_PATH:+:$AMENT_PREFIX_PATH}" ;;
 esac
+# colcon's setup scripts read unset variables: relax `set -u` while sourcing them.
+case $- in *u*) _rs_nounset=1; set +u ;; *) _rs_nounset= ;; esac
 # shellcheck disable=SC1091
 source "$_rs_root/ros_ws/install/setup.bash"
+[ -n "$_rs_nounset" ] && set -u
 # ros2cli is not pip-installable: put each package's lib/<pkg> (where `ros2 run` looks) on PATH.
 for _rs_dir in "$_rs_root"/ros_ws/install/*/lib/*/; do
   _rs_pkg="$(basename "$(dirname "$(dirname "$_rs_dir")")")"
@@ -19,4 +22,4 @@ for _rs_dir in "$_rs_root"/ros_ws/install/*/lib/*/; do
   fi
 done
 export PATH
-unset _rs_root _rs_dir _rs_pkg _rs_abs
+unset _rs_root _rs_dir _rs_pkg _rs_abs _rs_nounset

@@ -1,0 +1,58 @@
+"""The simulator node in-process: parameters are declared, validated, and fail clearly."""
+import pytest
+import rclpy
+from rclpy.exceptions import InvalidParameterValueException
+from rclpy.parameter import Parameter
+
+from sim_bridge.sim_node import SimConfigError, SimNode
+from sim_bridge.world_config import WorldConfigError
+
+
+@pytest.fixture
+def context():
+    ctx = rclpy.Context()
+    rclpy.init(context=ctx)
+    yield ctx
+    rclpy.try_shutdown(context=ctx)
+
+
+def make(context, **overrides):
+    return SimNode(context=context, parameter_overrides=[
+        Parameter(k, value=v) for k, v in overrides.items()])
+
+
+def test_every_parameter_has_a_description(context):
+    node = make(context)
+    try:
+        names = node._parameters.keys() - {'use_sim_time'}
+        assert {'world', 'time_step', 'real_time_factor', 'synchronous', 'max_speed',
+                'max_turn', 'cmd_vel_timeout', 'use_stamped_vel', 'gui'} <= names
+        for name in names:
+            assert node.describe_parameter(name).description, name
+        ranged = node.describe_parameter('max_speed').floating_point_range[0]
+        assert (ranged.from_value, ranged.to_value) == (1e-3, 10.0)
+    finally:
+        node.destroy_node()
+
+
+@pytest.mark.parametrize('name, value', [
+    ('time_step', 0.5), ('time_step', 0.0), ('real_time_factor', -1.0), ('max_speed', 0.0),
+    ('cmd_vel_timeout', -0.5), ('max_turn', 1e9)])
+def test_out_of_range_values_fail_at_start(context, name, value):
+    with pytest.raises(InvalidParameterValueException):
+        make(context, **{name: value})
+
+
+def test_wrong_type_fails_at_start(context):
+    with pytest.raises(rclpy.exceptions.ParameterException):
+        make(context, max_speed='fast')
+
+
+def test_cross_parameter_check(context):
+    with pytest.raises(SimConfigError, match='exceeds the physics rate'):
+        make(context, time_step=0.01, state_publish_rate=200.0)
+
+
+def test_missing_world_file(context, tmp_path):
+    with pytest.raises(WorldConfigError, match='does not exist'):
+        make(context, world=str(tmp_path / 'nope.yaml'))
