@@ -4,7 +4,7 @@ from __future__ import annotations
 import array
 import math
 from dataclasses import dataclass
-from typing import Sequence, Tuple
+from typing import Optional, Sequence, Tuple
 
 import numpy as np
 
@@ -85,15 +85,21 @@ def look_at_rotation(position: Sequence[float], target: Sequence[float]) -> np.n
 
 
 class ImageBuffer:
-    """One rgb8 byte buffer reused for every frame.
+    """Writes rgb8 frames into one byte array in place, without per-frame allocation.
 
-    rclpy copies a numpy array into Image.data element by element (about 140 ms at 640x480);
-    an ``array.array('B')`` is taken as is, and writing into a numpy view of it costs a memcpy.
+    rclpy copies a numpy array into Image.data element by element (about 140 ms at 640x480),
+    and its setter copies whatever it is given into a new ``array.array``. So the buffer must be
+    the array that the message already owns (``msg.data``); frames are copied into a numpy view
+    of it, a plain memcpy.
     """
 
-    def __init__(self, width: int, height: int) -> None:
+    def __init__(self, width: int, height: int, data: Optional[array.array] = None) -> None:
         self.width, self.height = width, height
-        self.data = array.array('B', bytes(width * height * 3))
+        size = width * height * 3
+        self.data = data if data is not None else array.array('B', bytes(size))
+        if not isinstance(self.data, array.array) or self.data.typecode != 'B' \
+                or len(self.data) != size:
+            raise ValueError(f'need an array.array of {size} unsigned bytes')
         self._view = np.frombuffer(self.data, dtype=np.uint8).reshape(height, width, 3)
 
     def fill_from_rgba(self, rgba: np.ndarray) -> array.array:

@@ -122,10 +122,11 @@ class SimNode(Node):
                 Image, _topic(ns, f'{c.name}/image_raw'), qos_profile_sensor_data))
             self._info_pubs.append(self.create_publisher(
                 CameraInfo, _topic(ns, f'{c.name}/camera_info'), qos_profile_sensor_data))
-            buffer = ImageBuffer(c.width, c.height)
-            self._buffers.append(buffer)
-            self._image_msgs.append(Image(height=c.height, width=c.width, encoding='rgb8',
-                                          is_bigendian=0, step=3 * c.width, data=buffer.data))
+            image = Image(height=c.height, width=c.width, encoding='rgb8', is_bigendian=0,
+                          step=3 * c.width, data=bytes(3 * c.width * c.height))
+            # Frames are written into the message's own byte array (see ImageBuffer).
+            self._buffers.append(ImageBuffer(c.width, c.height, image.data))
+            self._image_msgs.append(image)
             self._image_msgs[-1].header.frame_id = c.frame_id
             k = cam.intrinsics
             self._info_msgs.append(CameraInfo(

@@ -75,3 +75,14 @@ def test_image_buffer_fills_without_reallocating():
     data = buf.fill_from_rgba(rgba)
     assert data is buf.data and len(data) == 24
     assert bytes(data) == rgba[:, :, :3].tobytes()
+
+
+def test_image_buffer_writes_into_the_messages_own_array():
+    from sensor_msgs.msg import Image
+    msg = Image(height=2, width=4, encoding='rgb8', step=12, data=bytes(24))
+    buf = ImageBuffer(4, 2, msg.data)
+    rgba = np.full((2, 4, 4), 7, np.uint8)
+    buf.fill_from_rgba(rgba)
+    assert bytes(msg.data) == bytes([7] * 24)
+    with pytest.raises(ValueError):
+        ImageBuffer(4, 2, msg.data[:10])

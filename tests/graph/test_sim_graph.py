@@ -1,0 +1,258 @@
+"""The simulator node as a user drives it: separate processes over DDS, in simulated time."""
+import math
+import time
+
+import numpy as np
+import pytest
+from geometry_msgs.msg import Twist, TwistStamped
+from nav_msgs.msg import Odometry
+from rclpy.qos import qos_profile_sensor_data
+from rosgraph_msgs.msg import Clock
+from sensor_msgs.msg import CameraInfo, Image, JointState
+from sim_interfaces.srv import StepSimulation
+from std_srvs.srv import Trigger
+
+from helpers import stamp_s, wait_for
+from sim_bridge.world import yaw_from_quaternion
+
+RTF = 4.0   # paced, but faster than real time to keep the suite short
+DT = 1.0 / 240.0
+DT_NS = round(DT * 1e9)  # simulated time advances in whole nanoseconds per step
+
+
+class Driver:
+    """Publishes cmd_vel and follows /clock and odom, as a user's controller would."""
+
+    def __init__(self, probe, stamped=False):
+        self.probe = probe
+        self.clock = probe.collect(Clock, '/clock')
+        self.odom = probe.collect(Odometry, '/mini_robot/odom')
+        self.joints = probe.collect(JointState, '/mini_robot/joint_states')
+        self.stamped = stamped
+        self.pub = probe.node.create_publisher(TwistStamped if stamped else Twist,
+                                               '/mini_robot/cmd_vel', 10)
+        wait_for(lambda: self.clock and self.odom and self.pub.get_subscription_count() > 0,
+                 15.0, what='simulator topics')
+
+    def now(self):
+        return stamp_s(self.clock[-1][1].clock)
+
+    def send(self, v, w):
+        twist = Twist()
+        twist.linear.x, twist.angular.z = v, w
+        self.pub.publish(TwistStamped(twist=twist) if self.stamped else twist)
+
+    def drive(self, v, w, duration, period=0.05):
+        """Hold (v, w) for ``duration`` seconds of simulated time, then send zero."""
+        t_end = self.now() + duration
+        while self.now() < t_end:
+            self.send(v, w)
+            time.sleep(period / RTF)
+        self.send(0.0, 0.0)
+
+    def wait_at_rest(self, timeout=10.0):
+        def at_rest():
+            t = self.odom[-1][1].twist.twist
+            return abs(t.linear.x) < 1e-3 and abs(t.angular.z) < 1e-3
+        time.sleep(0.2 / RTF)
+        wait_for(at_rest, timeout, what='the robot at rest')
+
+    def pose(self):
+        p = self.odom[-1][1].pose.pose
+        return p.position.x, p.position.y, yaw_from_quaternion(
+            (p.orientation.x, p.orientation.y, p.orientation.z, p.orientation.w))
+
+    def settle(self, seconds=0.3):
+        t_end = self.now() + seconds
+        wait_for(lambda: self.now() >= t_end, 10.0, what='simulated time')
+
+
+def _ns(stamp):
+    return stamp.sec * 1_000_000_000 + stamp.nanosec
+
+
+@pytest.fixture
+def sim(start_node):
+    return start_node('sim_node', '-p', f'real_time_factor:={RTF}', '-p', 'rtf_log_period:=1.0')
+
+
+def test_forward_0p1_for_2s_gives_0p2_m(sim, probe):
+    d = Driver(probe)
+    d.settle()
+    x0, y0, _ = d.pose()
+    d.drive(0.1, 0.0, 2.0)
+    d.wait_at_rest()
+    x, y, yaw = d.pose()
+    assert x - x0 == pytest.approx(0.2, rel=0.05)
+    assert abs(y - y0) < 0.005 and abs(yaw) < 0.02
+    # The wheels turned by rolling: about 0.2 m / r of wheel angle.
+    names = list(d.joints[-1][1].name)
+    left = d.joints[-1][1].position[names.index('left_wheel_joint')]
+    assert left == pytest.approx(0.2 / 0.03, rel=0.05)
+
+
+def test_turn_in_place_for_pi_over_0p2_s_gives_pi(sim, probe):
+    d = Driver(probe)
+    d.settle()
+    start = len(d.odom)
+    d.drive(0.0, 0.2, math.pi / 0.2)
+    d.wait_at_rest()
+    yaws = [yaw_from_quaternion((m.pose.pose.orientation.x, m.pose.pose.orientation.y,
+                                 m.pose.pose.orientation.z, m.pose.pose.orientation.w))
+            for _, m in d.odom[start - 1:]]
+    turned = np.unwrap(yaws)[-1] - yaws[0]
+    assert turned == pytest.approx(math.pi, rel=0.05)
+    x, y, _ = d.pose()
+    assert math.hypot(x, y) < 0.01
+
+
+def test_commands_above_the_limits_are_clamped(sim, probe):
+    d = Driver(probe)
+    d.drive(1.0, 0.0, 1.0)
+    v = d.odom[-1][1].twist.twist.linear.x
+    d.drive(0.0, -3.0, 1.0)
+    w = d.odom[-1][1].twist.twist.angular.z
+    assert v == pytest.approx(0.2, rel=0.03)
+    assert w == pytest.approx(-0.2, rel=0.03)
+    wait_for(lambda: 'clamped to (0.200, 0.000)' in sim.output(), 5.0, what='clamp warning')
+
+
+def test_silence_past_the_timeout_stops_the_robot(sim, probe):
+    d = Driver(probe)
+    t_end = d.now() + 1.0
+    while d.now() < t_end:
+        d.send(0.1, 0.0)
+        time.sleep(0.05 / RTF)
+    t_last = d.now()
+    assert d.odom[-1][1].twist.twist.linear.x == pytest.approx(0.1, rel=0.05)
+    # No zero twist is sent: only the timeout (0.5 s) can stop it.
+    wait_for(lambda: d.now() > t_last + 0.8, 10.0, what='simulated time')
+    assert abs(d.odom[-1][1].twist.twist.linear.x) < 1e-3
+    stopped_at = next(stamp_s(m.header.stamp) for _, m in d.odom
+                      if stamp_s(m.header.stamp) > t_last
+                      and abs(m.twist.twist.linear.x) < 0.01)
+    assert t_last + 0.3 < stopped_at < t_last + 0.7
+    wait_for(lambda: 'stopping' in sim.output(), 5.0, what='timeout log line')
+
+
+def test_nan_is_rejected_the_robot_stops_and_the_node_lives(sim, probe):
+    d = Driver(probe)
+    d.drive(0.1, 0.0, 0.5)
+    d.send(0.1, 0.0)
+    d.settle(0.1)
+    d.send(math.nan, 0.0)
+    t_nan = d.now()
+    d.settle(0.25)  # well inside the 0.5 s timeout: only the rejection can stop it
+    assert abs(d.odom[-1][1].twist.twist.linear.x) < 2e-3
+    assert sim.alive()
+    d.send(0.0, math.inf)
+    wait_for(lambda: 'non-finite command' in sim.output(), 5.0, what='rejection warning')
+    d.drive(0.1, 0.0, 0.5)
+    assert d.odom[-1][1].twist.twist.linear.x == pytest.approx(0.1, rel=0.05)
+    assert d.now() > t_nan
+
+
+def test_clock_advances_at_the_paced_rate(sim, probe):
+    clock = probe.collect(Clock, '/clock')
+    wait_for(lambda: len(clock) > 10, 10.0, what='/clock')
+    time.sleep(1.0)
+    (w0, c0), (w1, c1) = clock[1], clock[-1]
+    stamps = [stamp_s(c.clock) for _, c in clock]
+    assert all(b > a for a, b in zip(stamps, stamps[1:]))
+    assert (stamp_s(c1.clock) - stamp_s(c0.clock)) / (w1 - w0) == pytest.approx(RTF, rel=0.3)
+    # One /clock message per physics step.
+    assert np.diff(stamps) == pytest.approx(DT, abs=1e-6)
+
+
+def test_camera_info_matches_the_image(sim, probe):
+    images = probe.collect(Image, '/mini_robot/camera/image_raw', qos_profile_sensor_data)
+    infos = probe.collect(CameraInfo, '/mini_robot/camera/camera_info', qos_profile_sensor_data)
+    wait_for(lambda: len(images) >= 5 and len(infos) >= 5, 20.0, what='camera frames')
+    img, info = images[-1][1], next(m for _, m in reversed(infos)
+                                    if m.header.stamp == images[-1][1].header.stamp)
+    assert (img.width, img.height, img.encoding) == (320, 240, 'rgb8')
+    assert (info.width, info.height) == (img.width, img.height)
+    assert img.step == 3 * img.width and len(img.data) == img.step * img.height
+    assert img.header.frame_id == info.header.frame_id == 'camera_optical_frame'
+    fx, cx, cy = info.k[0], info.k[2], info.k[5]
+    assert fx == pytest.approx(120.0 / math.tan(math.radians(30.0)))
+    assert (cx, cy) == (160.0, 119.0)
+    pixels = np.frombuffer(img.data, np.uint8).reshape(240, 320, 3)
+    assert pixels.std() > 5  # a rendered scene, not a blank buffer
+    # 15 Hz of simulated time.
+    stamps = [stamp_s(m.header.stamp) for _, m in images]
+    assert np.median(np.diff(stamps)) == pytest.approx(1 / 15, abs=DT)
+
+
+def test_reset_returns_the_robot_to_its_start_pose(sim, probe):
+    d = Driver(probe)
+    d.drive(0.2, 0.2, 1.5)
+    d.wait_at_rest()
+    assert math.hypot(*d.pose()[:2]) > 0.1
+    reply = probe.call(Trigger, '/sim_node/reset', Trigger.Request())
+    assert reply.success
+    d.settle(0.3)
+    x, y, yaw = d.pose()
+    assert math.hypot(x, y) < 0.002 and abs(yaw) < 0.01
+
+
+def test_pause_resume_and_step_while_paused(sim, probe):
+    d = Driver(probe)
+    refused = probe.call(StepSimulation, '/sim_node/step', StepSimulation.Request(steps=5))
+    assert not refused.success and 'paused' in refused.message
+    assert probe.call(Trigger, '/sim_node/pause', Trigger.Request()).success
+    time.sleep(0.2)
+    t_paused = d.now()
+    time.sleep(0.3)
+    assert d.now() == t_paused
+    reply = probe.call(StepSimulation, '/sim_node/step', StepSimulation.Request(steps=24))
+    assert reply.success and stamp_s(reply.sim_time) == pytest.approx(t_paused + 0.1, abs=1e-6)
+    assert probe.call(Trigger, '/sim_node/resume', Trigger.Request()).success
+    wait_for(lambda: d.now() > t_paused + 0.5, 5.0, what='time after resume')
+
+
+def test_stamped_velocity_commands(start_node, probe):
+    start_node('sim_node', '-p', f'real_time_factor:={RTF}', '-p', 'use_stamped_vel:=true')
+    d = Driver(probe, stamped=True)
+    d.drive(0.1, 0.0, 0.5)
+    assert d.odom[-1][1].twist.twist.linear.x == pytest.approx(0.1, rel=0.05)
+
+
+def test_lock_step_advances_exactly_n_steps_per_request(start_node, probe):
+    start_node('sim_node', '-p', 'synchronous:=true')
+    clock = probe.collect(Clock, '/clock')
+    odom = probe.collect(Odometry, '/mini_robot/odom')
+    first = probe.call(StepSimulation, '/sim_node/step', StepSimulation.Request(steps=1))
+    assert first.success
+    time.sleep(0.5)  # no request, no physics
+    again = probe.call(StepSimulation, '/sim_node/step', StepSimulation.Request(steps=1))
+    assert again.step_count == first.step_count + 1
+    for n in (1, 7, 240, 1000):
+        before = probe.call(StepSimulation, '/sim_node/step', StepSimulation.Request(steps=1))
+        n_clock = len(clock)
+        reply = probe.call(StepSimulation, '/sim_node/step', StepSimulation.Request(steps=n))
+        assert reply.success
+        assert reply.step_count == before.step_count + n
+        assert _ns(reply.sim_time) == _ns(before.sim_time) + n * DT_NS
+        # Everything the steps published was sent before the reply: one /clock per step.
+        wait_for(lambda: len(clock) >= n_clock + n, 5.0, what=f'{n} clock messages')
+        time.sleep(0.1)
+        assert len(clock) == n_clock + n
+        assert clock[-1][1].clock == reply.sim_time
+    # States at 100 Hz: the last odom published is at most one state period old.
+    assert stamp_s(reply.sim_time) - stamp_s(odom[-1][1].header.stamp) < 0.0105
+    bad = probe.call(StepSimulation, '/sim_node/step', StepSimulation.Request(steps=0))
+    assert not bad.success and 'within' in bad.message
+    assert not probe.call(Trigger, '/sim_node/pause', Trigger.Request()).success
+
+
+@pytest.mark.parametrize('args, fragment', [
+    (['-p', 'time_step:=1.0'], 'bad parameter'),
+    (['-p', 'world:=/nonexistent/world.yaml'], 'does not exist'),
+    (['-p', 'max_speed:=fast'], 'bad parameter'),
+])
+def test_bad_parameters_fail_at_start_with_a_clear_message(start_node, args, fragment):
+    proc = start_node('sim_node', *args)
+    wait_for(lambda: not proc.alive(), 15.0, what='the node to exit')
+    assert proc.proc.returncode == 1
+    assert fragment in proc.output()
