@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # The main job: the simulator and a scripted teleop, headless. The mini robot drives a 0.5 m
 # square; drive_check prints the final odometry pose against the pose that the kinematics
-# predicts from the commands sent, and the exit code says whether they agree.
+# predicts for the script's commands, and the exit code says whether they agree.
 set -euo pipefail
 ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 # shellcheck disable=SC1091
@@ -30,11 +30,12 @@ trap cleanup EXIT
 sim_node --ros-args -p real_time_factor:="$RTF" -p rtf_log_period:=10.0 \
   > "$RUN_DIR/sim_node.log" 2>&1 &
 pids+=($!)
-drive_check --ros-args -p use_sim_time:=true -p wall_timeout:=600.0 \
+drive_check --ros-args -p use_sim_time:=true -p wall_timeout:=600.0 -p script:="$SCRIPT" \
   -r cmd_vel:=/mini_robot/cmd_vel -r odom:=/mini_robot/odom 2>&1 | tee "$RUN_DIR/drive_check.log" &
 check_pid=$!
 pids+=("$check_pid")
 teleop --ros-args -p use_sim_time:=true -p script:="$SCRIPT" -p wait_for_subscriber:=30.0 \
+  -p publish_rate:=50.0 \
   -r __ns:=/mini_robot 2>&1 | tee "$RUN_DIR/teleop.log"
 
 set +e

@@ -60,10 +60,6 @@ class CommandGuard:
             return tuple(0.0 for _ in self._limits)
         return self._command
 
-    def expiry(self) -> Optional[float]:
-        """The time after which the held command no longer applies (None: nothing held)."""
-        return None if self._stamp is None else self._stamp + self._timeout
-
     def timed_out(self, now: float) -> bool:
         return self._stamp is not None and (now - self._stamp > self._timeout)
 

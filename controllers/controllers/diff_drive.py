@@ -3,7 +3,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Iterable, Optional, Tuple
+from typing import Iterable, Tuple
 
 # The report's simulation parameters (ROBOT_MODELS.md section 1).
 WHEEL_RADIUS_M = 0.03
@@ -77,34 +77,3 @@ def wrap_angle(a: float) -> float:
     """Wrap an angle to [-pi, pi)."""
     return (a + math.pi) % (2.0 * math.pi) - math.pi
 
-
-class CommandIntegrator:
-    """Dead reckoning of the pose a base should reach from the velocity commands it received.
-
-    Commands go through the same CommandGuard semantics as the simulator's (clamping, hold the
-    last command, zero after the timeout), so the prediction is what ideal kinematics would do
-    with exactly the commands sent.
-    """
-
-    def __init__(self, guard, start: Pose2D = Pose2D()) -> None:
-        self._guard = guard
-        self.pose = start
-        self._t: Optional[float] = None
-
-    def command(self, v: float, w: float, t: float) -> None:
-        self.advance_to(t)
-        self._guard.submit((v, w), t)
-
-    def advance_to(self, t: float) -> Pose2D:
-        """Integrate up to time t; a held command stops contributing at its timeout."""
-        if self._t is None or t <= self._t:
-            self._t = t if self._t is None else self._t
-            return self.pose
-        v, w = self._guard.active_command(self._t)
-        t_end = t
-        expiry = self._guard.expiry()
-        if expiry is not None and expiry < t:
-            t_end = max(self._t, expiry)
-        self.pose = integrate_unicycle(self.pose, v, w, t_end - self._t)
-        self._t = t
-        return self.pose

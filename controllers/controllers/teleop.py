@@ -6,7 +6,6 @@ import select
 import signal
 import sys
 import termios
-import threading
 import time
 import tty
 from typing import Optional
@@ -58,10 +57,9 @@ class TeleopNode(Node):
         self.wait_for_subscriber = get('wait_for_subscriber')
         self._pub = self.create_publisher(TwistStamped if self._stamped else Twist, 'cmd_vel',
                                           QoSProfile(depth=10))
-        self._lock = threading.Lock()
         self._script_start = None
         self._script_step = None
-        self.finished = threading.Event()
+        self.finished = False
         self._timer = self.create_timer(1.0 / get('publish_rate'), self._on_timer)
         if self.script is not None:
             self._timer.cancel()  # started by start_script() once a subscriber is there
@@ -72,8 +70,7 @@ class TeleopNode(Node):
 
     # --- keyboard mode ------------------------------------------------------------------
     def press(self, key: str) -> Optional[str]:
-        with self._lock:
-            change = self.state.press(key)
+        change = self.state.press(key)
         if change is not None:
             self.publish_current()
         return change
@@ -82,15 +79,11 @@ class TeleopNode(Node):
         if self.script is not None:
             self._script_tick()
             return
-        with self._lock:
-            active = self.state.motion != 'stop'
-        if active:
+        if self.state.motion != 'stop':
             self.publish_current()
 
     def publish_current(self) -> None:
-        with self._lock:
-            v, w = self.state.twist()
-        self.publish_twist(v, w)
+        self.publish_twist(*self.state.twist())
 
     def publish_twist(self, v: float, w: float) -> None:
         twist = Twist()
@@ -126,7 +119,7 @@ class TeleopNode(Node):
             self.publish_twist(0.0, 0.0)
             self.get_logger().info(f'script done after {elapsed:.2f} s')
             self._timer.cancel()
-            self.finished.set()
+            self.finished = True
             return
         if step is not self._script_step:
             self._script_step = step
@@ -152,7 +145,7 @@ def _run_script(node: TeleopNode, executor) -> int:
                                 f'{node.wait_for_subscriber:g} s; is the simulator running?')
         return 1
     node.start_script()
-    while rclpy.ok() and not node.finished.is_set():
+    while rclpy.ok() and not node.finished:
         executor.spin_once(timeout_sec=0.1)
     return 0
 
@@ -162,15 +155,15 @@ def _run_keyboard(node: TeleopNode, executor) -> int:
         node.get_logger().error('stdin is not a terminal: run in a terminal, or give '
                                 '-p script:="forward 2s, left 1.5s, stop"')
         return 1
-    spinner = threading.Thread(target=executor.spin, daemon=True)
-    spinner.start()
     print(HELP, flush=True)
     fd = sys.stdin.fileno()
     saved = termios.tcgetattr(fd)
     try:
         tty.setraw(fd)
+        # One thread: poll the keyboard, then serve the executor (the repeat timer).
         while rclpy.ok():
-            ready, _, _ = select.select([sys.stdin], [], [], 0.1)
+            executor.spin_once(timeout_sec=0.0)
+            ready, _, _ = select.select([fd], [], [], 0.01)
             if not ready:
                 continue
             key = os.read(fd, 1).decode(errors='ignore')

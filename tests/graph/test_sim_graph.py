@@ -156,12 +156,17 @@ def test_clock_advances_at_the_paced_rate(sim, probe):
     clock = probe.collect(Clock, '/clock')
     wait_for(lambda: len(clock) > 10, 10.0, what='/clock')
     time.sleep(1.0)
-    (w0, c0), (w1, c1) = clock[1], clock[-1]
-    stamps = [stamp_s(c.clock) for _, c in clock]
-    assert all(b > a for a, b in zip(stamps, stamps[1:]))
-    assert (stamp_s(c1.clock) - stamp_s(c0.clock)) / (w1 - w0) == pytest.approx(RTF, rel=0.3)
-    # One /clock message per physics step.
-    assert np.diff(stamps) == pytest.approx(DT, abs=1e-6)
+    received = clock[5:]  # after discovery settled
+    (w0, c0), (w1, c1) = received[0], received[-1]
+    ns = np.array([_ns(c.clock) for _, c in received])
+    gaps = np.diff(ns)
+    assert (gaps > 0).all()
+    # One /clock per physics step: every gap is a whole number of steps, nearly all exactly one
+    # (a reliable depth-10 queue may drop one when the probe process is starved).
+    assert (gaps % DT_NS == 0).all()
+    assert np.mean(gaps == DT_NS) > 0.95
+    rate = (stamp_s(c1.clock) - stamp_s(c0.clock)) / (w1 - w0)
+    assert 0.5 * RTF < rate < 1.15 * RTF, rate
 
 
 def test_camera_info_matches_the_image(sim, probe):

@@ -3,9 +3,8 @@ import math
 
 import pytest
 
-from controllers.diff_drive import (CommandIntegrator, DiffDriveGeometry, Pose2D, body_twist,
+from controllers.diff_drive import (DiffDriveGeometry, Pose2D, body_twist,
                                     integrate_unicycle, predict_pose, wheel_speeds, wrap_angle)
-from controllers.cmd_guard import CommandGuard
 
 # (v, w) -> (wL, wR), the table of ROBOT_MODELS.md section 1.
 TABLE = [
@@ -83,20 +82,3 @@ def test_wrap_angle_range():
         assert -math.pi <= wrapped < math.pi
         assert math.cos(wrapped) == pytest.approx(math.cos(a))
 
-
-def test_command_integrator_holds_then_times_out():
-    integ = CommandIntegrator(CommandGuard((0.2, 0.2), 0.5))
-    integ.command(0.1, 0.0, 10.0)
-    integ.advance_to(10.3)
-    assert integ.pose.x == pytest.approx(0.03)
-    # No new command: motion stops 0.5 s after the last one.
-    integ.advance_to(12.0)
-    assert integ.pose.x == pytest.approx(0.05)
-
-
-def test_command_integrator_clamps_like_the_simulator():
-    integ = CommandIntegrator(CommandGuard((0.2, 0.2), 0.5))
-    for i in range(11):
-        integ.command(1.0, 0.0, i * 0.1)
-    integ.advance_to(1.0)
-    assert integ.pose.x == pytest.approx(0.2)

@@ -1,4 +1,4 @@
-"""Compare a base's odometry with the pose its received cmd_vel commands predict, then exit."""
+"""Compare a base's final odometry with the pose the kinematics predicts for a teleop script."""
 from __future__ import annotations
 
 import math
@@ -13,8 +13,8 @@ from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from rclpy.qos import QoSProfile
 
-from controllers.cmd_guard import CommandGuard
-from controllers.diff_drive import CommandIntegrator, Pose2D, wrap_angle
+from controllers.diff_drive import Pose2D, predict_pose, wrap_angle
+from controllers.teleop_core import TeleopError, parse_script
 from sim_bridge.world import yaw_from_quaternion
 
 
@@ -25,16 +25,23 @@ def _float(description: str, lo: float, hi: float) -> ParameterDescriptor:
 
 
 class DriveCheck(Node):
-    """Listens to ``cmd_vel`` and ``odom``; done once commands ended and the base is at rest."""
+    """Knows the script the teleop runs; listens to ``cmd_vel`` and ``odom``.
+
+    Once commands have ended (the last one zero, none for ``settle_time``) and the base is at
+    rest, it reports the final odometry pose against the pose that integrating the script's
+    twists, clamped to the simulator's limits, predicts.
+    """
 
     def __init__(self, **kwargs) -> None:
         super().__init__('drive_check', **kwargs)
-        self.declare_parameter('max_speed', 0.2, _float('Limit the simulator clamps to', 1e-3,
-                                                        10.0))
-        self.declare_parameter('max_turn', 0.2, _float('Limit the simulator clamps to', 1e-3,
-                                                       20.0))
-        self.declare_parameter('cmd_vel_timeout', 0.5, _float('The simulator timeout [s]',
-                                                              1e-3, 60.0))
+        self.declare_parameter('script', '', ParameterDescriptor(
+            description='The teleop script being driven (same syntax as teleop)',
+            read_only=True))
+        self.declare_parameter('max_speed', 0.2, _float(
+            'The simulator limit and teleop max_speed [m/s]', 1e-3, 10.0))
+        self.declare_parameter('max_turn', 0.2, _float(
+            'The simulator limit and teleop max_turn [rad/s]', 1e-3, 20.0))
+        self.declare_parameter('speed', 0.5, _float('The teleop initial speed level', 0.0, 1.0))
         self.declare_parameter('position_tolerance', 0.05, _float('Pass limit [m]', 0.0, 10.0))
         self.declare_parameter('yaw_tolerance', 0.1, _float('Pass limit [rad]', 0.0, 3.2))
         self.declare_parameter('settle_time', 1.0, _float(
@@ -42,43 +49,46 @@ class DriveCheck(Node):
         self.declare_parameter('wall_timeout', 300.0, _float('Give up after [wall s]', 1.0,
                                                              3600.0))
         get = lambda name: self.get_parameter(name).value  # noqa: E731
+        max_speed, max_turn = get('max_speed'), get('max_turn')
+        script = parse_script(get('script'), max_speed, max_turn, get('speed'))
+        segments = [(max(-max_speed, min(max_speed, s.v)), max(-max_turn, min(max_turn, s.w)),
+                     s.duration) for s in script.steps]
+        self.predicted = predict_pose(Pose2D(), segments)
         self.wall_timeout = get('wall_timeout')
-        guard = CommandGuard((get('max_speed'), get('max_turn')), get('cmd_vel_timeout'))
-        self._integrator = CommandIntegrator(guard)
         self._tol = (get('position_tolerance'), get('yaw_tolerance'))
         self._settle = get('settle_time')
-        self._moving_commands = 0
-        self._last_cmd_t = None
+        self._moving = False
+        self._last_cmd = None   # (sim time, was it zero)
         self._odom = None
         self.result = None
         reliable = QoSProfile(depth=10)
         self.create_subscription(Twist, 'cmd_vel', self._on_cmd, reliable)
         self.create_subscription(Odometry, 'odom', self._on_odom, reliable)
-
-    def _now(self) -> float:
-        return self.get_clock().now().nanoseconds * 1e-9
+        self.get_logger().info(
+            f'waiting for commands on cmd_vel and odometry on odom; the script of '
+            f'{len(segments)} steps should end at x={self.predicted.x:+.4f} m '
+            f'y={self.predicted.y:+.4f} m yaw={math.degrees(self.predicted.yaw):+.2f} deg')
 
     def _on_cmd(self, msg: Twist) -> None:
-        t = self._now()
-        self._integrator.command(msg.linear.x, msg.angular.z, t)
-        self._last_cmd_t = t
-        if msg.linear.x != 0.0 or msg.angular.z != 0.0:
-            self._moving_commands += 1
+        is_zero = msg.linear.x == 0.0 and msg.angular.z == 0.0
+        self._moving = self._moving or not is_zero
+        self._last_cmd = (self.get_clock().now().nanoseconds * 1e-9, is_zero)
 
     def _on_odom(self, msg: Odometry) -> None:
-        t = msg.header.stamp.sec + msg.header.stamp.nanosec * 1e-9
-        self._integrator.advance_to(t)
         self._odom = msg
-        at_rest = (abs(msg.twist.twist.linear.x) < 1e-3 and abs(msg.twist.twist.angular.z) < 1e-3)
-        if (self.result is None and self._moving_commands and at_rest
-                and t - self._last_cmd_t > self._settle):
+        if self.result is not None or not self._moving or not self._last_cmd[1]:
+            return
+        t = msg.header.stamp.sec + msg.header.stamp.nanosec * 1e-9
+        twist = msg.twist.twist
+        if (t - self._last_cmd[0] > self._settle and abs(twist.linear.x) < 1e-3
+                and abs(twist.angular.z) < 1e-3):
             self.result = self._report()
 
     def _report(self) -> bool:
         p = self._odom.pose.pose
         actual = Pose2D(p.position.x, p.position.y, yaw_from_quaternion(
             (p.orientation.x, p.orientation.y, p.orientation.z, p.orientation.w)))
-        predicted = self._integrator.pose
+        predicted = self.predicted
         dpos = math.hypot(actual.x - predicted.x, actual.y - predicted.y)
         dyaw = wrap_angle(actual.yaw - predicted.yaw)
         ok = dpos <= self._tol[0] and abs(dyaw) <= self._tol[1]
@@ -95,7 +105,12 @@ class DriveCheck(Node):
 
 def main(args=None) -> int:
     rclpy.init(args=args)
-    node = DriveCheck()
+    try:
+        node = DriveCheck()
+    except (TeleopError, rclpy.exceptions.ParameterException) as exc:
+        rclpy.logging.get_logger('drive_check').fatal(f'cannot start: {exc}')
+        rclpy.try_shutdown()
+        return 1
     deadline = time.monotonic() + node.wall_timeout
     code = 1
     try:

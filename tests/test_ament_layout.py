@@ -1,0 +1,69 @@
+"""After colcon build, every executable resolves the way `ros2 run <pkg> <exe>` resolves it
+(the package prefix from the ament index, then lib/<pkg>/<exe>) and starts."""
+import os
+import subprocess
+from pathlib import Path
+
+import pytest
+from ament_index_python.packages import get_package_prefix, get_package_share_directory
+
+from helpers import ROOT, wait_for
+
+# (package, executable, arguments, a line the executable logs once it runs)
+EXECUTABLES = [
+    ('sim_bridge', 'sim_node', [], 'with robots'),
+    ('controllers', 'teleop', ['-p', 'script:=stop', '-p', 'wait_for_subscriber:=60.0'],
+     'publishing on'),
+    ('sim_bringup', 'drive_check', ['-p', 'script:=forward 1s'], 'waiting for'),
+]
+
+
+def _ros2_run_path(package: str, executable: str) -> Path:
+    # What ros2run does: get_package_prefix(package)/lib/package/executable, executable bit set.
+    return Path(get_package_prefix(package)) / 'lib' / package / executable
+
+
+@pytest.mark.parametrize('package, executable, args, started', EXECUTABLES,
+                         ids=[e[1] for e in EXECUTABLES])
+def test_executable_resolves_and_starts(tmp_path, package, executable, args, started):
+    path = _ros2_run_path(package, executable)
+    assert path.is_file() and os.access(path, os.X_OK), path
+    assert Path(get_package_prefix(package)).is_relative_to(ROOT / 'ros_ws' / 'install')
+    log = tmp_path / 'out.log'
+    with open(log, 'w') as out:
+        proc = subprocess.Popen([str(path), '--ros-args'] + args, stdout=out,
+                                stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL)
+        try:
+            wait_for(lambda: started in log.read_text() or proc.poll() is not None, 20.0,
+                     what=f'{executable} to start')
+            assert proc.poll() is None, log.read_text()
+        finally:
+            proc.send_signal(2)
+            proc.wait(10)
+
+
+def test_every_package_is_in_the_ament_index():
+    for package in ('sim_bridge', 'controllers', 'perception', 'robot_description',
+                    'sim_bringup', 'sim_interfaces'):
+        share = Path(get_package_share_directory(package))
+        assert (share / 'package.xml').is_file()
+    assert (Path(get_package_share_directory('robot_description')) / 'urdf' /
+            'mini_robot.urdf').is_file()
+    assert (Path(get_package_share_directory('sim_bridge')) / 'worlds' /
+            'mini_robot.yaml').is_file()
+
+
+def test_interface_package_generated_python_bindings():
+    from sim_interfaces.srv import StepSimulation
+    assert StepSimulation.Request(steps=3).steps == 3
+    fields = StepSimulation.Response.get_fields_and_field_types()
+    assert fields == {'success': 'boolean', 'message': 'string', 'step_count': 'uint64',
+                      'sim_time': 'builtin_interfaces/Time'}
+
+
+def test_launch_file_is_valid_python_for_a_full_install():
+    launch = Path(get_package_share_directory('sim_bringup')) / 'launch'
+    files = sorted(launch.glob('*.launch.py'))
+    assert files
+    for f in files:
+        compile(f.read_text(), str(f), 'exec')
