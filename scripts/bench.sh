@@ -1,0 +1,7 @@
+#!/usr/bin/env bash
+# Benchmarks (`make bench`): prints figures and ratios against raw PyBullet taken in the same run.
+set -euo pipefail
+ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
+# shellcheck disable=SC1091
+source "$ROOT/scripts/env.sh"
+python "$ROOT/bench/bench_sim.py" "$@"
