@@ -27,6 +27,10 @@ command -v cc >/dev/null || missing+=(gcc)
 command -v c++ >/dev/null || missing+=(g++)
 command -v make >/dev/null || missing+=(make)
 "$PYTHON" -c 'import ensurepip, venv' 2>/dev/null || missing+=("python3-venv")
+# Python.h: rosidl's Python type support compiles against it.
+"$PYTHON" -c 'import os, sysconfig, sys
+sys.exit(0 if os.path.isfile(os.path.join(sysconfig.get_paths()["include"], "Python.h")) else 1)' \
+  || missing+=("python3-dev")
 if [ ${#missing[@]} -gt 0 ]; then
   pkgs="build-essential python3-venv python3-dev"
   if command -v apt-get >/dev/null && [ "$(id -u)" = 0 ]; then
@@ -55,11 +59,14 @@ if [ ! -x "$VENV/bin/python" ]; then
   "$PYTHON" -m venv "$VENV"
 fi
 mkdir -p "$STAMPS"
-req_hash="$(cat "$ROOT/requirements.txt" | hash_of)"
+LOCK="$ROOT/requirements/py$pyver.txt"
+[ -f "$LOCK" ] || die "no lock file requirements/py$pyver.txt for Python $pyver"
+req_hash="$(cat "$LOCK" | hash_of)"
 if [ "$(cat "$STAMPS/requirements" 2>/dev/null)" != "$req_hash" ]; then
-  log "installing pinned packages (requirements.txt)"
+  log "installing pinned packages (requirements/py$pyver.txt)"
+  case "$pyver" in 3.12|3.13) log "pybullet has no wheel for Python $pyver: compiling it takes minutes" ;; esac
   "$VENV/bin/python" -m pip install -q --disable-pip-version-check --upgrade pip==24.3.1
-  "$VENV/bin/python" -m pip install -q --disable-pip-version-check -r "$ROOT/requirements.txt"
+  "$VENV/bin/python" -m pip install -q --disable-pip-version-check -r "$LOCK"
   # The ROS wheels were built on a manylinux host: their CMake exports name that host's Python.
   "$VENV/bin/python" "$ROOT/scripts/fix_wheel_cmake_paths.py" "$VENV"
   echo "$req_hash" > "$STAMPS/requirements"
