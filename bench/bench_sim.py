@@ -52,9 +52,10 @@ class _CameraSink:
 
     def on_state(self, robot, t): pass
 
-    def camera_wanted(self, i): return self.camera
-
-    def on_camera(self, i, rgba, t): self.frames += 1
+    def on_camera_due(self, i, t, render):
+        if self.camera:
+            render()
+            self.frames += 1
 
     def on_command_timeout(self, robot): pass
 

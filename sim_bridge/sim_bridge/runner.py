@@ -3,7 +3,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Dict, List, Protocol
+from typing import Callable, Dict, List, Protocol
 
 import numpy as np
 
@@ -18,9 +18,9 @@ class StepSink(Protocol):
 
     def on_state(self, robot: str, time_ns: int) -> None: ...
 
-    def camera_wanted(self, index: int) -> bool: ...
-
-    def on_camera(self, index: int, rgba: np.ndarray, time_ns: int) -> None: ...
+    def on_camera_due(self, index: int, time_ns: int,
+                      render: Callable[[], np.ndarray]) -> None:
+        """A camera frame is due; call ``render()`` only if someone wants the image."""
 
     def on_command_timeout(self, robot: str) -> None: ...
 
@@ -38,7 +38,7 @@ class SimRunner:
     Each step: the command of every driven robot is taken from its guard (which zeroes it once
     it is older than the timeout, in simulated time), physics advances one fixed step, then
     /clock is due, robot states are due every ``state_period`` steps, and each camera is due at
-    its own rate, and only rendered when the sink wants it (someone subscribes).
+    its own rate; the sink renders it only if someone wants the image.
     """
 
     def __init__(self, world: SimWorld, limits: DriveLimits, state_rate: float) -> None:
@@ -85,8 +85,7 @@ class SimRunner:
                     # Keep the camera's own grid of due times, skipping frames nobody wanted.
                     period = self._camera_period_ns[i]
                     self._camera_next_ns[i] = (t_ns // period + 1) * period
-                    if sink.camera_wanted(i):
-                        sink.on_camera(i, world.render(cam), t_ns)
+                    sink.on_camera_due(i, t_ns, lambda cam=cam: world.render(cam))
 
     def reset(self) -> None:
         self.world.reset()

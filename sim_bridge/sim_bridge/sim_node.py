@@ -211,15 +211,16 @@ class SimNode(Node):
         odom.twist.covariance = GROUND_TRUTH_COVARIANCE
         self._odom_pubs[robot].publish(odom)
 
-    def camera_wanted(self, index: int) -> bool:
-        return self._image_pubs[index].get_subscription_count() > 0
-
-    def on_camera(self, index: int, rgba, time_ns: int) -> None:
+    def on_camera_due(self, index: int, time_ns: int, render) -> None:
+        # Rendering dominates the cost of a step: only for image subscribers.
         stamp = _stamp(time_ns)
-        image = self._image_msgs[index]
-        self._buffers[index].fill_from_rgba(rgba)
-        image.header.stamp = stamp
-        self._image_pubs[index].publish(image)
+        if self._image_pubs[index].get_subscription_count() > 0:
+            image = self._image_msgs[index]
+            self._buffers[index].fill_from_rgba(render())
+            image.header.stamp = stamp
+            self._image_pubs[index].publish(image)
+        elif self._info_pubs[index].get_subscription_count() == 0:
+            return
         info = self._info_msgs[index]
         info.header.stamp = stamp
         self._info_pubs[index].publish(info)

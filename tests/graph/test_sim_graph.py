@@ -189,6 +189,12 @@ def test_camera_info_matches_the_image(sim, probe):
     assert np.median(np.diff(stamps)) == pytest.approx(1 / 15, abs=DT)
 
 
+def test_camera_info_alone_is_published_without_rendering(sim, probe):
+    infos = probe.collect(CameraInfo, '/mini_robot/camera/camera_info', qos_profile_sensor_data)
+    wait_for(lambda: len(infos) >= 3, 20.0, what='camera_info without an image subscriber')
+    assert (infos[-1][1].width, infos[-1][1].height) == (320, 240)
+
+
 def test_reset_returns_the_robot_to_its_start_pose(sim, probe):
     d = Driver(probe)
     d.drive(0.2, 0.2, 1.5)

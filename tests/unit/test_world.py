@@ -16,6 +16,7 @@ class Recorder:
 
     def __init__(self, want_camera=False):
         self.clock, self.states, self.frames, self.timeouts = [], [], [], []
+        self.due = []
         self.want_camera = want_camera
 
     def on_clock(self, t):
@@ -24,11 +25,10 @@ class Recorder:
     def on_state(self, robot, t):
         self.states.append((robot, t))
 
-    def camera_wanted(self, i):
-        return self.want_camera
-
-    def on_camera(self, i, rgba, t):
-        self.frames.append((i, rgba.shape, t))
+    def on_camera_due(self, i, t, render):
+        self.due.append(t)
+        if self.want_camera:
+            self.frames.append((i, render().shape, t))
 
     def on_command_timeout(self, robot):
         self.timeouts.append(robot)
@@ -117,10 +117,12 @@ def test_outputs_are_scheduled_by_simulated_time(world):
     assert sink.frames[0][1] == (240, 320, 4)
 
 
-def test_camera_not_rendered_without_subscribers(world):
+def test_camera_due_at_its_rate_but_rendered_only_when_wanted(world, monkeypatch):
     runner, sink = SimRunner(world, DriveLimits(), 100.0), Recorder(want_camera=False)
+    calls = []
+    monkeypatch.setattr(world, 'render', lambda cam: calls.append(cam))
     runner.advance(240, sink)
-    assert sink.frames == []
+    assert len(sink.due) == 16 and sink.frames == [] and calls == []
 
 
 def test_reset_returns_to_the_start_pose(world):
