@@ -188,7 +188,8 @@ def main() -> int:
         print(f'| {label} | {r["rtf"]:.2f} | {r["steps_per_s"]:.0f} | '
               f'{r["frames_per_wall_s"]:.1f} |')
     print(f'\nnode / raw (camera on): {rn["rtf"] / rc["rtf"]:.2f}')
-    for key, label in (('latency_rtf1', 'real-time pacing'), ('latency_afap', 'as fast as possible')):
+    for key, label in (('latency_rtf1', 'real-time pacing'),
+                       ('latency_afap', 'as fast as possible')):
         r = results[key]
         print(f'cmd_vel -> wheel command ({label}): median {r["median_ms"]:.2f} ms, '
               f'p99 {r["p99_ms"]:.2f} ms, max {r["max_ms"]:.2f} ms '

@@ -12,39 +12,37 @@ from typing import Optional
 
 import rclpy
 from geometry_msgs.msg import Twist, TwistStamped
-from rcl_interfaces.msg import FloatingPointRange, ParameterDescriptor
+from rcl_interfaces.msg import ParameterDescriptor
 from rclpy.duration import Duration
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.qos import QoSProfile
 from rclpy.signals import SignalHandlerOptions
 
+from controllers.params import float_range
 from controllers.teleop_core import HELP, TeleopError, TeleopScript, TeleopState, parse_script
 
-
-def _float(description: str, lo: float, hi: float) -> ParameterDescriptor:
-    return ParameterDescriptor(description=description, read_only=True,
-                               floating_point_range=[FloatingPointRange(
-                                   from_value=lo, to_value=hi, step=0.0)])
 
 
 class TeleopNode(Node):
 
     def __init__(self, **kwargs) -> None:
         super().__init__('teleop', **kwargs)
-        self.declare_parameter('max_speed', 0.2, _float('Speed at 100 % [m/s]', 1e-3, 10.0))
-        self.declare_parameter('max_turn', 0.2, _float('Turn rate at 100 % [rad/s]', 1e-3, 20.0))
-        self.declare_parameter('speed', 0.5, _float(
+        self.declare_parameter('max_speed', 0.2, float_range(
+            'Speed at 100 % [m/s]', 1e-3, 10.0))
+        self.declare_parameter('max_turn', 0.2, float_range(
+            'Turn rate at 100 % [rad/s]', 1e-3, 20.0))
+        self.declare_parameter('speed', 0.5, float_range(
             'Initial speed level, a fraction of max_speed and max_turn (the report: 0.5)',
             0.0, 1.0))
-        self.declare_parameter('publish_rate', 20.0, _float(
+        self.declare_parameter('publish_rate', 20.0, float_range(
             'Rate of cmd_vel while a motion is active [Hz]', 0.5, 200.0))
         self.declare_parameter('stamped', False, ParameterDescriptor(
             description='Publish geometry_msgs/TwistStamped instead of Twist', read_only=True))
         self.declare_parameter('script', '', ParameterDescriptor(
             description='Timed commands, e.g. "forward 2s, left 1.5s, stop"; empty: keyboard',
             read_only=True))
-        self.declare_parameter('wait_for_subscriber', 10.0, _float(
+        self.declare_parameter('wait_for_subscriber', 10.0, float_range(
             'Script mode: wall seconds to wait for a cmd_vel subscriber before starting',
             0.0, 600.0))
         get = lambda name: self.get_parameter(name).value  # noqa: E731

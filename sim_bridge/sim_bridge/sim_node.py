@@ -10,7 +10,7 @@ import rclpy
 from builtin_interfaces.msg import Time
 from geometry_msgs.msg import Twist, TwistStamped
 from nav_msgs.msg import Odometry
-from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
+from rcl_interfaces.msg import IntegerRange, ParameterDescriptor
 from rclpy.clock import Clock, ClockType
 from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
@@ -20,6 +20,7 @@ from sensor_msgs.msg import CameraInfo, Image, JointState
 from sim_interfaces.srv import StepSimulation
 from std_srvs.srv import Trigger
 
+from controllers.params import float_range
 from sim_bridge.camera import ImageBuffer
 from sim_bridge.pacing import Pacer, RtfMeter
 from sim_bridge.runner import DriveLimits, SimRunner
@@ -36,11 +37,6 @@ class SimConfigError(ValueError):
     """A parameter combination the simulator cannot run with."""
 
 
-def _float(description: str, lo: float, hi: float) -> ParameterDescriptor:
-    return ParameterDescriptor(description=description, read_only=True,
-                               floating_point_range=[FloatingPointRange(
-                                   from_value=lo, to_value=hi, step=0.0)])
-
 
 class SimNode(Node):
 
@@ -51,25 +47,25 @@ class SimNode(Node):
             description='World YAML: a path or package://<pkg>/<path>', read_only=True))
         self.declare_parameter('gui', False, ro(
             description='Open the PyBullet GUI (needs a display)', read_only=True))
-        self.declare_parameter('time_step', 1.0 / 240.0, _float(
+        self.declare_parameter('time_step', 1.0 / 240.0, float_range(
             'Fixed physics step [s]', 1e-4, 0.05))
-        self.declare_parameter('real_time_factor', 1.0, _float(
+        self.declare_parameter('real_time_factor', 1.0, float_range(
             'Pacing: simulated seconds per wall second; 0 runs as fast as possible', 0.0, 100.0))
         self.declare_parameter('synchronous', False, ro(
             description='Lock-step: physics advances only on ~/step requests', read_only=True))
-        self.declare_parameter('state_publish_rate', 100.0, _float(
+        self.declare_parameter('state_publish_rate', 100.0, float_range(
             'Rate of joint_states and odom [Hz of simulated time]', 0.1, 10000.0))
-        self.declare_parameter('max_speed', 0.2, _float(
+        self.declare_parameter('max_speed', 0.2, float_range(
             'Linear speed limit of diff-drive bases [m/s]', 1e-3, 10.0))
-        self.declare_parameter('max_turn', 0.2, _float(
+        self.declare_parameter('max_turn', 0.2, float_range(
             'Turn rate limit of diff-drive bases [rad/s]', 1e-3, 20.0))
-        self.declare_parameter('cmd_vel_timeout', 0.5, _float(
+        self.declare_parameter('cmd_vel_timeout', 0.5, float_range(
             'Stop a base when its last cmd_vel is older than this [s of simulated time]',
             1e-3, 60.0))
         self.declare_parameter('use_stamped_vel', False, ro(
             description='Take geometry_msgs/TwistStamped on cmd_vel instead of Twist',
             read_only=True))
-        self.declare_parameter('rtf_log_period', 10.0, _float(
+        self.declare_parameter('rtf_log_period', 10.0, float_range(
             'Log the achieved real-time factor every this many wall seconds; 0 disables',
             0.0, 3600.0))
         self.declare_parameter('max_steps_per_tick', 64, ParameterDescriptor(

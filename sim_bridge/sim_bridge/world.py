@@ -89,7 +89,8 @@ class SimRobot:
             self.body = client.loadURDF(str(urdf), self._start_pos, self._start_orn,
                                         flags=URDF_FLAGS)
         except pybullet.error as exc:
-            raise WorldError(f'robot "{config.name}": PyBullet cannot load {urdf}: {exc}') from None
+            raise WorldError(
+                f'robot "{config.name}": PyBullet cannot load {urdf}: {exc}') from None
         # PyBullet reports the base's inertial frame; keep its offset from base_link.
         info = client.getDynamicsInfo(self.body, -1)
         self._inertial_pos, self._inertial_orn = info[3], info[4]

@@ -8,20 +8,16 @@ import time
 import rclpy
 from geometry_msgs.msg import Twist
 from nav_msgs.msg import Odometry
-from rcl_interfaces.msg import FloatingPointRange, ParameterDescriptor
+from rcl_interfaces.msg import ParameterDescriptor
 from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from rclpy.qos import QoSProfile
 
 from controllers.diff_drive import Pose2D, predict_pose, wrap_angle
+from controllers.params import float_range
 from controllers.teleop_core import TeleopError, parse_script
 from sim_bridge.world import yaw_from_quaternion
 
-
-def _float(description: str, lo: float, hi: float) -> ParameterDescriptor:
-    return ParameterDescriptor(description=description, read_only=True,
-                               floating_point_range=[FloatingPointRange(
-                                   from_value=lo, to_value=hi, step=0.0)])
 
 
 class DriveCheck(Node):
@@ -37,16 +33,19 @@ class DriveCheck(Node):
         self.declare_parameter('script', '', ParameterDescriptor(
             description='The teleop script being driven (same syntax as teleop)',
             read_only=True))
-        self.declare_parameter('max_speed', 0.2, _float(
+        self.declare_parameter('max_speed', 0.2, float_range(
             'The simulator limit and teleop max_speed [m/s]', 1e-3, 10.0))
-        self.declare_parameter('max_turn', 0.2, _float(
+        self.declare_parameter('max_turn', 0.2, float_range(
             'The simulator limit and teleop max_turn [rad/s]', 1e-3, 20.0))
-        self.declare_parameter('speed', 0.5, _float('The teleop initial speed level', 0.0, 1.0))
-        self.declare_parameter('position_tolerance', 0.05, _float('Pass limit [m]', 0.0, 10.0))
-        self.declare_parameter('yaw_tolerance', 0.1, _float('Pass limit [rad]', 0.0, 3.2))
-        self.declare_parameter('settle_time', 1.0, _float(
+        self.declare_parameter('speed', 0.5, float_range(
+            'The teleop initial speed level', 0.0, 1.0))
+        self.declare_parameter('position_tolerance', 0.05, float_range(
+            'Pass limit [m]', 0.0, 10.0))
+        self.declare_parameter('yaw_tolerance', 0.1, float_range(
+            'Pass limit [rad]', 0.0, 3.2))
+        self.declare_parameter('settle_time', 1.0, float_range(
             'Done when no cmd_vel came for this long [s] and the base is at rest', 0.1, 60.0))
-        self.declare_parameter('wall_timeout', 300.0, _float('Give up after [wall s]', 1.0,
+        self.declare_parameter('wall_timeout', 300.0, float_range('Give up after [wall s]', 1.0,
                                                              3600.0))
         get = lambda name: self.get_parameter(name).value  # noqa: E731
         max_speed, max_turn = get('max_speed'), get('max_turn')
