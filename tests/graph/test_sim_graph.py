@@ -29,6 +29,7 @@ class Driver:
         self.odom = probe.collect(Odometry, '/mini_robot/odom')
         self.joints = probe.collect(JointState, '/mini_robot/joint_states')
         self.stamped = stamped
+        self.stop_sent = 0.0
         self.pub = probe.node.create_publisher(TwistStamped if stamped else Twist,
                                                '/mini_robot/cmd_vel', 10)
         wait_for(lambda: self.clock and self.odom and self.pub.get_subscription_count() > 0,
@@ -43,18 +44,27 @@ class Driver:
         self.pub.publish(TwistStamped(twist=twist) if self.stamped else twist)
 
     def drive(self, v, w, duration, period=0.05):
-        """Hold (v, w) for ``duration`` seconds of simulated time, then send zero."""
+        """Hold (v, w) for ``duration`` seconds of simulated time, then send zero.
+
+        Returns the twist of the last odometry stamped inside the commanded interval, read
+        before the zero goes out, so it shows the steady motion and not the stop.
+        """
         t_end = self.now() + duration
         while self.now() < t_end:
             self.send(v, w)
             time.sleep(period / RTF)
+        steady = self.odom[-1][1].twist.twist
         self.send(0.0, 0.0)
+        self.stop_sent = self.now()
+        return steady
 
     def wait_at_rest(self, timeout=10.0):
+        """Wait for odometry, stamped after the stop was sent, that shows the robot at rest."""
         def at_rest():
-            t = self.odom[-1][1].twist.twist
-            return abs(t.linear.x) < 1e-3 and abs(t.angular.z) < 1e-3
-        time.sleep(0.2 / RTF)
+            msg = self.odom[-1][1]
+            t = msg.twist.twist
+            return (stamp_s(msg.header.stamp) > self.stop_sent and abs(t.linear.x) < 1e-3
+                    and abs(t.angular.z) < 1e-3)
         wait_for(at_rest, timeout, what='the robot at rest')
 
     def pose(self):
@@ -108,10 +118,8 @@ def test_turn_in_place_for_pi_over_0p2_s_gives_pi(sim, probe):
 
 def test_commands_above_the_limits_are_clamped(sim, probe):
     d = Driver(probe)
-    d.drive(1.0, 0.0, 1.0)
-    v = d.odom[-1][1].twist.twist.linear.x
-    d.drive(0.0, -3.0, 1.0)
-    w = d.odom[-1][1].twist.twist.angular.z
+    v = d.drive(1.0, 0.0, 1.0).linear.x
+    w = d.drive(0.0, -3.0, 1.0).angular.z
     assert v == pytest.approx(0.2, rel=0.03)
     assert w == pytest.approx(-0.2, rel=0.03)
     wait_for(lambda: 'clamped to (0.200, 0.000)' in sim.output(), 5.0, what='clamp warning')
@@ -147,8 +155,7 @@ def test_nan_is_rejected_the_robot_stops_and_the_node_lives(sim, probe):
     assert sim.alive()
     d.send(0.0, math.inf)
     wait_for(lambda: 'non-finite command' in sim.output(), 5.0, what='rejection warning')
-    d.drive(0.1, 0.0, 0.5)
-    assert d.odom[-1][1].twist.twist.linear.x == pytest.approx(0.1, rel=0.05)
+    assert d.drive(0.1, 0.0, 0.5).linear.x == pytest.approx(0.1, rel=0.05)
     assert d.now() > t_nan
 
 
@@ -225,8 +232,7 @@ def test_pause_resume_and_step_while_paused(sim, probe):
 def test_stamped_velocity_commands(start_node, probe):
     start_node('sim_node', '-p', f'real_time_factor:={RTF}', '-p', 'use_stamped_vel:=true')
     d = Driver(probe, stamped=True)
-    d.drive(0.1, 0.0, 0.5)
-    assert d.odom[-1][1].twist.twist.linear.x == pytest.approx(0.1, rel=0.05)
+    assert d.drive(0.1, 0.0, 0.5).linear.x == pytest.approx(0.1, rel=0.05)
 
 
 def test_lock_step_advances_exactly_n_steps_per_request(start_node, probe):
