@@ -74,12 +74,12 @@ if [ "$(cat "$STAMPS/requirements" 2>/dev/null)" != "$req_hash" ]; then
 fi
 
 # --- 3. colcon workspace ----------------------------------------------------------------------
-# Rebuild when anything but Python source changed (the build is --symlink-install, so edits of
-# existing .py files are live); new or removed files change the listing and trigger a build.
+# Rebuild when anything but Python modules changed (the build is --symlink-install, so edits of
+# existing modules are live); setup.py, data files, new or removed files trigger a build.
 ws_hash="$(cd "$WS/src" && {
   find -L . -type f ! -path '*/__pycache__/*' ! -name '*.pyc' | LC_ALL=C sort
-  find -L . -type f ! -path '*/__pycache__/*' ! -name '*.py' ! -name '*.pyc' -print0 \
-    | LC_ALL=C sort -z | xargs -0 cat
+  find -L . -type f ! -path '*/__pycache__/*' \( ! -name '*.py' -o -name setup.py \) \
+    ! -name '*.pyc' -print0 | LC_ALL=C sort -z | xargs -0 cat
 } | hash_of)"
 if [ "$(cat "$STAMPS/workspace" 2>/dev/null)" != "$ws_hash" ] || [ ! -f "$WS/install/setup.bash" ]; then
   log "building ros_ws with colcon"
