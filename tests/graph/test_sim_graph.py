@@ -219,12 +219,15 @@ def test_pause_resume_and_step_while_paused(sim, probe):
     refused = probe.call(StepSimulation, '/sim_node/step', StepSimulation.Request(steps=5))
     assert not refused.success and 'paused' in refused.message
     assert probe.call(Trigger, '/sim_node/pause', Trigger.Request()).success
-    time.sleep(0.2)
-    t_paused = d.now()
-    time.sleep(0.3)
-    assert d.now() == t_paused
+    # While paused, a step request is served and tells the exact simulated time.
+    one = probe.call(StepSimulation, '/sim_node/step', StepSimulation.Request(steps=1))
+    assert one.success
+    wait_for(lambda: d.clock[-1][1].clock == one.sim_time, 5.0, what='the stepped /clock')
+    time.sleep(0.3)  # paused: nothing advances over this window
+    assert d.clock[-1][1].clock == one.sim_time
     reply = probe.call(StepSimulation, '/sim_node/step', StepSimulation.Request(steps=24))
-    assert reply.success and stamp_s(reply.sim_time) == pytest.approx(t_paused + 0.1, abs=1e-6)
+    assert reply.success and _ns(reply.sim_time) == _ns(one.sim_time) + 24 * DT_NS
+    t_paused = stamp_s(reply.sim_time)
     assert probe.call(Trigger, '/sim_node/resume', Trigger.Request()).success
     wait_for(lambda: d.now() > t_paused + 0.5, 5.0, what='time after resume')
 
