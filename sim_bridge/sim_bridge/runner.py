@@ -37,21 +37,24 @@ class SimRunner:
 
     Each step: the command of every driven robot is taken from its guard (which zeroes it once
     it is older than the timeout, in simulated time), physics advances one fixed step, then
-    /clock is due, robot states are due every ``state_period`` steps, and each camera is due at
-    its own rate; the sink renders it only if someone wants the image.
+    /clock is due, robot states are due at ``state_rate`` and each camera at its own rate (each on
+    its own grid of simulated time); the sink renders a camera only if someone wants the image.
     """
 
     def __init__(self, world: SimWorld, limits: DriveLimits, state_rate: float) -> None:
         if not (state_rate > 0.0 and math.isfinite(state_rate)):
             raise ValueError(f'state_rate must be > 0, got {state_rate}')
         self.world = world
-        self.state_period = max(1, round(1.0 / (state_rate * world.time_step)))
+        dt_ns = round(world.time_step * 1e9)
+        # States go out at the first step at or after each point of their own time grid, so the
+        # average rate is exact even when the period is not a whole number of steps.
+        self.state_period_ns = max(dt_ns, round(1e9 / state_rate))
+        self._state_next_ns = 0
         self.guards: Dict[str, CommandGuard] = {
             name: CommandGuard((limits.max_speed, limits.max_turn), limits.cmd_vel_timeout)
             for name, robot in world.robots.items() if robot.geometry is not None}
         self._applied: Dict[str, tuple] = {name: (0.0, 0.0) for name in self.guards}
         self._timed_out: Dict[str, bool] = {name: False for name in self.guards}
-        dt_ns = round(world.time_step * 1e9)
         self._camera_period_ns: List[int] = [
             max(dt_ns, round(1e9 / cam.config.rate)) for cam in world.cameras]
         self._camera_next_ns: List[int] = [0 for _ in world.cameras]
@@ -77,14 +80,14 @@ class SimRunner:
             world.step()
             t_ns = world.sim_time_ns
             sink.on_clock(t_ns)
-            if world.step_count % self.state_period == 0:
+            if t_ns >= self._state_next_ns:
+                self._state_next_ns = _next_on_grid(t_ns, self.state_period_ns)
                 for name in world.robots:
                     sink.on_state(name, t_ns)
             for i, cam in enumerate(world.cameras):
                 if t_ns >= self._camera_next_ns[i]:
                     # Keep the camera's own grid of due times, skipping frames nobody wanted.
-                    period = self._camera_period_ns[i]
-                    self._camera_next_ns[i] = (t_ns // period + 1) * period
+                    self._camera_next_ns[i] = _next_on_grid(t_ns, self._camera_period_ns[i])
                     sink.on_camera_due(i, t_ns, lambda cam=cam: world.render(cam))
 
     def reset(self) -> None:
@@ -102,3 +105,8 @@ class SimRunner:
     def _apply(self, robot: str, command: tuple) -> None:
         self.world.robots[robot].set_body_twist(*command)
         self._applied[robot] = tuple(command)
+
+
+def _next_on_grid(t_ns: int, period_ns: int) -> int:
+    """The first point of the grid k * period strictly after t (skipping missed points)."""
+    return (t_ns // period_ns + 1) * period_ns

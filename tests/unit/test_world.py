@@ -108,7 +108,11 @@ def test_outputs_are_scheduled_by_simulated_time(world):
     runner.advance(240, sink)
     assert len(sink.clock) == 240
     assert sink.clock[-1] == 240 * round(world.time_step * 1e9)
-    assert len(sink.states) == 240 // runner.state_period
+    # 100 Hz on a 10 ms grid of simulated time (grid points 0, 10, ..., 1000 ms).
+    state_times = np.array([t for _, t in sink.states])
+    assert len(state_times) == 101
+    assert np.diff(state_times).mean() == pytest.approx(1e7, rel=0.01)
+    assert np.all(np.abs(np.diff(state_times) - 1e7) <= round(world.time_step * 1e9))
     # The 15 Hz camera: a frame at the first step, then on its own 1/15 s grid.
     stamps = np.array([t for _, _, t in sink.frames])
     assert len(stamps) == 16

@@ -1,0 +1,171 @@
+"""Report on a rosbag2 bag: topics, counts and rates, and the path of every odometry topic.
+
+``bag_analysis BAG [-o DIR]`` writes DIR/report.md, DIR/report.json and one PNG per odometry
+topic (default DIR: BAG_report beside the bag).
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import sys
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Dict, List, Optional
+
+import numpy as np
+from rosbags.highlevel import AnyReader
+from rosbags.rosbag2 import ReaderError
+
+from recording.plot import plot_paths
+
+ODOMETRY = 'nav_msgs/msg/Odometry'
+
+
+class AnalysisError(RuntimeError):
+    """A bag that cannot be read; the message says why and what to do."""
+
+
+@dataclass
+class TopicStats:
+    topic: str
+    msgtype: str
+    count: int
+    first_s: Optional[float]
+    last_s: Optional[float]
+    rate_hz: Optional[float]
+    bytes: int
+
+
+@dataclass
+class PathStats:
+    topic: str
+    samples: int
+    distance_m: float
+    start: List[float]
+    end: List[float]
+    end_yaw_deg: float
+    plot: str = ''
+
+
+@dataclass
+class Report:
+    bag: str
+    storage: str
+    duration_s: float
+    message_count: int
+    topics: List[TopicStats] = field(default_factory=list)
+    paths: List[PathStats] = field(default_factory=list)
+
+
+def open_reader(bag: Path) -> AnyReader:
+    bag = Path(bag)
+    if not bag.exists():
+        raise AnalysisError(f'{bag} does not exist')
+    try:
+        reader = AnyReader([bag])
+        reader.open()
+        return reader
+    except (ReaderError, OSError, ValueError, KeyError, IndexError) as exc:
+        hint = ''
+        if bag.is_dir() and not (bag / 'metadata.yaml').exists():
+            hint = ' (no metadata.yaml: if its recorder was killed, run bag_repair on it)'
+        raise AnalysisError(f'{bag} is not a readable rosbag2 bag: {exc}{hint}') from None
+
+
+def analyse(bag: Path) -> tuple:
+    """Read every message once; returns the Report and the odometry paths (x, y arrays)."""
+    reader = open_reader(bag)
+    try:
+        stamps: Dict[str, List[int]] = {}
+        sizes: Dict[str, int] = {}
+        types: Dict[str, str] = {}
+        paths: Dict[str, list] = {}
+        yaws: Dict[str, float] = {}
+        for c in reader.connections:
+            stamps.setdefault(c.topic, [])
+            sizes.setdefault(c.topic, 0)
+            types[c.topic] = c.msgtype
+        try:
+            for c, t, raw in reader.messages():
+                stamps[c.topic].append(t)
+                sizes[c.topic] += len(raw)
+                if c.msgtype == ODOMETRY:
+                    pose = reader.deserialize(raw, c.msgtype).pose.pose
+                    paths.setdefault(c.topic, []).append((pose.position.x, pose.position.y))
+                    q = pose.orientation
+                    yaws[c.topic] = math.atan2(2 * (q.w * q.z + q.x * q.y),
+                                               1 - 2 * (q.y * q.y + q.z * q.z))
+        except Exception as exc:  # noqa: BLE001 - rosbags raises several kinds on bad data
+            raise AnalysisError(f'{bag}: unreadable data ({type(exc).__name__}: {exc}); the '
+                                'bag is truncated or corrupt') from None
+        storage = 'mcap' if list(Path(bag).glob('*.mcap')) else 'sqlite3'
+        report = Report(str(bag), storage, reader.duration * 1e-9, reader.message_count)
+        for topic in sorted(stamps):
+            ts = stamps[topic]
+            span = (ts[-1] - ts[0]) * 1e-9 if len(ts) > 1 else 0.0
+            report.topics.append(TopicStats(
+                topic, types[topic], len(ts), ts[0] * 1e-9 if ts else None,
+                ts[-1] * 1e-9 if ts else None,
+                (len(ts) - 1) / span if span > 0 else None, sizes[topic]))
+        arrays = {t: np.asarray(p, float) for t, p in paths.items()}
+        for topic, p in arrays.items():
+            report.paths.append(PathStats(
+                topic, len(p), float(np.linalg.norm(np.diff(p, axis=0), axis=1).sum()),
+                p[0].tolist(), p[-1].tolist(), math.degrees(yaws[topic])))
+        return report, arrays
+    finally:
+        reader.close()
+
+
+def write_report(bag: Path, out_dir: Path) -> Report:
+    report, arrays = analyse(bag)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    if arrays:
+        png = out_dir / 'paths.png'
+        plot_paths(arrays, png, f'odometry paths: {Path(bag).name}')
+        for p in report.paths:
+            p.plot = png.name
+    (out_dir / 'report.json').write_text(json.dumps(asdict(report), indent=2))
+    (out_dir / 'report.md').write_text(to_markdown(report))
+    return report
+
+
+def to_markdown(report: Report) -> str:
+    lines = [f'# Bag report: {report.bag}', '',
+             f'{report.storage}, {report.message_count} messages over '
+             f'{report.duration_s:.2f} s', '',
+             '| topic | type | count | rate [Hz] | MB |', '|---|---|---|---|---|']
+    for t in report.topics:
+        rate = f'{t.rate_hz:.2f}' if t.rate_hz else '-'
+        lines.append(f'| {t.topic} | {t.msgtype} | {t.count} | {rate} | '
+                     f'{t.bytes / 1e6:.3f} |')
+    if report.paths:
+        lines += ['', '## Odometry paths', '', '![paths](paths.png)', '',
+                  '| topic | samples | distance [m] | start (x, y) | end (x, y) | end yaw [deg] |',
+                  '|---|---|---|---|---|---|']
+        for p in report.paths:
+            lines.append(f'| {p.topic} | {p.samples} | {p.distance_m:.3f} | '
+                         f'({p.start[0]:+.3f}, {p.start[1]:+.3f}) | '
+                         f'({p.end[0]:+.3f}, {p.end[1]:+.3f}) | {p.end_yaw_deg:+.2f} |')
+    return '\n'.join(lines) + '\n'
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(prog='bag_analysis', description=__doc__.splitlines()[0])
+    parser.add_argument('bag', type=Path, help='rosbag2 bag directory (mcap or sqlite3)')
+    parser.add_argument('-o', '--output', type=Path, help='report directory')
+    args = parser.parse_args(argv)
+    out = args.output or args.bag.parent / f'{args.bag.name}_report'
+    try:
+        report = write_report(args.bag, out)
+    except AnalysisError as exc:
+        print(f'bag_analysis: error: {exc}', file=sys.stderr)
+        return 2
+    print(to_markdown(report))
+    print(f'bag_analysis: report written to {out}')
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())

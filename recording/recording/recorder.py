@@ -1,0 +1,132 @@
+"""Records topics to a rosbag2 bag as they appear, writing the serialized bytes as received."""
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+from typing import Set
+
+import rclpy
+from rcl_interfaces.msg import IntegerRange, ParameterDescriptor
+from rclpy.clock import Clock, ClockType
+from rclpy.executors import ExternalShutdownException
+from rclpy.node import Node
+from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+
+from controllers.params import float_range
+from recording.bag_writer import STORAGES, BagError, BagWriter
+from recording.qos_profiles import adapt_to_publishers, bag_qos
+from recording.types import TypeResolutionError, message_class
+
+
+class Recorder(Node):
+
+    def __init__(self, **kwargs) -> None:
+        super().__init__('recorder', **kwargs)
+        text = ParameterDescriptor
+        self.declare_parameter('topics', [''], text(
+            description='Topics to record; empty: every topic, as it appears', read_only=True))
+        self.declare_parameter('exclude', [''], text(
+            description='Topics never recorded', read_only=True))
+        self.declare_parameter('output_dir', 'bags', text(
+            description='Directory that receives the bag directory', read_only=True))
+        self.declare_parameter('bag_name', '', text(
+            description='Bag directory name; empty: rosbag2_<date>-<time>. An existing bag is '
+                        'never overwritten: _1, _2, ... is appended', read_only=True))
+        self.declare_parameter('storage', 'mcap', text(
+            description='Storage plugin: mcap or sqlite3', read_only=True))
+        self.declare_parameter('flush_period', 0.5, float_range(
+            'Wall seconds between durable flushes: what a SIGKILL can lose', 0.05, 10.0))
+        self.declare_parameter('discovery_period', 0.1, float_range(
+            'Wall seconds between looks for new topics', 0.01, 10.0))
+        self.declare_parameter('queue_depth', 1000, ParameterDescriptor(
+            description='Subscription history depth, to absorb bursts', read_only=True,
+            integer_range=[IntegerRange(from_value=1, to_value=100000, step=1)]))
+        get = lambda name: self.get_parameter(name).value  # noqa: E731
+        self._wanted: Set[str] = {t for t in get('topics') if t}
+        self._excluded: Set[str] = {t for t in get('exclude') if t}
+        storage = get('storage')
+        if storage not in STORAGES:
+            raise BagError(f'storage must be one of {sorted(STORAGES)}, got "{storage}"')
+        self._depth = get('queue_depth')
+        self._writer = BagWriter(Path(get('output_dir')), get('bag_name') or None, storage)
+        self._skipped: Set[str] = set()
+        # Wall-clock timers: they must run whether or not simulated time advances.
+        steady = Clock(clock_type=ClockType.STEADY_TIME)
+        self.create_timer(get('discovery_period'), self._discover, clock=steady)
+        self.create_timer(get('flush_period'), self._writer.flush, clock=steady)
+        self.get_logger().info(
+            f'recording {sorted(self._wanted) if self._wanted else "all topics"} to '
+            f'{self._writer.path} ({storage})')
+        self._discover()
+
+    @property
+    def bag_path(self) -> Path:
+        return self._writer.path
+
+    def _discover(self) -> None:
+        for topic, types in self.get_topic_names_and_types():
+            if (topic in self._writer.topics or topic in self._skipped or topic in self._excluded
+                    or (self._wanted and topic not in self._wanted)):
+                continue
+            publishers = self.get_publishers_info_by_topic(topic)
+            if not publishers:
+                continue  # only subscribers so far: nothing to record, QoS unknown
+            self._subscribe(topic, types, publishers)
+
+    def _subscribe(self, topic: str, types, publishers) -> None:
+        if len(types) != 1:
+            self._skip(topic, f'has several types {types}')
+            return
+        try:
+            msg_class = message_class(types[0])
+            policies = [(int(p.qos_profile.reliability), int(p.qos_profile.durability))
+                        for p in publishers]
+            self._writer.add_topic(topic, types[0], [
+                bag_qos(r, d, p.qos_profile.depth) for (r, d), p in zip(policies, publishers)])
+        except (TypeResolutionError, BagError) as exc:
+            self._skip(topic, str(exc))
+            return
+        reliability, durability = adapt_to_publishers(policies)
+        qos = QoSProfile(depth=self._depth, reliability=ReliabilityPolicy(reliability),
+                         durability=DurabilityPolicy(durability))
+        self.create_subscription(msg_class, topic, lambda data, t=topic: self._on_message(t, data),
+                                 qos, raw=True)
+        self.get_logger().info(f'recording {topic} [{types[0]}]')
+
+    def _on_message(self, topic: str, data: bytes) -> None:
+        self._writer.write(topic, self.get_clock().now().nanoseconds, data)
+
+    def _skip(self, topic: str, why: str) -> None:
+        self._skipped.add(topic)
+        self.get_logger().warn(f'not recording {topic}: {why}')
+
+    def finish(self) -> str:
+        self._writer.close()
+        counts = ', '.join(f'{t}: {r.count}' for t, r in sorted(self._writer.topics.items()))
+        return (f'bag {self._writer.path} closed with {self._writer.message_count} messages '
+                f'({counts})')
+
+
+def main(args=None) -> int:
+    rclpy.init(args=args)
+    try:
+        node = Recorder()
+    except (BagError, OSError, rclpy.exceptions.ParameterException) as exc:
+        rclpy.logging.get_logger('recorder').fatal(f'cannot start: {exc}')
+        rclpy.try_shutdown()
+        return 1
+    try:
+        rclpy.spin(node)
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    finally:
+        # SIGINT and SIGTERM end up here: the bag is finalised and readable.
+        summary = node.finish()
+        print(f'[recorder] {summary}', flush=True)
+        node.destroy_node()
+        rclpy.try_shutdown()
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())

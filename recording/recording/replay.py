@@ -1,0 +1,163 @@
+"""Publishes a bag's messages on their topics with the recorded timing (and /clock from it)."""
+from __future__ import annotations
+
+import sys
+import time
+from pathlib import Path
+from typing import Dict
+
+import rclpy
+from rcl_interfaces.msg import ParameterDescriptor
+from rclpy.duration import Duration
+from rclpy.executors import ExternalShutdownException
+from rclpy.node import Node
+from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+from rosgraph_msgs.msg import Clock
+from rosbags.highlevel import AnyReader
+from rosbags.rosbag2 import ReaderError
+
+from controllers.params import float_range
+from recording.qos_profiles import replay_policies
+from recording.replay_schedule import ReplaySchedule
+from recording.types import TypeResolutionError, message_class
+
+
+class ReplayError(RuntimeError):
+    """A bag that cannot be replayed."""
+
+
+class Replay(Node):
+
+    def __init__(self, **kwargs) -> None:
+        super().__init__('replay', **kwargs)
+        text = ParameterDescriptor
+        self.declare_parameter('bag', '', text(description='Bag directory to replay',
+                                               read_only=True))
+        self.declare_parameter('rate', 1.0, float_range('Replay speed factor', 0.01, 100.0))
+        self.declare_parameter('loop', False, text(description='Start again at the end',
+                                                   read_only=True))
+        self.declare_parameter('topics', [''], text(
+            description='Topics to replay; empty: all', read_only=True))
+        self.declare_parameter('start_offset', 0.0, float_range(
+            'Seconds of the bag to skip at the start', 0.0, 1e6))
+        self.declare_parameter('publish_clock', False, text(
+            description='Publish /clock from bag time (the recorded /clock is then not '
+                        'replayed)', read_only=True))
+        self.declare_parameter('clock_rate', 100.0, float_range(
+            '/clock messages per wall second with publish_clock', 1.0, 10000.0))
+        self.declare_parameter('wait_for_subscribers', 0.0, float_range(
+            'Wall seconds to wait until every replayed topic has a subscriber', 0.0, 600.0))
+        get = lambda name: self.get_parameter(name).value  # noqa: E731
+        self.bag = Path(get('bag'))
+        if not get('bag') or not self.bag.is_dir():
+            raise ReplayError(f'bag "{get("bag")}" is not a bag directory')
+        self.rate, self.loop = get('rate'), get('loop')
+        self.start_offset = get('start_offset')
+        self.publish_clock = get('publish_clock')
+        self.clock_period = 1.0 / get('clock_rate')
+        self.wait_for_subscribers = get('wait_for_subscribers')
+        wanted = {t for t in get('topics') if t}
+        try:
+            self.reader = AnyReader([self.bag])
+            self.reader.open()
+        except (ReaderError, OSError, ValueError) as exc:
+            raise ReplayError(f'{self.bag}: not a readable bag ({exc}); a bag left by a killed '
+                              'recorder can be restored with bag_repair') from None
+        self.connections = [c for c in self.reader.connections
+                            if (not wanted or c.topic in wanted)
+                            and not (self.publish_clock and c.topic == '/clock')]
+        if not self.connections:
+            raise ReplayError(f'{self.bag}: none of the topics {sorted(wanted)} is in the bag')
+        self.publishers: Dict[str, object] = {}
+        for c in self.connections:
+            if c.topic in self.publishers:
+                continue
+            try:
+                msg_class = message_class(c.msgtype)
+            except TypeResolutionError as exc:
+                self.get_logger().warn(f'not replaying {c.topic}: {exc}')
+                continue
+            reliability, durability = replay_policies(
+                getattr(c.ext, 'offered_qos_profiles', []), c.msgtype)
+            qos = QoSProfile(depth=100, reliability=ReliabilityPolicy(reliability),
+                             durability=DurabilityPolicy(durability))
+            self.publishers[c.topic] = self.create_publisher(msg_class, c.topic, qos)
+        self.clock_pub = (self.create_publisher(Clock, '/clock', QoSProfile(depth=10))
+                          if self.publish_clock else None)
+        self.get_logger().info(
+            f'replaying {len(self.publishers)} topics of {self.bag} at rate {self.rate:g}'
+            + (', looping' if self.loop else '') + (', publishing /clock' if self.publish_clock
+                                                    else ''))
+
+    def run(self) -> int:
+        if self.wait_for_subscribers > 0.0:
+            self._wait_for_subscribers()
+        schedule = ReplaySchedule(self.reader.start_time, self.rate, self.start_offset)
+        published = 0
+        while rclpy.ok():
+            schedule.restart(time.monotonic())
+            next_clock = 0.0
+            for connection, bag_ns, raw in self.reader.messages(connections=self.connections):
+                if schedule.skip(bag_ns) or connection.topic not in self.publishers:
+                    continue
+                due = schedule.due(bag_ns)
+                while True:  # sleep until due, publishing /clock on the way
+                    now = time.monotonic()
+                    if self.clock_pub is not None and now >= next_clock:
+                        self._publish_clock(min(schedule.bag_time_at(now), bag_ns))
+                        next_clock = now + self.clock_period
+                    if now >= due:
+                        break
+                    wake = due if self.clock_pub is None else min(due, next_clock)
+                    time.sleep(max(0.0, wake - now))
+                self.publishers[connection.topic].publish(bytes(raw))
+                published += 1
+                if not rclpy.ok():
+                    break
+            if not self.loop:
+                break
+        for pub in self.publishers.values():
+            pub.wait_for_all_acked(Duration(seconds=2.0))
+        self.get_logger().info(f'replay done: {published} messages published')
+        return 0
+
+    def _wait_for_subscribers(self) -> None:
+        end = time.monotonic() + self.wait_for_subscribers
+        while time.monotonic() < end:
+            if all(p.get_subscription_count() > 0 for p in self.publishers.values()):
+                return
+            rclpy.spin_once(self, timeout_sec=0.05)
+        missing = sorted(t for t, p in self.publishers.items() if p.get_subscription_count() == 0)
+        self.get_logger().warn(f'starting without subscribers on {missing}')
+
+    def _publish_clock(self, bag_ns: int) -> None:
+        msg = Clock()
+        msg.clock.sec, msg.clock.nanosec = divmod(bag_ns, 1_000_000_000)
+        self.clock_pub.publish(msg)
+
+    def destroy_node(self) -> None:
+        self.reader.close()
+        super().destroy_node()
+
+
+def main(args=None) -> int:
+    rclpy.init(args=args)
+    try:
+        node = Replay()
+    except (ReplayError, rclpy.exceptions.ParameterException) as exc:
+        rclpy.logging.get_logger('replay').fatal(f'cannot start: {exc}')
+        rclpy.try_shutdown()
+        return 1
+    code = 0
+    try:
+        code = node.run()
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    finally:
+        node.destroy_node()
+        rclpy.try_shutdown()
+    return code
+
+
+if __name__ == '__main__':
+    sys.exit(main())
