@@ -14,7 +14,7 @@ from pathlib import Path
 from typing import Dict, List, Optional
 
 import numpy as np
-from rosbags.highlevel import AnyReader
+from rosbags.highlevel import AnyReader, AnyReaderError
 from rosbags.rosbag2 import ReaderError
 
 from recording.plot import plot_paths
@@ -66,7 +66,7 @@ def open_reader(bag: Path) -> AnyReader:
         reader = AnyReader([bag])
         reader.open()
         return reader
-    except (ReaderError, OSError, ValueError, KeyError, IndexError) as exc:
+    except (AnyReaderError, ReaderError, OSError, ValueError, KeyError, IndexError) as exc:
         hint = ''
         if bag.is_dir() and not (bag / 'metadata.yaml').exists():
             hint = ' (no metadata.yaml: if its recorder was killed, run bag_repair on it)'

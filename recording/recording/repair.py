@@ -118,8 +118,8 @@ def _scan_record(op: int, content: bytes, found: Recovered) -> None:
             entries[key] = _string(meta)
         found.channels[cid] = (topic, sid, entries.get('offered_qos_profiles', ''))
     elif op == OP_MESSAGE:
-        cid, _seq, log_time, _pub_time = struct.unpack('<HIQQ', _exact(buf, 18))
-        found.messages.append((cid, log_time, content[18:]))
+        cid, _seq, log_time, _pub_time = struct.unpack('<HIQQ', _exact(buf, 22))
+        found.messages.append((cid, log_time, content[22:]))
 
 
 def scan_sqlite(path: Path) -> Recovered:

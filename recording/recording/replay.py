@@ -13,7 +13,7 @@ from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from rosgraph_msgs.msg import Clock
-from rosbags.highlevel import AnyReader
+from rosbags.highlevel import AnyReader, AnyReaderError
 from rosbags.rosbag2 import ReaderError
 
 from controllers.params import float_range
@@ -60,7 +60,7 @@ class Replay(Node):
         try:
             self.reader = AnyReader([self.bag])
             self.reader.open()
-        except (ReaderError, OSError, ValueError) as exc:
+        except (AnyReaderError, ReaderError, OSError, ValueError, KeyError, IndexError) as exc:
             raise ReplayError(f'{self.bag}: not a readable bag ({exc}); a bag left by a killed '
                               'recorder can be restored with bag_repair') from None
         self.connections = [c for c in self.reader.connections

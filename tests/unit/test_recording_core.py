@@ -1,0 +1,249 @@
+"""Bag writing, repair, replay schedule and analysis, without ROS nodes."""
+import json
+import math
+import os
+import signal
+import subprocess
+import sys
+import textwrap
+
+import cv2
+import numpy as np
+import pytest
+from geometry_msgs.msg import Point
+from nav_msgs.msg import Odometry
+from rclpy.serialization import serialize_message
+from rosbags.highlevel import AnyReader
+from std_msgs.msg import String
+
+from recording.analysis import AnalysisError, analyse, main as analysis_main, write_report
+from recording.bag_writer import BagError, BagWriter, unique_bag_path
+from recording.qos_profiles import (BEST_EFFORT, RELIABLE, TRANSIENT_LOCAL, VOLATILE,
+                                    adapt_to_publishers, bag_qos, parse_offered_qos,
+                                    replay_policies)
+from recording.repair import RepairError, main as repair_main, repair
+from recording.replay_schedule import ReplaySchedule
+from recording.types import TypeResolutionError, TypeResolver
+
+STORAGES = ['mcap', 'sqlite3']
+
+
+def _odom(x, y, yaw):
+    msg = Odometry()
+    msg.pose.pose.position.x, msg.pose.pose.position.y = x, y
+    msg.pose.pose.orientation.z, msg.pose.pose.orientation.w = math.sin(yaw / 2), math.cos(yaw / 2)
+    return serialize_message(msg)
+
+
+def _read_all(path):
+    with AnyReader([path]) as reader:
+        return [(c.topic, t, bytes(raw)) for c, t, raw in reader.messages()]
+
+
+@pytest.mark.parametrize('storage', STORAGES)
+def test_round_trip_is_byte_for_byte(tmp_path, storage):
+    rng = np.random.default_rng(1)
+    writer = BagWriter(tmp_path, 'run', storage)
+    writer.add_topic('/odom', 'nav_msgs/msg/Odometry', [bag_qos(RELIABLE, VOLATILE, 10)])
+    writer.add_topic('/text', 'std_msgs/msg/String')
+    written = []
+    for i in range(500):
+        topic, data = (('/odom', _odom(*rng.normal(size=3))) if i % 3 else
+                       ('/text', serialize_message(String(data='x' * int(rng.integers(0, 99))))))
+        writer.write(topic, 1_000_000 * i, data)
+        written.append((topic, 1_000_000 * i, data))
+        if i % 97 == 0:
+            writer.flush()
+    writer.close()
+    assert _read_all(writer.path) == written
+    with AnyReader([writer.path]) as reader:
+        assert {c.topic: c.msgcount for c in reader.connections} == {'/odom': 333, '/text': 167}
+        qos = reader.connections[0].ext.offered_qos_profiles
+        assert qos and qos[0].reliability.name == 'RELIABLE'
+
+
+def test_a_bag_is_never_overwritten(tmp_path):
+    first = BagWriter(tmp_path, 'run')
+    first.add_topic('/t', 'std_msgs/msg/String')
+    first.write('/t', 1, serialize_message(String(data='first')))
+    first.close()
+    second = BagWriter(tmp_path, 'run')
+    second.close()
+    assert (first.path.name, second.path.name) == ('run', 'run_1')
+    assert unique_bag_path(tmp_path, 'run').name == 'run_2'
+    assert len(_read_all(first.path)) == 1
+    with pytest.raises(BagError):
+        BagWriter(tmp_path, '../escape')
+    with pytest.raises(BagError):
+        BagWriter(tmp_path, 'x', storage='rosbag1')
+
+
+KILLED_WRITER = textwrap.dedent('''
+    import os, signal, sys
+    from pathlib import Path
+    from rclpy.serialization import serialize_message
+    from std_msgs.msg import String
+    from recording.bag_writer import BagWriter
+    out, storage = Path(sys.argv[1]), sys.argv[2]
+    w = BagWriter(out, 'killed', storage)
+    w.add_topic('/t', 'std_msgs/msg/String')
+    for i in range(1000):
+        w.write('/t', i * 1000, serialize_message(String(data=f'm{i}')))
+        if i == 599:
+            w.flush()
+    os.kill(os.getpid(), signal.SIGKILL)
+''')
+
+
+@pytest.mark.parametrize('storage', STORAGES)
+def test_sigkill_loses_only_what_was_not_flushed_and_repair_restores_it(tmp_path, storage):
+    proc = subprocess.run([sys.executable, '-c', KILLED_WRITER, str(tmp_path), storage],
+                          capture_output=True, text=True, timeout=60)
+    assert proc.returncode == -signal.SIGKILL
+    bag = tmp_path / 'killed'
+    assert not (bag / 'metadata.yaml').exists()
+    with pytest.raises(AnalysisError, match='bag_repair'):
+        analyse(bag)
+    out, count, _ = repair(bag)
+    assert out.name == 'killed_repaired' and count == 600
+    messages = _read_all(out)
+    assert [raw for _, _, raw in messages] == [
+        serialize_message(String(data=f'm{i}')) for i in range(600)]
+    assert [t for _, t, _ in messages] == [i * 1000 for i in range(600)]
+    assert repair_main([str(bag)]) == 0 and (tmp_path / 'killed_repaired_1').is_dir()
+
+
+def test_repair_of_a_truncated_mcap_keeps_the_complete_chunks(tmp_path):
+    writer = BagWriter(tmp_path, 'cut', 'mcap')
+    writer.add_topic('/t', 'std_msgs/msg/String')
+    for i in range(300):
+        writer.write('/t', i, serialize_message(String(data=f'{i:04d}' * 50)))
+        if i % 100 == 99:
+            writer.flush()
+    writer.close()
+    mcap = next(writer.path.glob('*.mcap'))
+    data = mcap.read_bytes()
+    (writer.path / 'metadata.yaml').unlink()
+    mcap.write_bytes(data[:int(len(data) * 0.55)])  # cut inside the second chunk
+    out, count, truncated = repair(writer.path)
+    assert truncated and count == 100
+    assert len(_read_all(out)) == 100
+
+
+def test_repair_errors(tmp_path):
+    with pytest.raises(RepairError, match='not a bag directory'):
+        repair(tmp_path / 'missing')
+    (tmp_path / 'empty').mkdir()
+    with pytest.raises(RepairError, match='no .mcap or .db3'):
+        repair(tmp_path / 'empty')
+    (tmp_path / 'junk').mkdir()
+    (tmp_path / 'junk' / 'junk.mcap').write_bytes(b'not an mcap file at all')
+    with pytest.raises(RepairError, match='not an MCAP file'):
+        repair(tmp_path / 'junk')
+    assert repair_main([str(tmp_path / 'junk')]) == 2
+
+
+def test_analysis_reports_counts_rates_and_paths(tmp_path):
+    writer = BagWriter(tmp_path, 'circle', 'mcap')
+    writer.add_topic('/robot/odom', 'nav_msgs/msg/Odometry')
+    writer.add_topic('/clock', 'rosgraph_msgs/msg/Clock')
+    from rosgraph_msgs.msg import Clock
+    radius, n = 0.5, 201   # a half circle, 20 Hz for 10 s
+    for i in range(n):
+        a = math.pi * i / (n - 1)
+        t = 50_000_000 * i
+        writer.write('/robot/odom', t, _odom(radius * math.sin(a), radius * (1 - math.cos(a)),
+                                             a))
+        writer.write('/clock', t, serialize_message(Clock()))
+    writer.close()
+    report = write_report(writer.path, tmp_path / 'report')
+    topics = {t.topic: t for t in report.topics}
+    assert topics['/robot/odom'].count == n and topics['/robot/odom'].rate_hz == pytest.approx(20)
+    path = report.paths[0]
+    assert path.distance_m == pytest.approx(math.pi * radius, rel=1e-3)
+    assert path.end == pytest.approx([0.0, 1.0], abs=1e-9)
+    assert path.end_yaw_deg == pytest.approx(180.0, abs=1e-6) or path.end_yaw_deg == \
+        pytest.approx(-180.0, abs=1e-6)
+    saved = json.loads((tmp_path / 'report' / 'report.json').read_text())
+    assert saved['paths'][0]['samples'] == n
+    assert '| /robot/odom | nav_msgs/msg/Odometry | 201 | 20.00 |' in \
+        (tmp_path / 'report' / 'report.md').read_text()
+    img = cv2.imread(str(tmp_path / 'report' / 'paths.png'))
+    blue = (img[:, :, 0] > 150) & (img[:, :, 2] < 100)   # the path colour (BGR)
+    assert blue.sum() > 500
+
+
+def test_analysis_errors_are_clear(tmp_path, capsys):
+    assert analysis_main([str(tmp_path / 'nope')]) == 2
+    assert 'does not exist' in capsys.readouterr().err
+    good = BagWriter(tmp_path, 'good', 'mcap')
+    good.add_topic('/t', 'std_msgs/msg/String')
+    for i in range(2000):
+        good.write('/t', i, serialize_message(String(data='y' * 100)))
+    good.close()
+    mcap = next(good.path.glob('*.mcap'))
+    data = mcap.read_bytes()
+    # Truncated (a copy cut short, the metadata.yaml still there): the summary is gone.
+    mcap.write_bytes(data[:len(data) // 2])
+    with pytest.raises(AnalysisError, match='not a readable'):
+        analyse(good.path)
+    # Garbage where the storage file should be.
+    mcap.write_bytes(os.urandom(len(data)))
+    with pytest.raises(AnalysisError, match='not a readable'):
+        analyse(good.path)
+    db_bag = BagWriter(tmp_path, 'db', 'sqlite3')
+    db_bag.add_topic('/t', 'std_msgs/msg/String')
+    db_bag.close()
+    next(db_bag.path.glob('*.db3')).write_bytes(b'SQLite format 3\x00' + os.urandom(5000))
+    with pytest.raises(AnalysisError, match='not a readable|unreadable'):
+        analyse(db_bag.path)
+    assert analysis_main([str(db_bag.path)]) == 2
+
+
+def test_type_resolver_reads_installed_msg_files(tmp_path, monkeypatch):
+    prefix = tmp_path / 'prefix'
+    share = prefix / 'share' / 'fake_msgs' / 'msg'
+    share.mkdir(parents=True)
+    (share / 'Inner.msg').write_text('float64 value\n')
+    (share / 'Thing.msg').write_text('std_msgs/Header header\nfake_msgs/Inner[] inner\n'
+                                     'geometry_msgs/Point where\n')
+    index = prefix / 'share' / 'ament_index' / 'resource_index' / 'packages'
+    index.mkdir(parents=True)
+    (index / 'fake_msgs').write_text('')
+    monkeypatch.setenv('AMENT_PREFIX_PATH',
+                       f'{prefix}{os.pathsep}{os.environ.get("AMENT_PREFIX_PATH", "")}')
+    resolver = TypeResolver()
+    msgdef, rihs01 = resolver.definition('fake_msgs/msg/Thing')
+    assert rihs01.startswith('RIHS01_') and 'MSG: fake_msgs/Inner' in msgdef
+    with pytest.raises(TypeResolutionError):
+        resolver.definition('nothere_msgs/msg/Missing')
+    with pytest.raises(TypeResolutionError):
+        resolver.definition('not a type')
+    assert Point  # the standard types need no lookup
+    assert resolver.definition('geometry_msgs/msg/Point')[1].startswith('RIHS01_')
+
+
+def test_replay_schedule():
+    s = ReplaySchedule(bag_first_ns=10_000_000_000, rate=2.0, start_offset_s=1.0,
+                       wall_start=100.0)
+    assert s.skip(10_500_000_000) and not s.skip(11_000_000_000)
+    assert s.due(11_000_000_000) == pytest.approx(100.0)
+    assert s.due(13_000_000_000) == pytest.approx(101.0)
+    assert s.bag_time_at(101.0) == 13_000_000_000
+    s.restart(200.0)
+    assert s.due(11_000_000_000) == pytest.approx(200.0)
+    with pytest.raises(ValueError):
+        ReplaySchedule(0, rate=0.0)
+    with pytest.raises(ValueError):
+        ReplaySchedule(0, start_offset_s=-1.0)
+
+
+def test_qos_choices():
+    assert adapt_to_publishers([(RELIABLE, VOLATILE), (BEST_EFFORT, VOLATILE)]) == \
+        (BEST_EFFORT, VOLATILE)
+    assert adapt_to_publishers([(RELIABLE, TRANSIENT_LOCAL)]) == (RELIABLE, TRANSIENT_LOCAL)
+    assert adapt_to_publishers([]) == (RELIABLE, VOLATILE)
+    assert replay_policies([], 'sensor_msgs/msg/Image') == (BEST_EFFORT, VOLATILE)
+    assert replay_policies([bag_qos(RELIABLE, TRANSIENT_LOCAL, 1)], 'std_msgs/msg/String') == \
+        (RELIABLE, TRANSIENT_LOCAL)
+    assert parse_offered_qos('') == [] and parse_offered_qos('{not yaml') == []
