@@ -45,7 +45,8 @@ class NodeProcess:
                                      start_new_session=True)
 
     def output(self) -> str:
-        self._log.flush()
+        if not self._log.closed:
+            self._log.flush()
         return self.log_path.read_text()
 
     def alive(self) -> bool:
@@ -80,11 +81,13 @@ class Probe:
         while self._running and self.context.ok():
             self.executor.spin_once(timeout_sec=0.02)
 
-    def collect(self, msg_type, topic: str, qos=10) -> List:
-        """Subscribe and return a list that fills with (receive_monotonic, msg) pairs."""
+    def collect(self, msg_type, topic: str, qos=10, raw: bool = False) -> List:
+        """Subscribe and return a list that fills with (receive_monotonic, msg) pairs
+        (the serialized bytes instead of the message with ``raw``)."""
         received: List = []
         self.node.create_subscription(msg_type, topic,
-                                      lambda m: received.append((time.monotonic(), m)), qos)
+                                      lambda m: received.append((time.monotonic(), m)), qos,
+                                      raw=raw)
         return received
 
     def call(self, srv_type, name: str, request, timeout: float = 10.0):

@@ -68,9 +68,9 @@ class Replay(Node):
                             and not (self.publish_clock and c.topic == '/clock')]
         if not self.connections:
             raise ReplayError(f'{self.bag}: none of the topics {sorted(wanted)} is in the bag')
-        self.publishers: Dict[str, object] = {}
+        self._topic_pubs: Dict[str, object] = {}
         for c in self.connections:
-            if c.topic in self.publishers:
+            if c.topic in self._topic_pubs:
                 continue
             try:
                 msg_class = message_class(c.msgtype)
@@ -81,11 +81,11 @@ class Replay(Node):
                 getattr(c.ext, 'offered_qos_profiles', []), c.msgtype)
             qos = QoSProfile(depth=100, reliability=ReliabilityPolicy(reliability),
                              durability=DurabilityPolicy(durability))
-            self.publishers[c.topic] = self.create_publisher(msg_class, c.topic, qos)
+            self._topic_pubs[c.topic] = self.create_publisher(msg_class, c.topic, qos)
         self.clock_pub = (self.create_publisher(Clock, '/clock', QoSProfile(depth=10))
                           if self.publish_clock else None)
         self.get_logger().info(
-            f'replaying {len(self.publishers)} topics of {self.bag} at rate {self.rate:g}'
+            f'replaying {len(self._topic_pubs)} topics of {self.bag} at rate {self.rate:g}'
             + (', looping' if self.loop else '') + (', publishing /clock' if self.publish_clock
                                                     else ''))
 
@@ -98,7 +98,7 @@ class Replay(Node):
             schedule.restart(time.monotonic())
             next_clock = 0.0
             for connection, bag_ns, raw in self.reader.messages(connections=self.connections):
-                if schedule.skip(bag_ns) or connection.topic not in self.publishers:
+                if schedule.skip(bag_ns) or connection.topic not in self._topic_pubs:
                     continue
                 due = schedule.due(bag_ns)
                 while True:  # sleep until due, publishing /clock on the way
@@ -110,13 +110,13 @@ class Replay(Node):
                         break
                     wake = due if self.clock_pub is None else min(due, next_clock)
                     time.sleep(max(0.0, wake - now))
-                self.publishers[connection.topic].publish(bytes(raw))
+                self._topic_pubs[connection.topic].publish(bytes(raw))
                 published += 1
                 if not rclpy.ok():
                     break
             if not self.loop:
                 break
-        for pub in self.publishers.values():
+        for pub in self._topic_pubs.values():
             pub.wait_for_all_acked(Duration(seconds=2.0))
         self.get_logger().info(f'replay done: {published} messages published')
         return 0
@@ -124,10 +124,10 @@ class Replay(Node):
     def _wait_for_subscribers(self) -> None:
         end = time.monotonic() + self.wait_for_subscribers
         while time.monotonic() < end:
-            if all(p.get_subscription_count() > 0 for p in self.publishers.values()):
+            if all(p.get_subscription_count() > 0 for p in self._topic_pubs.values()):
                 return
             rclpy.spin_once(self, timeout_sec=0.05)
-        missing = sorted(t for t, p in self.publishers.items() if p.get_subscription_count() == 0)
+        missing = sorted(t for t, p in self._topic_pubs.items() if p.get_subscription_count() == 0)
         self.get_logger().warn(f'starting without subscribers on {missing}')
 
     def _publish_clock(self, bag_ns: int) -> None:

@@ -1,0 +1,194 @@
+"""Recorder and replay nodes with the simulator, over DDS."""
+import signal
+import time
+
+import numpy as np
+import pytest
+from geometry_msgs.msg import Twist
+from nav_msgs.msg import Odometry
+from rclpy.serialization import deserialize_message
+from rosbags.highlevel import AnyReader
+from rosgraph_msgs.msg import Clock
+
+from helpers import wait_for
+from recording.repair import repair
+
+DT_NS = round(1e9 / 240)
+STATE_NS = 10_000_000          # 100 Hz
+CAMERA_NS = round(1e9 / 15)
+
+
+def _ns(stamp):
+    return stamp.sec * 1_000_000_000 + stamp.nanosec
+
+
+def _bag_messages(path):
+    with AnyReader([path]) as reader:
+        out = {}
+        for c, t, raw in reader.messages():
+            out.setdefault(c.topic, []).append((t, bytes(raw), c.msgtype, reader))
+        return {topic: [(t, raw, reader.deserialize(raw, msgtype)) for t, raw, msgtype, _ in m]
+                for topic, m in out.items()}
+
+
+def _start_recording(start_node, tmp_path, *args, name='run'):
+    rec = start_node('recorder', '-p', f'output_dir:={tmp_path / "bags"}', '-p',
+                     f'bag_name:={name}', *args, name=f'recorder_{name}')
+    for topic in ('/clock', '/mini_robot/odom', '/mini_robot/camera/image_raw'):
+        wait_for(lambda t=topic: f'recording {t} ' in rec.output(), 20.0,
+                 what=f'the recorder to subscribe {topic}')
+    return rec
+
+
+def _assert_on_grid(stamps_ns, period_ns, what):
+    """Every point of the period grid between the first and last stamp is present once."""
+    stamps = np.array(stamps_ns, dtype=np.int64)
+    assert len(stamps) > 10, what
+    gaps = np.diff(stamps)
+    # A stamp is the first step at/after its grid point: gaps differ from the period by less
+    # than one physics step, so a missing message would show as a gap of about two periods.
+    assert np.all(np.abs(gaps - period_ns) < DT_NS), (what, gaps.min(), gaps.max())
+
+
+@pytest.mark.parametrize('storage, stop_signal', [('mcap', signal.SIGINT),
+                                                  ('sqlite3', signal.SIGTERM)])
+def test_recording_at_full_rates_loses_nothing_and_keeps_bytes(start_node, probe, tmp_path,
+                                                               storage, stop_signal):
+    start_node('sim_node')
+    probe_odom = probe.collect(Odometry, '/mini_robot/odom', raw=True)
+    rec = _start_recording(start_node, tmp_path, '-p', f'storage:={storage}')
+    time.sleep(3.0)  # three seconds of a real-time run
+    assert rec.stop(stop_signal) == 0
+    assert 'closed with' in rec.output()
+    bag = tmp_path / 'bags' / 'run'
+    assert (bag / 'metadata.yaml').is_file()  # finalised: readable without repair
+    msgs = _bag_messages(bag)
+    # /clock: one per physics step, none missing between the first and the last recorded.
+    clocks = [_ns(m.clock) for _, _, m in msgs['/clock']]
+    assert np.all(np.diff(clocks) == DT_NS) and len(clocks) > 600
+    _assert_on_grid([_ns(m.header.stamp) for _, _, m in msgs['/mini_robot/odom']], STATE_NS,
+                    'odom')
+    _assert_on_grid([_ns(m.header.stamp) for _, _, m in msgs['/mini_robot/joint_states']],
+                    STATE_NS, 'joint_states')
+    images = [_ns(m.header.stamp) for _, _, m in msgs['/mini_robot/camera/image_raw']]
+    _assert_on_grid(images, CAMERA_NS, 'images')
+    infos = [_ns(m.header.stamp) for _, _, m in msgs['/mini_robot/camera/camera_info']]
+    assert set(images) <= set(infos)
+    assert len(msgs['/mini_robot/camera/image_raw'][0][1]) > 320 * 240 * 3
+    # Byte for byte: what another subscriber received is exactly what the bag holds.
+    recorded = {raw for _, raw, _ in msgs['/mini_robot/odom']}
+    first, last = (_ns(msgs['/mini_robot/odom'][i][2].header.stamp) for i in (0, -1))
+    overlap = [raw for _, raw in probe_odom
+               if first <= _ns(deserialize_message(raw, Odometry).header.stamp) <= last]
+    assert len(overlap) == len(recorded) and set(overlap) == recorded
+
+
+@pytest.mark.parametrize('storage', ['mcap', 'sqlite3'])
+def test_sigkill_loses_at_most_the_last_second(start_node, probe, tmp_path, storage):
+    start_node('sim_node')
+    probe_odom = probe.collect(Odometry, '/mini_robot/odom', raw=True)
+    rec = _start_recording(start_node, tmp_path, '-p', f'storage:={storage}', name='killed')
+    time.sleep(3.0)
+    killed_at = time.monotonic()
+    rec.stop(signal.SIGKILL)
+    bag = tmp_path / 'bags' / 'killed'
+    assert not (bag / 'metadata.yaml').exists()
+    repaired, count, _ = repair(bag)
+    assert count > 0
+    recorded = {raw for _, raw, _ in _bag_messages(repaired)['/mini_robot/odom']}
+    first = min(_ns(deserialize_message(raw, Odometry).header.stamp) for raw in recorded)
+    wanted = [raw for t, raw in probe_odom if t < killed_at - 1.0
+              and _ns(deserialize_message(raw, Odometry).header.stamp) >= first]
+    assert len(wanted) > 100
+    missing = [raw for raw in wanted if raw not in recorded]
+    assert missing == []
+
+
+def test_two_recorders_never_share_a_bag(start_node, tmp_path):
+    start_node('sim_node')
+    a = _start_recording(start_node, tmp_path, name='same')
+    b = start_node('recorder', '-p', f'output_dir:={tmp_path / "bags"}', '-p',
+                   'bag_name:=same', name='recorder_b')
+    wait_for(lambda: 'recording /clock ' in b.output(), 20.0, what='the second recorder')
+    a.stop()
+    b.stop()
+    assert sorted(p.name for p in (tmp_path / 'bags').iterdir()) == ['same', 'same_1']
+    for name in ('same', 'same_1'):
+        assert _bag_messages(tmp_path / 'bags' / name)['/clock']
+
+
+def test_replay_reproduces_the_recorded_odometry_with_its_timing(start_node, probe, tmp_path):
+    sim = start_node('sim_node')
+    rec = start_node('recorder', '-p', f'output_dir:={tmp_path / "bags"}', '-p',
+                     'bag_name:=drive', '-p', 'topics:=[/clock, /mini_robot/odom]')
+    wait_for(lambda: 'recording /mini_robot/odom ' in rec.output(), 20.0, what='recorder')
+    cmd = probe.node.create_publisher(Twist, '/mini_robot/cmd_vel', 10)
+    twist = Twist()
+    twist.linear.x, twist.angular.z = 0.15, 0.2
+    end = time.monotonic() + 2.0
+    while time.monotonic() < end:
+        cmd.publish(twist)
+        time.sleep(0.05)
+    rec.stop()
+    sim.stop()
+    bag = tmp_path / 'bags' / 'drive'
+    recorded = _bag_messages(bag)['/mini_robot/odom']
+    assert max(abs(m.twist.twist.linear.x) for _, _, m in recorded) > 0.1  # it drove
+
+    replayed = probe.collect(Odometry, '/mini_robot/odom', raw=True)
+    clock = probe.collect(Clock, '/clock')
+    replay = start_node('replay', '-p', f'bag:={bag}', '-p', 'publish_clock:=true', '-p',
+                        'wait_for_subscribers:=20.0')
+    wait_for(lambda: not replay.alive(), 60.0, what='the replay to end')
+    assert replay.proc.returncode == 0
+    wait_for(lambda: len(replayed) >= len(recorded), 5.0, what='all replayed odometry')
+    # Exactly the recorded messages, in order, byte for byte.
+    assert [raw for _, raw in replayed] == [raw for _, raw, _ in recorded]
+    # With the recorded timing: arrival intervals follow the recording's receive times.
+    rec_span = (recorded[-1][0] - recorded[0][0]) * 1e-9
+    rep_span = replayed[-1][0] - replayed[0][0]
+    assert rep_span == pytest.approx(rec_span, rel=0.1)
+    # /clock from bag time, not the recorded /clock (which was left out).
+    bag_start, bag_end = recorded[0][0], recorded[-1][0]
+    values = [_ns(m.clock) for _, m in clock]
+    assert values and all(b >= a for a, b in zip(values, values[1:]))
+    assert bag_start - 1e9 <= values[0] and values[-1] <= bag_end
+
+
+def test_replay_rate_and_topic_filter(start_node, probe, tmp_path):
+    sim = start_node('sim_node')
+    rec = start_node('recorder', '-p', f'output_dir:={tmp_path / "bags"}', '-p',
+                     'bag_name:=fast', '-p', 'topics:=[/clock, /mini_robot/odom]')
+    wait_for(lambda: 'recording /mini_robot/odom ' in rec.output(), 20.0, what='recorder')
+    time.sleep(2.0)
+    rec.stop()
+    sim.stop()  # from here on, odometry can only come from the replay
+    bag = tmp_path / 'bags' / 'fast'
+    recorded = _bag_messages(bag)['/mini_robot/odom']
+    replayed = probe.collect(Odometry, '/mini_robot/odom', raw=True)
+    clock = probe.collect(Clock, '/clock')
+    replay = start_node('replay', '-p', f'bag:={bag}', '-p', 'rate:=2.0', '-p',
+                        'topics:=[/mini_robot/odom]', '-p', 'start_offset:=0.5', '-p',
+                        'wait_for_subscribers:=20.0')
+    wait_for(lambda: not replay.alive(), 60.0, what='the replay to end')
+    with AnyReader([bag]) as reader:
+        bag_start = reader.start_time  # the offset counts from the bag's first message
+    kept = [r for r in recorded if r[0] >= bag_start + 500_000_000]
+    wait_for(lambda: len(replayed) >= len(kept), 5.0, what='replayed odometry')
+    assert [raw for _, raw in replayed] == [raw for _, raw, _ in kept]
+    rec_span = (kept[-1][0] - kept[0][0]) * 1e-9
+    assert replayed[-1][0] - replayed[0][0] == pytest.approx(rec_span / 2, rel=0.15)
+    assert clock == []  # filtered out, and publish_clock is off
+
+
+def test_bad_bags_fail_clearly(start_node, tmp_path):
+    (tmp_path / 'empty').mkdir()
+    for bag, fragment in ((tmp_path / 'missing', 'not a bag directory'),
+                          (tmp_path / 'empty', 'not a readable bag')):
+        proc = start_node('replay', '-p', f'bag:={bag}', name=f'replay_{bag.name}')
+        wait_for(lambda p=proc: not p.alive(), 15.0, what='replay to exit')
+        assert proc.proc.returncode == 1 and fragment in proc.output()
+    proc = start_node('recorder', '-p', 'storage:=rosbag1', '-p',
+                      f'output_dir:={tmp_path}', name='recorder_bad')
+    wait_for(lambda: not proc.alive(), 15.0, what='recorder to exit')
+    assert proc.proc.returncode == 1 and 'storage must be one of' in proc.output()
