@@ -15,7 +15,7 @@ SIDE_S="${DEMO_SIDE_SECONDS:-5}"           # 5 s at 0.1 m/s: 0.5 m sides
 LEG="speed 0.5, forward ${SIDE_S}s, speed 1.0, left 7.854s"
 SCRIPT="$LEG, $LEG, $LEG, $LEG, stop"
 
-RUN_DIR="$ROOT/runs/demo-$(date +%Y%m%d-%H%M%S)-$$"
+RUN_DIR="${DEMO_RUNS_DIR:-$ROOT/runs}/demo-$(date +%Y%m%d-%H%M%S)-$$"
 mkdir -p "$RUN_DIR"
 echo "[demo] ROS_DOMAIN_ID=$ROS_DOMAIN_ID, real-time factor $RTF, logs in ${RUN_DIR#"$ROOT"/}"
 echo "[demo] teleop script: $SCRIPT"
@@ -30,6 +30,16 @@ trap cleanup EXIT
 sim_node --ros-args -p real_time_factor:="$RTF" -p rtf_log_period:=10.0 \
   > "$RUN_DIR/sim_node.log" 2>&1 &
 pids+=($!)
+# Every run is recorded (DEMO_RECORD=0 turns it off): all topics, MCAP, into the run directory.
+if [ "${DEMO_RECORD:-1}" != 0 ]; then
+  recorder --ros-args -p output_dir:="$RUN_DIR" -p bag_name:=bag > "$RUN_DIR/recorder.log" 2>&1 &
+  recorder_pid=$!
+  pids+=("$recorder_pid")
+  for _ in $(seq 100); do  # wait until it records the simulator's topics
+    grep -q "recording /mini_robot/odom" "$RUN_DIR/recorder.log" && break
+    sleep 0.1
+  done
+fi
 drive_check --ros-args -p use_sim_time:=true -p wall_timeout:=600.0 -p script:="$SCRIPT" \
   -r cmd_vel:=/mini_robot/cmd_vel -r odom:=/mini_robot/odom 2>&1 | tee "$RUN_DIR/drive_check.log" &
 check_pid=$!
@@ -43,5 +53,14 @@ wait "$check_pid"
 code=$?
 set -e
 grep -h "real-time factor" "$RUN_DIR/sim_node.log" | tail -1 | sed 's/^/[demo] sim: /' || true
+if [ -n "${recorder_pid:-}" ]; then
+  kill -INT "$recorder_pid" && wait "$recorder_pid" || true
+  sed -n 's/^\[recorder\] /[demo] /p' "$RUN_DIR/recorder.log"
+  if bag_analysis "$RUN_DIR/bag" -o "$RUN_DIR/report" > "$RUN_DIR/analysis.log" 2>&1; then
+    echo "[demo] bag report: ${RUN_DIR#"$ROOT"/}/report/report.md (odometry path: paths.png)"
+  else
+    echo "[demo] bag analysis failed:"; cat "$RUN_DIR/analysis.log"
+  fi
+fi
 if [ "$code" -eq 0 ]; then echo "[demo] PASS"; else echo "[demo] FAIL (exit $code)"; fi
 exit "$code"

@@ -15,7 +15,9 @@ EXECUTABLES = [
     ('controllers', 'teleop', ['-p', 'script:=stop', '-p', 'wait_for_subscriber:=60.0'],
      'publishing on'),
     ('sim_bringup', 'drive_check', ['-p', 'script:=forward 1s'], 'waiting for'),
+    ('recording', 'recorder', ['-p', 'output_dir:={tmp}'], 'recording all topics'),
 ]
+COMMAND_LINE_TOOLS = [('recording', 'bag_analysis'), ('recording', 'bag_repair')]
 
 
 def _ros2_run_path(package: str, executable: str) -> Path:
@@ -30,6 +32,7 @@ def test_executable_resolves_and_starts(tmp_path, package, executable, args, sta
     assert path.is_file() and os.access(path, os.X_OK), path
     assert Path(get_package_prefix(package)).is_relative_to(ROOT / 'ros_ws' / 'install')
     log = tmp_path / 'out.log'
+    args = [a.replace('{tmp}', str(tmp_path)) for a in args]
     with open(log, 'w') as out:
         proc = subprocess.Popen([str(path), '--ros-args'] + args, stdout=out,
                                 stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL)
@@ -42,9 +45,18 @@ def test_executable_resolves_and_starts(tmp_path, package, executable, args, sta
             proc.wait(10)
 
 
+@pytest.mark.parametrize('package, executable', COMMAND_LINE_TOOLS,
+                         ids=[e[1] for e in COMMAND_LINE_TOOLS])
+def test_command_line_tool_resolves_and_runs(package, executable):
+    path = _ros2_run_path(package, executable)
+    assert path.is_file() and os.access(path, os.X_OK), path
+    out = subprocess.run([str(path), '--help'], capture_output=True, text=True, timeout=60)
+    assert out.returncode == 0 and f'usage: {executable}' in out.stdout
+
+
 def test_every_package_is_in_the_ament_index():
     for package in ('sim_bridge', 'controllers', 'perception', 'robot_description',
-                    'sim_bringup', 'sim_interfaces'):
+                    'sim_bringup', 'sim_interfaces', 'recording'):
         share = Path(get_package_share_directory(package))
         assert (share / 'package.xml').is_file()
     assert (Path(get_package_share_directory('robot_description')) / 'urdf' /

@@ -6,8 +6,8 @@ import subprocess
 from helpers import ROOT
 
 
-def test_demo_drives_the_square_and_passes():
-    env = {**os.environ, 'DEMO_REAL_TIME_FACTOR': '4.0'}
+def test_demo_drives_the_square_records_and_passes(tmp_path):
+    env = {**os.environ, 'DEMO_REAL_TIME_FACTOR': '4.0', 'DEMO_RUNS_DIR': str(tmp_path)}
     env.pop('ROS_DOMAIN_ID', None)  # the demo picks its own
     out = subprocess.run(['bash', str(ROOT / 'scripts' / 'demo.sh')], env=env,
                          capture_output=True, text=True, timeout=300)
@@ -16,3 +16,8 @@ def test_demo_drives_the_square_and_passes():
     assert '[demo] PASS' in text
     error = re.search(r'error: position ([0-9.]+) mm', text)
     assert error and float(error.group(1)) < 50.0
+    # The run was recorded and analysed.
+    run = next(tmp_path.glob('demo-*'))
+    assert (run / 'bag' / 'metadata.yaml').is_file()
+    report = (run / 'report' / 'report.md').read_text()
+    assert '/mini_robot/odom' in report and (run / 'report' / 'paths.png').is_file()
