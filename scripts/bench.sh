@@ -4,4 +4,5 @@ set -euo pipefail
 ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 # shellcheck disable=SC1091
 source "$ROOT/scripts/env.sh"
-python "$ROOT/bench/bench_sim.py" "$@"
+python "$ROOT/bench/bench_sim.py"
+python "$ROOT/bench/bench_recorder.py"

@@ -7,12 +7,14 @@ from helpers import ROOT
 
 
 def test_demo_drives_the_square_records_and_passes(tmp_path):
-    env = {**os.environ, 'DEMO_REAL_TIME_FACTOR': '4.0', 'DEMO_RUNS_DIR': str(tmp_path)}
+    # The demo's own pace (twice real time): the scripted teleop is open loop, so its segment
+    # switches lag by its /clock latency times the real-time factor.
+    env = {**os.environ, 'DEMO_RUNS_DIR': str(tmp_path)}
     env.pop('ROS_DOMAIN_ID', None)  # the demo picks its own
     out = subprocess.run(['bash', str(ROOT / 'scripts' / 'demo.sh')], env=env,
                          capture_output=True, text=True, timeout=300)
     text = out.stdout + out.stderr
-    assert out.returncode == 0, text[-3000:]
+    assert out.returncode == 0, text[-1500:]
     assert '[demo] PASS' in text
     error = re.search(r'error: position ([0-9.]+) mm', text)
     assert error and float(error.group(1)) < 50.0

@@ -1,4 +1,4 @@
-"""Message definitions for bags: the rosbags Jazzy typestore, extended from installed .msg files."""
+"""Message definitions for bags: the Jazzy typestore of rosbags, plus installed .msg files."""
 from __future__ import annotations
 
 import importlib
