@@ -1,4 +1,4 @@
-"""Report on a rosbag2 bag: topics, counts and rates, and the path of every odometry topic.
+"""Report on a rosbag2 bag: topics, counts and rates, odometry paths, joint tracking errors.
 
 ``bag_analysis BAG [-o DIR]`` writes DIR/report.md, DIR/report.json and one PNG per odometry
 topic (default DIR: BAG_report beside the bag).
@@ -49,6 +49,17 @@ class PathStats:
 
 
 @dataclass
+class TrackingStats:
+    """Position tracking of one joint on a controller-state topic (reference - feedback)."""
+
+    topic: str
+    joint: str
+    samples: int
+    rms_error: float
+    max_abs_error: float
+
+
+@dataclass
 class Report:
     bag: str
     storage: str
@@ -56,6 +67,7 @@ class Report:
     message_count: int
     topics: List[TopicStats] = field(default_factory=list)
     paths: List[PathStats] = field(default_factory=list)
+    tracking: List[TrackingStats] = field(default_factory=list)
 
 
 def open_reader(bag: Path) -> AnyReader:
@@ -82,6 +94,7 @@ def analyse(bag: Path) -> tuple:
         types: Dict[str, str] = {}
         paths: Dict[str, list] = {}
         yaws: Dict[str, float] = {}
+        tracking: Dict[str, Dict[str, list]] = {}
         for c in reader.connections:
             stamps.setdefault(c.topic, [])
             sizes.setdefault(c.topic, 0)
@@ -90,7 +103,10 @@ def analyse(bag: Path) -> tuple:
             for c, t, raw in reader.messages():
                 stamps[c.topic].append(t)
                 sizes[c.topic] += len(raw)
-                if c.msgtype == ODOMETRY:
+                if _is_controller_state(c):
+                    _add_tracking(reader.deserialize(raw, c.msgtype), tracking.setdefault(
+                        c.topic, {}))
+                elif c.msgtype == ODOMETRY:
                     pose = reader.deserialize(raw, c.msgtype).pose.pose
                     paths.setdefault(c.topic, []).append((pose.position.x, pose.position.y))
                     q = pose.orientation
@@ -113,9 +129,40 @@ def analyse(bag: Path) -> tuple:
             report.paths.append(PathStats(
                 topic, len(p), float(np.linalg.norm(np.diff(p, axis=0), axis=1).sum()),
                 p[0].tolist(), p[-1].tolist(), math.degrees(yaws[topic])))
+        for topic, joints in sorted(tracking.items()):
+            for joint, errors in joints.items():
+                e = np.asarray(errors, float)
+                report.tracking.append(TrackingStats(
+                    topic, joint, len(e), float(np.sqrt(np.mean(e * e))), float(np.abs(e).max())))
         return report, arrays
     finally:
         reader.close()
+
+
+def _is_controller_state(connection) -> bool:
+    """A joint trajectory controller's state: control_msgs/JointTrajectoryControllerState or any
+    type with its fields (joint_names, reference or desired, feedback or actual)."""
+    msgdef = connection.msgdef.data
+    return ('string[] joint_names' in msgdef
+            and ('JointTrajectoryPoint reference' in msgdef
+                 or 'JointTrajectoryPoint desired' in msgdef)
+            and ('JointTrajectoryPoint feedback' in msgdef
+                 or 'JointTrajectoryPoint actual' in msgdef))
+
+
+def _add_tracking(msg, joints: Dict[str, list]) -> None:
+    reference = getattr(msg, 'reference', None)
+    if reference is None or not len(reference.positions):
+        reference = getattr(msg, 'desired', None)
+    feedback = getattr(msg, 'feedback', None)
+    if feedback is None or not len(feedback.positions):
+        feedback = getattr(msg, 'actual', None)
+    if reference is None or feedback is None:
+        return
+    n = min(len(msg.joint_names), len(reference.positions), len(feedback.positions))
+    for i in range(n):
+        joints.setdefault(msg.joint_names[i], []).append(
+            float(reference.positions[i]) - float(feedback.positions[i]))
 
 
 def write_report(bag: Path, out_dir: Path) -> Report:
@@ -148,6 +195,13 @@ def to_markdown(report: Report) -> str:
             lines.append(f'| {p.topic} | {p.samples} | {p.distance_m:.3f} | '
                          f'({p.start[0]:+.3f}, {p.start[1]:+.3f}) | '
                          f'({p.end[0]:+.3f}, {p.end[1]:+.3f}) | {p.end_yaw_deg:+.2f} |')
+    if report.tracking:
+        lines += ['', '## Joint tracking (reference - feedback position)', '',
+                  '| topic | joint | samples | RMS error | max abs error |',
+                  '|---|---|---|---|---|']
+        for t in report.tracking:
+            lines.append(f'| {t.topic} | {t.joint} | {t.samples} | {t.rms_error:.6f} | '
+                         f'{t.max_abs_error:.6f} |')
     return '\n'.join(lines) + '\n'
 
 

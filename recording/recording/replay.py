@@ -22,6 +22,9 @@ from recording.replay_schedule import ReplaySchedule
 from recording.types import TypeResolutionError, message_class
 
 
+SUBSCRIBER_MATCH_SETTLE_S = 0.5
+
+
 class ReplayError(RuntimeError):
     """A bag that cannot be replayed."""
 
@@ -47,6 +50,9 @@ class Replay(Node):
             '/clock messages per wall second with publish_clock', 1.0, 10000.0))
         self.declare_parameter('wait_for_subscribers', 0.0, float_range(
             'Wall seconds to wait until every replayed topic has a subscriber', 0.0, 600.0))
+        self.declare_parameter('delay', 0.0, float_range(
+            'Wall seconds to wait before the first message (as ros2 bag play --delay)',
+            0.0, 600.0))
         get = lambda name: self.get_parameter(name).value  # noqa: E731
         self.bag = Path(get('bag'))
         if not get('bag') or not self.bag.is_dir():
@@ -56,6 +62,7 @@ class Replay(Node):
         self.publish_clock = get('publish_clock')
         self.clock_period = 1.0 / get('clock_rate')
         self.wait_for_subscribers = get('wait_for_subscribers')
+        self.delay = get('delay')
         wanted = {t for t in get('topics') if t}
         try:
             self.reader = AnyReader([self.bag])
@@ -92,6 +99,8 @@ class Replay(Node):
     def run(self) -> int:
         if self.wait_for_subscribers > 0.0:
             self._wait_for_subscribers()
+        if self.delay > 0.0:
+            time.sleep(self.delay)
         schedule = ReplaySchedule(self.reader.start_time, self.rate, self.start_offset)
         published = 0
         while rclpy.ok():
@@ -125,6 +134,9 @@ class Replay(Node):
         end = time.monotonic() + self.wait_for_subscribers
         while time.monotonic() < end:
             if all(p.get_subscription_count() > 0 for p in self._topic_pubs.values()):
+                # Our side has matched; the subscriber's side of discovery may finish a little
+                # later, and a volatile reader misses what was sent before it did.
+                time.sleep(SUBSCRIBER_MATCH_SETTLE_S)
                 return
             rclpy.spin_once(self, timeout_sec=0.05)
         missing = sorted(t for t, p in self._topic_pubs.items() if p.get_subscription_count() == 0)

@@ -93,15 +93,18 @@ class SimNode(Node):
         self._last_rtf_log = time.monotonic()
 
         reliable = QoSProfile(depth=10)
-        self._clock_pub = self.create_publisher(ClockMsg, '/clock', reliable)
+        # A reliable writer keeps only `depth` samples for a reader that falls behind: 100 lets a
+        # recorder starved for a moment (or a lock-step burst) still receive every message.
+        history = QoSProfile(depth=100)
+        self._clock_pub = self.create_publisher(ClockMsg, '/clock', history)
         self._clock_msg = ClockMsg()
         self._joint_pubs, self._odom_pubs, self._odom_frames = {}, {}, {}
         for name, robot in self._world.robots.items():
             ns = robot.config.namespace
             prefix = robot.config.frame_prefix
             self._joint_pubs[name] = self.create_publisher(
-                JointState, _topic(ns, 'joint_states'), reliable)
-            self._odom_pubs[name] = self.create_publisher(Odometry, _topic(ns, 'odom'), reliable)
+                JointState, _topic(ns, 'joint_states'), history)
+            self._odom_pubs[name] = self.create_publisher(Odometry, _topic(ns, 'odom'), history)
             self._odom_frames[name] = (prefix + 'odom', prefix + 'base_link')
             if name in self._runner.guards:
                 msg_type = TwistStamped if p['use_stamped_vel'] else Twist

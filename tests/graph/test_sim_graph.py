@@ -169,7 +169,7 @@ def test_clock_advances_at_the_paced_rate(sim, probe):
     gaps = np.diff(ns)
     assert (gaps > 0).all()
     # One /clock per physics step: every gap is a whole number of steps, nearly all exactly one
-    # (a reliable depth-10 queue may drop one when the probe process is starved).
+    # (a reliable queue may drop one when the probe process is starved).
     assert (gaps % DT_NS == 0).all()
     assert np.mean(gaps == DT_NS) > 0.95
     rate = (stamp_s(c1.clock) - stamp_s(c0.clock)) / (w1 - w0)
@@ -257,7 +257,7 @@ def test_lock_step_advances_exactly_n_steps_per_request(start_node, probe):
         # The steps' messages were published before the reply: the last /clock is its time.
         wait_for(lambda: clock[-1][1].clock == reply.sim_time, 5.0, what='the final /clock')
         if n <= 7:
-            # Within the publisher's history depth (10) every message arrives: one per step.
+            # Well within the publisher's history depth every message arrives: one per step.
             time.sleep(0.1)
             assert len(clock) == n_clock + n
     # States at 100 Hz: the last odom published is at most one state period old.

@@ -247,3 +247,53 @@ def test_qos_choices():
     assert replay_policies([bag_qos(RELIABLE, TRANSIENT_LOCAL, 1)], 'std_msgs/msg/String') == \
         (RELIABLE, TRANSIENT_LOCAL)
     assert parse_offered_qos('') == [] and parse_offered_qos('{not yaml') == []
+
+
+CONTROLLER_STATE = '''std_msgs/Header header
+string[] joint_names
+trajectory_msgs/JointTrajectoryPoint reference
+trajectory_msgs/JointTrajectoryPoint feedback
+trajectory_msgs/JointTrajectoryPoint error
+trajectory_msgs/JointTrajectoryPoint output
+'''
+
+
+def test_analysis_reports_joint_tracking_of_controller_states(tmp_path, monkeypatch):
+    # control_msgs is not installable here: its definition comes from a .msg file, as any
+    # package's would, and the analysis reads the definition stored in the bag.
+    prefix = tmp_path / 'prefix'
+    (prefix / 'share' / 'control_msgs' / 'msg').mkdir(parents=True)
+    (prefix / 'share' / 'control_msgs' / 'msg' / 'JointTrajectoryControllerState.msg'
+     ).write_text(CONTROLLER_STATE)
+    index = prefix / 'share' / 'ament_index' / 'resource_index' / 'packages'
+    index.mkdir(parents=True)
+    (index / 'control_msgs').write_text('')
+    monkeypatch.setenv('AMENT_PREFIX_PATH',
+                       f'{prefix}{os.pathsep}{os.environ.get("AMENT_PREFIX_PATH", "")}')
+    msgtype = 'control_msgs/msg/JointTrajectoryControllerState'
+    writer = BagWriter(tmp_path, 'arm', 'sqlite3')
+    writer.add_topic('/arm/controller_state', msgtype)
+    store = writer.resolver.typestore
+    State = store.types[msgtype]
+    Point = store.types['trajectory_msgs/msg/JointTrajectoryPoint']
+    Header, Time = store.types['std_msgs/msg/Header'], store.types['builtin_interfaces/msg/Time']
+    Duration = store.types['builtin_interfaces/msg/Duration']
+    empty = np.array([], float)
+
+    def point(pos):
+        return Point(np.array(pos, float), empty, empty, empty, Duration(0, 0))
+
+    errors = np.array([[0.01, -0.02], [-0.01, 0.04], [0.0, 0.0], [0.02, 0.0]])
+    for i, e in enumerate(errors):
+        ref = np.array([0.5, -0.3]) + i
+        msg = State(Header(Time(i, 0), ''), ['joint_1', 'joint_2'], point(ref),
+                    point(ref - e), point(e), point([]))
+        writer.write('/arm/controller_state', i * 10**9, bytes(store.serialize_cdr(msg,
+                                                                                  msgtype)))
+    writer.close()
+    report, _ = analyse(writer.path)
+    by_joint = {t.joint: t for t in report.tracking}
+    assert set(by_joint) == {'joint_1', 'joint_2'}
+    assert by_joint['joint_1'].rms_error == pytest.approx(np.sqrt(np.mean(errors[:, 0] ** 2)))
+    assert by_joint['joint_2'].max_abs_error == pytest.approx(0.04)
+    assert by_joint['joint_1'].samples == 4

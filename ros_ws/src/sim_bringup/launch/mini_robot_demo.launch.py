@@ -1,6 +1,7 @@
-"""The demo on a full ROS 2 Jazzy install: simulator, scripted teleop and drive_check.
+"""The demo on a full ROS 2 Jazzy install: simulator, recorder, scripted teleop, drive_check.
 
     ros2 launch sim_bringup mini_robot_demo.launch.py [real_time_factor:=2.0] [gui:=false]
+        [bag_dir:=bags]
 
 (ros2 launch is not installable from the package index, so `make demo` runs
 scripts/demo.sh, which starts the same three nodes with the same parameters.)
@@ -25,6 +26,10 @@ def generate_launch_description():
     return LaunchDescription([
         DeclareLaunchArgument('real_time_factor', default_value='2.0'),
         DeclareLaunchArgument('gui', default_value='false'),
+        DeclareLaunchArgument('bag_dir', default_value='bags'),
+        # The run is recorded: all topics, MCAP, a new bag directory each time.
+        Node(package='recording', executable='recorder', output='screen',
+             parameters=[{'output_dir': LaunchConfiguration('bag_dir')}]),
         Node(package='sim_bridge', executable='sim_node', output='screen',
              parameters=[params, {'real_time_factor': LaunchConfiguration('real_time_factor'),
                                   'gui': LaunchConfiguration('gui')}]),
