@@ -81,9 +81,10 @@ class Probe:
         while self._running and self.context.ok():
             self.executor.spin_once(timeout_sec=0.02)
 
-    def collect(self, msg_type, topic: str, qos=10, raw: bool = False) -> List:
+    def collect(self, msg_type, topic: str, qos=1000, raw: bool = False) -> List:
         """Subscribe and return a list that fills with (receive_monotonic, msg) pairs
-        (the serialized bytes instead of the message with ``raw``)."""
+        (the serialized bytes instead of the message with ``raw``). The default history is deep
+        (1000) so that a test process busy elsewhere does not drop messages from its queue."""
         received: List = []
         self.node.create_subscription(msg_type, topic,
                                       lambda m: received.append((time.monotonic(), m)), qos,
