@@ -118,21 +118,30 @@ def test_two_recorders_never_share_a_bag(start_node, tmp_path):
         assert _bag_messages(tmp_path / 'bags' / name)['/clock']
 
 
-def test_replay_reproduces_the_recorded_odometry_with_its_timing(start_node, probe, tmp_path):
+def _record_short_run(start_node, probe, tmp_path, name, topics, seconds, twist=None):
+    """Run the simulator with a recorder on ``topics`` for ``seconds`` (driving with ``twist``),
+    stop both, and return the bag path: afterwards only a replay publishes those topics."""
     sim = start_node('sim_node')
     rec = start_node('recorder', '-p', f'output_dir:={tmp_path / "bags"}', '-p',
-                     'bag_name:=drive', '-p', 'topics:=[/clock, /mini_robot/odom]')
-    wait_for(lambda: 'recording /mini_robot/odom ' in rec.output(), 20.0, what='recorder')
+                     f'bag_name:={name}', '-p', f'topics:=[{", ".join(topics)}]',
+                     name=f'recorder_{name}')
+    wait_for(lambda: f'recording {topics[-1]} ' in rec.output(), 20.0, what='recorder')
     cmd = probe.node.create_publisher(Twist, '/mini_robot/cmd_vel', 10)
-    twist = Twist()
-    twist.linear.x, twist.angular.z = 0.15, 0.2
-    end = time.monotonic() + 2.0
+    end = time.monotonic() + seconds
     while time.monotonic() < end:
-        cmd.publish(twist)
+        if twist is not None:
+            cmd.publish(twist)
         time.sleep(0.05)
     rec.stop()
     sim.stop()
-    bag = tmp_path / 'bags' / 'drive'
+    return tmp_path / 'bags' / name
+
+
+def test_replay_reproduces_the_recorded_odometry_with_its_timing(start_node, probe, tmp_path):
+    twist = Twist()
+    twist.linear.x, twist.angular.z = 0.15, 0.2
+    bag = _record_short_run(start_node, probe, tmp_path, 'drive', ['/clock', '/mini_robot/odom'],
+                            2.0, twist)
     recorded = _bag_messages(bag)['/mini_robot/odom']
     assert max(abs(m.twist.twist.linear.x) for _, _, m in recorded) > 0.1  # it drove
 
@@ -157,14 +166,8 @@ def test_replay_reproduces_the_recorded_odometry_with_its_timing(start_node, pro
 
 
 def test_replay_rate_and_topic_filter(start_node, probe, tmp_path):
-    sim = start_node('sim_node')
-    rec = start_node('recorder', '-p', f'output_dir:={tmp_path / "bags"}', '-p',
-                     'bag_name:=fast', '-p', 'topics:=[/clock, /mini_robot/odom]')
-    wait_for(lambda: 'recording /mini_robot/odom ' in rec.output(), 20.0, what='recorder')
-    time.sleep(2.0)
-    rec.stop()
-    sim.stop()  # from here on, odometry can only come from the replay
-    bag = tmp_path / 'bags' / 'fast'
+    bag = _record_short_run(start_node, probe, tmp_path, 'fast', ['/clock', '/mini_robot/odom'],
+                            2.0)
     recorded = _bag_messages(bag)['/mini_robot/odom']
     replayed = probe.collect(Odometry, '/mini_robot/odom', raw=True)
     clock = probe.collect(Clock, '/clock')
@@ -196,17 +199,11 @@ def test_bad_bags_fail_clearly(start_node, tmp_path):
 
 
 def test_replay_loops_until_stopped(start_node, probe, tmp_path):
-    sim = start_node('sim_node')
-    rec = start_node('recorder', '-p', f'output_dir:={tmp_path / "bags"}', '-p',
-                     'bag_name:=short', '-p', 'topics:=[/mini_robot/odom]')
-    wait_for(lambda: 'recording /mini_robot/odom ' in rec.output(), 20.0, what='recorder')
-    time.sleep(0.5)
-    rec.stop()
-    sim.stop()
-    recorded = _bag_messages(tmp_path / 'bags' / 'short')['/mini_robot/odom']
+    bag = _record_short_run(start_node, probe, tmp_path, 'short', ['/mini_robot/odom'], 0.5)
+    recorded = _bag_messages(bag)['/mini_robot/odom']
     replayed = probe.collect(Odometry, '/mini_robot/odom', raw=True)
-    replay = start_node('replay', '-p', f'bag:={tmp_path / "bags" / "short"}', '-p',
-                        'loop:=true', '-p', 'rate:=4.0', '-p', 'wait_for_subscribers:=20.0')
+    replay = start_node('replay', '-p', f'bag:={bag}', '-p', 'loop:=true', '-p',
+                        'rate:=4.0', '-p', 'wait_for_subscribers:=20.0')
     wait_for(lambda: len(replayed) >= 3 * len(recorded), 30.0, what='three passes')
     assert replay.alive()
     assert replay.stop() == 0
