@@ -9,7 +9,7 @@ source "$ROOT/scripts/env.sh"
 
 export ROS_DOMAIN_ID="${ROS_DOMAIN_ID:-$((RANDOM % 90 + 10))}"
 export ROS_AUTOMATIC_DISCOVERY_RANGE="${ROS_AUTOMATIC_DISCOVERY_RANGE:-LOCALHOST}"
-RTF="${DEMO_REAL_TIME_FACTOR:-2.0}"
+RTF="${DEMO_REAL_TIME_FACTOR:-1.0}"
 SIDE_S="${DEMO_SIDE_SECONDS:-5}"           # 5 s at 0.1 m/s: 0.5 m sides
 # The report's buttons: forward at half of max_speed, turns at full max_turn (0.2 rad/s).
 LEG="speed 0.5, forward ${SIDE_S}s, speed 1.0, left 7.854s"

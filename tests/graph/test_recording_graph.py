@@ -56,6 +56,8 @@ def test_recording_at_full_rates_loses_nothing_and_keeps_bytes(start_node, probe
                                                                storage, stop_signal):
     start_node('sim_node')
     probe_odom = probe.collect(Odometry, '/mini_robot/odom', raw=True)
+    # The probe receives before the recorder starts, so it saw everything the bag can hold.
+    wait_for(lambda: len(probe_odom) > 5, 20.0, what='the probe receiving odometry')
     rec = _start_recording(start_node, tmp_path, '-p', f'storage:={storage}')
     time.sleep(3.0)  # three seconds of a real-time run
     assert rec.stop(stop_signal) == 0
@@ -88,6 +90,7 @@ def test_recording_at_full_rates_loses_nothing_and_keeps_bytes(start_node, probe
 def test_sigkill_loses_at_most_the_last_second(start_node, probe, tmp_path, storage):
     start_node('sim_node')
     probe_odom = probe.collect(Odometry, '/mini_robot/odom', raw=True)
+    wait_for(lambda: len(probe_odom) > 5, 20.0, what='the probe receiving odometry')
     rec = _start_recording(start_node, tmp_path, '-p', f'storage:={storage}', name='killed')
     time.sleep(3.0)
     killed_at = time.monotonic()

@@ -1,6 +1,6 @@
 """The demo on a full ROS 2 Jazzy install: simulator, recorder, scripted teleop, drive_check.
 
-    ros2 launch sim_bringup mini_robot_demo.launch.py [real_time_factor:=2.0] [gui:=false]
+    ros2 launch sim_bringup mini_robot_demo.launch.py [real_time_factor:=1.0] [gui:=false]
         [bag_dir:=bags]
 
 (ros2 launch is not installable from the package index, so `make demo` runs
@@ -24,7 +24,7 @@ def generate_launch_description():
                  parameters=[{'use_sim_time': True, 'script': SQUARE}],
                  remappings=[('cmd_vel', '/mini_robot/cmd_vel'), ('odom', '/mini_robot/odom')])
     return LaunchDescription([
-        DeclareLaunchArgument('real_time_factor', default_value='2.0'),
+        DeclareLaunchArgument('real_time_factor', default_value='1.0'),
         DeclareLaunchArgument('gui', default_value='false'),
         DeclareLaunchArgument('bag_dir', default_value='bags'),
         # The run is recorded: all topics, MCAP, a new bag directory each time.
