@@ -1,0 +1,107 @@
+"""Serial chains from Denavit-Hartenberg tables, in Craig's modified or the standard convention."""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import List, Sequence, Tuple
+
+import numpy as np
+
+MODIFIED, STANDARD = 'modified', 'standard'
+
+
+@dataclass(frozen=True)
+class DHRow:
+    """One joint. Modified (Craig): alpha and a are alpha_{i-1}, a_{i-1} of the link before the
+    joint. Standard: alpha and a of the link after it. Angles in radians, lengths in metres."""
+
+    alpha: float
+    a: float
+    d: float
+    theta_offset: float = 0.0
+    lower: float = -math.pi
+    upper: float = math.pi
+
+    def __post_init__(self) -> None:
+        values = (self.alpha, self.a, self.d, self.theta_offset, self.lower, self.upper)
+        if not all(math.isfinite(v) for v in values):
+            raise ValueError(f'DH row values must be finite: {self}')
+        if self.lower > self.upper:
+            raise ValueError(f'lower limit {self.lower} above upper limit {self.upper}')
+
+
+def _rot_x(a: float) -> np.ndarray:
+    c, s = math.cos(a), math.sin(a)
+    return np.array([[1.0, 0.0, 0.0, 0.0], [0.0, c, -s, 0.0], [0.0, s, c, 0.0],
+                     [0.0, 0.0, 0.0, 1.0]])
+
+
+def _rot_z(a: float) -> np.ndarray:
+    c, s = math.cos(a), math.sin(a)
+    return np.array([[c, -s, 0.0, 0.0], [s, c, 0.0, 0.0], [0.0, 0.0, 1.0, 0.0],
+                     [0.0, 0.0, 0.0, 1.0]])
+
+
+def _trans(x: float = 0.0, z: float = 0.0) -> np.ndarray:
+    t = np.eye(4)
+    t[0, 3], t[2, 3] = x, z
+    return t
+
+
+@dataclass(frozen=True)
+class DHChain:
+    """Revolute joints described by DH rows, with an optional fixed tool transform."""
+
+    rows: Tuple[DHRow, ...]
+    convention: str = MODIFIED
+    tool: Tuple[Tuple[float, ...], ...] = tuple(map(tuple, np.eye(4)))
+
+    def __post_init__(self) -> None:
+        if self.convention not in (MODIFIED, STANDARD):
+            raise ValueError(f'convention must be "{MODIFIED}" or "{STANDARD}"')
+        if not self.rows:
+            raise ValueError('a chain needs at least one row')
+
+    @property
+    def dof(self) -> int:
+        return len(self.rows)
+
+    @property
+    def limits(self) -> Tuple[np.ndarray, np.ndarray]:
+        return (np.array([r.lower for r in self.rows]), np.array([r.upper for r in self.rows]))
+
+    def within_limits(self, q: Sequence[float], tol: float = 1e-9) -> bool:
+        lower, upper = self.limits
+        q = np.asarray(q, float)
+        return bool(np.all(q >= lower - tol) and np.all(q <= upper + tol))
+
+    def joint_transform(self, i: int, q_i: float) -> np.ndarray:
+        """Transform from frame i-1 to frame i at joint value q_i."""
+        r = self.rows[i]
+        theta = q_i + r.theta_offset
+        if self.convention == MODIFIED:
+            return _rot_x(r.alpha) @ _trans(x=r.a) @ _rot_z(theta) @ _trans(z=r.d)
+        return _rot_z(theta) @ _trans(z=r.d) @ _trans(x=r.a) @ _rot_x(r.alpha)
+
+    def frames(self, q: Sequence[float]) -> List[np.ndarray]:
+        """Base-frame poses of frames 1..n (joint frames), then the tool frame."""
+        q = self._check(q)
+        t = np.eye(4)
+        out = []
+        for i, qi in enumerate(q):
+            t = t @ self.joint_transform(i, qi)
+            out.append(t)
+        out.append(t @ np.asarray(self.tool))
+        return out
+
+    def fk(self, q: Sequence[float]) -> np.ndarray:
+        """4x4 pose of the tool frame in the base frame."""
+        return self.frames(q)[-1]
+
+    def _check(self, q: Sequence[float]) -> np.ndarray:
+        q = np.asarray(q, float)
+        if q.shape != (self.dof,):
+            raise ValueError(f'expected {self.dof} joint values, got shape {q.shape}')
+        if not np.all(np.isfinite(q)):
+            raise ValueError(f'joint values must be finite, got {q.tolist()}')
+        return q
