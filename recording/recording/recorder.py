@@ -11,6 +11,7 @@ from rclpy.clock import Clock, ClockType
 from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+from rosbags.rosbag2 import WriterError
 
 from controllers.params import float_range
 from recording.bag_writer import STORAGES, BagError, BagWriter
@@ -50,6 +51,7 @@ class Recorder(Node):
         self._depth = get('queue_depth')
         self._writer = BagWriter(Path(get('output_dir')), get('bag_name') or None, storage)
         self._skipped: Set[str] = set()
+        self.dropped = 0
         # Wall-clock timers: they must run whether or not simulated time advances.
         steady = Clock(clock_type=ClockType.STEADY_TIME)
         self.create_timer(get('discovery_period'), self._discover, clock=steady)
@@ -94,7 +96,13 @@ class Recorder(Node):
         self.get_logger().info(f'recording {topic} [{types[0]}]')
 
     def _on_message(self, topic: str, data: bytes) -> None:
-        self._writer.write(topic, self.get_clock().now().nanoseconds, data)
+        try:
+            self._writer.write(topic, self.get_clock().now().nanoseconds, data)
+        except (OSError, WriterError) as exc:
+            # A full disk must not take down the recorder and what it already flushed.
+            self.dropped += 1
+            self.get_logger().error(f'cannot write {topic} ({exc}); {self.dropped} messages '
+                                    'dropped so far', throttle_duration_sec=1.0)
 
     def _skip(self, topic: str, why: str) -> None:
         self._skipped.add(topic)
@@ -103,8 +111,9 @@ class Recorder(Node):
     def finish(self) -> str:
         self._writer.close()
         counts = ', '.join(f'{t}: {r.count}' for t, r in sorted(self._writer.topics.items()))
+        lost = f'; {self.dropped} messages could not be written' if self.dropped else ''
         return (f'bag {self._writer.path} closed with {self._writer.message_count} messages '
-                f'({counts})')
+                f'({counts}){lost}')
 
 
 def main(args=None) -> int:

@@ -1,0 +1,53 @@
+"""The recorder node in-process: parameters and failures that must not lose the bag."""
+import pytest
+import rclpy
+from rclpy.parameter import Parameter
+from rclpy.serialization import serialize_message
+from rosbags.highlevel import AnyReader
+from std_msgs.msg import String
+
+from recording.bag_writer import BagError
+from recording.recorder import Recorder
+
+
+@pytest.fixture
+def context():
+    ctx = rclpy.Context()
+    rclpy.init(context=ctx)
+    yield ctx
+    rclpy.try_shutdown(context=ctx)
+
+
+def make(context, tmp_path, **overrides):
+    params = {'output_dir': str(tmp_path), 'bag_name': 'node', 'topics': ['/nothing']}
+    params.update(overrides)
+    return Recorder(context=context, parameter_overrides=[
+        Parameter(k, value=v) for k, v in params.items()])
+
+
+def test_a_failing_write_is_logged_and_counted_and_the_bag_survives(context, tmp_path):
+    node = make(context, tmp_path)
+    try:
+        node._writer.add_topic('/t', 'std_msgs/msg/String')
+        node._on_message('/t', serialize_message(String(data='kept')))
+        node._writer.flush()
+
+        def full_disk(*_):
+            raise OSError(28, 'No space left on device')
+
+        node._writer._writer.write = full_disk
+        node._on_message('/t', serialize_message(String(data='lost')))
+        node._on_message('/t', serialize_message(String(data='lost too')))
+        assert node.dropped == 2
+        summary = node.finish()
+        assert '2 messages could not be written' in summary
+    finally:
+        node.destroy_node()
+    with AnyReader([tmp_path / 'node']) as reader:
+        assert [reader.deserialize(raw, c.msgtype).data
+                for c, _, raw in reader.messages()] == ['kept']
+
+
+def test_bad_storage_fails_at_start(context, tmp_path):
+    with pytest.raises(BagError, match='storage must be one of'):
+        make(context, tmp_path, storage='bag')
