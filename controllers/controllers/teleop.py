@@ -20,7 +20,8 @@ from rclpy.qos import QoSProfile
 from rclpy.signals import SignalHandlerOptions
 
 from controllers.params import float_range
-from controllers.teleop_core import HELP, TeleopError, TeleopScript, TeleopState, parse_script
+from controllers.teleop_core import (HELP, HOLONOMIC_HELP, TeleopError, TeleopScript,
+                                     TeleopState, parse_script)
 
 
 
@@ -37,6 +38,9 @@ class TeleopNode(Node):
             0.0, 1.0))
         self.declare_parameter('publish_rate', 20.0, float_range(
             'Rate of cmd_vel while a motion is active [Hz]', 0.5, 200.0))
+        self.declare_parameter('holonomic', False, ParameterDescriptor(
+            description='Strafe keys and statements (linear.y) for a Mecanum base',
+            read_only=True))
         self.declare_parameter('stamped', False, ParameterDescriptor(
             description='Publish geometry_msgs/TwistStamped instead of Twist', read_only=True))
         self.declare_parameter('script', '', ParameterDescriptor(
@@ -46,11 +50,13 @@ class TeleopNode(Node):
             'Script mode: wall seconds to wait for a cmd_vel subscriber before starting',
             0.0, 600.0))
         get = lambda name: self.get_parameter(name).value  # noqa: E731
-        self.state = TeleopState(get('max_speed'), get('max_turn'), get('speed'))
+        self.holonomic = get('holonomic')
+        self.state = TeleopState(get('max_speed'), get('max_turn'), get('speed'),
+                                 holonomic=self.holonomic)
         self.script: Optional[TeleopScript] = None
         if get('script').strip():
             self.script = parse_script(get('script'), get('max_speed'), get('max_turn'),
-                                       get('speed'))
+                                       get('speed'), self.holonomic)
         self._stamped = get('stamped')
         self.wait_for_subscriber = get('wait_for_subscriber')
         self._pub = self.create_publisher(TwistStamped if self._stamped else Twist, 'cmd_vel',
@@ -81,11 +87,12 @@ class TeleopNode(Node):
             self.publish_current()
 
     def publish_current(self) -> None:
-        self.publish_twist(*self.state.twist())
+        vx, vy, wz = self.state.twist()
+        self.publish_twist(vx, wz, vy)
 
-    def publish_twist(self, v: float, w: float) -> None:
+    def publish_twist(self, v: float, w: float, vy: float = 0.0) -> None:
         twist = Twist()
-        twist.linear.x, twist.angular.z = float(v), float(w)
+        twist.linear.x, twist.linear.y, twist.angular.z = float(v), float(vy), float(w)
         if self._stamped:
             msg = TwistStamped(twist=twist)
             msg.header.stamp = self.get_clock().now().to_msg()
@@ -122,8 +129,9 @@ class TeleopNode(Node):
         if step is not self._script_step:
             self._script_step = step
             self.get_logger().info(f't={elapsed:6.2f} s  {step.name:8s} v={step.v:+.3f} m/s '
-                                   f'w={step.w:+.3f} rad/s for {step.duration:g} s')
-        self.publish_twist(step.v, step.w)
+                                   + (f'vy={step.vy:+.3f} m/s ' if self.holonomic else '')
+                                   + f'w={step.w:+.3f} rad/s for {step.duration:g} s')
+        self.publish_twist(step.v, step.w, step.vy)
 
 
 def _wait_for_subscriber(node: TeleopNode, executor, timeout: float) -> bool:
@@ -153,7 +161,7 @@ def _run_keyboard(node: TeleopNode, executor) -> int:
         node.get_logger().error('stdin is not a terminal: run in a terminal, or give '
                                 '-p script:="forward 2s, left 1.5s, stop"')
         return 1
-    print(HELP, flush=True)
+    print(HELP + (HOLONOMIC_HELP if node.holonomic else ''), flush=True)
     fd = sys.stdin.fileno()
     saved = termios.tcgetattr(fd)
     try:
@@ -169,8 +177,9 @@ def _run_keyboard(node: TeleopNode, executor) -> int:
                 break
             change = node.press(key)
             if change is not None:
-                v, w = node.state.twist()
-                sys.stdout.write(f'\r{change:10s} v={v:+.3f} m/s w={w:+.3f} rad/s\r\n')
+                v, vy, w = node.state.twist()
+                side = f' vy={vy:+.3f} m/s' if node.holonomic else ''
+                sys.stdout.write(f'\r{change:12s} v={v:+.3f} m/s{side} w={w:+.3f} rad/s\r\n')
                 sys.stdout.flush()
     finally:
         termios.tcsetattr(fd, termios.TCSADRAIN, saved)

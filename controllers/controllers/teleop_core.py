@@ -7,20 +7,28 @@ from dataclasses import dataclass, field
 from typing import Dict, List, Optional, Tuple
 
 # The report's buttons. Keys follow teleop_twist_keyboard's layout (i/,/j/l/k) and also WASD.
-MOTIONS: Dict[str, Tuple[float, float]] = {
-    # name: (fraction of linear speed, fraction of turn rate); y is for holonomic bases later
-    'forward': (1.0, 0.0),
-    'backward': (-1.0, 0.0),
-    'left': (0.0, 1.0),
-    'right': (0.0, -1.0),
-    'stop': (0.0, 0.0),
+MOTIONS: Dict[str, Tuple[float, float, float]] = {
+    # name: fractions of (linear speed along x, along y, turn rate)
+    'forward': (1.0, 0.0, 0.0),
+    'backward': (-1.0, 0.0, 0.0),
+    'left': (0.0, 0.0, 1.0),
+    'right': (0.0, 0.0, -1.0),
+    'strafe_left': (0.0, 1.0, 0.0),
+    'strafe_right': (0.0, -1.0, 0.0),
+    'stop': (0.0, 0.0, 0.0),
 }
+HOLONOMIC_MOTIONS = ('strafe_left', 'strafe_right')
 KEY_BINDINGS: Dict[str, str] = {
     'i': 'forward', 'w': 'forward',
     ',': 'backward', 'x': 'backward',
     'j': 'left', 'a': 'left',
     'l': 'right', 'd': 'right',
     'k': 'stop', 's': 'stop', ' ': 'stop',
+}
+# Strafing, for holonomic (Mecanum) bases: teleop_twist_keyboard's shifted J/L, and Q/E.
+HOLONOMIC_KEY_BINDINGS: Dict[str, str] = {
+    'J': 'strafe_left', 'q': 'strafe_left',
+    'L': 'strafe_right', 'e': 'strafe_right',
 }
 SPEED_KEYS: Dict[str, float] = {'+': 0.1, '=': 0.1, '-': -0.1, '_': -0.1}
 
@@ -31,6 +39,9 @@ Mini robot teleop (keys act immediately; the command repeats until changed)
   k / s / space : stop
   + / - : speed up / down by 10 % of max   (replaces the report's slider)
   Ctrl-C: quit (a zero twist is sent)
+"""
+HOLONOMIC_HELP = """\
+  J / q : strafe left    L / e : strafe right   (holonomic mode)
 """
 
 
@@ -47,6 +58,7 @@ class TeleopState:
     # The report's buttons drive at half of max_speed.
     speed_fraction: float = 0.5
     motion: str = 'stop'
+    holonomic: bool = False
 
     def __post_init__(self) -> None:
         for name in ('max_speed', 'max_turn'):
@@ -60,14 +72,18 @@ class TeleopState:
         if key in KEY_BINDINGS:
             self.motion = KEY_BINDINGS[key]
             return self.motion
+        if self.holonomic and key in HOLONOMIC_KEY_BINDINGS:
+            self.motion = HOLONOMIC_KEY_BINDINGS[key]
+            return self.motion
         if key in SPEED_KEYS:
             self.speed_fraction = _clip_fraction(self.speed_fraction + SPEED_KEYS[key])
             return f'speed {self.speed_fraction:.0%}'
         return None
 
-    def twist(self) -> Tuple[float, float]:
-        lin, ang = MOTIONS[self.motion]
-        return (lin * self.speed_fraction * self.max_speed,
+    def twist(self) -> Tuple[float, float, float]:
+        """(vx, vy, wz) of the current motion at the current speed level."""
+        x, y, ang = MOTIONS[self.motion]
+        return (x * self.speed_fraction * self.max_speed, y * self.speed_fraction * self.max_speed,
                 ang * self.speed_fraction * self.max_turn)
 
 
@@ -77,12 +93,14 @@ def _clip_fraction(value: float) -> float:
 
 @dataclass(frozen=True)
 class ScriptStep:
-    """One step of a timed script: a twist (v, w) held for ``duration`` seconds of sim time."""
+    """One step of a timed script: a twist (v, w, and vy for holonomic bases) held for
+    ``duration`` seconds of simulated time."""
 
     name: str
     v: float
     w: float
     duration: float
+    vy: float = 0.0
 
 
 @dataclass
@@ -107,16 +125,17 @@ _DURATION = re.compile(r'^(?P<value>[0-9]*\.?[0-9]+(?:[eE][-+]?[0-9]+)?)\s*(?P<u
 
 
 def parse_script(text: str, max_speed: float, max_turn: float,
-                 speed_fraction: float = 0.5) -> TeleopScript:
+                 speed_fraction: float = 0.5, holonomic: bool = False) -> TeleopScript:
     """Parse a timed script such as ``forward 2s, left 1.5s, speed 0.8, stop``.
 
     Statements are separated by commas, semicolons or newlines. Motions are ``forward``,
     ``backward``, ``left``, ``right`` and ``stop`` with an optional duration (``2``, ``2s``,
-    ``500ms``; ``stop`` defaults to 0 s); ``speed F`` sets the fraction of the maximum speed
+    ``500ms``; ``stop`` defaults to 0 s), and ``strafe_left``/``strafe_right`` with
+    ``holonomic``; ``speed F`` sets the fraction of the maximum speed
     used by the following motions (the report's slider), and ``twist V W DURATION`` sends an
     explicit twist. Raises TeleopError with the offending statement on any mistake.
     """
-    state = TeleopState(max_speed, max_turn, speed_fraction)
+    state = TeleopState(max_speed, max_turn, speed_fraction, holonomic=holonomic)
     script = TeleopScript()
     statements = [s.strip() for s in re.split(r'[,;\n]', text) if s.strip()]
     if not statements:
@@ -125,6 +144,8 @@ def parse_script(text: str, max_speed: float, max_turn: float,
         words = stmt.split()
         verb = words[0].lower()
         try:
+            if verb in HOLONOMIC_MOTIONS and not holonomic:
+                raise TeleopError(f'"{verb}" needs holonomic mode (a Mecanum base)')
             if verb in MOTIONS:
                 if len(words) > 2:
                     raise TeleopError('expected "<motion> [duration]"')
@@ -132,8 +153,8 @@ def parse_script(text: str, max_speed: float, max_turn: float,
                     raise TeleopError('a motion needs a duration, e.g. "forward 2s"')
                 duration = _parse_duration(words[1]) if len(words) == 2 else 0.0
                 state.motion = verb
-                v, w = state.twist()
-                script.steps.append(ScriptStep(verb, v, w, duration))
+                v, vy, w = state.twist()
+                script.steps.append(ScriptStep(verb, v, w, duration, vy))
             elif verb == 'speed':
                 if len(words) != 2:
                     raise TeleopError('expected "speed <fraction 0..1>"')

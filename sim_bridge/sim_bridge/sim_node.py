@@ -235,6 +235,10 @@ class SimNode(Node):
     # --- subscriptions and services --------------------------------------------------------
     def _on_cmd_vel(self, robot: str, msg) -> None:
         twist = msg.twist if isinstance(msg, TwistStamped) else msg
+        if twist.linear.y != 0.0:
+            self.get_logger().warn(f'{robot}/cmd_vel: linear.y {twist.linear.y:.3f} ignored: a '
+                                   'differential drive cannot move sideways',
+                                   throttle_duration_sec=5.0)
         result = self._runner.command(robot, twist.linear.x, twist.angular.z)
         if not result.accepted:
             self.get_logger().warn(f'{robot}/cmd_vel: {result.reason}', throttle_duration_sec=1.0)

@@ -159,6 +159,19 @@ def test_nan_is_rejected_the_robot_stops_and_the_node_lives(sim, probe):
     assert d.now() > t_nan
 
 
+def test_sideways_velocity_on_a_diff_drive_is_ignored_with_a_warning(sim, probe):
+    d = Driver(probe)
+    twist = Twist()
+    twist.linear.x, twist.linear.y = 0.1, 0.1
+    end = d.now() + 0.5
+    while d.now() < end:
+        d.pub.publish(twist)
+        time.sleep(0.05 / RTF)
+    steady = d.odom[-1][1].twist.twist
+    assert steady.linear.x == pytest.approx(0.1, rel=0.05) and abs(steady.linear.y) < 0.005
+    wait_for(lambda: 'cannot move sideways' in sim.output(), 5.0, what='the warning')
+
+
 def test_clock_advances_at_the_paced_rate(sim, probe):
     clock = probe.collect(Clock, '/clock')
     wait_for(lambda: len(clock) > 10, 10.0, what='/clock')

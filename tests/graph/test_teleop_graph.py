@@ -19,9 +19,13 @@ def _twist(msg):
     return round(msg.linear.x, 6), round(msg.angular.z, 6)
 
 
-def _start_keyboard(start_node, probe):
+def _twist3(msg):
+    return round(msg.linear.x, 6), round(msg.linear.y, 6), round(msg.angular.z, 6)
+
+
+def _start_keyboard(start_node, probe, *extra):
     master, slave = pty.openpty()
-    proc = start_node('teleop', '-r', '__ns:=/mini_robot', '-p', 'publish_rate:=20.0',
+    proc = start_node('teleop', '-r', '__ns:=/mini_robot', '-p', 'publish_rate:=20.0', *extra,
                       stdin=slave)
     os.close(slave)
     wait_for(lambda: 'Mini robot teleop' in proc.output(), 15.0, what='key help')
@@ -72,6 +76,22 @@ def test_sigint_sends_a_zero_twist(start_node, probe, cmd_vel):
         proc.proc.send_signal(signal.SIGINT)
         wait_for(lambda: not proc.alive(), 10.0, what='teleop to exit')
         wait_for(lambda: _twist(cmd_vel[-1][1]) == (0.0, 0.0), 5.0, what='final zero twist')
+    finally:
+        os.close(master)
+
+
+def test_holonomic_mode_strafes_with_linear_y(start_node, probe, cmd_vel):
+    master, proc = _start_keyboard(start_node, probe, '-p', 'holonomic:=true')
+    try:
+        assert 'strafe left' in proc.output()
+        os.write(master, b'J')
+        wait_for(lambda: cmd_vel and _twist3(cmd_vel[-1][1]) == (0.0, 0.1, 0.0), 5.0,
+                 what='strafe left')
+        os.write(master, b'e')
+        wait_for(lambda: _twist3(cmd_vel[-1][1]) == (0.0, -0.1, 0.0), 5.0, what='strafe right')
+        os.write(master, b'\x03')
+        wait_for(lambda: not proc.alive(), 10.0, what='teleop to exit')
+        wait_for(lambda: _twist3(cmd_vel[-1][1]) == (0.0, 0.0, 0.0), 5.0, what='zero twist')
     finally:
         os.close(master)
 
