@@ -89,6 +89,7 @@ class Replay(Node):
             qos = QoSProfile(depth=100, reliability=ReliabilityPolicy(reliability),
                              durability=DurabilityPolicy(durability))
             self._topic_pubs[c.topic] = self.create_publisher(msg_class, c.topic, qos)
+        self.published = 0
         self.clock_pub = (self.create_publisher(Clock, '/clock', QoSProfile(depth=10))
                           if self.publish_clock else None)
         self.get_logger().info(
@@ -97,13 +98,21 @@ class Replay(Node):
                                                     else ''))
 
     def run(self) -> int:
+        try:
+            return self._play()
+        except (AnyReaderError, ReaderError, OSError, ValueError, KeyError, IndexError) as exc:
+            # The index opened, but a chunk is damaged: say so instead of a traceback.
+            self.get_logger().error(f'{self.bag}: unreadable data after {self.published} '
+                                    f'messages ({exc}); the bag is truncated or corrupt')
+            return 1
+
+    def _play(self) -> int:
         if self.wait_for_subscribers > 0.0:
             self._wait_for_subscribers()
         if self.delay > 0.0:
             time.sleep(self.delay)
         schedule = ReplaySchedule(self.reader.start_time, self.rate, self.start_offset)
-        published = 0
-        while rclpy.ok():
+        while self.context.ok():
             schedule.restart(time.monotonic())
             next_clock = 0.0
             for connection, bag_ns, raw in self.reader.messages(connections=self.connections):
@@ -120,14 +129,14 @@ class Replay(Node):
                     wake = due if self.clock_pub is None else min(due, next_clock)
                     time.sleep(max(0.0, wake - now))
                 self._topic_pubs[connection.topic].publish(bytes(raw))
-                published += 1
-                if not rclpy.ok():
+                self.published += 1
+                if not self.context.ok():
                     break
             if not self.loop:
                 break
         for pub in self._topic_pubs.values():
             pub.wait_for_all_acked(Duration(seconds=2.0))
-        self.get_logger().info(f'replay done: {published} messages published')
+        self.get_logger().info(f'replay done: {self.published} messages published')
         return 0
 
     def _wait_for_subscribers(self) -> None:

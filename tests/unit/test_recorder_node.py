@@ -1,4 +1,4 @@
-"""The recorder node in-process: parameters and failures that must not lose the bag."""
+"""The recording nodes in-process: parameters, and failures that must end clearly."""
 import pytest
 import rclpy
 from rclpy.parameter import Parameter
@@ -8,6 +8,8 @@ from std_msgs.msg import String
 
 from recording.bag_writer import BagError
 from recording.recorder import Recorder
+from recording.replay import Replay
+from test_recording_core import damaged_mid_stream_bag
 
 
 @pytest.fixture
@@ -51,3 +53,14 @@ def test_a_failing_write_is_logged_and_counted_and_the_bag_survives(context, tmp
 def test_bad_storage_fails_at_start(context, tmp_path):
     with pytest.raises(BagError, match='storage must be one of'):
         make(context, tmp_path, storage='bag')
+
+
+def test_replay_of_a_bag_damaged_mid_stream_stops_with_an_error(context, tmp_path):
+    node = Replay(context=context, parameter_overrides=[
+        Parameter('bag', value=str(damaged_mid_stream_bag(tmp_path))),
+        Parameter('rate', value=100.0)])
+    try:
+        assert node.run() == 1
+        assert node.published == 1000
+    finally:
+        node.destroy_node()
