@@ -64,11 +64,11 @@ def raw_pybullet(seconds: float, camera: bool) -> dict:
     world = SimWorld(load_world(resolve_resource(WORLD)))
     runner = SimRunner(world, DriveLimits(), 100.0)
     sink = _CameraSink(camera)
-    runner.command('mini_robot', 0.1, 0.1)
+    runner.command('mini_robot', 0.1, 0.0, 0.1)
     steps, t0 = 0, time.perf_counter()
     while time.perf_counter() - t0 < seconds:
         if steps % 24 == 0:
-            runner.command('mini_robot', 0.1, 0.1)
+            runner.command('mini_robot', 0.1, 0.0, 0.1)
         runner.advance(1, sink)
         steps += 1
     wall = time.perf_counter() - t0
@@ -129,9 +129,9 @@ def latency(count: int, real_time_factor: float) -> dict:
     applied = {}
     original = robot.set_body_twist
 
-    def instrumented(v, w):
+    def instrumented(v, vy, w):
         applied.setdefault(round(v, 7), time.monotonic())  # CLOCK_MONOTONIC: system-wide
-        return original(v, w)
+        return original(v, vy, w)
 
     robot.set_body_twist = instrumented
     executor = SingleThreadedExecutor(context=ctx)

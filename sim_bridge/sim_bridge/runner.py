@@ -8,6 +8,7 @@ from typing import Callable, Dict, List, Protocol
 import numpy as np
 
 from controllers.cmd_guard import CommandGuard, GuardResult
+from controllers.joint_trajectory import TrajectoryRequest, TrajectoryResult
 from sim_bridge.world import SimWorld
 
 
@@ -50,26 +51,51 @@ class SimRunner:
         # average rate is exact even when the period is not a whole number of steps.
         self.state_period_ns = max(dt_ns, round(1e9 / state_rate))
         self._state_next_ns = 0
-        self.guards: Dict[str, CommandGuard] = {
-            name: CommandGuard((limits.max_speed, limits.max_turn), limits.cmd_vel_timeout)
-            for name, robot in world.robots.items() if robot.geometry is not None}
-        self._applied: Dict[str, tuple] = {name: (0.0, 0.0) for name in self.guards}
+        self.guards: Dict[str, CommandGuard] = {}
+        for name, robot in world.robots.items():
+            if robot.drive is None:
+                continue
+            own = robot.config.limits
+            speed = own.max_speed if own.max_speed is not None else limits.max_speed
+            turn = own.max_turn if own.max_turn is not None else limits.max_turn
+            # Guarded components: (vx, wz) for a differential drive, (vx, vy, wz) for Mecanum.
+            bounds = (speed, turn) if len(robot.drive.components) == 2 else (speed, speed, turn)
+            self.guards[name] = CommandGuard(bounds, limits.cmd_vel_timeout)
+        self._applied: Dict[str, tuple] = {name: tuple(0.0 for _ in guard.limits)
+                                           for name, guard in self.guards.items()}
         self._timed_out: Dict[str, bool] = {name: False for name in self.guards}
+        self._arms = [robot for robot in world.robots.values() if robot.controllers]
         self._camera_period_ns: List[int] = [
             max(dt_ns, round(1e9 / cam.config.rate)) for cam in world.cameras]
         self._camera_next_ns: List[int] = [0 for _ in world.cameras]
 
-    def command(self, robot: str, v: float, w: float) -> GuardResult:
-        """Take a body twist for a driven robot and apply it at once (or stop on bad input)."""
-        result = self.guards[robot].submit((v, w), self.world.sim_time)
+    def holonomic(self, robot: str) -> bool:
+        return len(self.guards[robot].limits) == 3
+
+    def command(self, robot: str, vx: float, vy: float, wz: float) -> GuardResult:
+        """Take a body twist for a driven robot and apply it at once (or stop on bad input).
+
+        The result's command is (vx, wz) for a differential drive, (vx, vy, wz) for Mecanum.
+        """
+        command = (vx, vy, wz) if self.holonomic(robot) else (vx, wz)
+        result = self.guards[robot].submit(command, self.world.sim_time)
         self._apply(robot, result.command)
         self._timed_out[robot] = False
         return result
+
+    def set_trajectory(self, robot: str, controller: str,
+                       request: TrajectoryRequest) -> TrajectoryResult:
+        """Validate a trajectory for a joint group and, if valid, follow it from now."""
+        group = self.world.robots[robot].controllers[controller]
+        return group.follower.set_trajectory(request, self.world.sim_time)
 
     def advance(self, steps: int, sink: StepSink) -> None:
         world = self.world
         for _ in range(steps):
             now = world.sim_time
+            # Position targets for the end of this step.
+            for robot in self._arms:
+                robot.apply_controllers(now + world.time_step)
             for name, guard in self.guards.items():
                 command = guard.active_command(now)
                 if command != self._applied[name]:
@@ -94,16 +120,17 @@ class SimRunner:
         self.world.reset()
         for name, guard in self.guards.items():
             guard.stop()
-            self._applied[name] = (0.0, 0.0)
+            self._applied[name] = tuple(0.0 for _ in guard.limits)
             self._timed_out[name] = False
 
     def stop_all(self) -> None:
         for name, guard in self.guards.items():
             guard.stop()
-            self._apply(name, (0.0, 0.0))
+            self._apply(name, tuple(0.0 for _ in guard.limits))
 
     def _apply(self, robot: str, command: tuple) -> None:
-        self.world.robots[robot].set_body_twist(*command)
+        vx, vy, wz = command if len(command) == 3 else (command[0], 0.0, command[1])
+        self.world.robots[robot].set_body_twist(vx, vy, wz)
         self._applied[robot] = tuple(command)
 
 

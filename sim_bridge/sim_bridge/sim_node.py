@@ -17,9 +17,12 @@ from rclpy.node import Node
 from rclpy.qos import QoSProfile, qos_profile_sensor_data
 from rosgraph_msgs.msg import Clock as ClockMsg
 from sensor_msgs.msg import CameraInfo, Image, JointState
+from sim_interfaces.msg import JointTrajectoryControllerState
 from sim_interfaces.srv import StepSimulation
+from trajectory_msgs.msg import JointTrajectory
 from std_srvs.srv import Trigger
 
+from controllers.joint_trajectory import TrajectoryPoint, TrajectoryRequest
 from controllers.params import float_range
 from sim_bridge.camera import ImageBuffer
 from sim_bridge.pacing import Pacer, RtfMeter
@@ -56,9 +59,10 @@ class SimNode(Node):
         self.declare_parameter('state_publish_rate', 100.0, float_range(
             'Rate of joint_states and odom [Hz of simulated time]', 0.1, 10000.0))
         self.declare_parameter('max_speed', 0.2, float_range(
-            'Linear speed limit of diff-drive bases [m/s]', 1e-3, 10.0))
+            'Linear speed limit (each of x, y) of bases whose world entry sets none [m/s]',
+            1e-3, 10.0))
         self.declare_parameter('max_turn', 0.2, float_range(
-            'Turn rate limit of diff-drive bases [rad/s]', 1e-3, 20.0))
+            'Turn rate limit of bases whose world entry sets none [rad/s]', 1e-3, 20.0))
         self.declare_parameter('cmd_vel_timeout', 0.5, float_range(
             'Stop a base when its last cmd_vel is older than this [s of simulated time]',
             1e-3, 60.0))
@@ -99,6 +103,7 @@ class SimNode(Node):
         self._clock_pub = self.create_publisher(ClockMsg, '/clock', history)
         self._clock_msg = ClockMsg()
         self._joint_pubs, self._odom_pubs, self._odom_frames = {}, {}, {}
+        self._state_pubs = {}
         for name, robot in self._world.robots.items():
             ns = robot.config.namespace
             prefix = robot.config.frame_prefix
@@ -110,6 +115,13 @@ class SimNode(Node):
                 msg_type = TwistStamped if p['use_stamped_vel'] else Twist
                 self.create_subscription(msg_type, _topic(ns, 'cmd_vel'),
                                          lambda msg, n=name: self._on_cmd_vel(n, msg), reliable)
+            for controller in robot.controllers:
+                self.create_subscription(
+                    JointTrajectory, _topic(ns, f'{controller}/joint_trajectory'),
+                    lambda msg, n=name, c=controller: self._on_trajectory(n, c, msg), reliable)
+                self._state_pubs[(name, controller)] = self.create_publisher(
+                    JointTrajectoryControllerState, _topic(ns, f'{controller}/controller_state'),
+                    history)
         self._image_pubs, self._info_pubs = [], []
         self._image_msgs: List[Image] = []
         self._info_msgs: List[CameraInfo] = []
@@ -152,8 +164,17 @@ class SimNode(Node):
             f'{[c.config.name for c in self._world.cameras]}; dt {p["time_step"]:.6f} s, '
             + ('lock-step (synchronous)' if self._synchronous else
                'as fast as possible' if rtf == 0.0 else f'real-time factor {rtf:g}')
-            + f'; limits {p["max_speed"]} m/s, {p["max_turn"]} rad/s, '
-            f'cmd_vel timeout {p["cmd_vel_timeout"]} s')
+            + f'; cmd_vel limits {self._limits_summary()}, '
+            f'cmd_vel timeout {p["cmd_vel_timeout"]} s; trajectory controllers '
+            f'{self._controllers_summary()}')
+
+    def _limits_summary(self) -> str:
+        return ', '.join(f'{name} {_fmt(guard.limits)}'
+                         for name, guard in self._runner.guards.items()) or 'none'
+
+    def _controllers_summary(self) -> str:
+        return ', '.join(f'{name}/{c}' for name, robot in self._world.robots.items()
+                         for c in robot.controllers) or 'none'
 
     # --- stepping -------------------------------------------------------------------------
     def _on_tick(self) -> None:
@@ -209,6 +230,9 @@ class SimNode(Node):
         odom.pose.covariance = GROUND_TRUTH_COVARIANCE
         odom.twist.covariance = GROUND_TRUTH_COVARIANCE
         self._odom_pubs[robot].publish(odom)
+        for name, group in sim_robot.controllers.items():
+            self._state_pubs[(robot, name)].publish(
+                _controller_state(group, stamp, self._world.sim_time))
 
     def on_camera_due(self, index: int, time_ns: int, render) -> None:
         # Rendering dominates the cost of a step: only for image subscribers.
@@ -235,18 +259,30 @@ class SimNode(Node):
     # --- subscriptions and services --------------------------------------------------------
     def _on_cmd_vel(self, robot: str, msg) -> None:
         twist = msg.twist if isinstance(msg, TwistStamped) else msg
-        if twist.linear.y != 0.0:
+        holonomic = self._runner.holonomic(robot)
+        if twist.linear.y != 0.0 and not holonomic:
             self.get_logger().warn(f'{robot}/cmd_vel: linear.y {twist.linear.y:.3f} ignored: a '
                                    'differential drive cannot move sideways',
                                    throttle_duration_sec=5.0)
-        result = self._runner.command(robot, twist.linear.x, twist.angular.z)
+        result = self._runner.command(robot, twist.linear.x, twist.linear.y, twist.angular.z)
         if not result.accepted:
             self.get_logger().warn(f'{robot}/cmd_vel: {result.reason}', throttle_duration_sec=1.0)
         elif result.clamped:
+            asked = ((twist.linear.x, twist.linear.y, twist.angular.z) if holonomic
+                     else (twist.linear.x, twist.angular.z))
             self.get_logger().warn(
-                f'{robot}/cmd_vel ({twist.linear.x:.3f} m/s, {twist.angular.z:.3f} rad/s) '
-                f'clamped to ({result.command[0]:.3f}, {result.command[1]:.3f})',
-                throttle_duration_sec=1.0)
+                f'{robot}/cmd_vel {_fmt(asked)} clamped to {_fmt(result.command)} '
+                f'(limits {_fmt(self._runner.guards[robot].limits)})', throttle_duration_sec=1.0)
+
+    def _on_trajectory(self, robot: str, controller: str, msg: JointTrajectory) -> None:
+        result = self._runner.set_trajectory(robot, controller, trajectory_request(msg))
+        where = f'{robot}/{controller}'
+        if result.accepted:
+            self.get_logger().info(f'{where}: following a trajectory of {len(msg.points)} '
+                                   f'points for {list(msg.joint_names)}')
+        else:
+            self.get_logger().error(f'{where}: trajectory rejected: {result.reason}; holding '
+                                    'position', throttle_duration_sec=0.2)
 
     def _on_reset(self, _request, response):
         self._runner.reset()
@@ -299,6 +335,42 @@ class SimNode(Node):
 def _topic(namespace: str, name: str) -> str:
     # Relative names, so a node namespace or remapping applies on top of the robot namespace.
     return f'{namespace}/{name}' if namespace else name
+
+
+def _fmt(values) -> str:
+    return '(' + ', '.join(f'{v:.3f}' for v in values) + ')'
+
+
+def _seconds(duration) -> float:
+    return duration.sec + duration.nanosec * 1e-9
+
+
+def trajectory_request(msg: JointTrajectory) -> TrajectoryRequest:
+    """A JointTrajectory as the follower takes it (a zero stamp means "start now")."""
+    stamp = msg.header.stamp
+    start = None if stamp.sec == 0 and stamp.nanosec == 0 else _seconds(stamp)
+    points = tuple(TrajectoryPoint(_seconds(p.time_from_start), tuple(p.positions),
+                                   tuple(p.velocities), tuple(p.accelerations), tuple(p.effort))
+                   for p in msg.points)
+    return TrajectoryRequest(tuple(msg.joint_names), points, start)
+
+
+def _controller_state(group, stamp: Time, now: float) -> JointTrajectoryControllerState:
+    desired = group.desired
+    position, velocity = group.actual()
+    msg = JointTrajectoryControllerState(joint_names=list(group.joint_names),
+                                         active=not group.follower.finished(now))
+    msg.header.stamp = stamp
+    msg.reference.positions = desired.positions.tolist()
+    msg.reference.velocities = desired.velocities.tolist()
+    msg.reference.accelerations = desired.accelerations.tolist()
+    msg.feedback.positions = position.tolist()
+    msg.feedback.velocities = velocity.tolist()
+    msg.error.positions = (desired.positions - position).tolist()
+    msg.error.velocities = (desired.velocities - velocity).tolist()
+    msg.output.positions = desired.positions.tolist()
+    msg.output.effort = group.limits.effort.tolist()
+    return msg
 
 
 def _stamp(time_ns: int) -> Time:

@@ -4,21 +4,28 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Dict, List, Optional, Tuple
+from typing import Dict, List, Optional, Sequence, Tuple
 
 import numpy as np
 import pybullet
 from pybullet_utils.bullet_client import BulletClient
 
-from controllers.diff_drive import DiffDriveGeometry, wheel_speeds
+from controllers.diff_drive import DiffDriveGeometry
+from controllers.diff_drive import wheel_speeds as diff_wheel_speeds
+from controllers.joint_trajectory import JointLimits, TrajectoryFollower
+from controllers.mecanum import MecanumGeometry
+from controllers.mecanum import wheel_speeds as mecanum_wheel_speeds
 from sim_bridge.camera import (intrinsics_from_fov, look_at_rotation, projection_matrix,
                                view_matrix_from_optical)
-from sim_bridge.world_config import CameraConfig, RobotConfig, WorldConfig
+from sim_bridge.world_config import (CameraConfig, ControllerConfig, DiffDriveConfig,
+                                     MecanumConfig, RobotConfig, WorldConfig)
 
 FLOOR_COLOR = (0.82, 0.80, 0.76, 1.0)
 # Inertias as written in the URDF; true cylinders, because the convex hull PyBullet otherwise
 # makes of a URDF cylinder rolls on its collision margin (a 2 % larger effective wheel radius).
 URDF_FLAGS = pybullet.URDF_USE_INERTIA_FROM_FILE | pybullet.URDF_USE_IMPLICIT_CYLINDER
+# A virtual omni-wheel's joint turns 1/sqrt(2) as fast as the Mecanum wheel it stands for.
+OMNI_WHEEL_SCALE = math.sqrt(2.0)
 
 
 class WorldError(RuntimeError):
@@ -75,7 +82,7 @@ def _package_share(package: str) -> Path:
 
 
 class SimRobot:
-    """One URDF body: its joints, its base frame, and its drive."""
+    """One URDF body: its joints, its base frame, its drive and its joint-group controllers."""
 
     def __init__(self, client: BulletClient, config: RobotConfig, urdf: Path) -> None:
         self.config = config
@@ -98,6 +105,7 @@ class SimRobot:
         self.link_index: Dict[str, int] = {client.getBodyInfo(self.body)[0].decode(): -1}
         self.movable: List[int] = []
         self._joint_names: List[str] = []
+        self._joint_limits: Dict[str, tuple] = {}
         for j in range(client.getNumJoints(self.body)):
             info = client.getJointInfo(self.body, j)
             name, jtype = info[1].decode(), info[2]
@@ -106,43 +114,76 @@ class SimRobot:
             if jtype != pybullet.JOINT_FIXED:
                 self.movable.append(j)
                 self._joint_names.append(name)
+                lower, upper = info[8], info[9]
+                if lower > upper:                     # continuous: PyBullet reports 0, -1
+                    lower, upper = -math.inf, math.inf
+                self._joint_limits[name] = (lower, upper, info[11], info[10])
                 # Free joints by default; PyBullet otherwise brakes each one with a motor.
                 client.setJointMotorControl2(self.body, j, pybullet.VELOCITY_CONTROL, force=0.0)
-        self._drive_joints: Tuple[int, int] = (-1, -1)
-        self.geometry: Optional[DiffDriveGeometry] = None
-        if config.drive is not None:
-            d = config.drive
-            for joint in (d.left_wheel_joint, d.right_wheel_joint):
-                if joint not in self.joint_index or self.joint_index[joint] not in self.movable:
-                    raise WorldError(f'robot "{config.name}": drive joint "{joint}" is not a '
-                                     f'movable joint of {urdf.name}')
-            self._drive_joints = (self.joint_index[d.left_wheel_joint],
-                                  self.joint_index[d.right_wheel_joint])
-            self.geometry = DiffDriveGeometry(d.wheel_radius, d.wheel_separation)
-        self.wheel_targets = (0.0, 0.0)
-        if self.geometry is not None:
-            self.set_body_twist(0.0, 0.0)
+        # Reported wheel angle per joint = scale * PyBullet joint angle (virtual omni-wheels).
+        self._report_scale = np.ones(len(self.movable))
+        self.drive = None
+        if isinstance(config.drive, DiffDriveConfig):
+            self.drive = _DiffDrive(self, config.drive)
+        elif isinstance(config.drive, MecanumConfig):
+            self.drive = _MecanumDrive(self, config.drive)
+        self.controllers: Dict[str, JointGroup] = {}
+        for cc in config.controllers:
+            self.controllers[cc.name] = JointGroup(self, cc)
+        self._initial: Dict[int, float] = {}
+        for joint, position in config.initial_joint_positions:
+            j = self._movable_joint(joint, 'initial_joint_positions')
+            lower, upper = self._joint_limits[joint][:2]
+            if not lower <= position <= upper:
+                raise WorldError(f'robot "{config.name}": initial position {position} of '
+                                 f'"{joint}" is outside its limits [{lower}, {upper}]')
+            self._initial[j] = position
+        self.reset()
 
     @property
     def joint_names(self) -> List[str]:
         return list(self._joint_names)
 
-    def set_body_twist(self, v: float, w: float) -> Tuple[float, float]:
-        """Command the wheel velocity motors for body twist (v, w); returns (left, right)."""
-        if self.geometry is None:
+    @property
+    def wheel_targets(self) -> tuple:
+        return self.drive.targets if self.drive is not None else ()
+
+    @property
+    def geometry(self):
+        """The drive's kinematic geometry (DiffDriveGeometry or MecanumGeometry), or None."""
+        return self.drive.geometry if self.drive is not None else None
+
+    def joint_limits(self, joint: str) -> tuple:
+        """(lower, upper, max velocity, max effort) as the URDF gives them."""
+        return self._joint_limits[joint]
+
+    def set_body_twist(self, vx: float, vy_or_w: float, wz: Optional[float] = None) -> tuple:
+        """Command the wheel velocity motors for a body twist; returns the wheel targets.
+
+        (v, w) for any drive, or (vx, vy, wz); a differential drive ignores vy.
+        """
+        if self.drive is None:
             raise WorldError(f'robot "{self.config.name}" has no drive')
-        targets = wheel_speeds(v, w, self.geometry)
-        effort = self.config.drive.wheel_effort
-        for joint, target in zip(self._drive_joints, targets):
-            self._p.setJointMotorControl2(self.body, joint, pybullet.VELOCITY_CONTROL,
-                                          targetVelocity=target, force=effort)
-        self.wheel_targets = targets
-        return targets
+        vy, w = (0.0, vy_or_w) if wz is None else (vy_or_w, wz)
+        return self.drive.command(vx, vy, w)
+
+    def apply_controllers(self, t: float) -> None:
+        for group in self.controllers.values():
+            group.apply(t)
 
     def joint_states(self) -> JointStates:
         states = self._p.getJointStates(self.body, self.movable)
-        return JointStates(self.joint_names, [s[0] for s in states], [s[1] for s in states],
-                           [s[3] for s in states])
+        scale = self._report_scale
+        return JointStates(self.joint_names, [s[0] * k for s, k in zip(states, scale)],
+                           [s[1] * k for s, k in zip(states, scale)], [s[3] for s in states])
+
+    def joint_positions(self, joints: Sequence[str]) -> np.ndarray:
+        states = self._p.getJointStates(self.body, [self.joint_index[j] for j in joints])
+        return np.array([s[0] for s in states])
+
+    def joint_velocities(self, joints: Sequence[str]) -> np.ndarray:
+        states = self._p.getJointStates(self.body, [self.joint_index[j] for j in joints])
+        return np.array([s[1] for s in states])
 
     def base_link_world(self) -> Tuple[tuple, tuple]:
         com_pos, com_orn = self._p.getBasePositionAndOrientation(self.body)
@@ -174,17 +215,130 @@ class SimRobot:
             pos, orn = state[4], state[5]
         return np.asarray(pos), np.array(self._p.getMatrixFromQuaternion(orn)).reshape(3, 3)
 
+    def link_pose_in_base(self, link: str) -> np.ndarray:
+        """4x4 pose of a link frame in base_link (ground truth of the simulation)."""
+        base_pos, base_rot = self.link_world_pose(self._root_link())
+        pos, rot = self.link_world_pose(link)
+        out = np.eye(4)
+        out[:3, :3] = base_rot.T @ rot
+        out[:3, 3] = base_rot.T @ (pos - base_pos)
+        return out
+
     def reset(self) -> None:
         self._p.resetBasePositionAndOrientation(self.body, *self._start_com())
         self._p.resetBaseVelocity(self.body, (0.0, 0.0, 0.0), (0.0, 0.0, 0.0))
         for j in self.movable:
-            self._p.resetJointState(self.body, j, 0.0, 0.0)
-        if self.geometry is not None:
-            self.set_body_twist(0.0, 0.0)
+            self._p.resetJointState(self.body, j, self._initial.get(j, 0.0), 0.0)
+        if self.drive is not None:
+            self.drive.command(0.0, 0.0, 0.0)
+        for group in self.controllers.values():
+            group.hold_current()
+
+    def _root_link(self) -> str:
+        return next(name for name, index in self.link_index.items() if index == -1)
+
+    def _movable_joint(self, joint: str, what: str) -> int:
+        j = self.joint_index.get(joint)
+        if j is None or j not in self.movable:
+            raise WorldError(f'robot "{self.config.name}": {what}: "{joint}" is not a movable '
+                             f'joint of the URDF (movable: {self._joint_names})')
+        return j
 
     def _start_com(self) -> Tuple[tuple, tuple]:
         return self._p.multiplyTransforms(self._start_pos, self._start_orn,
                                           self._inertial_pos, self._inertial_orn)
+
+
+class _DiffDrive:
+    def __init__(self, robot: SimRobot, config: DiffDriveConfig) -> None:
+        self._robot, self.config = robot, config
+        self.joints = tuple(robot._movable_joint(j, 'drive')
+                            for j in (config.left_wheel_joint, config.right_wheel_joint))
+        self.geometry = DiffDriveGeometry(config.wheel_radius, config.wheel_separation)
+        self.components = ('linear.x', 'angular.z')
+        self.targets: tuple = (0.0, 0.0)
+
+    def command(self, vx: float, vy: float, wz: float) -> tuple:
+        del vy                                     # a differential drive cannot strafe
+        targets = diff_wheel_speeds(vx, wz, self.geometry)
+        p = self._robot._p
+        for joint, target in zip(self.joints, targets):
+            p.setJointMotorControl2(self._robot.body, joint, pybullet.VELOCITY_CONTROL,
+                                    targetVelocity=target, force=self.config.wheel_effort)
+        self.targets = targets
+        return targets
+
+
+class _MecanumDrive:
+    """Four virtual omni-wheels: spheres spinning about the contact roller's axis.
+
+    A Mecanum wheel turning at u (forward-positive) leaves its contact free along the roller
+    axis and drives it across the roller at r*u*cos(45 deg). The sphere spins about the roller
+    axis (its link y, see the youBot URDF), frictionless along it, so its joint runs at
+    u/sqrt(2); the reported wheel angle and speed are sqrt(2) times the joint's.
+    """
+
+    def __init__(self, robot: SimRobot, config: MecanumConfig) -> None:
+        self._robot, self.config = robot, config
+        self.joints = tuple(robot._movable_joint(j, 'drive') for j in config.wheel_joints)
+        self.geometry = MecanumGeometry(config.wheel_radius,
+                                        config.sum_of_robot_center_projection_on_X_Y_axis)
+        self.components = ('linear.x', 'linear.y', 'angular.z')
+        self.targets: tuple = (0.0, 0.0, 0.0, 0.0)
+        for joint in self.joints:
+            # No friction along the spin axis (link y), which the spin leaves fixed in space.
+            robot._p.changeDynamics(robot.body, joint, anisotropicFriction=(1.0, 0.0, 1.0),
+                                    lateralFriction=1.0)
+            robot._report_scale[robot.movable.index(joint)] = OMNI_WHEEL_SCALE
+
+    def command(self, vx: float, vy: float, wz: float) -> tuple:
+        targets = mecanum_wheel_speeds(vx, vy, wz, self.geometry)
+        p = self._robot._p
+        for joint, target in zip(self.joints, targets):
+            p.setJointMotorControl2(self._robot.body, joint, pybullet.VELOCITY_CONTROL,
+                                    targetVelocity=target / OMNI_WHEEL_SCALE,
+                                    force=self.config.wheel_effort)
+        self.targets = targets
+        return targets
+
+
+class JointGroup:
+    """Position-controlled joints following trajectories (PyBullet position motors)."""
+
+    def __init__(self, robot: SimRobot, config: ControllerConfig) -> None:
+        self._robot, self.config = robot, config
+        self.joint_names = config.joints
+        self.joints = [robot._movable_joint(j, f'controller "{config.name}"')
+                       for j in config.joints]
+        limits = [robot.joint_limits(j) for j in config.joints]
+        for joint, (_, _, velocity, effort) in zip(config.joints, limits):
+            if not (velocity > 0.0 and effort > 0.0):
+                raise WorldError(f'robot "{robot.config.name}": controller "{config.name}": '
+                                 f'joint "{joint}" needs velocity and effort limits > 0 in the '
+                                 'URDF')
+        self.limits = JointLimits(*(np.array([lim[i] for lim in limits]) for i in range(4)))
+        self.follower = TrajectoryFollower(config.joints, self.limits, np.zeros(len(limits)))
+        self.desired = self.follower.sample(0.0)
+
+    def hold_current(self) -> None:
+        self.follower.hold(self._robot.joint_positions(self.joint_names))
+        self.desired = self.follower.sample(0.0)
+
+    def apply(self, t: float) -> None:
+        self.desired = state = self.follower.sample(t)
+        p, body = self._robot._p, self._robot.body
+        c = self.config
+        for i, joint in enumerate(self.joints):
+            p.setJointMotorControl2(body, joint, pybullet.POSITION_CONTROL,
+                                    targetPosition=state.positions[i],
+                                    targetVelocity=state.velocities[i],
+                                    force=self.limits.effort[i],
+                                    maxVelocity=self.limits.velocity[i],
+                                    positionGain=c.position_gain, velocityGain=c.velocity_gain)
+
+    def actual(self) -> Tuple[np.ndarray, np.ndarray]:
+        return (self._robot.joint_positions(self.joint_names),
+                self._robot.joint_velocities(self.joint_names))
 
 
 class SimCamera:

@@ -5,7 +5,7 @@ import math
 import re
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Dict, List, Optional, Tuple
+from typing import Any, Dict, List, Optional, Tuple, Union
 
 import yaml
 
@@ -35,13 +35,47 @@ class DiffDriveConfig:
 
 
 @dataclass(frozen=True)
+class MecanumConfig:
+    """Four Mecanum wheels driven as virtual omni-wheels (see robot_description's youBot)."""
+
+    # Wheel joints in the order front-left, front-right, rear-right, rear-left.
+    wheel_joints: Tuple[str, str, str, str]
+    wheel_radius: float
+    # k = lx + ly: half the wheelbase plus half the track (ros2_controllers' name).
+    sum_of_robot_center_projection_on_X_Y_axis: float
+    wheel_effort: float
+
+
+@dataclass(frozen=True)
+class DriveLimitsConfig:
+    """Per-robot command limits; None falls back to the simulator's parameters."""
+
+    max_speed: Optional[float] = None
+    max_turn: Optional[float] = None
+
+
+@dataclass(frozen=True)
+class ControllerConfig:
+    """A position-controlled joint group that follows trajectory_msgs/JointTrajectory."""
+
+    name: str
+    joints: Tuple[str, ...]
+    # PyBullet position-motor gains (its constraint solver's kp and kd).
+    position_gain: float = 0.3
+    velocity_gain: float = 1.0
+
+
+@dataclass(frozen=True)
 class RobotConfig:
     name: str
     urdf: str
     namespace: str
     pose: Pose
     frame_prefix: str = ''
-    drive: Optional[DiffDriveConfig] = None
+    drive: Optional[Union[DiffDriveConfig, MecanumConfig]] = None
+    limits: DriveLimitsConfig = DriveLimitsConfig()
+    controllers: Tuple[ControllerConfig, ...] = ()
+    initial_joint_positions: Tuple[Tuple[str, float], ...] = ()
 
 
 @dataclass(frozen=True)
@@ -126,7 +160,8 @@ def parse_world(data: Any, source: str = '<memory>') -> WorldConfig:
 
 def _robot(r: '_Reader', item: Any, i: int) -> RobotConfig:
     where = f'robots[{i}]'
-    r.only(item, where, {'name', 'urdf', 'namespace', 'pose', 'frame_prefix', 'drive'})
+    r.only(item, where, {'name', 'urdf', 'namespace', 'pose', 'frame_prefix', 'drive',
+                         'controllers', 'initial_joint_positions'})
     name = r.name(item, 'name', where)
     namespace = r.string(item, 'namespace', where, default=name).strip('/')
     if namespace and not all(_NAME.match(part) for part in namespace.split('/')):
@@ -135,24 +170,79 @@ def _robot(r: '_Reader', item: Any, i: int) -> RobotConfig:
     r.only(pose_data, where + '.pose', {'x', 'y', 'z', 'yaw'})
     pose = Pose(*(r.number(pose_data, k, where + '.pose', default=0.0)
                   for k in ('x', 'y', 'z', 'yaw')))
-    drive = None
+    drive, limits = None, DriveLimitsConfig()
     if item.get('drive') is not None:
-        d = item['drive']
-        dw = where + '.drive'
-        r.only(d, dw, {'type', 'left_wheel_joint', 'right_wheel_joint', 'wheel_radius',
-                       'wheel_separation', 'wheel_effort'})
-        if d.get('type') != 'diff_drive':
-            raise WorldConfigError(f'{r.source}: {dw}.type must be "diff_drive", '
-                                   f'got {d.get("type")!r}')
+        drive, limits = _drive(r, item['drive'], where + '.drive')
+    controllers = tuple(_controller(r, c, f'{where}.controllers[{k}]')
+                        for k, c in enumerate(r.list(item, 'controllers', where)))
+    names = [c.name for c in controllers]
+    if len(set(names)) != len(names):
+        raise WorldConfigError(f'{r.source}: {where}.controllers: names must be unique, '
+                               f'got {names}')
+    claimed = [j for c in controllers for j in c.joints]
+    if isinstance(drive, MecanumConfig):
+        claimed += list(drive.wheel_joints)
+    elif drive is not None:
+        claimed += [drive.left_wheel_joint, drive.right_wheel_joint]
+    if len(set(claimed)) != len(claimed):
+        raise WorldConfigError(f'{r.source}: {where}: a joint belongs to two controllers or '
+                               f'to a controller and the drive: {claimed}')
+    initial = item.get('initial_joint_positions') or {}
+    if not isinstance(initial, dict):
+        raise r.fail(where, 'initial_joint_positions', 'must be a mapping joint: position')
+    initial_positions = tuple((str(j), r.number(initial, j, where + '.initial_joint_positions'))
+                              for j in initial)
+    return RobotConfig(name=name, urdf=r.string(item, 'urdf', where), namespace=namespace,
+                       pose=pose, frame_prefix=r.string(item, 'frame_prefix', where, default=''),
+                       drive=drive, limits=limits, controllers=controllers,
+                       initial_joint_positions=initial_positions)
+
+
+def _drive(r: '_Reader', d: Any, dw: str):
+    common = {'type', 'wheel_radius', 'wheel_effort', 'max_speed', 'max_turn'}
+    kind = d.get('type') if isinstance(d, dict) else None
+    if kind == 'diff_drive':
+        r.only(d, dw, common | {'left_wheel_joint', 'right_wheel_joint', 'wheel_separation'})
         drive = DiffDriveConfig(
             left_wheel_joint=r.string(d, 'left_wheel_joint', dw),
             right_wheel_joint=r.string(d, 'right_wheel_joint', dw),
             wheel_radius=r.number(d, 'wheel_radius', dw, lo=1e-4),
             wheel_separation=r.number(d, 'wheel_separation', dw, lo=1e-4),
             wheel_effort=r.number(d, 'wheel_effort', dw, lo=1e-6))
-    return RobotConfig(name=name, urdf=r.string(item, 'urdf', where), namespace=namespace,
-                       pose=pose, frame_prefix=r.string(item, 'frame_prefix', where, default=''),
-                       drive=drive)
+    elif kind == 'mecanum':
+        k_name = 'sum_of_robot_center_projection_on_X_Y_axis'
+        r.only(d, dw, common | {'wheel_joints', k_name})
+        joints = d.get('wheel_joints')
+        if (not isinstance(joints, list) or len(joints) != 4
+                or not all(isinstance(j, str) for j in joints)):
+            raise r.fail(dw, 'wheel_joints', 'must list 4 joint names: front-left, '
+                         f'front-right, rear-right, rear-left; got {joints!r}')
+        drive = MecanumConfig(
+            wheel_joints=tuple(joints),
+            wheel_radius=r.number(d, 'wheel_radius', dw, lo=1e-4),
+            sum_of_robot_center_projection_on_X_Y_axis=r.number(d, k_name, dw, lo=1e-4),
+            wheel_effort=r.number(d, 'wheel_effort', dw, lo=1e-6))
+    else:
+        raise WorldConfigError(f'{r.source}: {dw}.type must be "diff_drive" or "mecanum", '
+                               f'got {kind!r}')
+    limits = DriveLimitsConfig(
+        max_speed=r.number(d, 'max_speed', dw, lo=1e-3, hi=10.0) if 'max_speed' in d else None,
+        max_turn=r.number(d, 'max_turn', dw, lo=1e-3, hi=20.0) if 'max_turn' in d else None)
+    return drive, limits
+
+
+def _controller(r: '_Reader', c: Any, where: str) -> ControllerConfig:
+    r.only(c, where, {'name', 'joints', 'position_gain', 'velocity_gain'})
+    joints = c.get('joints')
+    if (not isinstance(joints, list) or not joints
+            or not all(isinstance(j, str) for j in joints)):
+        raise r.fail(where, 'joints', f'must be a non-empty list of joint names, got {joints!r}')
+    if len(set(joints)) != len(joints):
+        raise r.fail(where, 'joints', f'has duplicates: {joints}')
+    return ControllerConfig(
+        name=r.name(c, 'name', where), joints=tuple(joints),
+        position_gain=r.number(c, 'position_gain', where, default=0.3, lo=1e-4, hi=10.0),
+        velocity_gain=r.number(c, 'velocity_gain', where, default=1.0, lo=0.0, hi=10.0))
 
 
 def _obstacle(r: '_Reader', item: Any, i: int) -> ObstacleConfig:

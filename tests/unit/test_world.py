@@ -51,7 +51,7 @@ def test_drive_forward_by_wheel_contact(world):
     _settle(runner, sink)
     x0 = robot.base_state().position[0]
     for _ in range(20):  # 2 s with a command every 0.1 s, inside the timeout
-        runner.command('mini_robot', 0.1, 0.0)
+        runner.command('mini_robot', 0.1, 0.0, 0.0)
         runner.advance(24, sink)
     state = robot.base_state()
     assert state.linear[0] == pytest.approx(0.1, rel=0.01)
@@ -67,9 +67,9 @@ def test_turn_in_place(world):
     _settle(runner, sink)
     steps = round(math.pi / 2 / 0.2 / world.time_step)
     for i in range(0, steps, 24):
-        runner.command('mini_robot', 0.0, 0.2)
+        runner.command('mini_robot', 0.0, 0.0, 0.2)
         runner.advance(min(24, steps - i), sink)
-    runner.command('mini_robot', 0.0, 0.0)
+    runner.command('mini_robot', 0.0, 0.0, 0.0)
     _settle(runner, sink)
     state = robot.base_state()
     assert yaw_from_quaternion(state.orientation) == pytest.approx(math.pi / 2, rel=0.03)
@@ -78,7 +78,7 @@ def test_turn_in_place(world):
 
 def test_command_times_out_in_simulated_time(world):
     runner, sink = SimRunner(world, DriveLimits(cmd_vel_timeout=0.5), 100.0), Recorder()
-    runner.command('mini_robot', 0.1, 0.0)
+    runner.command('mini_robot', 0.1, 0.0, 0.0)
     runner.advance(round(0.45 / world.time_step), sink)
     assert sink.timeouts == []
     assert world.robots['mini_robot'].wheel_targets[0] > 0
@@ -89,15 +89,15 @@ def test_command_times_out_in_simulated_time(world):
 
 def test_nan_command_stops_the_robot(world):
     runner, sink = SimRunner(world, DriveLimits(), 100.0), Recorder()
-    runner.command('mini_robot', 0.1, 0.0)
-    result = runner.command('mini_robot', math.nan, 0.0)
+    runner.command('mini_robot', 0.1, 0.0, 0.0)
+    result = runner.command('mini_robot', math.nan, 0.0, 0.0)
     assert not result.accepted
     assert world.robots['mini_robot'].wheel_targets == (0.0, 0.0)
 
 
 def test_clamped_command_drives_at_the_limit(world):
     runner, sink = SimRunner(world, DriveLimits(max_speed=0.2), 100.0), Recorder()
-    result = runner.command('mini_robot', 5.0, 0.0)
+    result = runner.command('mini_robot', 5.0, 0.0, 0.0)
     assert result.clamped and result.command == (0.2, 0.0)
     assert world.robots['mini_robot'].wheel_targets == pytest.approx((0.2 / 0.03,) * 2)
 
@@ -133,7 +133,7 @@ def test_reset_returns_to_the_start_pose(world):
     runner, sink = SimRunner(world, DriveLimits(), 100.0), Recorder()
     robot = world.robots['mini_robot']
     for _ in range(10):
-        runner.command('mini_robot', 0.2, 0.2)
+        runner.command('mini_robot', 0.2, 0.0, 0.2)
         runner.advance(24, sink)
     assert math.hypot(*robot.base_state().position[:2]) > 0.1
     runner.reset()

@@ -1,0 +1,158 @@
+"""Trajectory validation (every rejection rule) and interpolation of the joint-group follower."""
+import math
+
+import numpy as np
+import pytest
+
+from controllers.joint_trajectory import (JointLimits, TrajectoryFollower, TrajectoryPoint,
+                                          TrajectoryRequest)
+
+NAMES = ('j1', 'j2', 'j3')
+LIMITS = JointLimits(lower=np.array([-2.0, -1.0, -3.0]), upper=np.array([2.0, 1.5, 3.0]),
+                     velocity=np.array([1.0, 1.0, 2.0]), effort=np.array([5.0, 5.0, 1.0]))
+
+
+def follower(q=(0.0, 0.0, 0.0)):
+    return TrajectoryFollower(NAMES, LIMITS, q)
+
+
+def request(points, names=NAMES, start=None):
+    return TrajectoryRequest(tuple(names), tuple(TrajectoryPoint(*p) for p in points), start)
+
+
+GOOD = [(1.0, (0.5, 0.5, 0.5)), (2.0, (1.0, 0.0, -1.0))]
+
+
+def test_a_good_trajectory_is_accepted_and_reaches_its_waypoints():
+    f = follower()
+    assert f.set_trajectory(request(GOOD), now=10.0).accepted
+    assert f.sample(10.0).positions == pytest.approx([0.0, 0.0, 0.0])
+    assert f.sample(11.0).positions == pytest.approx([0.5, 0.5, 0.5])
+    end = f.sample(12.0)
+    assert end.positions == pytest.approx([1.0, 0.0, -1.0])
+    assert end.velocities == pytest.approx([0.0, 0.0, 0.0])
+    assert f.sample(20.0).positions == pytest.approx([1.0, 0.0, -1.0])
+    assert f.finished(12.0) and not f.finished(11.9)
+
+
+@pytest.mark.parametrize('req, reason', [
+    (request(GOOD, names=()), 'no joint names'),
+    (request([(1.0, (0.1, 0.1, 0.1))], names=('j1', 'j2', 'elbow')), "unknown joints ['elbow']"),
+    (request([(1.0, (0.1, 0.1, 0.1))], names=('j1', 'j1', 'j2')), "duplicate joint names ['j1']"),
+    (request([]), 'empty trajectory'),
+    (request([(1.0, (0.1, 0.1))]), 'point 0: 2 positions for 3 joints'),
+    (request([(1.0, (0.1, 0.1, 0.1), (0.0, 0.0))]), 'point 0: 2 velocities for 3 joints'),
+    (request([(1.0, (0.1, 0.1, 0.1), (0.0,) * 3, (0.0,))]), '1 accelerations for 3 joints'),
+    (request([(1.0, (0.1, 0.1, 0.1)), (1.0, (0.2, 0.2, 0.2))]), 'point 1: time_from_start 1 s '
+                                                                'is not after'),
+    (request([(2.0, (0.1, 0.1, 0.1)), (1.0, (0.2, 0.2, 0.2))]), 'is not after'),
+    (request([(-1.0, (0.1, 0.1, 0.1))]), 'is negative'),
+    (request([(1.0, (math.nan, 0.1, 0.1))]), 'point 0: non-finite positions'),
+    (request([(1.0, (0.1, 0.1, 0.1), (0.0, math.inf, 0.0))]), 'non-finite velocities'),
+    (request([(math.inf, (0.1, 0.1, 0.1))]), 'non-finite time_from_start'),
+    (request([(1.0, (0.1, 1.6, 0.1))]), 'point 0: j2 target 1.6000 is outside its limits'),
+    (request([(1.0, (-2.5, 0.0, 0.0))]), 'j1 target -2.5000 is outside'),
+    (request([(1.0, (0.1, 0.1, 0.1), (0.0, 1.5, 0.0))]), 'j2 velocity 1.5000 exceeds'),
+    (request([(0.0, (0.5, 0.0, 0.0))]), 'needs a time_from_start > 0'),
+    (request([(0.5, (1.0, 0.0, 0.0))]), 'j1 would move 0.8000 in 0.500 s'),
+    (request([(1.0, (0.1, 0.1, 0.1)), (2.0, (0.2, 0.2, 0.2), (0.0,) * 3)]),
+     'velocities given for some points but not all'),
+    (request(GOOD, start=5.0), 'trajectory ends at 7.000 s, before now (10.000 s)'),
+])
+def test_rejections_name_the_reason_and_leave_the_hold_untouched(req, reason):
+    f = follower((0.2, 0.1, 0.0))
+    result = f.set_trajectory(req, now=10.0)
+    assert not result.accepted
+    assert reason in result.reason
+    assert not f.active
+    assert f.sample(11.0).positions == pytest.approx([0.2, 0.1, 0.0])
+
+
+def test_a_point_at_time_zero_is_fine_when_it_is_where_the_joint_is():
+    f = follower((0.2, 0.1, 0.0))
+    assert f.set_trajectory(request([(0.0, (0.2, 0.1, 0.0)), (1.0, (0.3, 0.1, 0.0))]),
+                            now=1.0).accepted
+    assert f.sample(2.0).positions == pytest.approx([0.3, 0.1, 0.0])
+
+
+def test_partial_joint_sets_hold_the_joints_left_out():
+    f = follower((0.2, 0.1, -0.4))
+    assert f.set_trajectory(request([(1.0, (0.9,))], names=('j1',)), now=0.0).accepted
+    for t in np.linspace(0.0, 1.5, 16):
+        s = f.sample(t)
+        assert s.positions[1:] == pytest.approx([0.1, -0.4])
+    assert f.sample(1.0).positions[0] == pytest.approx(0.9)
+
+
+def test_a_new_trajectory_replaces_the_active_one_without_a_jump():
+    f = follower()
+    f.set_trajectory(request([(2.0, (1.0, 1.0, 1.0))]), now=0.0)
+    mid = f.sample(1.0)
+    assert 0.1 < mid.positions[0] < 0.9 and mid.velocities[0] > 0.1
+    assert f.set_trajectory(request([(2.0, (-1.0, -0.5, 0.0))]), now=1.0).accepted
+    after = f.sample(1.0)
+    assert after.positions == pytest.approx(mid.positions)
+    assert after.velocities == pytest.approx(mid.velocities)
+    assert f.sample(3.0).positions == pytest.approx([-1.0, -0.5, 0.0])
+
+
+def test_interpolation_is_smooth_and_never_overshoots_monotone_waypoints():
+    f = follower()
+    points = [(0.5, (0.2, 0.0, 0.0)), (1.0, (0.3, 0.0, 0.0)), (1.5, (0.8, 0.0, 0.0)),
+              (3.0, (0.8, 0.0, 0.0)), (4.0, (0.1, 0.0, 0.0))]
+    assert f.set_trajectory(request(points), now=0.0).accepted
+    ts = np.linspace(0.0, 4.0, 4001)
+    q = np.array([f.sample(t).positions[0] for t in ts])
+    v = np.array([f.sample(t).velocities[0] for t in ts])
+    assert q.min() >= -1e-12 and q.max() <= 0.8 + 1e-12          # never beyond the waypoints
+    assert np.all(np.diff(q[ts <= 1.5]) >= -1e-12)                 # rising part stays rising
+    # Velocity is continuous at every knot (cubic Hermite with shared knot slopes) ...
+    for knot in (0.5, 1.0, 1.5, 3.0):
+        before, after = f.sample(knot - 1e-9).velocities[0], f.sample(knot + 1e-9).velocities[0]
+        assert before == pytest.approx(after, abs=1e-6)
+    # ... and matches the derivative of the position.
+    assert np.gradient(q, ts)[1:-1] == pytest.approx(v[1:-1], abs=6e-3)
+
+
+def test_given_velocities_and_accelerations_are_honoured_quintic():
+    f = follower()
+    pts = [(1.0, (0.5, 0.0, 0.0), (0.3, 0.0, 0.0), (0.1, 0.0, 0.0)),
+           (2.0, (1.0, 0.0, 0.0), (0.0, 0.0, 0.0), (0.0, 0.0, 0.0))]
+    assert f.set_trajectory(request(pts), now=0.0).accepted
+    s = f.sample(1.0)
+    assert s.positions[0] == pytest.approx(0.5)
+    assert s.velocities[0] == pytest.approx(0.3)
+    assert s.accelerations[0] == pytest.approx(0.1)
+
+
+def test_a_future_stamp_holds_until_the_start():
+    f = follower()
+    assert f.set_trajectory(request([(1.0, (0.5, 0.0, 0.0))], start=5.0), now=2.0).accepted
+    assert f.sample(4.9).positions == pytest.approx([0.0, 0.0, 0.0])
+    assert f.sample(6.0).positions == pytest.approx([0.5, 0.0, 0.0])
+
+
+def test_a_past_stamp_skips_the_points_already_past():
+    f = follower()
+    req = request([(1.0, (0.2, 0.0, 0.0)), (4.0, (0.9, 0.0, 0.0))], start=8.0)
+    assert f.set_trajectory(req, now=10.0).accepted      # point 0 was due at 9 s: skipped
+    assert f.sample(10.0).positions == pytest.approx([0.0, 0.0, 0.0])
+    assert f.sample(12.0).positions == pytest.approx([0.9, 0.0, 0.0])
+
+
+def test_hold_stops_the_trajectory():
+    f = follower()
+    f.set_trajectory(request(GOOD), now=0.0)
+    f.hold([0.1, 0.2, 0.3])
+    assert not f.active
+    assert f.sample(1.0).positions == pytest.approx([0.1, 0.2, 0.3])
+
+
+def test_inconsistent_limits_are_a_configuration_error():
+    with pytest.raises(ValueError):
+        JointLimits(np.zeros(2), np.ones(3), np.ones(2), np.ones(2))
+    with pytest.raises(ValueError):
+        JointLimits(np.ones(2), np.zeros(2), np.ones(2), np.ones(2))
+    with pytest.raises(ValueError):
+        TrajectoryFollower(('a', 'a'), JointLimits(np.zeros(2), np.ones(2), np.ones(2),
+                                                   np.ones(2)), (0.0, 0.0))
