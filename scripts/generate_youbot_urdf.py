@@ -154,7 +154,7 @@ def _base() -> list:
     for name, sx, sy, yaw_deg in WHEELS:
         # The link's y axis is the spin axis: anisotropic friction [1, 0, 1] leaves the contact
         # free along it, and a rotation about y keeps that direction fixed.
-        side, axle, _ = wheel_inertia
+        side, _, axle = wheel_inertia
         parts.append(_link(f'wheel_link_{name}', WHEEL_MASS_KG,
                            ('sphere', (WHEEL_RADIUS_M,), (0.0, 0.0, 0.0)), 'black',
                            visual_shape=('cylinder', (WHEEL_RADIUS_M, WHEEL_WIDTH_M),

@@ -1,4 +1,6 @@
 """youBot Mecanum kinematics against ROBOT_MODELS.md §2 (the paper's eq. 9)."""
+import math
+
 import numpy as np
 import pytest
 
@@ -45,3 +47,34 @@ def test_geometry_is_validated():
         MecanumGeometry(0.0, 0.385)
     with pytest.raises(ValueError):
         MecanumGeometry(0.0475, float('inf'))
+
+
+def test_integrate_twist_matches_small_steps():
+    from controllers.base_fidelity import integrate_twist
+    from controllers.diff_drive import Pose2D
+    exact = integrate_twist(Pose2D(0.3, -0.2, 0.4), 0.15, -0.1, 0.3, 2.0)
+    pose = Pose2D(0.3, -0.2, 0.4)
+    for _ in range(20000):
+        c, s = math.cos(pose.yaw), math.sin(pose.yaw)
+        pose = Pose2D(pose.x + (0.15 * c + 0.1 * s) * 1e-4, pose.y + (0.15 * s - 0.1 * c) * 1e-4,
+                      pose.yaw + 0.3e-4)
+    assert (exact.x, exact.y, exact.yaw) == pytest.approx((pose.x, pose.y, pose.yaw), abs=1e-5)
+
+
+def test_tracking_errors_separate_along_and_across():
+    from controllers.base_fidelity import tracking_errors
+    from controllers.diff_drive import Pose2D
+    # 2 % short and 1 % to the side of a 0.4 m straight line.
+    e = tracking_errors((0.2, 0.0, 0.0), 2.0, Pose2D(), Pose2D(0.392, 0.004, 0.0),
+                        (0.198, 0.0, 0.0), 0.386)
+    assert e.path_length == pytest.approx(0.4)
+    assert e.cross_drift == pytest.approx(0.01)
+    assert e.position_error == pytest.approx(math.hypot(0.008, 0.004) / 0.4)
+    assert e.twist_error == pytest.approx(0.01)
+    # Turning in place: translation is drift, relative to the wheels' travel.
+    e = tracking_errors((0.0, 0.0, 0.5), 2.0, Pose2D(), Pose2D(0.00386, 0.0, 0.99),
+                        (0.0, 0.0, 0.5), 0.386)
+    assert e.cross_drift == pytest.approx(0.01)
+    assert e.yaw_error == pytest.approx(0.01)
+    with pytest.raises(ValueError):
+        tracking_errors((0.0, 0.0, 0.0), 1.0, Pose2D(), Pose2D(), (0.0, 0.0, 0.0), 0.386)

@@ -1,0 +1,182 @@
+"""The youBot in the simulated world (no ROS): Mecanum base fidelity through contact physics,
+command safety, and the arm and gripper following trajectories."""
+import math
+
+import numpy as np
+import pytest
+
+from controllers.base_fidelity import tracking_errors
+from controllers.diff_drive import Pose2D
+from controllers.joint_trajectory import TrajectoryPoint, TrajectoryRequest
+from controllers.mecanum import MecanumGeometry, wheel_speeds
+from controllers.youbot_arm import JOINT_NAMES
+from sim_bridge.runner import DriveLimits, SimRunner
+from sim_bridge.world import SimWorld, resolve_resource, yaw_from_quaternion
+from sim_bridge.world_config import load_world
+
+HZ = 240
+K = 0.386
+
+
+class Sink:
+    def __init__(self):
+        self.timeouts = []
+
+    def on_clock(self, t):
+        pass
+
+    def on_state(self, robot, t):
+        pass
+
+    def on_camera_due(self, i, t, render):
+        pass
+
+    def on_command_timeout(self, robot):
+        self.timeouts.append(robot)
+
+
+@pytest.fixture(scope='module')
+def sim():
+    world = SimWorld(load_world(resolve_resource('package://sim_bridge/worlds/youbot.yaml')))
+    runner = SimRunner(world, DriveLimits(cmd_vel_timeout=0.5), 100.0)
+    yield world, runner
+    world.close()
+
+
+@pytest.fixture
+def youbot(sim):
+    world, runner = sim
+    runner.reset()
+    runner.advance(HZ // 2, Sink())          # settle on the wheels
+    return world.robots['youbot'], runner
+
+
+def _pose(robot):
+    s = robot.base_state()
+    return Pose2D(s.position[0], s.position[1], yaw_from_quaternion(s.orientation))
+
+
+def _drive(robot, runner, command, seconds):
+    """Hold a command (re-sent at 10 Hz like a teleop); return the mean measured twist after
+    the first 0.5 s (the start-up)."""
+    twists = []
+    for k in range(int(seconds * HZ)):
+        if k % (HZ // 10) == 0:
+            runner.command('youbot', *command)
+        runner.advance(1, Sink())
+        if k >= int(0.5 * HZ) or seconds <= 0.5:
+            s = robot.base_state()
+            twists.append((s.linear[0], s.linear[1], s.angular[2]))
+    return tuple(np.mean(twists, axis=0))
+
+
+@pytest.mark.parametrize('command', [(0.2, 0.0, 0.0), (0.0, 0.2, 0.0), (0.0, 0.0, 0.5),
+                                     (0.15, -0.1, 0.3)],
+                         ids=['vx', 'vy', 'wz', 'combined'])
+def test_odometry_follows_the_commanded_twist(youbot, command):
+    robot, runner = youbot
+    start = _pose(robot)
+    measured = _drive(robot, runner, command, 2.0)
+    e = tracking_errors(command, 2.0, start, _pose(robot), measured, K)
+    assert e.twist_error < 0.03
+    assert e.position_error < 0.03
+    assert e.yaw_error < 0.03
+    assert e.cross_drift < 0.02
+
+
+def test_wheel_joint_states_show_the_kinematic_wheel_speeds(youbot):
+    robot, runner = youbot
+    command = (0.15, -0.1, 0.3)
+    _drive(robot, runner, command, 1.0)
+    js = robot.joint_states()
+    names = ['wheel_joint_fl', 'wheel_joint_fr', 'wheel_joint_rr', 'wheel_joint_rl']
+    speeds = [js.velocities[js.names.index(n)] for n in names]
+    expected = wheel_speeds(*command, MecanumGeometry(0.0475, K))
+    assert speeds == pytest.approx(expected, rel=0.01)
+    # Positions integrate the same speeds (the reported angle is sqrt(2) x the sphere's).
+    before = [js.positions[js.names.index(n)] for n in names]
+    _drive(robot, runner, command, 0.5)
+    js = robot.joint_states()
+    after = [js.positions[js.names.index(n)] for n in names]
+    assert np.subtract(after, before) == pytest.approx(np.multiply(expected, 0.5), rel=0.02)
+
+
+def test_commands_are_clamped_to_the_youbots_own_limits(youbot):
+    robot, runner = youbot
+    result = runner.command('youbot', 2.0, -3.0, 4.0)
+    assert result.clamped and result.command == (0.8, -0.8, 1.5)
+    assert runner.guards['youbot'].limits == (0.8, 0.8, 1.5)
+
+
+def test_nan_stops_the_base_and_a_stale_command_times_out(youbot):
+    robot, runner = youbot
+    _drive(robot, runner, (0.2, 0.1, 0.0), 1.0)
+    result = runner.command('youbot', math.nan, 0.0, 0.0)
+    assert not result.accepted and 'non-finite' in result.reason
+    runner.advance(HZ, Sink())
+    assert np.abs(robot.base_state().linear[:2]).max() < 0.005
+    runner.command('youbot', 0.0, 0.2, 0.0)
+    sink = Sink()
+    runner.advance(int(0.8 * HZ), sink)     # timeout 0.5 s: stops, then coasts to rest
+    assert sink.timeouts == ['youbot']
+    assert robot.wheel_targets == (0.0, 0.0, 0.0, 0.0)
+    runner.advance(HZ // 2, Sink())
+    assert abs(robot.base_state().linear[1]) < 0.005
+
+
+def _run_until(runner, seconds):
+    runner.advance(int(seconds * HZ), Sink())
+
+
+def test_the_arm_follows_a_trajectory_to_its_goal(youbot):
+    robot, runner = youbot
+    arm = robot.controllers['arm_controller']
+    goal = (1.0, 0.8, -1.2, 0.9, 1.5)
+    request = TrajectoryRequest(JOINT_NAMES, (TrajectoryPoint(1.0, (0.5, 0.4, -0.6, 0.45, 0.7)),
+                                              TrajectoryPoint(2.5, goal)))
+    assert runner.set_trajectory('youbot', 'arm_controller', request).accepted
+    worst = 0.0
+    for _ in range(int(2.5 * HZ)):
+        runner.advance(1, Sink())
+        worst = max(worst, float(np.abs(arm.desired.positions - arm.actual()[0]).max()))
+    _run_until(runner, 0.5)
+    assert arm.actual()[0] == pytest.approx(goal, abs=1e-3)
+    assert worst < 0.02                          # rad, while moving
+    # Its velocity never exceeded the URDF limit (pi/2 rad/s).
+    assert np.abs(arm.actual()[1]).max() <= math.pi / 2 + 1e-6
+
+
+def test_a_rejected_trajectory_leaves_the_arm_holding(youbot):
+    robot, runner = youbot
+    arm = robot.controllers['arm_controller']
+    held = arm.actual()[0]
+    bad = TrajectoryRequest(JOINT_NAMES, (TrajectoryPoint(1.0, (0.0, 3.0, 0.0, 0.0, 0.0)),))
+    result = runner.set_trajectory('youbot', 'arm_controller', bad)
+    assert not result.accepted and 'arm_joint_2 target 3.0000 is outside' in result.reason
+    _run_until(runner, 1.0)
+    assert arm.actual()[0] == pytest.approx(held, abs=1e-3)
+
+
+def test_the_gripper_closes_and_opens(youbot):
+    robot, runner = youbot
+    gripper = robot.controllers['gripper_controller']
+    assert gripper.actual()[0] == pytest.approx((0.0115, 0.0115), abs=1e-4)   # starts open
+    close = TrajectoryRequest(gripper.joint_names, (TrajectoryPoint(1.0, (0.0, 0.0)),))
+    assert runner.set_trajectory('youbot', 'gripper_controller', close).accepted
+    _run_until(runner, 1.5)
+    assert gripper.actual()[0] == pytest.approx((0.0, 0.0), abs=2e-4)
+    too_fast = TrajectoryRequest(gripper.joint_names, (TrajectoryPoint(0.1, (0.0115, 0.0115)),))
+    assert 'above its velocity limit' in runner.set_trajectory(
+        'youbot', 'gripper_controller', too_fast).reason
+
+
+def test_reset_returns_the_arm_to_its_start(youbot):
+    robot, runner = youbot
+    arm = robot.controllers['arm_controller']
+    runner.set_trajectory('youbot', 'arm_controller', TrajectoryRequest(
+        JOINT_NAMES, (TrajectoryPoint(1.0, (0.5, 0.3, 0.2, 0.1, 0.0)),)))
+    _run_until(runner, 1.2)
+    runner.reset()
+    _run_until(runner, 0.5)
+    assert arm.actual()[0] == pytest.approx(np.zeros(5), abs=2e-3)
+    assert not arm.follower.active
