@@ -16,6 +16,7 @@ EXECUTABLES = [
      'publishing on'),
     ('sim_bringup', 'drive_check', ['-p', 'script:=forward 1s'], 'waiting for'),
     ('recording', 'recorder', ['-p', 'output_dir:={tmp}'], 'recording all topics'),
+    ('arm_kinematics', 'kinematics_node', ['-r', '__ns:=/youbot'], 'IK on /youbot/solve_ik'),
 ]
 COMMAND_LINE_TOOLS = [('recording', 'bag_analysis'), ('recording', 'bag_repair')]
 
@@ -56,18 +57,24 @@ def test_command_line_tool_resolves_and_runs(package, executable):
 
 def test_every_package_is_in_the_ament_index():
     for package in ('sim_bridge', 'controllers', 'perception', 'robot_description',
-                    'sim_bringup', 'sim_interfaces', 'recording'):
+                    'sim_bringup', 'sim_interfaces', 'recording', 'arm_kinematics'):
         share = Path(get_package_share_directory(package))
         assert (share / 'package.xml').is_file()
     assert (Path(get_package_share_directory('robot_description')) / 'urdf' /
             'mini_robot.urdf').is_file()
-    assert (Path(get_package_share_directory('sim_bridge')) / 'worlds' /
-            'mini_robot.yaml').is_file()
+    for world in ('mini_robot', 'youbot'):
+        assert (Path(get_package_share_directory('sim_bridge')) / 'worlds' /
+                f'{world}.yaml').is_file()
+    assert (Path(get_package_share_directory('robot_description')) / 'urdf' /
+            'youbot.urdf').is_file()
 
 
 def test_interface_package_generated_python_bindings():
-    from sim_interfaces.srv import StepSimulation
+    from sim_interfaces.msg import JointTrajectoryControllerState
+    from sim_interfaces.srv import SolveIK, StepSimulation
     assert StepSimulation.Request(steps=3).steps == 3
+    assert SolveIK.Request(execute=True).execute
+    assert JointTrajectoryControllerState(joint_names=['a']).joint_names == ['a']
     fields = StepSimulation.Response.get_fields_and_field_types()
     assert fields == {'success': 'boolean', 'message': 'string', 'step_count': 'uint64',
                       'sim_time': 'builtin_interfaces/Time'}

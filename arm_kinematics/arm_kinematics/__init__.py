@@ -1,0 +1,1 @@
+"""Arm kinematics node (the MDH kinematics core is in controllers)."""

@@ -1,0 +1,198 @@
+"""Kinematics node of an arm: publishes the tool pose from joint_states and answers IK.
+
+Run it in the robot's namespace (``--ros-args -r __ns:=/youbot``):
+- subscribes ``joint_states``; publishes ``end_effector_pose`` (PoseStamped, in base_link);
+- service ``solve_ik`` (sim_interfaces/SolveIK): a target pose in, the joint positions out, and
+  with ``execute`` a trajectory sent to ``arm_controller/joint_trajectory``;
+- topic ``goal_pose`` (PoseStamped): solve and execute; every outcome goes out on ``ik_status``
+  (diagnostic_msgs/DiagnosticStatus), failures are logged as errors.
+"""
+from __future__ import annotations
+
+import sys
+from typing import Optional, Tuple
+
+import numpy as np
+import rclpy
+from builtin_interfaces.msg import Duration
+from diagnostic_msgs.msg import DiagnosticStatus, KeyValue
+from geometry_msgs.msg import PoseStamped
+from rcl_interfaces.msg import ParameterDescriptor
+from rclpy.executors import ExternalShutdownException
+from rclpy.node import Node
+from rclpy.qos import QoSProfile
+from sensor_msgs.msg import JointState
+from sim_interfaces.srv import SolveIK
+from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
+
+from controllers.params import float_range
+from controllers.transforms import matrix_to_quaternion, pose_matrix
+from controllers.youbot_kinematics import (TOOL_FRAMES, YoubotKinematics, in_base_link,
+                                           motion_duration)
+
+ARMS = {'youbot': YoubotKinematics}
+
+
+class KinematicsConfigError(ValueError):
+    """Parameters the node cannot run with."""
+
+
+class KinematicsNode(Node):
+
+    def __init__(self, **kwargs) -> None:
+        super().__init__('kinematics_node', **kwargs)
+        ro = ParameterDescriptor
+        self.declare_parameter('arm', 'youbot', ro(
+            description=f'Which arm: {sorted(ARMS)}', read_only=True))
+        self.declare_parameter('tool_frame', 'gripper_tcp', ro(
+            description=f'Frame whose pose is published and solved for: {sorted(TOOL_FRAMES)}',
+            read_only=True))
+        self.declare_parameter('frame_prefix', '', ro(
+            description='Prefix of the robot\'s frame names (as in the world file)',
+            read_only=True))
+        self.declare_parameter('velocity_scaling', 0.5, float_range(
+            'Default fraction of the joint velocity limits for IK motions', 0.01, 1.0))
+        self.declare_parameter('min_duration', 0.5, float_range(
+            'Shortest IK motion [s]', 0.01, 60.0))
+        self.declare_parameter('trajectory_topic', 'arm_controller/joint_trajectory', ro(
+            description='Where IK motions go (relative: in the node namespace)', read_only=True))
+        arm = self.get_parameter('arm').value
+        tool = self.get_parameter('tool_frame').value
+        if arm not in ARMS:
+            raise KinematicsConfigError(f'arm "{arm}" unknown; known: {sorted(ARMS)}')
+        if tool not in TOOL_FRAMES:
+            raise KinematicsConfigError(f'tool_frame "{tool}" unknown; known: '
+                                        f'{sorted(TOOL_FRAMES)}')
+        self._kin = ARMS[arm](tool)
+        self._prefix = self.get_parameter('frame_prefix').value
+        self._positions: Optional[np.ndarray] = None
+        reliable = QoSProfile(depth=10)
+        self._pose_pub = self.create_publisher(PoseStamped, 'end_effector_pose', reliable)
+        traj_topic = self.get_parameter('trajectory_topic').value
+        self._traj_pub = self.create_publisher(JointTrajectory, traj_topic, reliable)
+        self._status_pub = self.create_publisher(DiagnosticStatus, 'ik_status', reliable)
+        self.create_subscription(JointState, 'joint_states', self._on_joint_states, reliable)
+        self.create_subscription(PoseStamped, 'goal_pose', self._on_goal_pose, reliable)
+        self.create_service(SolveIK, 'solve_ik', self._on_solve_ik)
+        self.get_logger().info(
+            f'{arm} arm, tool frame {self._prefix}{tool}: publishing '
+            f'{self._pose_pub.topic_name}; IK on {self.resolve_service_name("solve_ik")} and '
+            f'{self.resolve_topic_name("goal_pose")}; motions to {self._traj_pub.topic_name}')
+
+    # --- joint states -> end-effector pose ----------------------------------------------------
+    def _on_joint_states(self, msg: JointState) -> None:
+        index = {name: i for i, name in enumerate(msg.name)}
+        if not all(name in index for name in self._kin.joint_names):
+            return
+        q = np.array([msg.position[index[name]] for name in self._kin.joint_names])
+        if not np.all(np.isfinite(q)):
+            self.get_logger().warn('joint_states with non-finite arm positions ignored',
+                                   throttle_duration_sec=5.0)
+            return
+        self._positions = q
+        out = PoseStamped()
+        out.header.stamp = msg.header.stamp
+        out.header.frame_id = self._prefix + 'base_link'
+        _fill_pose(out, self._kin.fk(q))
+        self._pose_pub.publish(out)
+
+    # --- IK -----------------------------------------------------------------------------------
+    def _on_solve_ik(self, request, response):
+        ok, message, positions, errors, trajectory = self._solve(
+            request.target, request.execute, request.duration, request.velocity_scaling)
+        response.success, response.message = ok, message
+        response.joint_names = list(self._kin.joint_names)
+        if positions is not None:
+            response.positions = positions.tolist()
+            response.position_error, response.rotation_error = errors
+        if trajectory is not None:
+            response.trajectory = trajectory
+        return response
+
+    def _on_goal_pose(self, msg: PoseStamped) -> None:
+        ok, message, positions, _, _ = self._solve(msg, True, 0.0, 0.0)
+        status = DiagnosticStatus(level=DiagnosticStatus.OK if ok else DiagnosticStatus.ERROR,
+                                  name=self.get_fully_qualified_name() + ': goal_pose',
+                                  message=message, hardware_id=self._prefix + 'arm')
+        if positions is not None:
+            status.values = [KeyValue(key=n, value=f'{v:.6f}')
+                             for n, v in zip(self._kin.joint_names, positions)]
+        self._status_pub.publish(status)
+
+    def _solve(self, target: PoseStamped, execute: bool, duration: float,
+               scaling: float) -> Tuple[bool, str, Optional[np.ndarray], tuple,
+                                        Optional[JointTrajectory]]:
+        p, o = target.pose.position, target.pose.orientation
+        try:
+            pose = pose_matrix((p.x, p.y, p.z), (o.x, o.y, o.z, o.w))
+            pose = in_base_link(target.header.frame_id, pose, self._prefix)
+        except (KeyError, ValueError) as exc:
+            return self._fail(f'bad target: {exc.args[0]}')
+        if not np.all(np.isfinite(pose)):
+            return self._fail('bad target: non-finite pose')
+        if not (np.isfinite(duration) and duration >= 0.0):
+            return self._fail(f'bad duration {duration}: must be >= 0')
+        if not (np.isfinite(scaling) and 0.0 <= scaling <= 1.0):
+            return self._fail(f'bad velocity_scaling {scaling}: must be within [0, 1]')
+        if execute and self._positions is None:
+            return self._fail('no joint_states received yet: cannot plan a motion from the '
+                              'current position')
+        solution = self._kin.ik(pose, seed=self._positions)
+        if not solution.success:
+            xyz = ', '.join(f'{v:.3f}' for v in pose[:3, 3])
+            return self._fail(f'no IK solution for ({xyz}) in base_link: {solution.reason}')
+        errors = (solution.position_error, solution.rotation_error)
+        if not execute:
+            return True, 'solved', solution.positions, errors, None
+        scaling = scaling or self.get_parameter('velocity_scaling').value
+        if duration == 0.0:
+            duration = motion_duration(self._positions, solution.positions,
+                                       self._kin.velocity_limits, scaling,
+                                       self.get_parameter('min_duration').value)
+        trajectory = _trajectory(self._kin.joint_names, solution.positions, duration)
+        self._traj_pub.publish(trajectory)
+        message = f'solved; moving there in {duration:.2f} s'
+        self.get_logger().info(f'IK: {message}')
+        return True, message, solution.positions, errors, trajectory
+
+    def _fail(self, message: str):
+        self.get_logger().error(f'IK failed: {message}')
+        return False, message, None, (float('inf'), float('inf')), None
+
+
+def _fill_pose(msg: PoseStamped, pose: np.ndarray) -> None:
+    msg.pose.position.x, msg.pose.position.y, msg.pose.position.z = (float(v)
+                                                                     for v in pose[:3, 3])
+    o = msg.pose.orientation
+    o.x, o.y, o.z, o.w = matrix_to_quaternion(pose[:3, :3])
+
+
+def _trajectory(names, positions: np.ndarray, duration: float) -> JointTrajectory:
+    """One point at rest at ``duration``: the controller interpolates from where it is."""
+    point = JointTrajectoryPoint(positions=positions.tolist(),
+                                 velocities=[0.0] * len(positions))
+    ns = round(duration * 1e9)
+    point.time_from_start = Duration(sec=ns // 1_000_000_000, nanosec=ns % 1_000_000_000)
+    return JointTrajectory(joint_names=list(names), points=[point])
+
+
+def main(args=None) -> int:
+    rclpy.init(args=args)
+    try:
+        node = KinematicsNode()
+    except (KinematicsConfigError, rclpy.exceptions.ParameterException) as exc:
+        rclpy.logging.get_logger('kinematics_node').fatal(f'cannot start: {exc}')
+        rclpy.try_shutdown()
+        return 1
+    try:
+        rclpy.spin(node)
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    finally:
+        node.destroy_node()
+        rclpy.try_shutdown()
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())

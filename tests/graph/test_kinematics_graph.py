@@ -1,0 +1,99 @@
+"""The kinematics node over DDS, with the simulator in this process so that the test can read
+PyBullet's ground truth: an IK request moves the simulated arm's gripper to the target."""
+import threading
+import time
+
+import numpy as np
+import pytest
+import rclpy
+from geometry_msgs.msg import PoseStamped
+from rclpy.executors import SingleThreadedExecutor
+from rclpy.parameter import Parameter
+from sim_interfaces.msg import JointTrajectoryControllerState
+from sim_interfaces.srv import SolveIK
+
+from controllers.transforms import matrix_to_quaternion, rotation_angle
+from controllers.youbot_kinematics import YoubotKinematics
+from helpers import Probe, wait_for
+
+RTF = 2.0
+
+
+class InProcessSim:
+    """sim_node in this process, so the test can read PyBullet's ground truth."""
+
+    def __init__(self):
+        from sim_bridge.sim_node import SimNode
+        self.context = rclpy.Context()
+        rclpy.init(context=self.context)
+        self.node = SimNode(context=self.context, parameter_overrides=[
+            Parameter('world', value='package://sim_bridge/worlds/youbot.yaml'),
+            Parameter('real_time_factor', value=RTF), Parameter('rtf_log_period', value=0.0)])
+        self.executor = SingleThreadedExecutor(context=self.context)
+        self.executor.add_node(self.node)
+        self.lock = threading.Lock()
+        self._running = True
+        self.thread = threading.Thread(target=self._spin, daemon=True)
+        self.thread.start()
+
+    def _spin(self):
+        while self._running:
+            with self.lock:
+                self.executor.spin_once(timeout_sec=0.01)
+
+    def tcp_in_base_link(self):
+        with self.lock:
+            return self.node._world.robots['youbot'].link_pose_in_base('gripper_tcp')
+
+    def close(self):
+        self._running = False
+        self.thread.join(5.0)
+        self.executor.shutdown()
+        self.node.destroy_node()
+        rclpy.try_shutdown(context=self.context)
+
+
+def test_kinematics_node_moves_the_simulated_arm_to_an_ik_target(start_node):
+    sim = InProcessSim()
+    probe = Probe()
+    try:
+        kin = start_node('kinematics_node', '-r', '__ns:=/youbot', '-p', 'use_sim_time:=true')
+        poses = probe.collect(PoseStamped, '/youbot/end_effector_pose')
+        states = probe.collect(JointTrajectoryControllerState,
+                               '/youbot/arm_controller/controller_state')
+        wait_for(lambda: poses and states, 30.0, what='the end-effector pose')
+        # The published pose is PyBullet's at the candle start.
+        p = poses[-1][1].pose.position
+        assert (p.x, p.y, p.z) == pytest.approx(sim.tcp_in_base_link()[:3, 3], abs=1e-3)
+        # A reachable target in front of the robot, gripper pointing down and forward.
+        target = YoubotKinematics().fk([0.6, 0.9, 0.7, 0.9, -0.4])
+        assert target[2, 3] > 0.0
+        request = SolveIK.Request(execute=True)
+        request.target.header.frame_id = 'base_link'
+        pos = request.target.pose.position
+        pos.x, pos.y, pos.z = (float(v) for v in target[:3, 3])
+        o = request.target.pose.orientation
+        o.x, o.y, o.z, o.w = matrix_to_quaternion(target[:3, :3])
+        reply = probe.call(SolveIK, '/youbot/solve_ik', request, timeout=20.0)
+        assert reply.success, reply.message
+        assert reply.position_error < 1e-4 and len(reply.trajectory.points) == 1
+        wait_for(lambda: states[-1][1].active, 10.0, what='the motion to start')
+        wait_for(lambda: not states[-1][1].active, 30.0, what='the motion to end')
+        time.sleep(0.5 / RTF)
+        reached = sim.tcp_in_base_link()
+        assert np.linalg.norm(reached[:3, 3] - target[:3, 3]) < 0.005
+        assert rotation_angle(reached[:3, :3].T @ target[:3, :3]) < 0.01
+        # An unreachable target (the same arm plane, four times as far): a clear failure.
+        pos.x = 0.167 + 4 * (target[0, 3] - 0.167)
+        pos.y = 4 * target[1, 3]
+        reply = probe.call(SolveIK, '/youbot/solve_ik', request, timeout=20.0)
+        assert not reply.success and 'out of reach' in reply.message
+        request.target.header.frame_id = 'odom'
+        reply = probe.call(SolveIK, '/youbot/solve_ik', request, timeout=20.0)
+        assert not reply.success and 'unknown frame "odom"' in reply.message
+        assert 'IK failed' in kin.output() and kin.alive()
+        time.sleep(0.5 / RTF)
+        assert np.linalg.norm(sim.tcp_in_base_link()[:3, 3] - target[:3, 3]) < 0.005
+    finally:
+        probe.close()
+        sim.close()

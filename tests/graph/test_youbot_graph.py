@@ -1,0 +1,136 @@
+"""The youBot over DDS: base fidelity under cmd_vel, arm trajectories (good and malformed), and
+test_kinematics_graph.py has the kinematics node moving the arm to an IK target."""
+import math
+import time
+
+import numpy as np
+import pytest
+from geometry_msgs.msg import Twist
+from nav_msgs.msg import Odometry
+from rosgraph_msgs.msg import Clock
+from sensor_msgs.msg import JointState
+from sim_interfaces.msg import JointTrajectoryControllerState
+from std_srvs.srv import Trigger
+from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
+
+from controllers.base_fidelity import tracking_errors
+from controllers.diff_drive import Pose2D
+from controllers.youbot_arm import JOINT_NAMES
+from helpers import NodeProcess, stamp_s, wait_for
+from sim_bridge.world import yaw_from_quaternion
+
+WORLD = 'world:=package://sim_bridge/worlds/youbot.yaml'
+RTF = 2.0
+K = 0.386
+
+
+@pytest.fixture(scope='module')
+def youbot_sim(tmp_path_factory):
+    proc = NodeProcess('sim_node', ['-p', WORLD, '-p', f'real_time_factor:={RTF}'],
+                       tmp_path_factory.mktemp('youbot'))
+    yield proc
+    proc.stop()
+
+
+class Base:
+    def __init__(self, probe):
+        self.probe = probe
+        self.clock = probe.collect(Clock, '/clock')
+        self.odom = probe.collect(Odometry, '/youbot/odom')
+        self.pub = probe.node.create_publisher(Twist, '/youbot/cmd_vel', 10)
+        wait_for(lambda: self.clock and self.odom and self.pub.get_subscription_count() > 0,
+                 20.0, what='youbot topics')
+
+    def now(self):
+        return stamp_s(self.clock[-1][1].clock)
+
+    def send(self, vx, vy, wz):
+        msg = Twist()
+        msg.linear.x, msg.linear.y, msg.angular.z = vx, vy, wz
+        self.pub.publish(msg)
+
+    def hold(self, command, seconds):
+        end = self.now() + seconds
+        while self.now() < end:
+            self.send(*command)
+            time.sleep(0.05 / RTF)
+        self.send(0.0, 0.0, 0.0)
+
+
+def _pose2d(msg):
+    p, o = msg.pose.pose.position, msg.pose.pose.orientation
+    return Pose2D(p.x, p.y, yaw_from_quaternion((o.x, o.y, o.z, o.w)))
+
+
+@pytest.mark.parametrize('command', [(0.2, 0.0, 0.0), (0.0, 0.2, 0.0), (0.0, 0.0, 0.5),
+                                     (0.15, -0.1, 0.3)],
+                         ids=['vx', 'vy', 'wz', 'combined'])
+def test_base_odometry_follows_cmd_vel(youbot_sim, probe, command):
+    base = Base(probe)
+    assert probe.call(Trigger, '/sim_node/reset', Trigger.Request()).success
+    t_cmd = base.now()
+    base.hold(command, 2.8)
+    # A 2 s window of the commanded motion, after 0.4 s of start-up.
+    window = [m for _, m in list(base.odom)
+              if t_cmd + 0.4 <= stamp_s(m.header.stamp) <= t_cmd + 2.4 + 1e-9]
+    first, last = window[0], window[-1]
+    duration = stamp_s(last.header.stamp) - stamp_s(first.header.stamp)
+    assert duration == pytest.approx(2.0, abs=0.02)
+    twist = np.mean([(m.twist.twist.linear.x, m.twist.twist.linear.y, m.twist.twist.angular.z)
+                     for m in window], axis=0)
+    e = tracking_errors(command, duration, _pose2d(first), _pose2d(last), tuple(twist), K)
+    assert e.twist_error < 0.03 and e.position_error < 0.03 and e.yaw_error < 0.03
+    assert e.cross_drift < 0.02
+    assert youbot_sim.alive()
+
+
+def _trajectory(positions, seconds, names=JOINT_NAMES):
+    point = JointTrajectoryPoint(positions=[float(p) for p in positions])
+    point.time_from_start.sec = int(seconds)
+    point.time_from_start.nanosec = int(round((seconds - int(seconds)) * 1e9))
+    return JointTrajectory(joint_names=list(names), points=[point])
+
+
+def _arm_positions(joint_states):
+    msg = joint_states[-1][1]
+    return np.array([msg.position[msg.name.index(n)] for n in JOINT_NAMES])
+
+
+def test_arm_trajectory_reaches_its_goal_and_malformed_ones_are_rejected(youbot_sim, probe):
+    assert probe.call(Trigger, '/sim_node/reset', Trigger.Request()).success
+    joints = probe.collect(JointState, '/youbot/joint_states')
+    states = probe.collect(JointTrajectoryControllerState,
+                           '/youbot/arm_controller/controller_state')
+    pub = probe.node.create_publisher(JointTrajectory, '/youbot/arm_controller/joint_trajectory',
+                                      10)
+    wait_for(lambda: joints and states and pub.get_subscription_count() > 0, 20.0,
+             what='arm topics')
+    goal = (0.8, 0.6, 0.9, -0.5, 1.2)
+    pub.publish(_trajectory(goal, 2.0))
+    wait_for(lambda: states[-1][1].active, 10.0, what='the trajectory to start')
+    wait_for(lambda: not states[-1][1].active, 20.0, what='the trajectory to end')
+    time.sleep(0.5 / RTF)
+    assert _arm_positions(joints) == pytest.approx(goal, abs=2e-3)
+    tracked = [m for _, m in list(states) if m.active]
+    worst = max(max(abs(e) for e in m.error.positions) for m in tracked)
+    assert worst < 0.02                               # rad while moving
+    assert list(tracked[0].joint_names) == list(JOINT_NAMES)
+    # Malformed: the arm holds, the node lives on and logs each reason.
+    bad = [_trajectory(goal, 1.0, names=('arm_joint_1', 'elbow', 'arm_joint_3',
+                                         'arm_joint_4', 'arm_joint_5')),
+           _trajectory((math.nan, 0.0, 0.0, 0.0, 0.0), 1.0),
+           _trajectory((0.0, 2.5, 0.0, 0.0, 0.0), 1.0),
+           JointTrajectory(joint_names=list(JOINT_NAMES))]
+    for msg in bad:
+        pub.publish(msg)
+        time.sleep(0.3)                                # one log line each (throttle 0.2 s)
+    time.sleep(1.0 / RTF)
+    assert _arm_positions(joints) == pytest.approx(goal, abs=2e-3)
+    log = youbot_sim.output()
+    for reason in ("unknown joints ['elbow']", 'non-finite positions',
+                   'arm_joint_2 target 2.5000 is outside its limits', 'empty trajectory'):
+        assert f'trajectory rejected: {reason}' in log or reason in log, reason
+    assert youbot_sim.alive()
+    # ... and still follows a good one afterwards.
+    pub.publish(_trajectory(np.zeros(5), 2.0))
+    wait_for(lambda: np.abs(_arm_positions(joints)).max() < 2e-3, 20.0, what='the arm home')
