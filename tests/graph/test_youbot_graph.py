@@ -134,3 +134,73 @@ def test_arm_trajectory_reaches_its_goal_and_malformed_ones_are_rejected(youbot_
     # ... and still follows a good one afterwards.
     pub.publish(_trajectory(np.zeros(5), 2.0))
     wait_for(lambda: np.abs(_arm_positions(joints)).max() < 2e-3, 20.0, what='the arm home')
+
+
+def test_teleop_drives_the_base_in_every_direction(youbot_sim, probe, tmp_path):
+    """Holonomic teleop script on the youBot's cmd_vel, in simulated time: each leg moves the
+    base the way its key says (half speed: 0.1 m/s or 0.1 rad/s, for 1 s each). The script
+    opens with a 1 s stop: a process starting up on two cores can starve the simulator, which
+    then catches up in bursts that an open-loop script cannot follow."""
+    assert probe.call(Trigger, '/sim_node/reset', Trigger.Request()).success
+    odom = probe.collect(Odometry, '/youbot/odom')
+    wait_for(lambda: odom, 20.0, what='odometry')
+    teleop = NodeProcess('teleop', ['-r', '__ns:=/youbot', '-p', 'holonomic:=true',
+                                    '-p', 'use_sim_time:=true', '-p', 'publish_rate:=20.0',
+                                    '-p', 'script:=stop 1s, forward 1s, stop 0.5s, strafe_left 1s, '
+                                          'stop 0.5s, backward 1s, stop 0.5s, strafe_right 1s, '
+                                          'stop 0.5s, left 1s, stop 0.5s, right 1s, stop'],
+                         tmp_path)
+    try:
+        wait_for(lambda: not teleop.alive(), 60.0, what='the script to end')
+    finally:
+        teleop.stop()
+    time.sleep(0.5 / RTF)
+    # The legs, from the odometry afterwards: each run of motion between two rests.
+    history = [m for _, m in list(odom)]
+    moving = [_moving(m) for m in history]
+    legs, k = [], 1
+    while k < len(history):
+        if moving[k] and not moving[k - 1]:
+            end = next((j for j in range(k, len(history)) if not moving[j]), len(history) - 1)
+            a, b = _pose2d(history[k - 1]), _pose2d(history[end])
+            legs.append((b.x - a.x, b.y - a.y, b.yaw - a.yaw))
+            k = end
+        k += 1
+    assert len(legs) == 6, legs
+    log = teleop.output()
+    expected = [(0.1, 0, 0), (0, 0.1, 0), (-0.1, 0, 0), (0, -0.1, 0), (0, 0, 0.1), (0, 0, -0.1)]
+    for leg, want in zip(legs, expected):
+        assert leg == pytest.approx(want, abs=0.01), (legs, log)
+
+
+def _moving(msg):
+    t = msg.twist.twist
+    return max(abs(t.linear.x), abs(t.linear.y), abs(t.angular.z)) > 0.01
+
+
+def test_arm_tracking_can_be_analysed_from_a_bag(youbot_sim, probe, tmp_path):
+    from recording.analysis import to_markdown, write_report
+    topic = '/youbot/arm_controller/controller_state'
+    rec = NodeProcess('recorder', ['-p', f'output_dir:={tmp_path}', '-p', 'bag_name:=arm',
+                                   '-p', f'topics:=[{topic}, /youbot/odom]'], tmp_path)
+    try:
+        wait_for(lambda: 'recording /youbot/odom ' in rec.output(), 20.0, what='the recorder')
+        states = probe.collect(JointTrajectoryControllerState, topic)
+        pub = probe.node.create_publisher(JointTrajectory,
+                                          '/youbot/arm_controller/joint_trajectory', 10)
+        wait_for(lambda: states and pub.get_subscription_count() > 0, 20.0, what='the arm')
+        pub.publish(_trajectory((-0.7, 0.4, 1.0, 0.6, -1.0), 1.5))
+        wait_for(lambda: states[-1][1].active, 10.0, what='the trajectory to start')
+        wait_for(lambda: not states[-1][1].active, 20.0, what='the trajectory to end')
+        pub.publish(_trajectory(np.zeros(5), 1.5))
+        wait_for(lambda: states[-1][1].active, 10.0, what='the way back to start')
+        wait_for(lambda: not states[-1][1].active, 20.0, what='the way back to end')
+    finally:
+        assert rec.stop() == 0
+    report = write_report(tmp_path / 'arm', tmp_path / 'report')
+    rows = {t.joint: t for t in report.tracking if t.topic == topic}
+    assert sorted(rows) == list(JOINT_NAMES)
+    for row in rows.values():
+        assert row.samples >= 300                      # 100 Hz over more than 3 s
+        assert 0.0 < row.max_abs_error < 0.02 and row.rms_error < row.max_abs_error
+    assert '## Joint tracking' in to_markdown(report)
