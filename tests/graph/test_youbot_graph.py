@@ -204,3 +204,21 @@ def test_arm_tracking_can_be_analysed_from_a_bag(youbot_sim, probe, tmp_path):
         assert row.samples >= 300                      # 100 Hz over more than 3 s
         assert 0.0 < row.max_abs_error < 0.02 and row.rms_error < row.max_abs_error
     assert '## Joint tracking' in to_markdown(report)
+
+
+def test_arm_move_sends_a_trajectory_and_reports_the_result(youbot_sim, tmp_path):
+    ok = NodeProcess('arm_move', ['-r', '__ns:=/youbot', '-p',
+                                  'positions:=[0.3, 0.4, 0.5, 0.6, 0.7]', '-p', 'duration:=1.5'],
+                     tmp_path, name='arm_move_ok')
+    wait_for(lambda: not ok.alive(), 60.0, what='arm_move to finish')
+    assert ok.stop() == 0 and 'reached the target' in ok.output()
+    bad = NodeProcess('arm_move', ['-r', '__ns:=/youbot', '-p',
+                                   'positions:=[0.3, 2.4, 0.5, 0.6, 0.7]'],
+                      tmp_path, name='arm_move_bad')
+    wait_for(lambda: not bad.alive(), 60.0, what='arm_move to give up')
+    assert bad.stop() == 1 and 'did not start the trajectory' in bad.output()
+    assert 'arm_joint_2 target 2.4000 is outside' in youbot_sim.output()
+    home = NodeProcess('arm_move', ['-r', '__ns:=/youbot', '-p', 'duration:=1.5'], tmp_path,
+                       name='arm_move_home')
+    wait_for(lambda: not home.alive(), 60.0, what='arm_move home')
+    assert home.stop() == 0

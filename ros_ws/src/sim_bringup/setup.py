@@ -23,6 +23,7 @@ setup(
     entry_points={
         'console_scripts': [
             'drive_check = sim_bringup.drive_check:main',
+            'arm_move = sim_bringup.arm_move:main',
         ],
     },
 )

@@ -1,0 +1,116 @@
+"""Send one joint trajectory to an arm controller and report where the arm ended up.
+
+    arm_move --ros-args -r __ns:=/youbot -p positions:=[0.5,0.6,0.9,0.8,0.0] -p duration:=2.0
+
+Publishes on ``<controller>/joint_trajectory`` once the simulator listens, follows
+``<controller>/controller_state`` until the motion ends, and exits 0 when every joint is within
+``tolerance`` of its target (1 when not, or when the simulator rejected the trajectory).
+"""
+from __future__ import annotations
+
+import sys
+import time
+
+import rclpy
+from rcl_interfaces.msg import ParameterDescriptor
+from rclpy.executors import ExternalShutdownException
+from rclpy.node import Node
+from rclpy.qos import QoSProfile
+from sim_interfaces.msg import JointTrajectoryControllerState
+from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
+
+from controllers.params import float_range
+from controllers.youbot_arm import JOINT_NAMES
+
+
+class ArmMove(Node):
+
+    def __init__(self, **kwargs) -> None:
+        super().__init__('arm_move', **kwargs)
+        ro = ParameterDescriptor
+        self.declare_parameter('controller', 'arm_controller', ro(
+            description='Controller name: topics <controller>/joint_trajectory and '
+                        '<controller>/controller_state', read_only=True))
+        self.declare_parameter('joint_names', list(JOINT_NAMES), ro(
+            description='Joints of the trajectory', read_only=True))
+        self.declare_parameter('positions', [0.0] * len(JOINT_NAMES), ro(
+            description='Target positions, one per joint [rad or m]', read_only=True))
+        self.declare_parameter('duration', 2.0, float_range('Time to reach the target [s]',
+                                                            0.01, 600.0))
+        self.declare_parameter('tolerance', 0.01, float_range(
+            'Largest accepted final error per joint [rad or m]', 1e-6, 1.0))
+        get = lambda name: self.get_parameter(name).value  # noqa: E731
+        names, positions = list(get('joint_names')), [float(v) for v in get('positions')]
+        if len(names) != len(positions):
+            raise ValueError(f'{len(positions)} positions for {len(names)} joints')
+        self.names, self.target, self.tolerance = names, positions, get('tolerance')
+        point = JointTrajectoryPoint(positions=positions)
+        ns = round(get('duration') * 1e9)
+        point.time_from_start.sec, point.time_from_start.nanosec = divmod(ns, 1_000_000_000)
+        self.trajectory = JointTrajectory(joint_names=names, points=[point])
+        controller = get('controller')
+        self.pub = self.create_publisher(JointTrajectory, f'{controller}/joint_trajectory',
+                                         QoSProfile(depth=10))
+        self.create_subscription(JointTrajectoryControllerState,
+                                 f'{controller}/controller_state', self._on_state,
+                                 QoSProfile(depth=10))
+        self.sent_at = None
+        self.started = False
+        self.result = None
+
+    def _on_state(self, msg: JointTrajectoryControllerState) -> None:
+        if self.sent_at is None or self.result is not None:
+            return
+        self.started |= msg.active
+        if not (self.started and not msg.active):
+            return
+        index = {n: i for i, n in enumerate(msg.joint_names)}
+        errors = {n: abs(msg.feedback.positions[index[n]] - t)
+                  for n, t in zip(self.names, self.target)}
+        worst = max(errors, key=errors.get)
+        text = ', '.join(f'{n} {e:.4f}' for n, e in errors.items())
+        if errors[worst] <= self.tolerance:
+            self.get_logger().info(f'reached the target: errors {text}')
+            self.result = 0
+        else:
+            self.get_logger().error(f'target missed: errors {text} (tolerance '
+                                    f'{self.tolerance})')
+            self.result = 1
+
+
+def main(args=None) -> int:
+    rclpy.init(args=args)
+    try:
+        node = ArmMove()
+    except (ValueError, rclpy.exceptions.ParameterException) as exc:
+        rclpy.logging.get_logger('arm_move').fatal(f'cannot start: {exc}')
+        rclpy.try_shutdown()
+        return 1
+    code = 1
+    try:
+        end = time.monotonic() + 30.0
+        while rclpy.ok() and node.pub.get_subscription_count() == 0:
+            if time.monotonic() > end:
+                node.get_logger().error(f'nobody listens on {node.pub.topic_name}')
+                return 1
+            rclpy.spin_once(node, timeout_sec=0.05)
+        node.pub.publish(node.trajectory)
+        node.sent_at = time.monotonic()
+        node.get_logger().info(f'sent {node.names} -> {node.target}')
+        while rclpy.ok() and node.result is None:
+            rclpy.spin_once(node, timeout_sec=0.1)
+            if not node.started and time.monotonic() - node.sent_at > 5.0:
+                node.get_logger().error('the controller did not start the trajectory (rejected?'
+                                        ' see the simulator log)')
+                return 1
+        code = node.result if node.result is not None else 1
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    finally:
+        node.destroy_node()
+        rclpy.try_shutdown()
+    return code
+
+
+if __name__ == '__main__':
+    sys.exit(main())
