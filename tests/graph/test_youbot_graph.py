@@ -146,9 +146,10 @@ def test_teleop_drives_the_base_in_every_direction(youbot_sim, probe, tmp_path):
     wait_for(lambda: odom, 20.0, what='odometry')
     teleop = NodeProcess('teleop', ['-r', '__ns:=/youbot', '-p', 'holonomic:=true',
                                     '-p', 'use_sim_time:=true', '-p', 'publish_rate:=20.0',
-                                    '-p', 'script:=stop 1s, forward 1s, stop 0.5s, strafe_left 1s, '
-                                          'stop 0.5s, backward 1s, stop 0.5s, strafe_right 1s, '
-                                          'stop 0.5s, left 1s, stop 0.5s, right 1s, stop'],
+                                    '-p', 'script:=stop 1s, forward 1s, stop 0.5s, '
+                                          'strafe_left 1s, stop 0.5s, backward 1s, stop 0.5s, '
+                                          'strafe_right 1s, stop 0.5s, left 1s, stop 0.5s, '
+                                          'right 1s, stop'],
                          tmp_path)
     try:
         wait_for(lambda: not teleop.alive(), 60.0, what='the script to end')
