@@ -174,8 +174,10 @@ class SimRobot:
     def joint_states(self) -> JointStates:
         states = self._p.getJointStates(self.body, self.movable)
         scale = self._report_scale
+        # A virtual omni-wheel turns 1/sqrt(2) as fast with sqrt(2) times the torque (same power).
         return JointStates(self.joint_names, [s[0] * k for s, k in zip(states, scale)],
-                           [s[1] * k for s, k in zip(states, scale)], [s[3] for s in states])
+                           [s[1] * k for s, k in zip(states, scale)],
+                           [s[3] / k for s, k in zip(states, scale)])
 
     def joint_positions(self, joints: Sequence[str]) -> np.ndarray:
         states = self._p.getJointStates(self.body, [self.joint_index[j] for j in joints])
