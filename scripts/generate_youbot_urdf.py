@@ -20,7 +20,9 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT / 'controllers'))
+sys.path.insert(0, str(ROOT / 'scripts'))
 
+import urdf_writer as uw  # noqa: E402
 from controllers.mecanum import WHEEL_RADIUS_M  # noqa: E402
 from controllers.youbot_arm import (ARM_BASE_IN_BASE_LINK_M, CRAIG_ROWS_DEG_M,  # noqa: E402
                                     DATASHEET_LIMITS_DEG, GRIPPER_TCP_OFFSET_M,
@@ -58,139 +60,49 @@ ARM_SHAPES = (
 )
 
 
-def _num(v: float) -> str:
-    if abs(v) < 1e-15:
-        return '0'
-    return f'{v:.17g}'
-
-
-def _vec(v) -> str:
-    return ' '.join(_num(float(x)) for x in v)
-
-
-def _rpy(rot: np.ndarray) -> tuple:
-    """URDF roll-pitch-yaw (R = Rz(yaw) Ry(pitch) Rx(roll))."""
-    pitch = math.asin(max(-1.0, min(1.0, -rot[2, 0])))
-    if abs(rot[2, 0]) < 1.0 - 1e-12:
-        roll = math.atan2(rot[2, 1], rot[2, 2])
-        yaw = math.atan2(rot[1, 0], rot[0, 0])
-    else:  # gimbal lock: put everything in yaw
-        roll = 0.0
-        yaw = math.atan2(-rot[0, 1], rot[1, 1])
-    return roll, pitch, yaw
-
-
-def _rot_x(a: float) -> np.ndarray:
-    c, s = math.cos(a), math.sin(a)
-    return np.array([[1.0, 0.0, 0.0], [0.0, c, -s], [0.0, s, c]])
-
-
-def _rot_z(a: float) -> np.ndarray:
-    c, s = math.cos(a), math.sin(a)
-    return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
-
-
-def _inertia(kind: str, size: tuple, mass: float) -> tuple:
-    if kind == 'box':
-        x, y, z = size
-        return (mass * (y * y + z * z) / 12, mass * (x * x + z * z) / 12,
-                mass * (x * x + y * y) / 12)
-    if kind == 'sphere':
-        i = 2.0 / 5.0 * mass * size[0] ** 2
-        return (i, i, i)
-    r, h = size                       # cylinder along z
-    side = mass * (3 * r * r + h * h) / 12
-    return (side, side, mass * r * r / 2)
-
-
-def _geometry(kind: str, size: tuple) -> str:
-    if kind == 'box':
-        return f'<box size="{_vec(size)}"/>'
-    if kind == 'sphere':
-        return f'<sphere radius="{_num(size[0])}"/>'
-    return f'<cylinder radius="{_num(size[0])}" length="{_num(size[1])}"/>'
-
-
-def _link(name: str, mass: float, shape=None, material: str = 'grey', collision: bool = True,
-          visual_shape=None, inertia=None) -> str:
-    lines = [f'  <link name="{name}">']
-    if shape is not None:
-        kind, size, centre = shape
-        vkind, vsize, vrpy = visual_shape or (kind, size, (0.0, 0.0, 0.0))
-        lines += ['    <visual>', f'      <origin xyz="{_vec(centre)}" rpy="{_vec(vrpy)}"/>',
-                  f'      <geometry>{_geometry(vkind, vsize)}</geometry>',
-                  f'      <material name="{material}"/>', '    </visual>']
-        if collision:
-            lines += ['    <collision>', f'      <origin xyz="{_vec(centre)}" rpy="0 0 0"/>',
-                      f'      <geometry>{_geometry(kind, size)}</geometry>', '    </collision>']
-        ixx, iyy, izz = inertia or _inertia(kind, size, mass)
-    else:
-        centre = (0.0, 0.0, 0.0)
-        ixx = iyy = izz = 1e-9
-    lines += ['    <inertial>', f'      <origin xyz="{_vec(centre)}" rpy="0 0 0"/>',
-              f'      <mass value="{_num(mass)}"/>',
-              f'      <inertia ixx="{ixx:.6g}" ixy="0" ixz="0" iyy="{iyy:.6g}" iyz="0" '
-              f'izz="{izz:.6g}"/>', '    </inertial>', '  </link>']
-    return '\n'.join(lines)
-
-
-def _joint(name: str, kind: str, parent: str, child: str, xyz, rpy=(0.0, 0.0, 0.0),
-           axis=None, limit=None) -> str:
-    lines = [f'  <joint name="{name}" type="{kind}">', f'    <parent link="{parent}"/>',
-             f'    <child link="{child}"/>', f'    <origin xyz="{_vec(xyz)}" rpy="{_vec(rpy)}"/>']
-    if axis is not None:
-        lines.append(f'    <axis xyz="{_vec(axis)}"/>')
-    if limit is not None:
-        lower, upper, effort, velocity = limit
-        bounds = '' if lower is None else f'lower="{_num(lower)}" upper="{_num(upper)}" '
-        lines.append(f'    <limit {bounds}effort="{_num(effort)}" velocity="{_num(velocity)}"/>')
-    lines.append('  </joint>')
-    return '\n'.join(lines)
-
-
 def _base() -> list:
-    parts = [_link('base_link', BASE_MASS_KG, ('box', BASE_SIZE_M, (0.0, 0.0, 0.0)), 'dark')]
-    wheel_inertia = _inertia('cylinder', (WHEEL_RADIUS_M, WHEEL_WIDTH_M), WHEEL_MASS_KG)
+    parts = [uw.link('base_link', BASE_MASS_KG, ('box', BASE_SIZE_M, (0.0, 0.0, 0.0)), 'dark')]
+    wheel_inertia = uw.inertia('cylinder', (WHEEL_RADIUS_M, WHEEL_WIDTH_M), WHEEL_MASS_KG)
     for name, sx, sy, yaw_deg in WHEELS:
         # The link's y axis is the spin axis: anisotropic friction [1, 0, 1] leaves the contact
         # free along it, and a rotation about y keeps that direction fixed.
         side, _, axle = wheel_inertia
-        parts.append(_link(f'wheel_link_{name}', WHEEL_MASS_KG,
+        parts.append(uw.link(f'wheel_link_{name}', WHEEL_MASS_KG,
                            ('sphere', (WHEEL_RADIUS_M,), (0.0, 0.0, 0.0)), 'black',
                            visual_shape=('cylinder', (WHEEL_RADIUS_M, WHEEL_WIDTH_M),
                                          (math.pi / 2, 0.0, 0.0)),
-                           inertia=(side, axle, side)))
-        parts.append(_joint(f'wheel_joint_{name}', 'continuous', 'base_link',
+                           inertia_diag=(side, axle, side)))
+        parts.append(uw.joint(f'wheel_joint_{name}', 'continuous', 'base_link',
                             f'wheel_link_{name}', (sx * WHEEL_X_M, sy * WHEEL_Y_M, WHEEL_Z_M),
                             (0.0, 0.0, math.radians(yaw_deg)), (0.0, 1.0, 0.0),
                             (None, None, 20.0, 30.0)))
     plate = ('box', (0.25, 0.32, 0.01), (0.0, 0.0, 0.005))
-    parts.append(_link('plate_link', 0.3, plate, 'plate'))
-    parts.append(_joint('plate_joint', 'fixed', 'base_link', 'plate_link', PLATE_M))
+    parts.append(uw.link('plate_link', 0.3, plate, 'plate'))
+    parts.append(uw.joint('plate_joint', 'fixed', 'base_link', 'plate_link', PLATE_M))
     return parts
 
 
 def _arm() -> list:
-    parts = [_link('arm_link_0', ARM_MASSES_KG[0], ARM_SHAPES[0], 'orange')]
-    parts.append(_joint('arm_joint_0', 'fixed', 'base_link', 'arm_link_0', ARM_MOUNT_M))
+    parts = [uw.link('arm_link_0', ARM_MASSES_KG[0], ARM_SHAPES[0], 'orange')]
+    parts.append(uw.joint('arm_joint_0', 'fixed', 'base_link', 'arm_link_0', ARM_MOUNT_M))
     base_in_mount = np.subtract(ARM_BASE_IN_BASE_LINK_M, ARM_MOUNT_M)
-    parts.append(_link('arm_base_frame', FRAME_MASS_KG))
-    parts.append(_joint('arm_base_frame_joint', 'fixed', 'arm_link_0', 'arm_base_frame',
+    parts.append(uw.link('arm_base_frame', FRAME_MASS_KG))
+    parts.append(uw.joint('arm_base_frame_joint', 'fixed', 'arm_link_0', 'arm_base_frame',
                         base_in_mount))
     for i, ((alpha_deg, a, d), (lo, hi)) in enumerate(zip(CRAIG_ROWS_DEG_M,
                                                            DATASHEET_LIMITS_DEG)):
         # Craig: RotX(alpha) TransX(a) RotZ(theta) TransZ(d) with theta = sign*phi + offset
         # equals the fixed origin RotX(alpha) TransX(a) TransZ(d) RotZ(offset), then a turn by
         # phi about (0, 0, sign).
-        rot = _rot_x(math.radians(alpha_deg)) @ _rot_z(float(THETA_OFFSET_RAD[i]))
-        xyz = np.array([a, 0.0, 0.0]) + _rot_x(math.radians(alpha_deg)) @ np.array([0, 0, d])
+        rot = uw.rot_x(math.radians(alpha_deg)) @ uw.rot_z(float(THETA_OFFSET_RAD[i]))
+        xyz = np.array([a, 0.0, 0.0]) + uw.rot_x(math.radians(alpha_deg)) @ np.array([0, 0, d])
         if i == 0:
             xyz = xyz + base_in_mount
         parent = f'arm_link_{i}'
-        parts.append(_link(f'arm_link_{i + 1}', ARM_MASSES_KG[i + 1], ARM_SHAPES[i + 1],
+        parts.append(uw.link(f'arm_link_{i + 1}', ARM_MASSES_KG[i + 1], ARM_SHAPES[i + 1],
                            'orange' if i % 2 else 'grey'))
-        parts.append(_joint(JOINT_NAMES[i], 'revolute', parent, f'arm_link_{i + 1}', xyz,
-                            _rpy(rot), (0.0, 0.0, float(THETA_SIGN[i])),
+        parts.append(uw.joint(JOINT_NAMES[i], 'revolute', parent, f'arm_link_{i + 1}', xyz,
+                            uw.rpy(rot), (0.0, 0.0, float(THETA_SIGN[i])),
                             (math.radians(lo), math.radians(hi), ARM_EFFORT_NM[i],
                              JOINT_VELOCITY_LIMIT)))
     return parts
@@ -198,17 +110,17 @@ def _arm() -> list:
 
 def _gripper() -> list:
     palm = ('box', (0.04, 0.1, 0.045), (0.0, 0.0, 0.0225))
-    parts = [_link('gripper_palm_link', PALM_MASS_KG, palm, 'dark'),
-             _joint('gripper_palm_joint', 'fixed', 'arm_link_5', 'gripper_palm_link',
+    parts = [uw.link('gripper_palm_link', PALM_MASS_KG, palm, 'dark'),
+             uw.joint('gripper_palm_joint', 'fixed', 'arm_link_5', 'gripper_palm_link',
                     (0.0, 0.0, 0.0))]
     for side, sign in (('l', 1.0), ('r', -1.0)):
         finger = ('box', (0.02, 0.01, 0.07), (0.0, sign * 0.005, 0.035))
-        parts.append(_link(f'gripper_finger_link_{side}', FINGER_MASS_KG, finger, 'grey'))
-        parts.append(_joint(f'gripper_finger_joint_{side}', 'prismatic', 'gripper_palm_link',
+        parts.append(uw.link(f'gripper_finger_link_{side}', FINGER_MASS_KG, finger, 'grey'))
+        parts.append(uw.joint(f'gripper_finger_joint_{side}', 'prismatic', 'gripper_palm_link',
                             f'gripper_finger_link_{side}', (0.0, 0.0, 0.045), axis=(0, sign, 0),
                             limit=(0.0, FINGER_TRAVEL_M, FINGER_EFFORT_N, FINGER_VELOCITY_MPS)))
-    parts.append(_link('gripper_tcp', FRAME_MASS_KG))
-    parts.append(_joint('gripper_tcp_joint', 'fixed', 'gripper_palm_link', 'gripper_tcp',
+    parts.append(uw.link('gripper_tcp', FRAME_MASS_KG))
+    parts.append(uw.joint('gripper_tcp_joint', 'fixed', 'gripper_palm_link', 'gripper_tcp',
                         (0.0, 0.0, GRIPPER_TCP_OFFSET_M)))
     return parts
 
