@@ -1,5 +1,5 @@
-"""youBot arm IK over 1000 targets made by FK of random in-limit configurations: the table's
-chain (flange, theta) and the kinematics node's core (gripper_tcp, description joints)."""
+"""Arm IK over 1000 targets made by FK of random in-limit configurations: the youBot's MDH
+chain (flange, theta), its kinematics node core (gripper_tcp), and the JAKA Zu 12."""
 import statistics
 import sys
 import time
@@ -9,6 +9,8 @@ import numpy as np
 from controllers.youbot_arm import youbot_arm_chain
 from controllers.youbot_ik import solve_ik
 from controllers.youbot_kinematics import YoubotKinematics
+from controllers.zu12_arm import zu12_chain
+from controllers.zu12_ik import solve_ik as solve_zu12
 
 N = 1000
 
@@ -63,6 +65,24 @@ def main() -> int:
             failures += 1
     ok &= _report('kinematics node core (gripper_tcp in base_link)', times, errors, in_limits,
                   failures, not kin.ik(far).success)
+
+    zu12 = zu12_chain()
+    lower, upper = zu12.limits
+    targets = [zu12.fk(rng.uniform(lower, upper)) for _ in range(N)]
+    times, errors, failures, in_limits = [], [], 0, True
+    for target in targets:
+        seed = rng.uniform(lower, upper)
+        start = time.perf_counter()
+        result = solve_zu12(target, seed, zu12)
+        times.append(time.perf_counter() - start)
+        if result.success:
+            errors.append(result.position_error)
+            in_limits &= zu12.within_limits(result.q)
+        else:
+            failures += 1
+    far[:3, 3] = (2.0, 0.0, 0.5)
+    ok &= _report('JAKA Zu 12 (flange, full 6-DOF poses)', times, errors, in_limits, failures,
+                  not solve_zu12(far).success)
     return 0 if ok else 1
 
 

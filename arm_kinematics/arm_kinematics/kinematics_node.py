@@ -25,12 +25,13 @@ from sensor_msgs.msg import JointState
 from sim_interfaces.srv import SolveIK
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
+from controllers.arm_kinematics import motion_duration
 from controllers.params import float_range
 from controllers.transforms import matrix_to_quaternion, pose_matrix
-from controllers.youbot_kinematics import (TOOL_FRAMES, YoubotKinematics, in_base_link,
-                                           motion_duration)
+from controllers.youbot_kinematics import YoubotKinematics
+from controllers.zu12_kinematics import Zu12Kinematics
 
-ARMS = {'youbot': YoubotKinematics}
+ARMS = {'youbot': (YoubotKinematics, 'gripper_tcp'), 'zu12': (Zu12Kinematics, 'suction_tcp')}
 
 
 class KinematicsConfigError(ValueError):
@@ -44,8 +45,13 @@ class KinematicsNode(Node):
         ro = ParameterDescriptor
         self.declare_parameter('arm', 'youbot', ro(
             description=f'Which arm: {sorted(ARMS)}', read_only=True))
-        self.declare_parameter('tool_frame', 'gripper_tcp', ro(
-            description=f'Frame whose pose is published and solved for: {sorted(TOOL_FRAMES)}',
+        self.declare_parameter('tool_frame', '', ro(
+            description='Frame whose pose is published and solved for; empty: the arm\'s '
+                        'gripping point (youbot gripper_tcp, zu12 suction_tcp)',
+            read_only=True))
+        self.declare_parameter('base_pose', [0.0, 0.0, 0.0, 0.0], ro(
+            description='x, y, z, yaw of a fixed arm\'s base_link in the world (the world '
+                        'file\'s pose): targets may then be given in "world"',
             read_only=True))
         self.declare_parameter('frame_prefix', '', ro(
             description='Prefix of the robot\'s frame names (as in the world file)',
@@ -57,13 +63,20 @@ class KinematicsNode(Node):
         self.declare_parameter('trajectory_topic', 'arm_controller/joint_trajectory', ro(
             description='Where IK motions go (relative: in the node namespace)', read_only=True))
         arm = self.get_parameter('arm').value
-        tool = self.get_parameter('tool_frame').value
         if arm not in ARMS:
             raise KinematicsConfigError(f'arm "{arm}" unknown; known: {sorted(ARMS)}')
-        if tool not in TOOL_FRAMES:
-            raise KinematicsConfigError(f'tool_frame "{tool}" unknown; known: '
-                                        f'{sorted(TOOL_FRAMES)}')
-        self._kin = ARMS[arm](tool)
+        kinematics, default_tool = ARMS[arm]
+        tool = self.get_parameter('tool_frame').value or default_tool
+        base_pose = [float(v) for v in self.get_parameter('base_pose').value]
+        if len(base_pose) != 4 or not all(np.isfinite(base_pose)):
+            raise KinematicsConfigError(f'base_pose must be 4 finite numbers, got {base_pose}')
+        try:
+            if arm == 'zu12':
+                self._kin = kinematics(tool, world_to_base=_planar_pose(*base_pose))
+            else:
+                self._kin = kinematics(tool)
+        except ValueError as exc:
+            raise KinematicsConfigError(str(exc)) from None
         self._prefix = self.get_parameter('frame_prefix').value
         self._positions: Optional[np.ndarray] = None
         reliable = QoSProfile(depth=10)
@@ -125,7 +138,7 @@ class KinematicsNode(Node):
         p, o = target.pose.position, target.pose.orientation
         try:
             pose = pose_matrix((p.x, p.y, p.z), (o.x, o.y, o.z, o.w))
-            pose = in_base_link(target.header.frame_id, pose, self._prefix)
+            pose = self._kin.in_base_link(target.header.frame_id, pose, self._prefix)
         except (KeyError, ValueError) as exc:
             return self._fail(f'bad target: {exc.args[0]}')
         if not np.all(np.isfinite(pose)):
@@ -158,6 +171,11 @@ class KinematicsNode(Node):
     def _fail(self, message: str):
         self.get_logger().error(f'IK failed: {message}')
         return False, message, None, (float('inf'), float('inf')), None
+
+
+def _planar_pose(x: float, y: float, z: float, yaw: float) -> np.ndarray:
+    c, s = np.cos(yaw), np.sin(yaw)
+    return np.array([[c, -s, 0.0, x], [s, c, 0.0, y], [0.0, 0.0, 1.0, z], [0.0, 0.0, 0.0, 1.0]])
 
 
 def _fill_pose(msg: PoseStamped, pose: np.ndarray) -> None:

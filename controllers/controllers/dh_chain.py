@@ -2,12 +2,24 @@
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
-from typing import List, Sequence, Tuple
+from dataclasses import dataclass, field
+from typing import List, Optional, Sequence, Tuple
 
 import numpy as np
 
 MODIFIED, STANDARD = 'modified', 'standard'
+
+
+@dataclass
+class IKResult:
+    """An inverse-kinematics answer: joint values on success, else the reason."""
+
+    success: bool
+    q: Optional[np.ndarray] = None
+    reason: str = ''
+    position_error: float = math.inf
+    rotation_error: float = math.inf
+    candidates: List[np.ndarray] = field(default_factory=list)
 
 
 @dataclass(frozen=True)

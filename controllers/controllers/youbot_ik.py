@@ -9,27 +9,16 @@ turned by pi, elbow up or down).
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
-from typing import List, Optional, Sequence
+from typing import Optional, Sequence
 
 import numpy as np
 
-from controllers.dh_chain import DHChain
+from controllers.dh_chain import DHChain, IKResult
 from controllers.youbot_arm import youbot_arm_chain
 
 _SHOULDER_R, _SHOULDER_Z = 0.033, 0.147     # joint 2's axis in the arm plane
 _L2, _L3, _WRIST = 0.155, 0.135, 0.113       # links 2 and 3, joint 4 to the flange
 PLANE_TOLERANCE = 1e-6                       # |approach . plane normal| accepted
-
-
-@dataclass
-class IKResult:
-    success: bool
-    q: Optional[np.ndarray] = None
-    reason: str = ''
-    position_error: float = math.inf
-    rotation_error: float = math.inf
-    candidates: List[np.ndarray] = field(default_factory=list)
 
 
 def _wrap(a: float) -> float:

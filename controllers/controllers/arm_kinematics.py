@@ -1,0 +1,106 @@
+"""Arm kinematics in a robot description's terms: joint positions as the description (and
+/joint_states) gives them, poses of a tool frame in base_link (or another known frame).
+
+A chain of DH frames, a conversion between its joint values and the description's, where the
+chain's frame 0 sits in base_link, the tool frames on the last DH frame, and an IK solver for
+the chain. The youBot and the Zu 12 fill these in (youbot_kinematics.py, zu12_kinematics.py).
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Callable, Dict, Optional, Sequence
+
+import numpy as np
+
+from controllers.dh_chain import DHChain, IKResult
+from controllers.transforms import rotation_angle
+
+Solver = Callable[[np.ndarray, Optional[np.ndarray], DHChain], IKResult]
+Convert = Callable[[Sequence[float]], np.ndarray]
+
+
+@dataclass
+class ArmSolution:
+    success: bool
+    positions: Optional[np.ndarray] = None     # description convention, joint_names order
+    reason: str = ''
+    position_error: float = math.inf
+    rotation_error: float = math.inf
+
+
+def _identity(q: Sequence[float]) -> np.ndarray:
+    return np.asarray(q, float)
+
+
+class ArmKinematics:
+    """FK and IK of one arm for one of its tool frames."""
+
+    def __init__(self, chain: DHChain, solver: Solver, joint_names: Sequence[str],
+                 velocity_limits: Sequence[float], base: np.ndarray,
+                 tool_frames: Dict[str, np.ndarray], tool_frame: str,
+                 reference_frames: Dict[str, np.ndarray],
+                 to_chain: Convert = _identity, from_chain: Convert = _identity) -> None:
+        if tool_frame not in tool_frames:
+            raise ValueError(f'unknown tool frame "{tool_frame}"; known: {sorted(tool_frames)}')
+        self.chain, self._solver = chain, solver
+        self.joint_names = tuple(joint_names)
+        self.velocity_limits = np.asarray(velocity_limits, float)
+        self.tool_frame = tool_frame
+        self.tool_frames = dict(tool_frames)
+        self.reference_frames = dict(reference_frames)
+        self._tool = tool_frames[tool_frame]
+        self._tool_inv = np.linalg.inv(self._tool)
+        self._base = np.asarray(base, float)
+        self._base_inv = np.linalg.inv(self._base)
+        self._to_chain, self._from_chain = to_chain, from_chain
+        lower, upper = chain.limits
+        ends = np.sort(np.stack([from_chain(lower), from_chain(upper)]), 0)
+        self.lower, self.upper = ends[0], ends[1]
+
+    def fk(self, positions: Sequence[float]) -> np.ndarray:
+        """4x4 pose of the tool frame in base_link."""
+        return self._base @ self.chain.fk(self._to_chain(positions)) @ self._tool
+
+    def ik(self, target: np.ndarray, seed: Optional[Sequence[float]] = None) -> ArmSolution:
+        """Joint positions that put the tool frame at ``target`` (4x4 in base_link), nearest
+        to ``seed``; a failure names why (out of reach, orientation, limits)."""
+        target = np.asarray(target, float)
+        if target.shape != (4, 4) or not np.all(np.isfinite(target)):
+            return ArmSolution(False, reason='target must be a finite 4x4 pose')
+        flange = self._base_inv @ target @ self._tool_inv
+        seed_chain = None if seed is None else self._to_chain(seed)
+        result = self._solver(flange, seed_chain, self.chain)
+        if not result.success:
+            return ArmSolution(False, reason=result.reason)
+        positions = self._from_chain(result.q)
+        reached = self.fk(positions)
+        return ArmSolution(True, positions, '',
+                           float(np.linalg.norm(reached[:3, 3] - target[:3, 3])),
+                           rotation_angle(reached[:3, :3].T @ target[:3, :3]))
+
+    def within_limits(self, positions: Sequence[float], tol: float = 1e-9) -> bool:
+        q = np.asarray(positions, float)
+        return bool(np.all(q >= self.lower - tol) and np.all(q <= self.upper + tol))
+
+    def in_base_link(self, frame: str, pose: np.ndarray, prefix: str = '') -> np.ndarray:
+        """A pose given in one of the reference frames (with the robot's frame prefix; empty
+        means base_link) as a pose in base_link. Raises KeyError for other frames."""
+        name = frame[len(prefix):] if prefix and frame.startswith(prefix) else frame
+        name = name or 'base_link'
+        if name not in self.reference_frames:
+            known = [prefix + f if f != 'world' else f for f in self.reference_frames]
+            raise KeyError(f'unknown frame "{frame}": targets must be given in {known} '
+                           '(no tf2 lookup here)')
+        return self.reference_frames[name] @ np.asarray(pose, float)
+
+
+def motion_duration(start: Sequence[float], goal: Sequence[float],
+                    velocity_limits: Sequence[float], scaling: float,
+                    min_duration: float = 0.5) -> float:
+    """Duration of a rest-to-rest cubic move whose peak joint speed (1.5x the average) stays
+    within ``scaling`` times the velocity limits."""
+    if not 0.0 < scaling <= 1.0:
+        raise ValueError(f'velocity scaling must be within (0, 1], got {scaling}')
+    step = np.abs(np.subtract(goal, start))
+    return max(min_duration, float(np.max(1.5 * step / (np.asarray(velocity_limits) * scaling))))

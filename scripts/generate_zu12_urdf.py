@@ -1,0 +1,105 @@
+#!/usr/bin/env python3
+"""Write robot_description/urdf/zu12.urdf from the JAKA Zu 12's standard DH table.
+
+Standard DH puts joint i's rotation before the link's fixed part: T(i-1, i) = RotZ(theta_i)
+[TransZ(d_i) TransX(a_i) RotX(alpha_i)]. In the URDF, link_i is frame i-1 turned by theta_i, and
+joint i+1's origin is the fixed part of row i, so `flange` (link_6 plus row 6's fixed part) is
+the table's frame 6 and the joint positions are the table's theta (ROBOT_MODELS.md §4).
+tests/unit/test_zu12.py fails if the committed file differs from what this script writes.
+
+    python3 scripts/generate_zu12_urdf.py [--check]
+"""
+from __future__ import annotations
+
+import argparse
+import math
+import sys
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parent.parent
+sys.path.insert(0, str(ROOT / 'controllers'))
+sys.path.insert(0, str(ROOT / 'scripts'))
+
+import urdf_writer as uw  # noqa: E402
+from controllers.zu12_arm import (JOINT_NAMES, JOINT_VELOCITY_LIMITS, LIMITS_DEG,  # noqa: E402
+                                  SUCTION_TCP_OFFSET_M, flange_offset)
+
+OUT = ROOT / 'robot_description' / 'urdf' / 'zu12.urdf'
+
+# About 41 kg in all (the vendor's figure), spread over the links; efforts of the joint sizes.
+BASE_MASS_KG = 4.0
+LINK_MASSES_KG = (6.0, 10.0, 5.0, 2.0, 2.0, 1.0)
+EFFORTS_NM = (330.0, 330.0, 150.0, 36.0, 36.0, 36.0)
+SUCTION_MASS_KG = 0.3
+FRAME_MASS_KG = 1e-3
+# Each link's shape in its own URDF frame: (kind, size, centre); it joins the joint to the next.
+LINK_SHAPES = (
+    ('cylinder', (0.07, 0.09), (0.0, 0.0, 0.0975)),
+    ('box', (0.70, 0.10, 0.11), (0.2975, 0.0, 0.0)),
+    ('box', (0.64, 0.08, 0.08), (0.2858, 0.0, 0.0)),
+    ('cylinder', (0.045, 0.1315), (0.0, 0.0, -0.06575)),
+    ('cylinder', (0.045, 0.115), (0.0, 0.0, 0.0575)),
+    ('cylinder', (0.04, 0.1035), (0.0, 0.0, 0.05175)),
+)
+
+HEADER = '''<?xml version="1.0"?>
+<!--
+  JAKA Zu 12, written by scripts/generate_zu12_urdf.py from the manufacturer's standard DH
+  table (ROBOT_MODELS.md §4); do not edit by hand. base_link on the floor; joint positions are
+  the table's theta (all offsets 0) with the published ranges and speeds; `flange` is the
+  table's frame 6, `suction_tcp` the contact point of the suction tool on the flange's z axis.
+  Masses spread the vendor's 41 kg over the links; inertias are solid-shape values.
+-->
+<robot name="zu12">
+  <material name="white"><color rgba="0.92 0.92 0.92 1.0"/></material>
+  <material name="grey"><color rgba="0.55 0.55 0.58 1.0"/></material>
+  <material name="dark"><color rgba="0.2 0.2 0.22 1.0"/></material>
+'''
+
+
+def _parts() -> list:
+    parts = [uw.link('base_link', BASE_MASS_KG, ('cylinder', (0.08, 0.05), (0.0, 0.0, 0.025)),
+                     'grey')]
+    parent, origin = 'base_link', ((0.0, 0.0, 0.0), (0.0, 0.0, 0.0))
+    for i, name in enumerate(JOINT_NAMES):
+        lo, hi = (math.radians(v) for v in LIMITS_DEG[i])
+        child = f'link_{i + 1}'
+        parts.append(uw.link(child, LINK_MASSES_KG[i], LINK_SHAPES[i],
+                             'white' if i % 2 == 0 else 'grey'))
+        parts.append(uw.joint(name, 'revolute', parent, child, origin[0], origin[1],
+                              (0.0, 0.0, 1.0), (lo, hi, EFFORTS_NM[i], JOINT_VELOCITY_LIMITS[i])))
+        fixed = flange_offset(i)
+        parent, origin = child, (fixed[:3, 3], uw.rpy(fixed[:3, :3]))
+    parts.append(uw.link('flange', FRAME_MASS_KG))
+    parts.append(uw.joint('flange_joint', 'fixed', 'link_6', 'flange', origin[0], origin[1]))
+    tool = ('cylinder', (0.02, SUCTION_TCP_OFFSET_M), (0.0, 0.0, SUCTION_TCP_OFFSET_M / 2))
+    parts.append(uw.link('suction_tool', SUCTION_MASS_KG, tool, 'dark'))
+    parts.append(uw.joint('suction_tool_joint', 'fixed', 'flange', 'suction_tool',
+                          (0.0, 0.0, 0.0)))
+    parts.append(uw.link('suction_tcp', FRAME_MASS_KG))
+    parts.append(uw.joint('suction_tcp_joint', 'fixed', 'suction_tool', 'suction_tcp',
+                          (0.0, 0.0, SUCTION_TCP_OFFSET_M)))
+    return parts
+
+
+def render() -> str:
+    return HEADER + '\n'.join(_parts()) + '\n</robot>\n'
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument('--check', action='store_true',
+                        help='exit 1 if the committed file differs from the generated one')
+    args = parser.parse_args()
+    text = render()
+    if args.check:
+        same = OUT.is_file() and OUT.read_text() == text
+        print(f'{OUT}: {"up to date" if same else "differs from the generator"}')
+        return 0 if same else 1
+    OUT.write_text(text)
+    print(f'wrote {OUT}')
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())
