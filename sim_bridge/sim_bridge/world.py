@@ -17,6 +17,7 @@ from controllers.mecanum import MecanumGeometry
 from controllers.mecanum import wheel_speeds as mecanum_wheel_speeds
 from sim_bridge.camera import (intrinsics_from_fov, look_at_rotation, projection_matrix,
                                view_matrix_from_optical)
+from sim_bridge.cell import Conveyor, Material, MaterialSource, Suction
 from sim_bridge.world_config import (CameraConfig, ControllerConfig, DiffDriveConfig,
                                      MecanumConfig, RobotConfig, WorldConfig)
 
@@ -94,7 +95,7 @@ class SimRobot:
         self._start_orn = tuple(client.getQuaternionFromEuler((0.0, 0.0, pose.yaw)))
         try:
             self.body = client.loadURDF(str(urdf), self._start_pos, self._start_orn,
-                                        flags=URDF_FLAGS)
+                                        useFixedBase=config.fixed_base, flags=URDF_FLAGS)
         except pybullet.error as exc:
             raise WorldError(
                 f'robot "{config.name}": PyBullet cannot load {urdf}: {exc}') from None
@@ -373,7 +374,7 @@ class SimWorld:
     """Owns one PyBullet client. Every physics step goes through :meth:`step`."""
 
     def __init__(self, config: WorldConfig, time_step: float = 1.0 / 240.0,
-                 gui: bool = False) -> None:
+                 gui: bool = False, scenario_seed: Optional[int] = None) -> None:
         if not (0.0 < time_step <= 0.1):
             raise ValueError(f'time_step must be within (0, 0.1] s, got {time_step}')
         self.config = config
@@ -392,6 +393,17 @@ class SimWorld:
             self.robots[rc.name] = SimRobot(p, rc, resolve_resource(rc.urdf, base_dir))
         self.cameras: List[SimCamera] = [
             SimCamera(cc, self.robots[cc.robot] if cc.robot else None) for cc in config.cameras]
+        self.conveyor = Conveyor(p, config.conveyor) if config.conveyor else None
+        self.source = (MaterialSource(p, self.conveyor, config.materials, scenario_seed)
+                       if config.materials else None)
+        self.suctions: Dict[str, Suction] = {}
+        for name, robot in self.robots.items():
+            sc = robot.config.suction
+            if sc is not None:
+                try:
+                    self.suctions[name] = Suction(p, robot, sc.link, sc.reach, sc.max_payload)
+                except ValueError as exc:
+                    raise WorldError(str(exc)) from None
 
     @property
     def sim_time(self) -> float:
@@ -402,14 +414,29 @@ class SimWorld:
         # Integer nanoseconds so that lock-step time is exact after any number of steps.
         return self.step_count * round(self.time_step * 1e9)
 
+    @property
+    def materials(self) -> List[Material]:
+        return self.source.materials if self.source is not None else []
+
     def step(self) -> None:
+        if self.conveyor is not None:
+            held = {s.held.body for s in self.suctions.values() if s.held is not None}
+            self.conveyor.carry([m.body for m in self.materials if m.body not in held],
+                                self.time_step)
+            if self.source is not None:
+                self.source.update(self.sim_time)
         self._p.stepSimulation()
         self.step_count += 1
 
     def reset(self) -> None:
-        """Put every robot back at its start pose, at rest. Simulated time keeps running."""
+        """Put every robot back at its start pose, at rest, and start the materials' scenario
+        again (same seed). Simulated time keeps running."""
+        for suction in self.suctions.values():
+            suction.reset()
         for robot in self.robots.values():
             robot.reset()
+        if self.source is not None:
+            self.source.restart()
 
     def render(self, camera: SimCamera) -> np.ndarray:
         """Render an RGBA frame (height x width x 4, uint8) with the CPU renderer."""
@@ -450,6 +477,8 @@ class SimWorld:
         else:
             col = p.createCollisionShape(pybullet.GEOM_SPHERE, radius=s[0])
             vis = p.createVisualShape(pybullet.GEOM_SPHERE, radius=s[0], rgbaColor=obstacle.color)
+        if not obstacle.collision:
+            col = -1
         p.createMultiBody(0.0, col, vis, basePosition=obstacle.position,
                           baseOrientation=p.getQuaternionFromEuler((0.0, 0.0, obstacle.yaw)))
 

@@ -66,6 +66,15 @@ class ControllerConfig:
 
 
 @dataclass(frozen=True)
+class SuctionConfig:
+    """A suction tool: grips the material whose face is within ``reach`` of ``link``'s origin."""
+
+    link: str
+    reach: float = 0.01
+    max_payload: float = 12.0      # kg
+
+
+@dataclass(frozen=True)
 class RobotConfig:
     name: str
     urdf: str
@@ -76,6 +85,8 @@ class RobotConfig:
     limits: DriveLimitsConfig = DriveLimitsConfig()
     controllers: Tuple[ControllerConfig, ...] = ()
     initial_joint_positions: Tuple[Tuple[str, float], ...] = ()
+    fixed_base: bool = False
+    suction: Optional[SuctionConfig] = None
 
 
 @dataclass(frozen=True)
@@ -103,6 +114,34 @@ class ObstacleConfig:
     position: Vec3
     yaw: float = 0.0
     color: Tuple[float, float, float, float] = (0.6, 0.6, 0.6, 1.0)
+    name: str = ''
+    # False: drawn only (a marked area on the floor).
+    collision: bool = True
+
+
+@dataclass(frozen=True)
+class ConveyorConfig:
+    """A belt: a box whose top surface carries what lies on it along its x axis (at ``yaw``)."""
+
+    position: Vec3                 # centre of the belt's top surface
+    length: float
+    width: float
+    yaw: float = 0.0
+    belt_speed: float = 0.05       # m/s along the belt's x axis
+
+
+@dataclass(frozen=True)
+class MaterialsConfig:
+    """The material source: cubes of the scenario's colours dropped at the belt's start."""
+
+    counts: Tuple[Tuple[str, int], ...]          # (colour class, how many), e.g. the paper's 8
+    colors: Tuple[Tuple[str, Tuple[float, float, float, float]], ...]
+    size: float = 0.05
+    mass: float = 0.1
+    gap: Tuple[float, float] = (0.25, 0.45)      # belt travel between two drops [m]
+    lateral_jitter: float = 0.03                 # +- across the belt [m]
+    start_offset: float = 0.1                    # from the belt's upstream end [m]
+    seed: int = 0
 
 
 @dataclass(frozen=True)
@@ -114,6 +153,8 @@ class WorldConfig:
     robots: List[RobotConfig] = field(default_factory=list)
     obstacles: List[ObstacleConfig] = field(default_factory=list)
     cameras: List[CameraConfig] = field(default_factory=list)
+    conveyor: Optional[ConveyorConfig] = None
+    materials: Optional[MaterialsConfig] = None
 
     def robot(self, name: str) -> RobotConfig:
         for robot in self.robots:
@@ -140,7 +181,8 @@ def parse_world(data: Any, source: str = '<memory>') -> WorldConfig:
     r = _Reader(source)
     if not isinstance(data, dict):
         raise WorldConfigError(f'{source}: the top level must be a mapping')
-    r.only(data, 'world', {'gravity', 'floor_size', 'robots', 'obstacles', 'cameras'})
+    r.only(data, 'world', {'gravity', 'floor_size', 'robots', 'obstacles', 'cameras',
+                           'conveyor', 'materials'})
     robots = [_robot(r, item, i) for i, item in enumerate(r.list(data, 'robots', 'world'))]
     names = [rb.name for rb in robots]
     if len(set(names)) != len(names):
@@ -152,16 +194,23 @@ def parse_world(data: Any, source: str = '<memory>') -> WorldConfig:
                  for i, item in enumerate(r.list(data, 'obstacles', 'world'))]
     cameras = [_camera(r, item, i, robots)
                for i, item in enumerate(r.list(data, 'cameras', 'world'))]
+    conveyor = _conveyor(r, data['conveyor']) if data.get('conveyor') is not None else None
+    materials = None
+    if data.get('materials') is not None:
+        if conveyor is None:
+            raise WorldConfigError(f'{source}: materials need a conveyor to be placed on')
+        materials = _materials(r, data['materials'])
     return WorldConfig(source=source,
                        gravity=r.number(data, 'gravity', 'world', default=-9.81),
                        floor_size=r.number(data, 'floor_size', 'world', default=4.0, lo=0.1),
-                       robots=robots, obstacles=obstacles, cameras=cameras)
+                       robots=robots, obstacles=obstacles, cameras=cameras, conveyor=conveyor,
+                       materials=materials)
 
 
 def _robot(r: '_Reader', item: Any, i: int) -> RobotConfig:
     where = f'robots[{i}]'
     r.only(item, where, {'name', 'urdf', 'namespace', 'pose', 'frame_prefix', 'drive',
-                         'controllers', 'initial_joint_positions'})
+                         'controllers', 'initial_joint_positions', 'fixed_base', 'suction'})
     name = r.name(item, 'name', where)
     namespace = r.string(item, 'namespace', where, default=name).strip('/')
     if namespace and not all(_NAME.match(part) for part in namespace.split('/')):
@@ -192,10 +241,25 @@ def _robot(r: '_Reader', item: Any, i: int) -> RobotConfig:
         raise r.fail(where, 'initial_joint_positions', 'must be a mapping joint: position')
     initial_positions = tuple((str(j), r.number(initial, j, where + '.initial_joint_positions'))
                               for j in initial)
+    fixed_base = item.get('fixed_base', False)
+    if not isinstance(fixed_base, bool):
+        raise r.fail(where, 'fixed_base', f'must be true or false, got {fixed_base!r}')
+    if fixed_base and drive is not None:
+        raise r.fail(where, 'drive', 'cannot drive a robot with a fixed base')
+    suction = None
+    if item.get('suction') is not None:
+        sw = where + '.suction'
+        r.only(item['suction'], sw, {'link', 'reach', 'max_payload'})
+        suction = SuctionConfig(r.string(item['suction'], 'link', sw),
+                                r.number(item['suction'], 'reach', sw, default=0.01, lo=1e-4,
+                                         hi=0.1),
+                                r.number(item['suction'], 'max_payload', sw, default=12.0,
+                                         lo=1e-3))
     return RobotConfig(name=name, urdf=r.string(item, 'urdf', where), namespace=namespace,
                        pose=pose, frame_prefix=r.string(item, 'frame_prefix', where, default=''),
                        drive=drive, limits=limits, controllers=controllers,
-                       initial_joint_positions=initial_positions)
+                       initial_joint_positions=initial_positions, fixed_base=fixed_base,
+                       suction=suction)
 
 
 def _drive(r: '_Reader', d: Any, dw: str):
@@ -247,15 +311,61 @@ def _controller(r: '_Reader', c: Any, where: str) -> ControllerConfig:
 
 def _obstacle(r: '_Reader', item: Any, i: int) -> ObstacleConfig:
     where = f'obstacles[{i}]'
-    r.only(item, where, {'shape', 'size', 'position', 'yaw', 'color'})
+    r.only(item, where, {'shape', 'size', 'position', 'yaw', 'color', 'name', 'collision'})
     shape = r.string(item, 'shape', where)
     sizes = {'box': 3, 'cylinder': 2, 'sphere': 1}
     if shape not in sizes:
         raise WorldConfigError(f'{r.source}: {where}.shape must be one of {sorted(sizes)}')
     size = r.vector(item, 'size', where, sizes[shape], lo=1e-4)
     color = r.vector(item, 'color', where, 4, lo=0.0, hi=1.0, default=(0.6, 0.6, 0.6, 1.0))
+    collision = item.get('collision', True)
+    if not isinstance(collision, bool):
+        raise r.fail(where, 'collision', f'must be true or false, got {collision!r}')
     return ObstacleConfig(shape=shape, size=size, position=r.vector(item, 'position', where, 3),
-                          yaw=r.number(item, 'yaw', where, default=0.0), color=color)
+                          yaw=r.number(item, 'yaw', where, default=0.0), color=color,
+                          name=r.string(item, 'name', where, default=''), collision=collision)
+
+
+def _conveyor(r: '_Reader', item: Any) -> ConveyorConfig:
+    where = 'conveyor'
+    r.only(item, where, {'position', 'length', 'width', 'yaw', 'belt_speed'})
+    return ConveyorConfig(position=r.vector(item, 'position', where, 3),
+                          length=r.number(item, 'length', where, lo=0.1, hi=50.0),
+                          width=r.number(item, 'width', where, lo=0.02, hi=5.0),
+                          yaw=r.number(item, 'yaw', where, default=0.0),
+                          belt_speed=r.number(item, 'belt_speed', where, default=0.05, lo=0.0,
+                                              hi=2.0))
+
+
+def _materials(r: '_Reader', item: Any) -> MaterialsConfig:
+    where = 'materials'
+    r.only(item, where, {'counts', 'colors', 'size', 'mass', 'gap', 'lateral_jitter',
+                         'start_offset', 'seed'})
+    counts, colors = item.get('counts'), item.get('colors')
+    if not isinstance(counts, dict) or not counts:
+        raise r.fail(where, 'counts', 'must map colour classes to how many, e.g. '
+                                      '{purple: 1, orange: 6, blue: 1}')
+    if not isinstance(colors, dict):
+        raise r.fail(where, 'colors', 'must map each colour class to [r, g, b, a]')
+    missing = sorted(set(counts) - set(colors))
+    if missing:
+        raise r.fail(where, 'colors', f'has no colour for {missing}')
+    count_items = tuple((str(k), int(r.number(counts, k, where + '.counts', lo=0, hi=1000,
+                                                  integer=True))) for k in counts)
+    color_items = tuple((str(k), r.vector(colors, k, where + '.colors', 4, lo=0.0, hi=1.0))
+                        for k in colors)
+    gap = r.vector(item, 'gap', where, 2, lo=0.0, default=(0.25, 0.45))
+    if gap[0] > gap[1]:
+        raise r.fail(where, 'gap', f'must be [min, max], got {list(gap)}')
+    size = r.number(item, 'size', where, default=0.05, lo=0.005, hi=1.0)
+    if gap[0] < size * 1.2:
+        raise r.fail(where, 'gap', f'minimum {gap[0]} lets materials ({size} m) touch')
+    return MaterialsConfig(
+        counts=count_items, colors=color_items, size=size,
+        mass=r.number(item, 'mass', where, default=0.1, lo=1e-3, hi=100.0), gap=gap,
+        lateral_jitter=r.number(item, 'lateral_jitter', where, default=0.03, lo=0.0, hi=1.0),
+        start_offset=r.number(item, 'start_offset', where, default=0.1, lo=0.0),
+        seed=int(r.number(item, 'seed', where, default=0, lo=0, hi=2**31 - 1, integer=True)))
 
 
 def _camera(r: '_Reader', item: Any, i: int, robots: List[RobotConfig]) -> CameraConfig:

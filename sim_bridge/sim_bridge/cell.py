@@ -1,0 +1,222 @@
+"""The pipeline cell's props in PyBullet: the conveyor, the material source and the suction tool.
+
+The belt is a static box; each physics step, whatever rests on its top surface is given the belt's
+velocity along the belt (no slip: the belt carries it; lifting it breaks the contact). The source
+drops the scenario's materials, in a seeded random order, at the belt's upstream end, one each
+time the belt has travelled a seeded random gap. The suction tool holds a material with a fixed
+constraint while it is on and the material was within reach when it was switched on.
+"""
+from __future__ import annotations
+
+import math
+import random
+from dataclasses import dataclass
+from typing import List, Optional, Tuple
+
+import numpy as np
+import pybullet
+from pybullet_utils.bullet_client import BulletClient
+
+from controllers.transforms import matrix_to_quaternion
+from sim_bridge.world_config import ConveyorConfig, MaterialsConfig
+
+BELT_THICKNESS_M = 0.04
+BELT_COLOR = (0.15, 0.15, 0.17, 1.0)
+STAND_COLOR = (0.45, 0.47, 0.5, 1.0)
+
+
+@dataclass
+class Material:
+    index: int                 # order of appearance, 0-based: its ground-truth id
+    color: str
+    body: int
+    spawned_at: float          # simulated time [s]
+
+
+class Conveyor:
+    def __init__(self, client: BulletClient, config: ConveyorConfig) -> None:
+        self._p, self.config = client, config
+        self.direction = np.array([math.cos(config.yaw), math.sin(config.yaw), 0.0])
+        self.lateral = np.array([-math.sin(config.yaw), math.cos(config.yaw), 0.0])
+        self.top = np.asarray(config.position, float)
+        self._speed = config.belt_speed
+        self.travel = 0.0                     # belt travel since the start [m]
+        orn = client.getQuaternionFromEuler((0.0, 0.0, config.yaw))
+        half = (config.length / 2, config.width / 2, BELT_THICKNESS_M / 2)
+        belt_col = client.createCollisionShape(pybullet.GEOM_BOX, halfExtents=half)
+        belt_vis = client.createVisualShape(pybullet.GEOM_BOX, halfExtents=half,
+                                            rgbaColor=BELT_COLOR)
+        centre = self.top - np.array([0.0, 0.0, BELT_THICKNESS_M / 2])
+        self.body = client.createMultiBody(0.0, belt_col, belt_vis, basePosition=centre,
+                                           baseOrientation=orn)
+        # No friction: carry() imposes the belt's velocity on what rests on it each step, and
+        # friction against a static box would brake it within the step.
+        client.changeDynamics(self.body, -1, lateralFriction=0.0, rollingFriction=0.0,
+                              spinningFriction=0.0)
+        stand_h = centre[2] - BELT_THICKNESS_M / 2
+        if stand_h > 0.01:
+            stand_half = (config.length / 2 * 0.95, config.width / 2 * 0.8, stand_h / 2)
+            stand_col = client.createCollisionShape(pybullet.GEOM_BOX, halfExtents=stand_half)
+            stand_vis = client.createVisualShape(pybullet.GEOM_BOX, halfExtents=stand_half,
+                                                 rgbaColor=STAND_COLOR)
+            client.createMultiBody(0.0, stand_col, stand_vis,
+                                   basePosition=(centre[0], centre[1], stand_h / 2),
+                                   baseOrientation=orn)
+
+    @property
+    def speed(self) -> float:
+        return self._speed
+
+    @speed.setter
+    def speed(self, value: float) -> None:
+        if not (math.isfinite(value) and 0.0 <= value <= 2.0):
+            raise ValueError(f'belt speed must be within [0, 2] m/s, got {value}')
+        self._speed = float(value)
+
+    def point(self, along: float, across: float = 0.0) -> np.ndarray:
+        """A point on the belt's top surface, ``along`` from its upstream end."""
+        return (self.top + (along - self.config.length / 2) * self.direction
+                + across * self.lateral)
+
+    def on_belt(self, body: int) -> bool:
+        """Whether ``body`` rests on the belt (a contact whose normal points up)."""
+        for contact in self._p.getContactPoints(bodyA=self.body, bodyB=body):
+            if contact[7][2] < -0.7:       # the normal on B points towards A (the belt): down
+                return True
+        return False
+
+    def carry(self, bodies: List[int], dt: float) -> None:
+        """Give what rests on the belt the belt's velocity; advance the belt's travel."""
+        self.travel += self._speed * dt
+        belt_v = self._speed * self.direction
+        for body in bodies:
+            if self.on_belt(body):
+                v, _ = self._p.getBaseVelocity(body)
+                self._p.resetBaseVelocity(body, (belt_v[0], belt_v[1], min(v[2], 0.0)),
+                                          (0.0, 0.0, 0.0))
+
+
+class MaterialSource:
+    """Drops the scenario's materials on the belt in a seeded random order and spacing."""
+
+    def __init__(self, client: BulletClient, conveyor: Conveyor, config: MaterialsConfig,
+                 seed: Optional[int] = None) -> None:
+        self._p, self._conveyor, self.config = client, conveyor, config
+        self._colors = dict(config.colors)
+        self.seed = config.seed if seed is None else seed
+        self.materials: List[Material] = []
+        self.restart()
+
+    def restart(self) -> None:
+        """Remove every material and plan the scenario again from the seed."""
+        for m in self.materials:
+            self._p.removeBody(m.body)
+        self.materials = []
+        rng = random.Random(self.seed)
+        order = [color for color, n in self.config.counts for _ in range(n)]
+        rng.shuffle(order)
+        lo, hi = self.config.gap
+        gaps = [0.0] + [rng.uniform(lo, hi) for _ in order[1:]]
+        jitter = self.config.lateral_jitter
+        self.plan: List[Tuple[str, float, float]] = []      # (colour, belt travel, across)
+        travel = self._conveyor.travel
+        for color, gap in zip(order, gaps):
+            travel += gap
+            self.plan.append((color, travel, rng.uniform(-jitter, jitter)))
+
+    @property
+    def done(self) -> bool:
+        return len(self.materials) == len(self.plan)
+
+    def update(self, sim_time: float) -> Optional[Material]:
+        """Drop the next material once the belt has travelled its gap; return it."""
+        if self.done:
+            return None
+        color, travel, across = self.plan[len(self.materials)]
+        if self._conveyor.travel + 1e-12 < travel:
+            return None
+        s = self.config.size
+        half = (s / 2,) * 3
+        col = self._p.createCollisionShape(pybullet.GEOM_BOX, halfExtents=half)
+        vis = self._p.createVisualShape(pybullet.GEOM_BOX, halfExtents=half,
+                                        rgbaColor=self._colors[color])
+        position = self._conveyor.point(self.config.start_offset + s / 2, across)
+        position[2] += s / 2 + 1e-4
+        orn = self._p.getQuaternionFromEuler((0.0, 0.0, self._conveyor.config.yaw))
+        body = self._p.createMultiBody(self.config.mass, col, vis, basePosition=position,
+                                       baseOrientation=orn)
+        self._p.changeDynamics(body, -1, lateralFriction=0.8)
+        material = Material(len(self.materials), color, body, sim_time)
+        self.materials.append(material)
+        return material
+
+    def pose(self, material: Material) -> Tuple[np.ndarray, np.ndarray]:
+        """World position and rotation matrix of a material's centre."""
+        pos, orn = self._p.getBasePositionAndOrientation(material.body)
+        return np.asarray(pos), np.array(self._p.getMatrixFromQuaternion(orn)).reshape(3, 3)
+
+
+class Suction:
+    """A suction cup at a robot link: on grips the material within reach, off releases it."""
+
+    def __init__(self, client: BulletClient, robot, link: str, reach: float,
+                 max_payload: float) -> None:
+        self._p, self._robot = client, robot
+        if link not in robot.link_index or robot.link_index[link] == -1:
+            raise ValueError(f'robot "{robot.config.name}" has no link "{link}" for suction')
+        self.link, self.reach, self.max_payload = link, reach, max_payload
+        self.held: Optional[Material] = None
+        self._constraint: Optional[int] = None
+
+    def grip(self, source: Optional[MaterialSource]) -> Tuple[bool, str]:
+        if self.held is not None:
+            return True, f'already holding material {self.held.index} ({self.held.color})'
+        if source is None:
+            return False, 'no materials in this world'
+        tcp, rot = self._robot.link_world_pose(self.link)
+        best, best_d = None, math.inf
+        for material in source.materials:
+            pos, mrot = source.pose(material)
+            d = _distance_to_box(tcp, pos, mrot, source.config.size / 2)
+            if d < best_d:
+                best, best_d = material, d
+        if best is None or best_d > self.reach:
+            near = f'; nearest {best_d * 1000:.1f} mm away' if best is not None else ''
+            return False, f'nothing within {self.reach * 1000:.0f} mm of the suction cup{near}'
+        if source.config.mass > self.max_payload:
+            return False, f'material {best.index} is above the {self.max_payload} kg payload'
+        pos, mrot = source.pose(best)
+        link_index = self._robot.link_index[self.link]
+        rel_pos = rot.T @ (pos - tcp)
+        rel_rot = rot.T @ mrot
+        self._constraint = self._p.createConstraint(
+            self._robot.body, link_index, best.body, -1, pybullet.JOINT_FIXED, (0.0, 0.0, 0.0),
+            rel_pos.tolist(), (0.0, 0.0, 0.0), matrix_to_quaternion(rel_rot),
+            (0.0, 0.0, 0.0, 1.0))
+        self._p.changeConstraint(self._constraint, maxForce=self.max_payload * 9.81 * 20)
+        self.held = best
+        return True, f'holding material {best.index} ({best.color}), {best_d * 1000:.1f} mm away'
+
+    def release(self) -> Tuple[bool, str]:
+        if self.held is None:
+            return True, 'nothing held'
+        self._p.removeConstraint(self._constraint)
+        message = f'released material {self.held.index} ({self.held.color})'
+        self.held, self._constraint = None, None
+        return True, message
+
+    def reset(self) -> None:
+        if self._constraint is not None:
+            try:
+                self._p.removeConstraint(self._constraint)
+            except pybullet.error:
+                pass
+        self.held, self._constraint = None, None
+
+
+def _distance_to_box(point: np.ndarray, centre: np.ndarray, rot: np.ndarray,
+                     half: float) -> float:
+    local = rot.T @ (point - centre)
+    closest = np.clip(local, -half, half)
+    return float(np.linalg.norm(local - closest))
+
