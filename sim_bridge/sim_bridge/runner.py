@@ -25,6 +25,9 @@ class StepSink(Protocol):
 
     def on_command_timeout(self, robot: str) -> None: ...
 
+    def on_world_state(self, time_ns: int) -> None:
+        """The world's props (materials) are due; called only for worlds that have them."""
+
 
 @dataclass(frozen=True)
 class DriveLimits:
@@ -42,7 +45,8 @@ class SimRunner:
     its own grid of simulated time); the sink renders a camera only if someone wants the image.
     """
 
-    def __init__(self, world: SimWorld, limits: DriveLimits, state_rate: float) -> None:
+    def __init__(self, world: SimWorld, limits: DriveLimits, state_rate: float,
+                 world_state_rate: float = 10.0) -> None:
         if not (state_rate > 0.0 and math.isfinite(state_rate)):
             raise ValueError(f'state_rate must be > 0, got {state_rate}')
         self.world = world
@@ -51,6 +55,8 @@ class SimRunner:
         # average rate is exact even when the period is not a whole number of steps.
         self.state_period_ns = max(dt_ns, round(1e9 / state_rate))
         self._state_next_ns = 0
+        self.world_state_period_ns = max(dt_ns, round(1e9 / world_state_rate))
+        self._world_state_next_ns = 0
         self.guards: Dict[str, CommandGuard] = {}
         for name, robot in world.robots.items():
             if robot.drive is None:
@@ -110,6 +116,9 @@ class SimRunner:
                 self._state_next_ns = _next_on_grid(t_ns, self.state_period_ns)
                 for name in world.robots:
                     sink.on_state(name, t_ns)
+            if world.source is not None and t_ns >= self._world_state_next_ns:
+                self._world_state_next_ns = _next_on_grid(t_ns, self.world_state_period_ns)
+                sink.on_world_state(t_ns)
             for i, cam in enumerate(world.cameras):
                 if t_ns >= self._camera_next_ns[i]:
                     # Keep the camera's own grid of due times, skipping frames nobody wanted.

@@ -9,7 +9,7 @@ import rclpy
 from builtin_interfaces.msg import Time
 from geometry_msgs.msg import Twist, TwistStamped
 from nav_msgs.msg import Odometry
-from rcl_interfaces.msg import IntegerRange, ParameterDescriptor
+from rcl_interfaces.msg import IntegerRange, ParameterDescriptor, SetParametersResult
 from rclpy.clock import Clock, ClockType
 from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
@@ -19,10 +19,12 @@ from sensor_msgs.msg import CameraInfo, Image, JointState
 from sim_interfaces.msg import JointTrajectoryControllerState
 from sim_interfaces.srv import StepSimulation
 from trajectory_msgs.msg import JointTrajectory
-from std_srvs.srv import Trigger
+from visualization_msgs.msg import Marker, MarkerArray
+from std_srvs.srv import SetBool, Trigger
 
 from controllers.joint_trajectory import TrajectoryPoint, TrajectoryRequest
 from controllers.params import float_range
+from controllers.transforms import matrix_to_quaternion
 from sim_bridge.camera import ImageBuffer
 from sim_bridge.pacing import Pacer, RtfMeter
 from sim_bridge.runner import DriveLimits, SimRunner
@@ -75,19 +77,36 @@ class SimNode(Node):
             description='Most physics steps run between two rounds of callbacks',
             read_only=True, integer_range=[IntegerRange(from_value=1, to_value=10000, step=1)]))
 
+        self.declare_parameter('belt_speed', -1.0, float_range(
+            'Conveyor belt speed [m/s]; -1 keeps the world file\'s; settable while running',
+            -1.0, 2.0))
+        self.declare_parameter('scenario_seed', -1, ParameterDescriptor(
+            description='Seed of the materials\' order and spacing; -1 keeps the world file\'s',
+            read_only=True,
+            integer_range=[IntegerRange(from_value=-1, to_value=2**31 - 1, step=1)]))
+        self.declare_parameter('materials_publish_rate', 10.0, float_range(
+            'Rate of the materials\' ground truth on /cell/materials [Hz of simulated time]',
+            0.1, 1000.0))
+
         p = {name: self.get_parameter(name).value for name in (
             'world', 'gui', 'time_step', 'real_time_factor', 'synchronous', 'state_publish_rate',
             'max_speed', 'max_turn', 'cmd_vel_timeout', 'use_stamped_vel', 'rtf_log_period',
-            'max_steps_per_tick')}
+            'max_steps_per_tick', 'belt_speed', 'scenario_seed', 'materials_publish_rate')}
         if p['state_publish_rate'] * p['time_step'] > 1.0 + 1e-9:
             raise SimConfigError(
                 f'state_publish_rate {p["state_publish_rate"]} Hz exceeds the physics rate '
                 f'{1.0 / p["time_step"]:.1f} Hz (1/time_step)')
         world_path = resolve_resource(p['world'])
         config = load_world(world_path)
-        self._world = SimWorld(config, time_step=p['time_step'], gui=p['gui'])
+        seed = p['scenario_seed'] if p['scenario_seed'] >= 0 else None
+        self._world = SimWorld(config, time_step=p['time_step'], gui=p['gui'],
+                               scenario_seed=seed)
+        if self._world.conveyor is not None and p['belt_speed'] >= 0.0:
+            self._world.conveyor.speed = p['belt_speed']
+        self.add_on_set_parameters_callback(self._on_set_parameters)
         self._runner = SimRunner(self._world, DriveLimits(
-            p['max_speed'], p['max_turn'], p['cmd_vel_timeout']), p['state_publish_rate'])
+            p['max_speed'], p['max_turn'], p['cmd_vel_timeout']), p['state_publish_rate'],
+            p['materials_publish_rate'])
         self._synchronous = p['synchronous']
         self._paused = False
         self._pacer = Pacer(p['time_step'], p['real_time_factor'], p['max_steps_per_tick'])
@@ -108,7 +127,12 @@ class SimNode(Node):
             prefix = robot.config.frame_prefix
             self._joint_pubs[name] = self.create_publisher(
                 JointState, _topic(ns, 'joint_states'), history)
-            self._odom_pubs[name] = self.create_publisher(Odometry, _topic(ns, 'odom'), history)
+            if not robot.config.fixed_base:
+                self._odom_pubs[name] = self.create_publisher(Odometry, _topic(ns, 'odom'),
+                                                              history)
+            if name in self._world.suctions:
+                self.create_service(SetBool, _topic(ns, 'suction'),
+                                    lambda req, res, n=name: self._on_suction(n, req, res))
             self._odom_frames[name] = (prefix + 'odom', prefix + 'base_link')
             if name in self._runner.guards:
                 msg_type = TwistStamped if p['use_stamped_vel'] else Twist
@@ -145,6 +169,9 @@ class SimNode(Node):
                 p=list(k.p)))
             self._info_msgs[-1].header.frame_id = c.frame_id
 
+        self._materials_pub = None
+        if self._world.source is not None:
+            self._materials_pub = self.create_publisher(MarkerArray, '/cell/materials', history)
         self.create_service(Trigger, '~/reset', self._on_reset)
         self.create_service(Trigger, '~/pause', self._on_pause)
         self.create_service(Trigger, '~/resume', self._on_resume)
@@ -216,6 +243,11 @@ class SimNode(Node):
                          effort=js.efforts)
         msg.header.stamp = stamp
         self._joint_pubs[robot].publish(msg)
+        for name, group in sim_robot.controllers.items():
+            self._state_pubs[(robot, name)].publish(
+                _controller_state(group, stamp, self._world.sim_time))
+        if robot not in self._odom_pubs:
+            return
         base = sim_robot.base_state()
         odom = Odometry()
         odom.header.stamp = stamp
@@ -229,9 +261,20 @@ class SimNode(Node):
         odom.pose.covariance = GROUND_TRUTH_COVARIANCE
         odom.twist.covariance = GROUND_TRUTH_COVARIANCE
         self._odom_pubs[robot].publish(odom)
-        for name, group in sim_robot.controllers.items():
-            self._state_pubs[(robot, name)].publish(
-                _controller_state(group, stamp, self._world.sim_time))
+
+    def on_world_state(self, time_ns: int) -> None:
+        if self._materials_pub is None:
+            return
+        world = self._world
+        held = {s.held.index for s in world.suctions.values() if s.held is not None}
+        msg = MarkerArray()
+        for m in world.materials:
+            pos, rot = world.source.pose(m)
+            state = ('held' if m.index in held else
+                     'on_belt' if world.conveyor.on_belt(m.body) else 'free')
+            msg.markers.append(_material_marker(m, pos, rot, state, world.source.config,
+                                                _stamp(time_ns)))
+        self._materials_pub.publish(msg)
 
     def on_camera_due(self, index: int, time_ns: int, render) -> None:
         # Rendering dominates the cost of a step: only for image subscribers.
@@ -282,6 +325,24 @@ class SimNode(Node):
         else:
             self.get_logger().error(f'{where}: trajectory rejected: {result.reason}; holding '
                                     'position', throttle_duration_sec=0.2)
+
+    def _on_suction(self, robot: str, request, response):
+        suction = self._world.suctions[robot]
+        response.success, response.message = (suction.grip(self._world.source) if request.data
+                                               else suction.release())
+        log = self.get_logger().info if response.success else self.get_logger().warn
+        log(f'{robot}/suction {"on" if request.data else "off"}: {response.message}')
+        return response
+
+    def _on_set_parameters(self, params):
+        for param in params:
+            if param.name == 'belt_speed' and param.value >= 0.0:
+                if self._world.conveyor is None:
+                    return SetParametersResult(successful=False,
+                                               reason='this world has no conveyor')
+                self._world.conveyor.speed = param.value
+                self.get_logger().info(f'belt speed {param.value:.3f} m/s')
+        return SetParametersResult(successful=True)
 
     def _on_reset(self, _request, response):
         self._runner.reset()
@@ -370,6 +431,21 @@ def _controller_state(group, stamp: Time, now: float) -> JointTrajectoryControll
     msg.output.positions = desired.positions.tolist()
     msg.output.effort = group.limits.effort.tolist()
     return msg
+
+
+def _material_marker(material, pos, rot, state: str, config, stamp: Time) -> Marker:
+    marker = Marker(ns=material.color, id=material.index, type=Marker.CUBE,
+                    action=Marker.ADD, text=state)
+    marker.header.stamp = stamp
+    marker.header.frame_id = 'world'
+    marker.pose.position.x, marker.pose.position.y, marker.pose.position.z = (
+        float(v) for v in pos)
+    o = marker.pose.orientation
+    o.x, o.y, o.z, o.w = matrix_to_quaternion(rot)
+    marker.scale.x = marker.scale.y = marker.scale.z = config.size
+    r, g, b, a = dict(config.colors)[material.color]
+    marker.color.r, marker.color.g, marker.color.b, marker.color.a = r, g, b, a
+    return marker
 
 
 def _stamp(time_ns: int) -> Time:
