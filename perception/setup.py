@@ -14,6 +14,11 @@ setup(
     zip_safe=True,
     maintainer='robot-sim maintainers',
     maintainer_email='maintainers@example.org',
-    description='Camera-based perception.',
+    description='Vision sorting of the cell\'s materials.',
+    entry_points={
+        'console_scripts': [
+            'vision_node = perception.vision_node:main',
+        ],
+    },
     license='Apache-2.0',
 )

@@ -1,0 +1,83 @@
+"""The vision-sorting core: segment a frame, locate each material on the belt, track it."""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import List, Optional, Sequence, Tuple
+
+import cv2
+import numpy as np
+
+from perception.projection import CameraModel, locate_cube
+from perception.segmentation import DEFAULT_CLASSES, Blob, ColorClass, confidence, segment
+from perception.tracker import Observation, Track, Tracker
+
+BORDER_PX = 2
+
+
+@dataclass
+class FrameResult:
+    blobs: List[Blob]
+    observations: List[Observation]
+    tracks: List[Track]          # confirmed tracks seen in this frame
+
+
+class MaterialVision:
+    """Materials are upright cubes of edge ``size`` resting on the plane z = ``support_z``."""
+
+    def __init__(self, camera: CameraModel, width: int, height: int, support_z: float,
+                 size: float, classes: Sequence[ColorClass] = DEFAULT_CLASSES,
+                 min_area_fraction: float = 0.25, yaw: float = 0.0,
+                 tracker: Optional[Tracker] = None) -> None:
+        self.camera, self.width, self.height = camera, width, height
+        self.support_z, self.size, self.yaw = support_z, size, yaw
+        self.classes = tuple(classes)
+        depth = float((camera.position[2] - (support_z + size)))
+        if depth <= 0.0:
+            raise ValueError('the camera must be above the materials')
+        focal = float(camera.k[0, 0])
+        self.expected_area = (focal * size / depth) ** 2
+        self.min_area = max(4.0, min_area_fraction * self.expected_area)
+        self.tracker = tracker or Tracker()
+
+    def process(self, t: float, rgb: np.ndarray) -> FrameResult:
+        if rgb.shape[:2] != (self.height, self.width):
+            raise ValueError(f'frame is {rgb.shape[1]}x{rgb.shape[0]}, camera_info says '
+                             f'{self.width}x{self.height}')
+        blobs = segment(rgb, self.classes, self.min_area)
+        observations = []
+        for blob in blobs:
+            x, y, w, h = blob.bbox
+            cut = (x < BORDER_PX or y < BORDER_PX or x + w > self.width - BORDER_PX
+                   or y + h > self.height - BORDER_PX)
+            if cut:                      # partly out of view: its centroid is not its centre
+                continue
+            centre, residual = locate_cube(self.camera, blob.u, blob.v, self.support_z,
+                                           self.size, self.yaw)
+            if residual > 1.0:
+                continue
+            observations.append(Observation(blob.color, centre, blob.u, blob.v,
+                                            confidence(blob, self.expected_area)))
+        return FrameResult(blobs, observations, self.tracker.update(t, observations))
+
+    def annotate(self, rgb: np.ndarray, result: FrameResult) -> np.ndarray:
+        """A copy of the frame with blob outlines, track ids, colours and positions."""
+        out = rgb.copy()
+        for blob in result.blobs:
+            cv2.drawContours(out, [blob.contour], -1, (255, 255, 255), 1)
+        for track in result.tracks:
+            obs = track.last
+            u, v = int(round(obs.u)), int(round(obs.v))
+            cv2.drawMarker(out, (u, v), (0, 255, 0), cv2.MARKER_CROSS, 8, 1)
+            x, y = track.position[:2]
+            cv2.putText(out, f'#{track.id} {track.color} {track.confidence:.2f}', (u + 6, v - 4),
+                        cv2.FONT_HERSHEY_SIMPLEX, 0.32, (255, 255, 255), 1, cv2.LINE_AA)
+            cv2.putText(out, f'({x:.3f}, {y:.3f})', (u + 6, v + 8), cv2.FONT_HERSHEY_SIMPLEX,
+                        0.3, (255, 255, 255), 1, cv2.LINE_AA)
+        return out
+
+
+def camera_model(k: Sequence[float], position: Sequence[float],
+                 rotation: np.ndarray) -> CameraModel:
+    return CameraModel(np.asarray(k, float).reshape(3, 3), np.asarray(rotation, float),
+                       np.asarray(position, float))
+

@@ -1,0 +1,251 @@
+"""Vision-sorting node: finds the cell's materials in the belt camera's images.
+
+Subscribes ``image_raw`` and ``camera_info`` (remap them to the camera, e.g.
+``-r image_raw:=/belt_camera/image_raw``); publishes ``detections``
+(sim_interfaces/MaterialDetectionArray, in the world frame) for every usable frame and an
+annotated ``debug_image`` while someone subscribes. The camera's pose, the belt height and the
+material size come from the world file (or from parameters).
+"""
+from __future__ import annotations
+
+import statistics
+import sys
+import time
+from collections import deque
+from typing import Optional
+
+import numpy as np
+import rclpy
+from rcl_interfaces.msg import ParameterDescriptor
+from rclpy.executors import ExternalShutdownException
+from rclpy.node import Node
+from rclpy.qos import QoSProfile, qos_profile_sensor_data
+from sensor_msgs.msg import CameraInfo, Image
+from sim_interfaces.msg import MaterialDetection, MaterialDetectionArray
+
+from controllers.params import float_range
+from perception.projection import CameraModel
+from perception.segmentation import DEFAULT_CLASSES, ColorClass
+from perception.tracker import Tracker
+from perception.vision import MaterialVision
+
+ENCODINGS = ('rgb8', 'bgr8')
+
+
+class VisionConfigError(ValueError):
+    """Parameters the node cannot run with."""
+
+
+class VisionNode(Node):
+
+    def __init__(self, **kwargs) -> None:
+        super().__init__('vision_node', **kwargs)
+        ro = ParameterDescriptor
+        self.declare_parameter('world', 'package://sim_bridge/worlds/pipeline_cell.yaml', ro(
+            description='World file with the camera pose, the conveyor and the materials; '
+                        'empty: use the explicit parameters below', read_only=True))
+        self.declare_parameter('camera', 'belt_camera', ro(
+            description='Name of the camera in the world file', read_only=True))
+        self.declare_parameter('camera_position', [0.0], ro(
+            description='Optical frame position in the world [m] (without a world file)',
+            read_only=True))
+        self.declare_parameter('camera_look_at', [0.0], ro(
+            description='Point the camera looks at [m] (without a world file)', read_only=True))
+        self.declare_parameter('support_height', -1.0, ro(
+            description='Height of the surface the materials rest on [m]; -1: the world '
+                        'file\'s belt top', read_only=True))
+        self.declare_parameter('material_size', -1.0, ro(
+            description='Edge of the cubic materials [m]; -1: the world file\'s',
+            read_only=True))
+        self.declare_parameter('classes', [c.name for c in DEFAULT_CLASSES], ro(
+            description='Colour classes; each has <name>.hue_ranges, <name>.min_saturation, '
+                        '<name>.min_value', read_only=True))
+        self.declare_parameter('track_gate', 0.04, float_range(
+            'Largest distance between a track\'s prediction and a new observation [m]',
+            1e-3, 1.0))
+        self.declare_parameter('track_min_hits', 3, ro(
+            description='Frames before a material is reported', read_only=True))
+        self.declare_parameter('track_max_missed', 5, ro(
+            description='Frames without a match before a track ends', read_only=True))
+        self.declare_parameter('frame_id', 'world', ro(
+            description='Frame of the reported positions', read_only=True))
+        classes = self._classes()
+        camera_pose, support, size, yaw = self._geometry()
+        self._pose, self._support, self._size, self._yaw = camera_pose, support, size, yaw
+        self._classes_cfg = classes
+        get = lambda n: self.get_parameter(n).value  # noqa: E731
+        if get('track_min_hits') < 1 or get('track_max_missed') < 0:
+            raise VisionConfigError('track_min_hits must be >= 1 and track_max_missed >= 0')
+        self._tracker = Tracker(get('track_gate'), get('track_min_hits'),
+                                get('track_max_missed'))
+        self._frame_id = get('frame_id')
+        self._vision: Optional[MaterialVision] = None
+        self._info_key = None
+        self._latencies = deque(maxlen=500)
+        self._last_stats = time.monotonic()
+        self._pub = self.create_publisher(MaterialDetectionArray, 'detections',
+                                          QoSProfile(depth=10))
+        self._debug_pub = self.create_publisher(Image, 'debug_image', qos_profile_sensor_data)
+        self.create_subscription(CameraInfo, 'camera_info', self._on_info,
+                                 qos_profile_sensor_data)
+        self.create_subscription(Image, 'image_raw', self._on_image, qos_profile_sensor_data)
+        self.get_logger().info(
+            f'looking for {[c.name for c in classes]} materials ({size} m) on z = {support} m '
+            f'through {self.resolve_topic_name("image_raw")}; detections on '
+            f'{self._pub.topic_name}')
+
+    # --- configuration ------------------------------------------------------------------------
+    def _classes(self):
+        classes = []
+        defaults = {c.name: c for c in DEFAULT_CLASSES}
+        for name in self.get_parameter('classes').value:
+            d = defaults.get(name)
+            ranges = [v for r in d.hue_ranges for v in r] if d else [0]
+            self.declare_parameter(f'{name}.hue_ranges', ranges, ParameterDescriptor(
+                description=f'OpenCV hue ranges (0..180) of {name}: lo, hi, lo, hi, ...',
+                read_only=True))
+            self.declare_parameter(f'{name}.min_saturation', d.min_saturation if d else 110,
+                                   ParameterDescriptor(read_only=True))
+            self.declare_parameter(f'{name}.min_value', d.min_value if d else 50,
+                                   ParameterDescriptor(read_only=True))
+            flat = list(self.get_parameter(f'{name}.hue_ranges').value)
+            if len(flat) < 2 or len(flat) % 2:
+                raise VisionConfigError(f'{name}.hue_ranges must hold pairs lo, hi; got {flat}')
+            try:
+                classes.append(ColorClass(
+                    name, tuple((int(flat[i]), int(flat[i + 1])) for i in range(0, len(flat), 2)),
+                    int(self.get_parameter(f'{name}.min_saturation').value),
+                    int(self.get_parameter(f'{name}.min_value').value)))
+            except ValueError as exc:
+                raise VisionConfigError(str(exc)) from None
+        if not classes:
+            raise VisionConfigError('no colour classes')
+        return classes
+
+    def _geometry(self):
+        from sim_bridge.camera import look_at_rotation
+        get = lambda n: self.get_parameter(n).value  # noqa: E731
+        position, look_at = list(get('camera_position')), list(get('camera_look_at'))
+        support, size, yaw = get('support_height'), get('material_size'), 0.0
+        if get('world'):
+            from sim_bridge.world import resolve_resource
+            from sim_bridge.world_config import load_world
+            world = load_world(resolve_resource(get('world')))
+            cams = [c for c in world.cameras if c.name == get('camera')]
+            if not cams or cams[0].position is None:
+                raise VisionConfigError(f'world {get("world")} has no fixed camera '
+                                        f'"{get("camera")}"')
+            if len(position) != 3:
+                position, look_at = list(cams[0].position), list(cams[0].look_at)
+            if world.conveyor is not None:
+                support = world.conveyor.position[2] if support < 0.0 else support
+                yaw = world.conveyor.yaw
+            if world.materials is not None and size <= 0.0:
+                size = world.materials.size
+        if len(position) != 3 or len(look_at) != 3:
+            raise VisionConfigError('camera_position and camera_look_at need 3 values each '
+                                    '(or a world file with the camera)')
+        if support < 0.0 or size <= 0.0:
+            raise VisionConfigError('support_height and material_size are needed (or a world '
+                                    'file with a conveyor and materials)')
+        rotation = look_at_rotation(position, look_at)
+        return (np.asarray(position, float), rotation), float(support), float(size), yaw
+
+    # --- frames -------------------------------------------------------------------------------
+    def _on_info(self, msg: CameraInfo) -> None:
+        key = (msg.width, msg.height, tuple(msg.k))
+        if key == self._info_key:
+            return
+        k = np.asarray(msg.k, float).reshape(3, 3)
+        if msg.width == 0 or msg.height == 0 or k[0, 0] <= 0.0 or k[1, 1] <= 0.0:
+            self.get_logger().warn('camera_info without a usable size or K ignored',
+                                   throttle_duration_sec=5.0)
+            return
+        position, rotation = self._pose
+        camera = CameraModel(k, rotation, position)
+        self._vision = MaterialVision(camera, msg.width, msg.height, self._support, self._size,
+                                      self._classes_cfg, yaw=self._yaw, tracker=self._tracker)
+        self._info_key = key
+
+    def _on_image(self, msg: Image) -> None:
+        frame = self._frame(msg)
+        if frame is None:
+            return
+        start = time.perf_counter()
+        t = msg.header.stamp.sec + msg.header.stamp.nanosec * 1e-9
+        result = self._vision.process(t, frame)
+        out = MaterialDetectionArray()
+        out.header.stamp = msg.header.stamp
+        out.header.frame_id = self._frame_id
+        for track in result.tracks:
+            d = MaterialDetection(id=track.id, color=track.color, u=track.last.u,
+                                  v=track.last.v, confidence=float(track.confidence),
+                                  hits=track.hits)
+            d.position.x, d.position.y, d.position.z = (float(v) for v in track.position)
+            d.velocity.x, d.velocity.y, d.velocity.z = (float(v) for v in track.velocity())
+            out.detections.append(d)
+        self._pub.publish(out)
+        self._latencies.append(time.perf_counter() - start)
+        if self._debug_pub.get_subscription_count() > 0:
+            debug = self._vision.annotate(frame, result)
+            self._debug_pub.publish(Image(header=msg.header, height=debug.shape[0],
+                                          width=debug.shape[1], encoding='rgb8',
+                                          step=3 * debug.shape[1], data=debug.tobytes()))
+        self._log_stats()
+
+    def _frame(self, msg: Image) -> Optional[np.ndarray]:
+        """The image as an RGB array, or None (with a throttled warning) if unusable."""
+        warn = lambda text: self.get_logger().warn(text, throttle_duration_sec=5.0)  # noqa
+        if self._vision is None:
+            warn('no camera_info yet: frames skipped')
+            return None
+        if msg.encoding not in ENCODINGS:
+            warn(f'frame with encoding "{msg.encoding}" rejected: expected {ENCODINGS}')
+            return None
+        if msg.width == 0 or msg.height == 0 or not len(msg.data):
+            warn('empty frame rejected')
+            return None
+        if (msg.width, msg.height) != (self._vision.width, self._vision.height):
+            warn(f'frame {msg.width}x{msg.height} rejected: camera_info says '
+                 f'{self._vision.width}x{self._vision.height}')
+            return None
+        if msg.step < 3 * msg.width or len(msg.data) < msg.step * msg.height:
+            warn(f'frame rejected: {len(msg.data)} bytes for step {msg.step} x {msg.height}')
+            return None
+        rows = np.frombuffer(msg.data, np.uint8)[:msg.step * msg.height]
+        frame = rows.reshape(msg.height, msg.step)[:, :3 * msg.width].reshape(
+            msg.height, msg.width, 3)
+        return np.ascontiguousarray(frame[..., ::-1] if msg.encoding == 'bgr8' else frame)
+
+    def _log_stats(self) -> None:
+        now = time.monotonic()
+        if now - self._last_stats < 30.0 or not self._latencies:
+            return
+        self._last_stats = now
+        ms = sorted(1e3 * v for v in self._latencies)
+        self.get_logger().info(
+            f'per-frame latency median {statistics.median(ms):.2f} ms, p99 '
+            f'{ms[min(len(ms) - 1, int(0.99 * len(ms)))]:.2f} ms; materials so far: '
+            f'{len(self._tracker.confirmed_ids)}')
+
+
+def main(args=None) -> int:
+    rclpy.init(args=args)
+    try:
+        node = VisionNode()
+    except (VisionConfigError, ValueError, rclpy.exceptions.ParameterException) as exc:
+        rclpy.logging.get_logger('vision_node').fatal(f'cannot start: {exc}')
+        rclpy.try_shutdown()
+        return 1
+    try:
+        rclpy.spin(node)
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    finally:
+        node.destroy_node()
+        rclpy.try_shutdown()
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())
