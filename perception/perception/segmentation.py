@@ -1,7 +1,6 @@
 """Colour segmentation of materials in HSV, where hue does not change with lighting."""
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 from typing import List, Optional, Sequence, Tuple
 
@@ -102,6 +101,5 @@ def confidence(blob: Blob, expected_area: Optional[float]) -> float:
     """0..1: colour purity times how well the size matches a material's expected image size."""
     if not expected_area:
         return blob.purity
-    ratio = blob.area / expected_area
-    size_score = math.exp(-abs(math.log(max(ratio, 1e-6))) / math.log(2.0))
-    return float(blob.purity * size_score)
+    ratio = max(blob.area / expected_area, 1e-9)
+    return float(blob.purity * min(ratio, 1.0 / ratio))

@@ -438,12 +438,17 @@ class SimWorld:
         if self.source is not None:
             self.source.restart()
 
-    def render(self, camera: SimCamera) -> np.ndarray:
-        """Render an RGBA frame (height x width x 4, uint8) with the CPU renderer."""
+    def render(self, camera: SimCamera, lighting: Optional[dict] = None) -> np.ndarray:
+        """Render an RGBA frame (height x width x 4, uint8) with the CPU renderer.
+
+        ``lighting``: getCameraImage's light arguments (lightDirection, lightColor,
+        lightAmbientCoeff, lightDiffuseCoeff, lightSpecularCoeff), to vary the lighting.
+        """
         c = camera.config
         _, _, rgba, _, _ = self._p.getCameraImage(
             c.width, c.height, camera.view_matrix(), camera.projection, shadow=0,
-            renderer=pybullet.ER_TINY_RENDERER, flags=pybullet.ER_NO_SEGMENTATION_MASK)
+            renderer=pybullet.ER_TINY_RENDERER, flags=pybullet.ER_NO_SEGMENTATION_MASK,
+            **(lighting or {}))
         return np.asarray(rgba, dtype=np.uint8).reshape(c.height, c.width, 4)
 
     def close(self) -> None:
