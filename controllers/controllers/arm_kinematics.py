@@ -40,7 +40,8 @@ class ArmKinematics:
                  velocity_limits: Sequence[float], base: np.ndarray,
                  tool_frames: Dict[str, np.ndarray], tool_frame: str,
                  reference_frames: Dict[str, np.ndarray],
-                 to_chain: Convert = _identity, from_chain: Convert = _identity) -> None:
+                 to_chain: Convert = _identity, from_chain: Convert = _identity,
+                 min_frame_height: Optional[float] = None) -> None:
         if tool_frame not in tool_frames:
             raise ValueError(f'unknown tool frame "{tool_frame}"; known: {sorted(tool_frames)}')
         self.chain, self._solver = chain, solver
@@ -54,6 +55,9 @@ class ArmKinematics:
         self._base = np.asarray(base, float)
         self._base_inv = np.linalg.inv(self._base)
         self._to_chain, self._from_chain = to_chain, from_chain
+        # Solutions that put a joint frame below this height in base_link are not used (the
+        # floor: IK alone would happily fold an elbow through it).
+        self.min_frame_height = min_frame_height
         lower, upper = chain.limits
         ends = np.sort(np.stack([from_chain(lower), from_chain(upper)]), 0)
         self.lower, self.upper = ends[0], ends[1]
@@ -73,11 +77,23 @@ class ArmKinematics:
         result = self._solver(flange, seed_chain, self.chain)
         if not result.success:
             return ArmSolution(False, reason=result.reason)
-        positions = self._from_chain(result.q)
+        q = result.q
+        if self.min_frame_height is not None:
+            clear = [c for c in result.candidates if self._clear(c)]
+            if not clear:
+                return ArmSolution(False, reason='every solution puts the arm below '
+                                                 f'{self.min_frame_height} m (the floor)')
+            ref = seed_chain if seed_chain is not None else np.zeros(self.chain.dof)
+            q = min(clear, key=lambda c: float(np.abs(c - ref).sum()))
+        positions = self._from_chain(q)
         reached = self.fk(positions)
         return ArmSolution(True, positions, '',
                            float(np.linalg.norm(reached[:3, 3] - target[:3, 3])),
                            rotation_angle(reached[:3, :3].T @ target[:3, :3]))
+
+    def _clear(self, q_chain: np.ndarray) -> bool:
+        heights = [(self._base @ f)[2, 3] for f in self.chain.frames(q_chain)[1:]]
+        return min(heights) >= self.min_frame_height
 
     def within_limits(self, positions: Sequence[float], tol: float = 1e-9) -> bool:
         q = np.asarray(positions, float)

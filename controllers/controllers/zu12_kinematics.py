@@ -11,6 +11,8 @@ from controllers.zu12_arm import (JOINT_NAMES, JOINT_VELOCITY_LIMITS, SUCTION_TC
                                   zu12_chain)
 from controllers.zu12_ik import solve_ik
 
+# The base stands on the floor: every joint frame above the shoulder's housing height.
+FLOOR_CLEARANCE_M = 0.08
 TOOL_FRAMES: Dict[str, np.ndarray] = {
     'flange': np.eye(4),
     'suction_tcp': translation(z=SUCTION_TCP_OFFSET_M),
@@ -27,4 +29,4 @@ class Zu12Kinematics(ArmKinematics):
         if world_to_base is not None:
             frames['world'] = np.linalg.inv(np.asarray(world_to_base, float))
         super().__init__(zu12_chain(), solve_ik, JOINT_NAMES, JOINT_VELOCITY_LIMITS, np.eye(4),
-                         TOOL_FRAMES, tool_frame, frames)
+                         TOOL_FRAMES, tool_frame, frames, min_frame_height=FLOOR_CLEARANCE_M)

@@ -21,7 +21,8 @@ class Observation:
 @dataclass
 class Track:
     id: int
-    history: Deque[Tuple[float, np.ndarray]] = field(default_factory=lambda: deque(maxlen=15))
+    # About 4 s at 15 Hz: a long baseline for the velocity, which predicts where to pick.
+    history: Deque[Tuple[float, np.ndarray]] = field(default_factory=lambda: deque(maxlen=60))
     votes: Counter = field(default_factory=Counter)
     hits: int = 0
     missed: int = 0

@@ -1,0 +1,84 @@
+"""Planning a suction pick off a moving belt and a place, in Cartesian waypoints (no ROS).
+
+The tool points straight down. The pick follows the material: hover above where it will be,
+descend onto its top face while moving with the belt, stay on it while the suction engages,
+then lift. The place goes above the target, down until the material's bottom is just above the
+target surface, releases, and rises again. Times are absolute (simulated) seconds.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import List, Sequence, Tuple
+
+import numpy as np
+
+Waypoint = Tuple[float, np.ndarray]          # (time [s], tool position in the world [m])
+
+
+@dataclass(frozen=True)
+class PickTiming:
+    hover: float = 0.10          # height above the material's top for the approach [m]
+    contact_gap: float = 0.002   # tool tip above the top face at contact [m]
+    descend: float = 0.6         # hover -> contact [s], moving with the belt
+    dwell: float = 0.4           # on the material while the suction engages [s]
+    lift: float = 0.8            # contact -> lift height [s]
+    lift_height: float = 0.15    # above the belt's top face after the pick [m]
+    place_descend: float = 0.8   # above the target -> release [s]
+    place_gap: float = 0.003     # the material's bottom above the target surface at release
+
+
+def predict(position: Sequence[float], stamp: float, velocity: Sequence[float],
+            t: float) -> np.ndarray:
+    return np.asarray(position, float) + np.asarray(velocity, float) * (t - stamp)
+
+
+def pick_waypoints(position: Sequence[float], stamp: float, velocity: Sequence[float],
+                   t_contact: float, size: float, timing: PickTiming = PickTiming()
+                   ) -> Tuple[List[Waypoint], float]:
+    """Tool waypoints to pick the material seen at ``position`` (its centre) at ``stamp``,
+    moving at ``velocity``, touching it at ``t_contact``; and the time to switch suction on."""
+    top = size / 2 + timing.contact_gap
+
+    def at(t: float, height: float) -> np.ndarray:
+        p = predict(position, stamp, velocity, t)
+        p[2] += top + height
+        return p
+    t_hover = t_contact - timing.descend
+    t_leave = t_contact + timing.dwell
+    lifted = at(t_leave, 0.0)
+    lifted[2] = np.asarray(position)[2] - size / 2 + timing.lift_height + size
+    waypoints = [(t_hover, at(t_hover, timing.hover)),
+                 (t_contact - timing.descend / 3, at(t_contact - timing.descend / 3,
+                                                     timing.hover / 6)),
+                 (t_contact, at(t_contact, 0.0)),
+                 (t_leave, at(t_leave, 0.0)),
+                 (t_leave + timing.lift, lifted)]
+    return waypoints, t_contact + timing.dwell / 4
+
+
+def place_waypoints(t_above: float, target: Sequence[float], size: float,
+                    timing: PickTiming = PickTiming()) -> Tuple[List[Waypoint], float]:
+    """Tool waypoints to set the held material (tool on its top face) down with its centre at
+    ``target`` (the surface point it rests on); and the time to release."""
+    surface = np.asarray(target, float)
+    release = surface + np.array([0.0, 0.0, size + timing.place_gap])
+    above = release + np.array([0.0, 0.0, timing.lift_height])
+    t_release = t_above + timing.place_descend
+    return ([(t_above, above), (t_release, release),
+             (t_release + 0.3, release.copy()),
+             (t_release + 0.3 + timing.place_descend, above.copy())], t_release + 0.1)
+
+
+def plate_slots(centre: Sequence[float], yaw: float, size: float, count: int,
+                pitch: float = 0.075, columns: int = 3) -> List[np.ndarray]:
+    """Places for ``count`` materials on a load plate, in rows of ``columns``, around the
+    plate's centre (a point on its top surface)."""
+    rows = -(-count // columns)
+    c, s = np.cos(yaw), np.sin(yaw)
+    out = []
+    for k in range(count):
+        r, col = divmod(k, columns)
+        x = (r - (rows - 1) / 2) * pitch
+        y = (col - (columns - 1) / 2) * pitch
+        out.append(np.asarray(centre, float) + np.array([c * x - s * y, s * x + c * y, 0.0]))
+    return out
