@@ -112,7 +112,8 @@ class KinematicsNode(Node):
     # --- IK -----------------------------------------------------------------------------------
     def _on_solve_ik(self, request, response):
         ok, message, positions, errors, trajectory = self._solve(
-            request.target, request.execute, request.duration, request.velocity_scaling)
+            request.target, request.execute, request.duration, request.velocity_scaling,
+            list(request.seed))
         response.success, response.message = ok, message
         response.joint_names = list(self._kin.joint_names)
         if positions is not None:
@@ -133,8 +134,8 @@ class KinematicsNode(Node):
         self._status_pub.publish(status)
 
     def _solve(self, target: PoseStamped, execute: bool, duration: float,
-               scaling: float) -> Tuple[bool, str, Optional[np.ndarray], tuple,
-                                        Optional[JointTrajectory]]:
+               scaling: float, seed: Optional[list] = None
+               ) -> Tuple[bool, str, Optional[np.ndarray], tuple, Optional[JointTrajectory]]:
         p, o = target.pose.position, target.pose.orientation
         try:
             pose = pose_matrix((p.x, p.y, p.z), (o.x, o.y, o.z, o.w))
@@ -150,7 +151,14 @@ class KinematicsNode(Node):
         if execute and self._positions is None:
             return self._fail('no joint_states received yet: cannot plan a motion from the '
                               'current position')
-        solution = self._kin.ik(pose, seed=self._positions)
+        if seed:
+            if len(seed) != len(self._kin.joint_names) or not np.all(np.isfinite(seed)):
+                return self._fail(f'bad seed {seed}: needs {len(self._kin.joint_names)} finite '
+                                  'values')
+            start = np.asarray(seed, float)
+        else:
+            start = self._positions
+        solution = self._kin.ik(pose, seed=start)
         if not solution.success:
             xyz = ', '.join(f'{v:.3f}' for v in pose[:3, 3])
             return self._fail(f'no IK solution for ({xyz}) in base_link: {solution.reason}')

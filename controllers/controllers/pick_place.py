@@ -18,7 +18,7 @@ Waypoint = Tuple[float, np.ndarray]          # (time [s], tool position in the w
 @dataclass(frozen=True)
 class PickTiming:
     hover: float = 0.10          # height above the material's top for the approach [m]
-    contact_gap: float = 0.002   # tool tip above the top face at contact [m]
+    contact_gap: float = 0.0     # tool tip above the top face at contact [m]
     descend: float = 0.6         # hover -> contact [s], moving with the belt
     dwell: float = 0.4           # on the material while the suction engages [s]
     lift: float = 0.8            # contact -> lift height [s]
@@ -47,12 +47,13 @@ def pick_waypoints(position: Sequence[float], stamp: float, velocity: Sequence[f
     t_leave = t_contact + timing.dwell
     lifted = at(t_leave, 0.0)
     lifted[2] = np.asarray(position)[2] - size / 2 + timing.lift_height + size
-    waypoints = [(t_hover, at(t_hover, timing.hover)),
-                 (t_contact - timing.descend / 3, at(t_contact - timing.descend / 3,
-                                                     timing.hover / 6)),
-                 (t_contact, at(t_contact, 0.0)),
-                 (t_leave, at(t_leave, 0.0)),
-                 (t_leave + timing.lift, lifted)]
+    # Dense while moving with the belt, so that the joint interpolation stays on the path.
+    descend = [(t_contact - timing.descend * f, at(t_contact - timing.descend * f,
+                                                   timing.hover * f ** 2))
+               for f in (1.0, 2 / 3, 1 / 3)]
+    dwell = [(t_contact + timing.dwell * f, at(t_contact + timing.dwell * f, 0.0))
+             for f in (0.0, 0.5, 1.0)]
+    waypoints = descend + dwell + [(t_leave + timing.lift, lifted)]
     return waypoints, t_contact + timing.dwell / 4
 
 

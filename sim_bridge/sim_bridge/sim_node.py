@@ -330,8 +330,12 @@ class SimNode(Node):
         suction = self._world.suctions[robot]
         response.success, response.message = (suction.grip(self._world.source) if request.data
                                                else suction.release())
-        log = self.get_logger().info if response.success else self.get_logger().warn
-        log(f'{robot}/suction {"on" if request.data else "off"}: {response.message}')
+        text = f'{robot}/suction {"on" if request.data else "off"}: {response.message}'
+        # (rclpy forbids two severities from one logging call site.)
+        if response.success:
+            self.get_logger().info(text)
+        else:
+            self.get_logger().warn(text)
         return response
 
     def _on_set_parameters(self, params):

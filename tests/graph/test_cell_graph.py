@@ -69,3 +69,39 @@ def test_vision_reports_every_material_once_with_its_colour(cell, start_node, pr
 
 def _seconds(stamp):
     return stamp.sec + stamp.nanosec * 1e-9
+
+
+def test_pick_and_place_one_material_of_each_colour(start_node, probe):
+    sim = start_node('sim_node', '-p', WORLD, '-p', 'real_time_factor:=2.0', '-p',
+                     'belt_speed:=0.05', '-p', 'scenario_seed:=5')
+    start_node('vision_node', '-r', 'image_raw:=/belt_camera/image_raw', '-r',
+               'camera_info:=/belt_camera/camera_info', '-p', 'use_sim_time:=true')
+    start_node('kinematics_node', '-r', '__ns:=/zu12', '-p', 'arm:=zu12', '-p',
+               'use_sim_time:=true')
+    truth = probe.collect(MarkerArray, '/cell/materials')
+    task = start_node('pick_place', '-p', 'use_sim_time:=true', '-p',
+                      'colors:=[purple, orange, blue]')
+    wait_for(lambda: not task.alive(), 300.0, what='the pick and place script')
+    log = task.output()
+    assert task.proc.returncode == 0, log
+    placed = {}
+    for line in log.splitlines():
+        if 'released material' in line:
+            index = int(line.split('released material ')[1].split()[0])
+            target = line.split(' at ')[-1]
+            placed[index] = [float(v) for v in target.strip('[] ').split(',')]
+    assert len(placed) == 3
+    time.sleep(1.0)
+    final = {m.id: m for m in truth[-1][1].markers}
+    assert sorted(final[i].ns for i in placed) == ['blue', 'orange', 'purple']
+    for index, target in placed.items():
+        p = final[index].pose.position
+        # Resting on its target: centre within 1 cm of the target point, half a size above it.
+        assert np.hypot(p.x - target[0], p.y - target[1]) < 0.01, (index, p, target)
+        assert abs(p.z - (target[2] + 0.025)) < 0.005 and final[index].text == 'free'
+    # Nothing else was knocked off the belt: every other material is on it or past its end.
+    for m in final.values():
+        if m.id not in placed:
+            p = m.pose.position
+            assert m.text == 'on_belt' or p.x > 1.2, (m.id, m.text, p)
+    assert sim.alive()
