@@ -157,7 +157,9 @@ class MaterialSource:
 
 
 class Suction:
-    """A suction cup at a robot link: on grips the material within reach, off releases it."""
+    """A suction cup at a robot link. Switched on, it is armed: it grips the first material
+    that comes within reach (as a vacuum cup seals on a part it touches), at once or during a
+    later step; switched off, it releases what it holds."""
 
     def __init__(self, client: BulletClient, robot, link: str, reach: float,
                  max_payload: float) -> None:
@@ -166,7 +168,19 @@ class Suction:
             raise ValueError(f'robot "{robot.config.name}" has no link "{link}" for suction')
         self.link, self.reach, self.max_payload = link, reach, max_payload
         self.held: Optional[Material] = None
+        self.armed = False
         self._constraint: Optional[int] = None
+
+    def switch_on(self, source: Optional[MaterialSource]) -> Tuple[bool, str]:
+        """Arm the cup; grips now if a material is within reach."""
+        self.armed = True
+        ok, message = self.grip(source)
+        return True, message if ok else f'on; {message} yet'
+
+    def update(self, source: Optional[MaterialSource]) -> None:
+        """Each step: an armed cup without a part grips one that came within reach."""
+        if self.armed and self.held is None and source is not None and source.materials:
+            self.grip(source)
 
     def grip(self, source: Optional[MaterialSource]) -> Tuple[bool, str]:
         if self.held is not None:
@@ -198,14 +212,16 @@ class Suction:
         return True, f'holding material {best.index} ({best.color}), {best_d * 1000:.1f} mm away'
 
     def release(self) -> Tuple[bool, str]:
+        self.armed = False
         if self.held is None:
-            return True, 'nothing held'
+            return True, 'off; nothing held'
         self._p.removeConstraint(self._constraint)
         message = f'released material {self.held.index} ({self.held.color})'
         self.held, self._constraint = None, None
         return True, message
 
     def reset(self) -> None:
+        self.armed = False
         if self._constraint is not None:
             try:
                 self._p.removeConstraint(self._constraint)

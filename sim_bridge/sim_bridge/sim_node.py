@@ -20,6 +20,7 @@ from sim_interfaces.msg import JointTrajectoryControllerState
 from sim_interfaces.srv import StepSimulation
 from trajectory_msgs.msg import JointTrajectory
 from visualization_msgs.msg import Marker, MarkerArray
+from std_msgs.msg import Bool
 from std_srvs.srv import SetBool, Trigger
 
 from controllers.joint_trajectory import TrajectoryPoint, TrajectoryRequest
@@ -122,6 +123,7 @@ class SimNode(Node):
         self._clock_msg = ClockMsg()
         self._joint_pubs, self._odom_pubs, self._odom_frames = {}, {}, {}
         self._state_pubs = {}
+        self._holding_pubs = {}
         for name, robot in self._world.robots.items():
             ns = robot.config.namespace
             prefix = robot.config.frame_prefix
@@ -133,6 +135,9 @@ class SimNode(Node):
             if name in self._world.suctions:
                 self.create_service(SetBool, _topic(ns, 'suction'),
                                     lambda req, res, n=name: self._on_suction(n, req, res))
+                # The cup's vacuum switch: true while it holds a part.
+                self._holding_pubs[name] = self.create_publisher(
+                    Bool, _topic(ns, 'suction/holding'), history)
             self._odom_frames[name] = (prefix + 'odom', prefix + 'base_link')
             if name in self._runner.guards:
                 msg_type = TwistStamped if p['use_stamped_vel'] else Twist
@@ -243,6 +248,9 @@ class SimNode(Node):
                          effort=js.efforts)
         msg.header.stamp = stamp
         self._joint_pubs[robot].publish(msg)
+        if robot in self._holding_pubs:
+            self._holding_pubs[robot].publish(
+                Bool(data=self._world.suctions[robot].held is not None))
         for name, group in sim_robot.controllers.items():
             self._state_pubs[(robot, name)].publish(
                 _controller_state(group, stamp, self._world.sim_time))
@@ -328,8 +336,8 @@ class SimNode(Node):
 
     def _on_suction(self, robot: str, request, response):
         suction = self._world.suctions[robot]
-        response.success, response.message = (suction.grip(self._world.source) if request.data
-                                               else suction.release())
+        response.success, response.message = (suction.switch_on(self._world.source)
+                                               if request.data else suction.release())
         text = f'{robot}/suction {"on" if request.data else "off"}: {response.message}'
         # (rclpy forbids two severities from one logging call site.)
         if response.success:

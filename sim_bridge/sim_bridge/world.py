@@ -419,6 +419,8 @@ class SimWorld:
         return self.source.materials if self.source is not None else []
 
     def step(self) -> None:
+        for suction in self.suctions.values():
+            suction.update(self.source)
         if self.conveyor is not None:
             held = {s.held.body for s in self.suctions.values() if s.held is not None}
             self.conveyor.carry([m.body for m in self.materials if m.body not in held],

@@ -25,6 +25,7 @@ from rclpy.qos import QoSProfile
 from sensor_msgs.msg import JointState
 from sim_interfaces.msg import MaterialDetection, MaterialDetectionArray
 from sim_interfaces.srv import SolveIK
+from std_msgs.msg import Bool
 from std_srvs.srv import SetBool
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
@@ -85,6 +86,9 @@ class PickPlace(Node):
         self.create_subscription(JointState, '/zu12/joint_states', self._on_joints, qos,
                                  callback_group=group)
         self.tool: Optional[np.ndarray] = None
+        self.holding = False
+        self.create_subscription(Bool, '/zu12/suction/holding', self._on_holding, qos,
+                                 callback_group=group)
         self.create_subscription(PoseStamped, '/zu12/end_effector_pose', self._on_tool, qos,
                                  callback_group=group)
         self.traj_pub = self.create_publisher(JointTrajectory,
@@ -122,6 +126,9 @@ class PickPlace(Node):
         index = {n: i for i, n in enumerate(msg.name)}
         if all(n in index for n in JOINT_NAMES):
             self.joints = np.array([msg.position[index[n]] for n in JOINT_NAMES])
+
+    def _on_holding(self, msg: Bool) -> None:
+        self.holding = msg.data
 
     def _on_tool(self, msg: PoseStamped) -> None:
         p = msg.pose.position
@@ -248,7 +255,7 @@ class PickPlace(Node):
         timing = PickTiming()
         # Leave the arm the time its joints need to reach the hover point.
         for _ in range(3):
-            waypoints, t_grip = pick_waypoints(pos, stamp, vel, t_contact, self.size, timing)
+            waypoints, _ = pick_waypoints(pos, stamp, vel, t_contact, self.size, timing)
             # Seeded from the start pose over the belt: the solution nearest to where the arm
             # is now can be a flip over the top after a place on the other side.
             q_hover = self.solve(waypoints[0][1], f'material {det.id}', self.home)
@@ -259,10 +266,16 @@ class PickPlace(Node):
             t_contact = self.now() + needed + timing.descend
         points = self.solve_path(waypoints, f'material {det.id}', q_hover)
         self.send(points)
-        self.wait_until(t_grip)
-        ok, message = self.grip(True)
+        # The cup is switched on half-way down: it grips the material when it touches it.
+        self.wait_until(waypoints[1][0])
+        self.grip(True)
+        t_leave = t_contact + timing.dwell
+        self.wait_until(t_leave)
+        ok = self.holding
+        message = 'holding it' if ok else 'nothing held at the end of the dwell'
         self.get_logger().info(f'material {det.id} ({det.color}): {message}')
         if not ok:
+            self.grip(False)
             self.get_logger().error(
                 f'material {det.id} ({det.color}) missed: {message}; planned contact '
                 f'{np.round(waypoints[3][1], 3).tolist()} at {t_contact:.2f} s (now '
