@@ -17,6 +17,7 @@ EXECUTABLES = [
     ('sim_bringup', 'drive_check', ['-p', 'script:=forward 1s'], 'waiting for'),
     ('recording', 'recorder', ['-p', 'output_dir:={tmp}'], 'recording all topics'),
     ('arm_kinematics', 'kinematics_node', ['-r', '__ns:=/youbot'], 'IK on /youbot/solve_ik'),
+    ('perception', 'vision_node', [], 'looking for'),
 ]
 COMMAND_LINE_TOOLS = [('recording', 'bag_analysis'), ('recording', 'bag_repair')]
 
@@ -62,15 +63,20 @@ def test_every_package_is_in_the_ament_index():
         assert (share / 'package.xml').is_file()
     assert (Path(get_package_share_directory('robot_description')) / 'urdf' /
             'mini_robot.urdf').is_file()
-    for world in ('mini_robot', 'youbot'):
+    for world in ('mini_robot', 'youbot', 'pipeline_cell'):
         assert (Path(get_package_share_directory('sim_bridge')) / 'worlds' /
                 f'{world}.yaml').is_file()
-    assert (Path(get_package_share_directory('robot_description')) / 'urdf' /
-            'youbot.urdf').is_file()
+    for robot in ('youbot', 'zu12'):
+        assert (Path(get_package_share_directory('robot_description')) / 'urdf' /
+                f'{robot}.urdf').is_file()
+    for executable in ('arm_move', 'pick_place', 'drive_check'):
+        assert _ros2_run_path('sim_bringup', executable).is_file()
 
 
 def test_interface_package_generated_python_bindings():
-    from sim_interfaces.msg import JointTrajectoryControllerState
+    from sim_interfaces.msg import (JointTrajectoryControllerState, MaterialDetection,
+                                    MaterialDetectionArray)
+    assert MaterialDetectionArray(detections=[MaterialDetection(id=3)]).detections[0].id == 3
     from sim_interfaces.srv import SolveIK, StepSimulation
     assert StepSimulation.Request(steps=3).steps == 3
     assert SolveIK.Request(execute=True).execute

@@ -1,0 +1,148 @@
+"""The cell's props in the world core: the conveyor carries at belt speed, the material source
+is seeded and reproducible, the suction cup grips on contact and releases."""
+import math
+
+import numpy as np
+import pytest
+
+from sim_bridge.runner import DriveLimits, SimRunner
+from sim_bridge.world import SimWorld, resolve_resource
+from sim_bridge.world_config import WorldConfigError, load_world, parse_world
+
+WORLD = load_world(resolve_resource('package://sim_bridge/worlds/pipeline_cell.yaml'))
+
+
+class _Sink:
+    def on_clock(self, t):
+        pass
+
+    def on_state(self, robot, t):
+        pass
+
+    def on_camera_due(self, i, t, render):
+        pass
+
+    def on_command_timeout(self, robot):
+        pass
+
+    def on_world_state(self, t):
+        pass
+
+
+def _run(world, seconds):
+    """Step through a runner, which also drives the arms' position motors."""
+    if not hasattr(world, 'runner'):
+        world.runner = SimRunner(world, DriveLimits(), 100.0)
+    world.runner.advance(round(seconds / world.time_step), _Sink())
+
+
+@pytest.fixture
+def world():
+    w = SimWorld(WORLD)
+    yield w
+    w.close()
+
+
+def test_the_scenario_is_the_papers_eight_in_a_seeded_order(world):
+    colors = [c for c, _, _ in world.source.plan]
+    assert sorted(colors) == sorted(['purple'] + ['orange'] * 6 + ['blue'])
+    again = SimWorld(WORLD)
+    other = SimWorld(WORLD, scenario_seed=99)
+    try:
+        assert again.source.plan == world.source.plan
+        assert other.source.plan != world.source.plan
+    finally:
+        again.close()
+        other.close()
+    gaps = np.diff([travel for _, travel, _ in world.source.plan])
+    assert np.all(gaps >= 0.25 - 1e-12) and np.all(gaps <= 0.45 + 1e-12)
+
+
+def test_the_belt_carries_materials_at_its_speed(world):
+    world.conveyor.speed = 0.1
+    _run(world, 1.0)
+    first = world.materials[0]
+    x0 = world.source.pose(first)[0]
+    _run(world, 2.0)
+    x1, rot = world.source.pose(first)
+    assert (x1 - x0) == pytest.approx((0.2, 0.0, 0.0), abs=2e-3)
+    assert rot == pytest.approx(np.eye(3), abs=1e-3)            # no tumbling
+    assert world.conveyor.on_belt(first.body)
+    world.conveyor.speed = 0.0
+    _run(world, 0.5)
+    still = world.source.pose(first)[0]
+    _run(world, 1.0)
+    assert world.source.pose(first)[0] == pytest.approx(still, abs=1e-4)
+    with pytest.raises(ValueError):
+        world.conveyor.speed = math.nan
+
+
+def test_materials_fall_off_the_end_and_restart_on_reset(world):
+    world.conveyor.speed = 1.0
+    _run(world, 6.0)
+    assert len(world.materials) == 8
+    assert all(not world.conveyor.on_belt(m.body) for m in world.materials[:2])
+    world.reset()
+    assert world.materials == []
+    _run(world, 0.1)
+    assert len(world.materials) == 1
+
+
+def _tcp_to(world, point):
+    """Place the Zu 12's suction cup at ``point`` (pointing down) by resetting its joints."""
+    from controllers.transforms import quaternion_to_matrix
+    from controllers.zu12_kinematics import Zu12Kinematics
+    kin = Zu12Kinematics()
+    target = np.eye(4)
+    target[:3, :3] = quaternion_to_matrix((1, 0, 0, 0))
+    target[:3, 3] = point
+    robot = world.robots['zu12']
+    seed = robot.joint_positions(kin.joint_names)
+    q = kin.ik(target, seed).positions
+    for name, value in zip(kin.joint_names, q):
+        world._p.resetJointState(robot.body, robot.joint_index[name], value)
+    robot.controllers['arm_controller'].hold_current()
+
+
+def test_the_armed_cup_grips_on_contact_and_releases(world):
+    world.conveyor.speed = 0.5
+    _run(world, 1.8)                                           # into the arm's reach
+    world.conveyor.speed = 0.0
+    _run(world, 0.2)
+    material = world.materials[0]
+    centre = world.source.pose(material)[0]
+    suction = world.suctions['zu12']
+    _tcp_to(world, centre + (0.0, 0.0, 0.1))
+    ok, message = suction.switch_on(world.source)
+    assert ok and suction.armed and suction.held is None and 'nothing within 4 mm' in message
+    _tcp_to(world, centre + (0.0, 0.0, 0.025))                 # on its top face
+    _run(world, world.time_step)
+    assert suction.held is material
+    _tcp_to(world, centre + (0.0, 0.0, 0.3))
+    _run(world, 0.5)
+    lifted = world.source.pose(material)[0]
+    assert lifted[2] == pytest.approx(centre[2] + 0.275, abs=0.01)
+    assert not world.conveyor.on_belt(material.body)
+    ok, message = suction.release()
+    assert ok and 'released material 0' in message and not suction.armed
+    _run(world, 1.0)
+    assert world.conveyor.on_belt(material.body)               # dropped back onto the belt
+
+
+def test_cell_sections_are_validated():
+    base = {'conveyor': {'position': [0, 0, 0.4], 'length': 2.0, 'width': 0.3}}
+    assert parse_world(base).conveyor.belt_speed == 0.05
+    bad = [
+        ({'materials': {'counts': {'a': 1}, 'colors': {'a': [1, 0, 0, 1]}}}, 'need a conveyor'),
+        (dict(base, materials={'counts': {'a': 1}, 'colors': {}}), 'has no colour for'),
+        (dict(base, materials={'counts': {'a': 1}, 'colors': {'a': [1, 0, 0, 1]},
+                               'gap': [0.02, 0.1]}), 'lets materials'),
+        ({'conveyor': {'position': [0, 0, 0.4], 'length': 2.0, 'width': 0.3,
+                       'belt_speed': -1}}, 'belt_speed'),
+        ({'robots': [{'name': 'r', 'urdf': 'x.urdf', 'fixed_base': 'yes'}]}, 'fixed_base'),
+        ({'robots': [{'name': 'r', 'urdf': 'x.urdf', 'suction': {'reach': 0.01}}]},
+         'suction.link is required'),
+    ]
+    for data, fragment in bad:
+        with pytest.raises(WorldConfigError, match=fragment):
+            parse_world(data, 'test.yaml')
