@@ -82,6 +82,7 @@ class VisionNode(Node):
         self._vision: Optional[MaterialVision] = None
         self._info_key = None
         self._latencies = deque(maxlen=500)
+        self._warned = {}
         self._last_stats = time.monotonic()
         self._pub = self.create_publisher(MaterialDetectionArray, 'detections',
                                           QoSProfile(depth=10))
@@ -195,27 +196,35 @@ class VisionNode(Node):
 
     def _frame(self, msg: Image) -> Optional[np.ndarray]:
         """The image as an RGB array, or None (with a throttled warning) if unusable."""
-        warn = lambda text: self.get_logger().warn(text, throttle_duration_sec=5.0)  # noqa
         if self._vision is None:
-            warn('no camera_info yet: frames skipped')
+            self._warn('info', 'no camera_info yet: frames skipped')
             return None
         if msg.encoding not in ENCODINGS:
-            warn(f'frame with encoding "{msg.encoding}" rejected: expected {ENCODINGS}')
+            self._warn('encoding', f'frame with encoding "{msg.encoding}" rejected: expected '
+                                   f'{ENCODINGS}')
             return None
         if msg.width == 0 or msg.height == 0 or not len(msg.data):
-            warn('empty frame rejected')
+            self._warn('empty', 'empty frame rejected')
             return None
         if (msg.width, msg.height) != (self._vision.width, self._vision.height):
-            warn(f'frame {msg.width}x{msg.height} rejected: camera_info says '
-                 f'{self._vision.width}x{self._vision.height}')
+            self._warn('size', f'frame {msg.width}x{msg.height} rejected: camera_info says '
+                               f'{self._vision.width}x{self._vision.height}')
             return None
         if msg.step < 3 * msg.width or len(msg.data) < msg.step * msg.height:
-            warn(f'frame rejected: {len(msg.data)} bytes for step {msg.step} x {msg.height}')
+            self._warn('bytes', f'frame rejected: {len(msg.data)} bytes for step {msg.step} x '
+                                f'{msg.height}')
             return None
         rows = np.frombuffer(msg.data, np.uint8)[:msg.step * msg.height]
         frame = rows.reshape(msg.height, msg.step)[:, :3 * msg.width].reshape(
             msg.height, msg.width, 3)
         return np.ascontiguousarray(frame[..., ::-1] if msg.encoding == 'bgr8' else frame)
+
+    def _warn(self, reason: str, text: str) -> None:
+        """At most one warning per reason every 5 s (rclpy throttles per call site only)."""
+        now = time.monotonic()
+        if now - self._warned.get(reason, -1e9) >= 5.0:
+            self._warned[reason] = now
+            self.get_logger().warn(text)
 
     def _log_stats(self) -> None:
         now = time.monotonic()

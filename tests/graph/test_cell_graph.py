@@ -109,3 +109,37 @@ def test_pick_and_place_every_material_of_a_seeded_scenario(start_node, probe):
         assert abs(p.z - (target[2] + 0.025)) < 0.005 and final[index].text == 'free'
         assert np.hypot(p.x - q.x, p.y - q.y) < 0.001          # and stays there
     assert sim.alive()
+
+
+def test_unusable_frames_are_rejected_with_a_warning(start_node, probe):
+    from sensor_msgs.msg import CameraInfo
+    vision = start_node('vision_node')
+    wait_for(lambda: 'looking for' in vision.output(), 20.0, what='the vision node')
+    image_pub = probe.node.create_publisher(Image, 'image_raw', qos_profile_sensor_data)
+    info_pub = probe.node.create_publisher(CameraInfo, 'camera_info', qos_profile_sensor_data)
+    wait_for(lambda: image_pub.get_subscription_count() and info_pub.get_subscription_count(),
+             20.0, what='the vision node subscriptions')
+    frame = Image(width=320, height=240, encoding='rgb8', step=960, data=bytes(960 * 240))
+    image_pub.publish(frame)
+    wait_for(lambda: 'no camera_info yet' in vision.output(), 10.0, what='a warning')
+    info = CameraInfo(width=320, height=240,
+                      k=[290.0, 0.0, 160.0, 0.0, 290.0, 119.0, 0.0, 0.0, 1.0])
+    detections = probe.collect(MaterialDetectionArray, '/detections')
+    bad = [(Image(width=320, height=240, encoding='mono8', step=320, data=bytes(320 * 240)),
+            'encoding "mono8" rejected'),
+           (Image(width=160, height=120, encoding='rgb8', step=480, data=bytes(480 * 120)),
+            'frame 160x120 rejected'),
+           (Image(width=320, height=240, encoding='rgb8', step=960), 'empty frame rejected'),
+           (Image(width=320, height=240, encoding='rgb8', step=960, data=bytes(100)),
+            'frame rejected: 100 bytes')]
+    for msg, warning in bad:
+        end = time.monotonic() + 10.0
+        while warning not in vision.output() and time.monotonic() < end:
+            info_pub.publish(info)
+            image_pub.publish(msg)
+            time.sleep(0.2)
+        assert warning in vision.output(), warning
+    assert not detections                        # nothing published for unusable frames
+    image_pub.publish(frame)
+    wait_for(lambda: detections, 10.0, what='a good frame processed')
+    assert detections[-1][1].detections == [] and vision.alive()
