@@ -201,7 +201,12 @@ class PickPlace(Node):
         home = self.home = self.joints.copy()
         done, slot, placed, missed = set(), 0, [], []
         start = self.now()
-        while len(placed) < self.count:
+        while len(placed) + len(missed) < self.count:
+            for det in self._passed(done):
+                done.add(det.id)
+                missed.append(det.id)
+                self.get_logger().error(f'material {det.id} ({det.color}) passed the pick '
+                                        'window unpicked (the arm was busy)')
             if self.now() - start > self.timeout:
                 raise PickPlaceError(f'only {len(placed)} of {self.count} materials placed in '
                                      f'{self.timeout} s (missed: {missed})')
@@ -227,6 +232,16 @@ class PickPlace(Node):
         self.get_logger().info(f'done: {len(placed)} materials placed, {len(missed)} missed '
                                f'{missed}; arm back at its start')
         return 0 if not missed else 1
+
+    def _passed(self, done) -> List[MaterialDetection]:
+        """Materials (tracked long enough) that are beyond the pick window by now."""
+        with self._lock:
+            candidates = [(stamp, d) for stamp, d in self.latest.values() if d.id not in done]
+        now = self.now()
+        return [d for stamp, d in candidates
+                if d.hits >= 15 and d.velocity.x > 1e-3
+                and (self.wanted_colors is None or d.color in self.wanted_colors)
+                and d.position.x + d.velocity.x * (now + self.lead - stamp) > self.pick_x_max]
 
     def _next(self, done):
         """A material to pick now: its detection and the contact time, or None."""
