@@ -11,7 +11,6 @@ tests/unit/test_zu12.py fails if the committed file differs from what this scrip
 """
 from __future__ import annotations
 
-import argparse
 import math
 import sys
 from pathlib import Path
@@ -86,20 +85,5 @@ def render() -> str:
     return HEADER + '\n'.join(_parts()) + '\n</robot>\n'
 
 
-def main() -> int:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument('--check', action='store_true',
-                        help='exit 1 if the committed file differs from the generated one')
-    args = parser.parse_args()
-    text = render()
-    if args.check:
-        same = OUT.is_file() and OUT.read_text() == text
-        print(f'{OUT}: {"up to date" if same else "differs from the generator"}')
-        return 0 if same else 1
-    OUT.write_text(text)
-    print(f'wrote {OUT}')
-    return 0
-
-
 if __name__ == '__main__':
-    sys.exit(main())
+    sys.exit(uw.generator_main(__doc__, render, OUT))

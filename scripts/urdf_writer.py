@@ -1,9 +1,28 @@
 """Small helpers that write URDF elements (used by the robot description generators)."""
 from __future__ import annotations
 
+import argparse
 import math
+from pathlib import Path
+from typing import Callable
 
 import numpy as np
+
+
+def generator_main(doc: str, render: Callable[[], str], out: Path) -> int:
+    """Command line of a description generator: write ``out``, or ``--check`` it."""
+    parser = argparse.ArgumentParser(description=doc.splitlines()[0])
+    parser.add_argument('--check', action='store_true',
+                        help='exit 1 if the committed file differs from the generated one')
+    args = parser.parse_args()
+    text = render()
+    if args.check:
+        same = out.is_file() and out.read_text() == text
+        print(f'{out}: {"up to date" if same else "differs from the generator"}')
+        return 0 if same else 1
+    out.write_text(text)
+    print(f'wrote {out}')
+    return 0
 
 
 def num(v: float) -> str:
