@@ -94,6 +94,11 @@ class KinematicsNode(Node):
 
     # --- joint states -> end-effector pose ----------------------------------------------------
     def _on_joint_states(self, msg: JointState) -> None:
+        if len(msg.position) != len(msg.name):
+            self.get_logger().warn(f'joint_states with {len(msg.name)} names and '
+                                   f'{len(msg.position)} positions ignored',
+                                   throttle_duration_sec=5.0)
+            return
         index = {name: i for i, name in enumerate(msg.name)}
         if not all(name in index for name in self._kin.joint_names):
             return

@@ -124,7 +124,7 @@ class PickPlace(Node):
 
     def _on_joints(self, msg: JointState) -> None:
         index = {n: i for i, n in enumerate(msg.name)}
-        if all(n in index for n in JOINT_NAMES):
+        if len(msg.position) == len(msg.name) and all(n in index for n in JOINT_NAMES):
             self.joints = np.array([msg.position[index[n]] for n in JOINT_NAMES])
 
     def _on_holding(self, msg: Bool) -> None:
