@@ -1,12 +1,20 @@
 # The two commands: `make demo` runs the main job, `make test` runs the tests.
 # Both create .venv and build ros_ws first when needed (scripts/setup.sh is idempotent).
-.PHONY: setup demo test bench clean
+.PHONY: setup demo demo-mini trials test bench clean
 
 setup:
 	@bash scripts/setup.sh
 
 demo: setup
 	@bash scripts/demo.sh
+
+# The mini robot drives a square from the scripted teleop (the first source document).
+demo-mini: setup
+	@bash scripts/demo_mini_robot.sh
+
+# The paper's Table 2 over many seeded trials: make trials TRIALS=100 PARALLEL=2
+trials: setup
+	@bash -c 'source scripts/env.sh && run_trials --trials $${TRIALS:-10} --parallel $${PARALLEL:-1}'
 
 test: setup
 	@bash scripts/test.sh

@@ -18,8 +18,10 @@ EXECUTABLES = [
     ('recording', 'recorder', ['-p', 'output_dir:={tmp}'], 'recording all topics'),
     ('arm_kinematics', 'kinematics_node', ['-r', '__ns:=/youbot'], 'IK on /youbot/solve_ik'),
     ('perception', 'vision_node', [], 'looking for'),
+    ('coordinator', 'coordinator_node', ['-p', 'service_timeout:=60.0'], 'real-time at'),
 ]
-COMMAND_LINE_TOOLS = [('recording', 'bag_analysis'), ('recording', 'bag_repair')]
+COMMAND_LINE_TOOLS = [('recording', 'bag_analysis'), ('recording', 'bag_repair'),
+                      ('coordinator', 'run_trials')]
 
 
 def _ros2_run_path(package: str, executable: str) -> Path:
@@ -58,7 +60,8 @@ def test_command_line_tool_resolves_and_runs(package, executable):
 
 def test_every_package_is_in_the_ament_index():
     for package in ('sim_bridge', 'controllers', 'perception', 'robot_description',
-                    'sim_bringup', 'sim_interfaces', 'recording', 'arm_kinematics'):
+                    'sim_bringup', 'sim_interfaces', 'recording', 'arm_kinematics',
+                    'coordinator'):
         share = Path(get_package_share_directory(package))
         assert (share / 'package.xml').is_file()
     assert (Path(get_package_share_directory('robot_description')) / 'urdf' /

@@ -11,7 +11,7 @@ def test_demo_drives_the_square_records_and_passes(tmp_path):
     # switches lag by its /clock latency times the real-time factor.
     env = {**os.environ, 'DEMO_RUNS_DIR': str(tmp_path)}
     env.pop('ROS_DOMAIN_ID', None)  # the demo picks its own
-    out = subprocess.run(['bash', str(ROOT / 'scripts' / 'demo.sh')], env=env,
+    out = subprocess.run(['bash', str(ROOT / 'scripts' / 'demo_mini_robot.sh')], env=env,
                          capture_output=True, text=True, timeout=600)
     text = out.stdout + out.stderr
     assert out.returncode == 0, text[-1500:]

@@ -171,6 +171,11 @@ class VisionNode(Node):
     def _on_image(self, msg: Image) -> None:
         frame = self._frame(msg)
         if frame is None:
+            # Every frame gets an answer (a lock-step consumer waits for it): none found.
+            skipped = MaterialDetectionArray()
+            skipped.header.stamp = msg.header.stamp
+            skipped.header.frame_id = self._frame_id
+            self._pub.publish(skipped)
             return
         start = time.perf_counter()
         t = msg.header.stamp.sec + msg.header.stamp.nanosec * 1e-9

@@ -16,7 +16,7 @@ from rclpy.node import Node
 from rclpy.qos import QoSProfile, qos_profile_sensor_data
 from rosgraph_msgs.msg import Clock as ClockMsg
 from sensor_msgs.msg import CameraInfo, Image, JointState
-from sim_interfaces.msg import JointTrajectoryControllerState
+from sim_interfaces.msg import GripState, JointTrajectoryControllerState
 from sim_interfaces.srv import StepSimulation
 from trajectory_msgs.msg import JointTrajectory
 from visualization_msgs.msg import Marker, MarkerArray
@@ -80,7 +80,7 @@ class SimNode(Node):
 
         self.declare_parameter('belt_speed', -1.0, float_range(
             'Conveyor belt speed [m/s]; -1 keeps the world file\'s; settable while running',
-            -1.0, 2.0))
+            -1.0, 2.0, read_only=False))
         self.declare_parameter('scenario_seed', -1, ParameterDescriptor(
             description='Seed of the materials\' order and spacing; -1 keeps the world file\'s',
             read_only=True,
@@ -133,11 +133,13 @@ class SimNode(Node):
                 self._odom_pubs[name] = self.create_publisher(Odometry, _topic(ns, 'odom'),
                                                               history)
             if name in self._world.suctions:
-                self.create_service(SetBool, _topic(ns, 'suction'),
+                service = _topic(ns, robot.config.suction.service)
+                self.create_service(SetBool, service,
                                     lambda req, res, n=name: self._on_suction(n, req, res))
-                # The cup's vacuum switch: true while it holds a part.
-                self._holding_pubs[name] = self.create_publisher(
-                    Bool, _topic(ns, 'suction/holding'), history)
+                # The cup's vacuum switch: true while it holds a part; and the same, stamped.
+                self._holding_pubs[name] = (
+                    self.create_publisher(Bool, f'{service}/holding', history),
+                    self.create_publisher(GripState, f'{service}/state', history))
             self._odom_frames[name] = (prefix + 'odom', prefix + 'base_link')
             if name in self._runner.guards:
                 msg_type = TwistStamped if p['use_stamped_vel'] else Twist
@@ -249,8 +251,13 @@ class SimNode(Node):
         msg.header.stamp = stamp
         self._joint_pubs[robot].publish(msg)
         if robot in self._holding_pubs:
-            self._holding_pubs[robot].publish(
-                Bool(data=self._world.suctions[robot].held is not None))
+            suction = self._world.suctions[robot]
+            holding = suction.held is not None
+            bool_pub, state_pub = self._holding_pubs[robot]
+            bool_pub.publish(Bool(data=holding))
+            grip = GripState(armed=suction.armed, holding=holding)
+            grip.header.stamp = stamp
+            state_pub.publish(grip)
         for name, group in sim_robot.controllers.items():
             self._state_pubs[(robot, name)].publish(
                 _controller_state(group, stamp, self._world.sim_time))

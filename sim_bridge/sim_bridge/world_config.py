@@ -72,6 +72,9 @@ class SuctionConfig:
     link: str
     reach: float = 0.01
     max_payload: float = 12.0      # kg
+    # The SetBool service that arms/releases it, relative to the robot's namespace; the
+    # vacuum switch is published on <service>/holding and <service>/state.
+    service: str = 'suction'
 
 
 @dataclass(frozen=True)
@@ -249,12 +252,15 @@ def _robot(r: '_Reader', item: Any, i: int) -> RobotConfig:
     suction = None
     if item.get('suction') is not None:
         sw = where + '.suction'
-        r.only(item['suction'], sw, {'link', 'reach', 'max_payload'})
+        r.only(item['suction'], sw, {'link', 'reach', 'max_payload', 'service'})
         suction = SuctionConfig(r.string(item['suction'], 'link', sw),
                                 r.number(item['suction'], 'reach', sw, default=0.01, lo=1e-4,
                                          hi=0.1),
                                 r.number(item['suction'], 'max_payload', sw, default=12.0,
-                                         lo=1e-3))
+                                         lo=1e-3),
+                                r.string(item['suction'], 'service', sw, default='suction'))
+        if not re.fullmatch(r'[a-z][a-z0-9_]*(/[a-z][a-z0-9_]*)*', suction.service):
+            raise r.fail(sw, 'service', f'"{suction.service}" is not a relative ROS name')
     return RobotConfig(name=name, urdf=r.string(item, 'urdf', where), namespace=namespace,
                        pose=pose, frame_prefix=r.string(item, 'frame_prefix', where, default=''),
                        drive=drive, limits=limits, controllers=controllers,

@@ -1,0 +1,118 @@
+"""A holonomic base following a dummy that moves along a Bezier path, with a PD law on its pose.
+
+The paper's scheme (its section 4.2): the dummy moves along the path at the profile's speed; the
+robot takes the dummy's velocity as feed-forward and corrects its pose error with proportional
+and derivative terms (the derivative of the error is the dummy's velocity minus the robot's, so
+no numerical differentiation of a noisy pose). The command is a body twist (vx, vy, wz) for
+``cmd_vel``, saturated to the base's limits.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Optional, Sequence, Tuple
+
+import numpy as np
+
+from controllers.bezier import BezierPath, MotionProfile, wrap_angle
+
+
+@dataclass(frozen=True)
+class PDGains:
+    kp_xy: float = 2.0           # [1/s]
+    kd_xy: float = 0.3           # [-]
+    kp_yaw: float = 2.5          # [1/s]
+    kd_yaw: float = 0.2          # [-]
+    max_speed: float = 0.5       # [m/s] each of vx, vy
+    max_turn: float = 1.0        # [rad/s]
+
+
+@dataclass(frozen=True)
+class FollowStatus:
+    command: Tuple[float, float, float]     # body twist (vx, vy, wz)
+    dummy: Tuple[float, float, float]       # the dummy's pose
+    position_error: float                   # [m]
+    yaw_error: float                        # [rad]
+    finished: bool                          # dummy at the end and the robot settled on it
+
+
+class PathFollower:
+    """Follows one path, started at ``start_time``; call ``update`` every control period."""
+
+    def __init__(self, path: BezierPath, start_time: float, max_speed: float = 0.35,
+                 max_accel: float = 0.4, gains: PDGains = PDGains(),
+                 position_tolerance: float = 0.01, yaw_tolerance: float = 0.02) -> None:
+        self.path, self.start_time, self.gains = path, start_time, gains
+        self.profile = MotionProfile(path.length, max_speed, max_accel)
+        self.position_tolerance, self.yaw_tolerance = position_tolerance, yaw_tolerance
+        # The heading rate of the dummy from successive updates (feed-forward for the yaw).
+        self._last: Optional[Tuple[float, float]] = None
+
+    @property
+    def end_time(self) -> float:
+        return self.start_time + self.profile.duration
+
+    def dummy(self, t: float) -> Tuple[Tuple[float, float, float], np.ndarray, float]:
+        """The dummy's pose, world velocity (vx, vy) and yaw rate at time ``t``."""
+        s, speed = self.profile.at(t - self.start_time)
+        pose = self.path.pose(s)
+        velocity = self.path.tangent(s) * speed
+        ds = 1e-3
+        yaw_rate = 0.0
+        if speed > 0.0:
+            ahead = self.path.pose(min(self.path.length, s + ds))
+            yaw_rate = wrap_angle(ahead[2] - pose[2]) / ds * speed
+        return pose, velocity, yaw_rate
+
+    def update(self, t: float, pose: Sequence[float], velocity: Sequence[float] = (0.0, 0.0),
+               yaw_rate: float = 0.0) -> FollowStatus:
+        """Command for the robot at ``pose`` (x, y, yaw) moving at world ``velocity`` (vx, vy)
+        and ``yaw_rate``."""
+        g = self.gains
+        (xd, yd, yawd), vd, wd = self.dummy(t)
+        x, y, yaw = (float(v) for v in pose)
+        error = np.array([xd - x, yd - y])
+        yaw_error = wrap_angle(yawd - yaw)
+        v_world = vd + g.kp_xy * error + g.kd_xy * (vd - np.asarray(velocity, float))
+        wz = wd + g.kp_yaw * yaw_error + g.kd_yaw * (wd - yaw_rate)
+        c, s = math.cos(yaw), math.sin(yaw)
+        vx, vy = c * v_world[0] + s * v_world[1], -s * v_world[0] + c * v_world[1]
+        # Saturate the translation as a whole, so that the direction is kept.
+        scale = max(abs(vx), abs(vy)) / g.max_speed
+        if scale > 1.0:
+            vx, vy = vx / scale, vy / scale
+        wz = max(-g.max_turn, min(g.max_turn, wz))
+        distance = float(np.linalg.norm(error))
+        finished = (t >= self.end_time and distance <= self.position_tolerance
+                    and abs(yaw_error) <= self.yaw_tolerance)
+        if finished:
+            vx = vy = wz = 0.0
+        return FollowStatus((float(vx), float(vy), float(wz)), (xd, yd, yawd), distance,
+                            abs(yaw_error), finished)
+
+
+def simulate_kinematic(follower: PathFollower, start: Sequence[float], dt: float = 0.02,
+                       lag: float = 0.05, duration: Optional[float] = None,
+                       disturbance: Tuple[float, float] = (0.0, 0.0)):
+    """A pure-kinematic holonomic base (first-order velocity lag ``lag`` [s], a constant world
+    velocity ``disturbance``) driven by ``follower``; returns the visited poses and statuses."""
+    pose = np.asarray(start, float).copy()
+    body = np.zeros(3)
+    t = follower.start_time
+    end = follower.end_time + (duration if duration is not None else 5.0)
+    poses, statuses = [pose.copy()], []
+    while t < end:
+        c, s = math.cos(pose[2]), math.sin(pose[2])
+        world = np.array([c * body[0] - s * body[1], s * body[0] + c * body[1]])
+        status = follower.update(t, pose, world, body[2])
+        statuses.append(status)
+        if status.finished:
+            break
+        body += (np.array(status.command) - body) * min(1.0, dt / lag)
+        c, s = math.cos(pose[2]), math.sin(pose[2])
+        pose[0] += (c * body[0] - s * body[1] + disturbance[0]) * dt
+        pose[1] += (s * body[0] + c * body[1] + disturbance[1]) * dt
+        pose[2] = wrap_angle(pose[2] + body[2] * dt)
+        t += dt
+        poses.append(pose.copy())
+    return np.array(poses), statuses

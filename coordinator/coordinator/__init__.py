@@ -1,0 +1,1 @@
+"""The pipeline coordinator: state machine core, node, results and trial runner."""

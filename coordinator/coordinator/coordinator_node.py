@@ -1,0 +1,533 @@
+"""The pipeline coordinator node: wires the state machine (pipeline.py) to the node graph.
+
+Inputs: ``/detections`` (vision_node), ``/zu12/joint_states``, ``/youbot/joint_states``,
+``/youbot/odom``, the grip states of the Zu 12's cup and the youBot's gripper; for the score
+only, the simulator's ground truth ``/cell/materials``. Outputs: arm trajectories, the grip
+services, ``/youbot/cmd_vel``, the belt speed (the simulator's ``belt_speed`` parameter), IK
+through ``/zu12/solve_ik`` and ``/youbot/solve_ik``; ``~/events`` and ``~/state`` (latched).
+
+Real-time mode follows the simulator's clock. Lock-step mode (``synchronous:=true``, with the
+simulator started the same way) requests every step through ``/sim_node/step`` and, before each
+decision, waits for the messages of exactly that step (states stamped with its time, the
+detections of every camera frame it produced): the same seed gives the same run. Commands
+(topics) go out before the next step request (a service) from the same participant, and the
+simulator takes ready subscriptions before ready services; waiting for DDS acknowledgements
+instead costs a heartbeat period (seconds) per command.
+"""
+from __future__ import annotations
+
+import json
+import math
+import sys
+import threading
+import time
+from pathlib import Path
+from typing import Dict, List, Optional, Sequence, Tuple
+
+import numpy as np
+import rclpy
+from builtin_interfaces.msg import Duration
+from geometry_msgs.msg import Twist
+from nav_msgs.msg import Odometry
+from rcl_interfaces.msg import Parameter, ParameterDescriptor, ParameterType, ParameterValue
+from rcl_interfaces.srv import SetParameters
+from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
+from rclpy.node import Node
+from rclpy.qos import DurabilityPolicy, QoSProfile
+from sensor_msgs.msg import JointState
+from sim_interfaces.msg import (GripState, MaterialDetectionArray, PipelineEvent,
+                                PipelineState)
+from sim_interfaces.srv import SolveIK, StepSimulation
+from std_srvs.srv import SetBool
+from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
+from visualization_msgs.msg import MarkerArray
+
+from controllers.params import float_range
+from controllers.youbot_arm import JOINT_NAMES as YOUBOT_JOINTS
+from controllers.zu12_arm import JOINT_NAMES as ZU12_JOINTS
+from coordinator.layout import LayoutError, layout_from_world
+from coordinator.pipeline import (Detection, Event, NodeTimeout, Observation, Pipeline,
+                                  Points, Settings)
+from coordinator.results import (at_destination, match_identification, regions_from_world,
+                                 score)
+
+ARMS = {'zu12': ZU12_JOINTS, 'youbot': YOUBOT_JOINTS}
+GRIP_SERVICES = {'zu12': '/zu12/suction', 'youbot': '/youbot/gripper/grasp'}
+
+
+class CoordinatorError(RuntimeError):
+    pass
+
+
+class DueGrid:
+    """When the simulator publishes something on its own grid of simulated time (the first step
+    at or after each multiple of the period, see sim_bridge.runner): replayed here so that a
+    lock-step controller knows which stamps a batch of steps produced."""
+
+    def __init__(self, dt_ns: int, period_ns: int) -> None:
+        self.dt_ns, self.period_ns = dt_ns, max(dt_ns, period_ns)
+        self.next_ns = 0
+
+    def start_after(self, t_ns: int) -> None:
+        self.next_ns = (t_ns // self.period_ns + 1) * self.period_ns
+
+    def advance(self, from_step: int, to_step: int) -> List[int]:
+        """Stamps [ns] due in steps from_step+1 .. to_step."""
+        due = []
+        for k in range(from_step + 1, to_step + 1):
+            t = k * self.dt_ns
+            if t >= self.next_ns:
+                due.append(t)
+                self.next_ns = (t // self.period_ns + 1) * self.period_ns
+        return due
+
+
+class CoordinatorNode(Node):
+
+    def __init__(self, **kwargs) -> None:
+        super().__init__('coordinator_node', **kwargs)
+        ro, rng = ParameterDescriptor, float_range
+        self.declare_parameter('world', 'package://sim_bridge/worlds/pipeline_cell.yaml', ro(
+            description='World file of the cell (layout, manifest, belt)', read_only=True))
+        self.declare_parameter('synchronous', False, ro(
+            description='Lock-step: request every simulator step (sim_node synchronous:=true)',
+            read_only=True))
+        self.declare_parameter('sim_node', '/sim_node', ro(
+            description='The simulator node (its step service and belt_speed parameter)',
+            read_only=True))
+        self.declare_parameter('control_rate', 30.0, rng('Decisions per simulated second',
+                                                         1.0, 240.0))
+        self.declare_parameter('time_step', 1.0 / 240.0, rng(
+            "The simulator's physics step [s] (lock-step batches)", 1e-4, 0.05))
+        self.declare_parameter('state_publish_rate', 30.0, rng(
+            "The simulator's state_publish_rate [Hz] (lock-step waits for its stamps)",
+            1.0, 1000.0))
+        self.declare_parameter('belt_speed', -1.0, rng(
+            'Belt speed while running [m/s]; -1 takes the world file\'s', -1.0, 1.0))
+        self.declare_parameter('pick_x', 0.0, rng(
+            'The belt stops when the front material reaches this x [m]', -1.0, 1.0))
+        self.declare_parameter('max_retries', 1, ro(
+            description='Extra grasp attempts after a missed grasp', read_only=True))
+        self.declare_parameter('drive_speed', 0.4, rng("The path dummy's speed [m/s]",
+                                                       0.05, 0.8))
+        self.declare_parameter('run_timeout', 300.0, rng('Longest run [s of sim time]',
+                                                         10.0, 3600.0))
+        self.declare_parameter('idle_timeout', 20.0, rng(
+            'Belt running with nothing to pick for this long ends the loading [s]', 1.0, 600.0))
+        self.declare_parameter('service_timeout', 10.0, rng(
+            'A node that does not answer within this many wall seconds has failed', 0.5, 120.0))
+        self.declare_parameter('result_file', '', ro(
+            description='Write the result (JSON) here at the end', read_only=True))
+        self.declare_parameter('scenario_seed', -1, ro(
+            description='Recorded with the result (the simulator draws the scenario)',
+            read_only=True))
+        get = lambda n: self.get_parameter(n).value  # noqa: E731
+        from sim_bridge.world import resolve_resource
+        from sim_bridge.world_config import load_world
+        self.world = load_world(resolve_resource(get('world')))
+        try:
+            layout = layout_from_world(self.world)
+        except LayoutError as exc:
+            raise CoordinatorError(f'{get("world")}: {exc}') from exc
+        if get('belt_speed') >= 0.0:
+            layout = _replace(layout, belt_speed=float(get('belt_speed')))
+        if layout.belt_speed <= 0.0:
+            raise CoordinatorError('the belt speed must be > 0 to bring materials')
+        self.layout = layout
+        self.settings = Settings(pick_x=float(get('pick_x')),
+                                 max_retries=int(get('max_retries')),
+                                 drive_speed=float(get('drive_speed')),
+                                 run_timeout=float(get('run_timeout')),
+                                 idle_timeout=float(get('idle_timeout')))
+        if self.settings.max_retries < 0:
+            raise CoordinatorError('max_retries must be >= 0')
+        self.synchronous = bool(get('synchronous'))
+        self.rate = float(get('control_rate'))
+        self.dt_ns = round(float(get('time_step')) * 1e9)
+        self.steps_per_tick = max(1, round(1e9 / self.rate / self.dt_ns))
+        state_period = round(1e9 / float(get('state_publish_rate')))
+        if self.synchronous and state_period > self.steps_per_tick * self.dt_ns:
+            raise CoordinatorError('lock-step needs state_publish_rate >= control_rate')
+        cams = [c for c in self.world.cameras if c.name == 'belt_camera']
+        self.state_grid = DueGrid(self.dt_ns, state_period)
+        self.camera_grid = (DueGrid(self.dt_ns, round(1e9 / cams[0].rate)) if cams else None)
+        self.service_timeout = float(get('service_timeout'))
+        self.result_file = get('result_file')
+        self.seed = int(get('scenario_seed'))
+        self.regions = regions_from_world(self.world, layout.material_size)
+
+        self._lock = threading.Condition()
+        self._joints: Dict[str, Tuple[int, np.ndarray]] = {}
+        self._grip: Dict[str, Tuple[int, bool]] = {}
+        self._odom: Optional[Tuple[int, Tuple, Tuple]] = None
+        self._detections: Dict[int, List[Detection]] = {}
+        self._markers: List[Tuple[int, list]] = []
+        self._seen_truth: List[bool] = []
+        self._path: List[Tuple[float, float]] = []
+        qos = QoSProfile(depth=100)
+        for arm, names in ARMS.items():
+            self.create_subscription(JointState, f'/{arm}/joint_states',
+                                     lambda m, a=arm, n=names: self._on_joints(a, n, m), qos)
+            self.create_subscription(GripState, f'{GRIP_SERVICES[arm]}/state',
+                                     lambda m, a=arm: self._on_grip(a, m), qos)
+        self.create_subscription(Odometry, '/youbot/odom', self._on_odom, qos)
+        self.create_subscription(MaterialDetectionArray, '/detections', self._on_detections, qos)
+        self.create_subscription(MarkerArray, '/cell/materials', self._on_markers, qos)
+        reliable = QoSProfile(depth=10)
+        self.traj_pubs = {arm: self.create_publisher(
+            JointTrajectory, f'/{arm}/arm_controller/joint_trajectory', reliable) for arm in ARMS}
+        self.cmd_pub = self.create_publisher(Twist, '/youbot/cmd_vel', reliable)
+        self.event_pub = self.create_publisher(PipelineEvent, '~/events', QoSProfile(depth=100))
+        latched = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL)
+        self.state_pub = self.create_publisher(PipelineState, '~/state', latched)
+        self.ik = {arm: self.create_client(SolveIK, f'/{arm}/solve_ik') for arm in ARMS}
+        self.grips = {arm: self.create_client(SetBool, srv) for arm, srv in GRIP_SERVICES.items()}
+        sim = get('sim_node').rstrip('/')
+        self.step_client = self.create_client(StepSimulation, f'{sim}/step')
+        self.param_client = self.create_client(SetParameters, f'{sim}/set_parameters')
+        self.get_logger().info(
+            f'{"lock-step" if self.synchronous else "real-time"} at {self.rate:g} Hz '
+            f'({self.steps_per_tick} steps per decision); belt {layout.belt_speed:.3f} m/s, '
+            f'{layout.total} materials {layout.manifest}; pick at x = {self.settings.pick_x} m')
+
+    # --- inputs -------------------------------------------------------------------------------
+    def _on_joints(self, arm: str, names: Sequence[str], msg: JointState) -> None:
+        index = {n: i for i, n in enumerate(msg.name)}
+        if len(msg.position) != len(msg.name) or not all(n in index for n in names):
+            self.get_logger().warn(f'/{arm}/joint_states without the arm joints ignored',
+                                   throttle_duration_sec=5.0)
+            return
+        with self._lock:
+            self._joints[arm] = (_ns(msg.header.stamp),
+                                 np.array([msg.position[index[n]] for n in names]))
+            self._lock.notify_all()
+
+    def _on_grip(self, arm: str, msg: GripState) -> None:
+        with self._lock:
+            self._grip[arm] = (_ns(msg.header.stamp), bool(msg.holding))
+            self._lock.notify_all()
+
+    def _on_odom(self, msg: Odometry) -> None:
+        p, q, v = msg.pose.pose.position, msg.pose.pose.orientation, msg.twist.twist
+        yaw = math.atan2(2.0 * (q.w * q.z + q.x * q.y), 1.0 - 2.0 * (q.y * q.y + q.z * q.z))
+        # The odom frame is the youBot's start pose in the cell (REP-105; no tf2 here).
+        hx, hy, hyaw = self.layout.youbot_home
+        c, s = math.cos(hyaw), math.sin(hyaw)
+        pose = (hx + c * p.x - s * p.y, hy + s * p.x + c * p.y, hyaw + yaw)
+        # Odometry's twist is in the child (base) frame; the follower wants it in the world.
+        c, s = math.cos(pose[2]), math.sin(pose[2])
+        world = (c * v.linear.x - s * v.linear.y, s * v.linear.x + c * v.linear.y,
+                 v.angular.z)
+        with self._lock:
+            self._odom = (_ns(msg.header.stamp), pose, world)
+            self._lock.notify_all()
+
+    def _on_detections(self, msg: MaterialDetectionArray) -> None:
+        stamp = _ns(msg.header.stamp)
+        dets = [Detection(d.id, d.color, np.array([d.position.x, d.position.y, d.position.z]),
+                          stamp * 1e-9, d.hits) for d in msg.detections]
+        with self._lock:
+            self._detections[stamp] = dets
+            self._lock.notify_all()
+
+    def _on_markers(self, msg: MarkerArray) -> None:
+        if not msg.markers:
+            return
+        truth = [(m.ns, np.array([m.pose.position.x, m.pose.position.y, m.pose.position.z]))
+                 for m in msg.markers]
+        with self._lock:
+            self._markers.append((_ns(msg.markers[0].header.stamp), truth))
+            del self._markers[:-50]
+
+    # --- the ports the state machine acts through --------------------------------------------
+    def now(self) -> float:
+        return self.get_clock().now().nanoseconds * 1e-9
+
+    def _call(self, client, request, what: str):
+        if not client.wait_for_service(timeout_sec=self.service_timeout):
+            raise NodeTimeout(f'{client.srv_name} is not available ({what})')
+        future = client.call_async(request)
+        end = time.monotonic() + self.service_timeout
+        while not future.done():
+            if time.monotonic() > end or not rclpy.ok():
+                raise NodeTimeout(f'{client.srv_name} did not answer within '
+                                  f'{self.service_timeout} s ({what})')
+            time.sleep(0.0005)
+        return future.result()
+
+    def solve(self, arm, position, orientation, frame, seed):
+        req = SolveIK.Request(execute=False, seed=[float(v) for v in seed])
+        req.target.header.frame_id = frame
+        p, o = req.target.pose.position, req.target.pose.orientation
+        p.x, p.y, p.z = (float(v) for v in position)
+        o.x, o.y, o.z, o.w = (float(v) for v in orientation)
+        reply = self._call(self.ik[arm], req, 'IK')
+        return (np.array(reply.positions), '') if reply.success else (None, reply.message)
+
+    def trajectory(self, arm: str, points: Points) -> None:
+        now_ns = self.get_clock().now().nanoseconds
+        msg = JointTrajectory(joint_names=list(ARMS[arm]))
+        # An absolute start: the plan's times are simulated times.
+        msg.header.stamp.sec, msg.header.stamp.nanosec = divmod(now_ns, 1_000_000_000)
+        for t, q in points:
+            ns = max(1, round(t * 1e9) - now_ns)
+            msg.points.append(JointTrajectoryPoint(
+                positions=[float(v) for v in q],
+                time_from_start=Duration(sec=ns // 1_000_000_000, nanosec=ns % 1_000_000_000)))
+        self.traj_pubs[arm].publish(msg)
+
+    def grip(self, arm: str, on: bool):
+        reply = self._call(self.grips[arm], SetBool.Request(data=on), 'grip')
+        return reply.success, reply.message
+
+    def belt(self, speed: float) -> None:
+        value = ParameterValue(type=ParameterType.PARAMETER_DOUBLE, double_value=float(speed))
+        reply = self._call(self.param_client, SetParameters.Request(
+            parameters=[Parameter(name='belt_speed', value=value)]), 'belt speed')
+        if not reply.results or not reply.results[0].successful:
+            reason = reply.results[0].reason if reply.results else 'no result'
+            raise NodeTimeout(f'the simulator refused the belt speed: {reason}')
+
+    def drive(self, vx: float, vy: float, wz: float) -> None:
+        msg = Twist()
+        msg.linear.x, msg.linear.y, msg.angular.z = float(vx), float(vy), float(wz)
+        self.cmd_pub.publish(msg)
+
+    def event(self, e: Event) -> None:
+        msg = PipelineEvent(kind=e.kind, robot=e.robot, material_id=e.material, color=e.color,
+                            detail=e.detail)
+        msg.header.stamp = _stamp(e.time)
+        self.event_pub.publish(msg)
+        if e.kind == 'seen':
+            self._seen_truth.append(self._identified_correctly(e))
+        if e.kind != 'state':
+            what = f' {e.color} material {e.material}' if e.material >= 0 else ''
+            self.get_logger().info(f'[{e.time:7.2f} s] {e.robot or "pipeline"}: {e.kind}{what}'
+                                   f'{" - " + e.detail if e.detail else ""}')
+
+    def _identified_correctly(self, e: Event) -> bool:
+        m = self.pipeline.materials.get(e.material)
+        with self._lock:
+            if m is None or not self._markers:
+                return False
+            stamp_ns = round(m.stamp * 1e9)
+            _, truth = min(self._markers, key=lambda item: abs(item[0] - stamp_ns))
+        return match_identification(m.position, truth) == m.color
+
+    # --- the loop -----------------------------------------------------------------------------
+    def run(self) -> Dict:
+        try:
+            obs = self._first_observation()
+        except NodeTimeout as exc:
+            self.pipeline = Pipeline(self.layout, self, self.settings, self.now())
+            self.pipeline.abort(self.now(), 'node_timeout', str(exc))
+            return self._report()
+        self.pipeline = Pipeline(self.layout, self, self.settings, obs.now)
+        ticks = 0
+        try:
+            while not self.pipeline.finished and rclpy.ok():
+                self.pipeline.tick(obs)
+                self._path.append(obs.youbot_pose[:2])
+                ticks += 1
+                if ticks % max(1, round(self.rate)) == 0:
+                    self._publish_state(obs.now)
+                if self.pipeline.finished:
+                    break
+                obs = self._next_observation(obs)
+        except NodeTimeout as exc:
+            self.pipeline.abort(self.now(), 'node_timeout', str(exc))
+        if not self.pipeline.finished:
+            self.pipeline.abort(self.now(), 'interrupted', 'shut down before the end')
+        return self._report()
+
+    def _step(self, steps: int) -> Tuple[int, int]:
+        """Lock-step: advance; returns (step count before, after)."""
+        reply = self._call(self.step_client, StepSimulation.Request(steps=steps), 'step')
+        if not reply.success:
+            raise NodeTimeout(f'the simulator refused to step: {reply.message} (is it running '
+                              'with synchronous:=true?)')
+        return int(reply.step_count) - steps, int(reply.step_count)
+
+    def _first_observation(self) -> Observation:
+        if self.synchronous:
+            before, after = self._step(self.steps_per_tick)
+            self.state_grid.start_after(after * self.dt_ns)
+            if self.camera_grid:
+                self.camera_grid.start_after(after * self.dt_ns)
+            self._wait_states(after * self.dt_ns, first=True)
+            return self._observe(after * self.dt_ns, [])
+        end = time.monotonic() + self.service_timeout
+        while not self._have_states() or self.now() == 0.0:
+            if time.monotonic() > end:
+                raise NodeTimeout('no joint_states, grip states and odometry from the '
+                                  'simulator (is sim_node running with the cell world?)')
+            time.sleep(0.01)
+        return self._observe(round(self.now() * 1e9), None)
+
+    def _next_observation(self, obs: Observation) -> Observation:
+        if not self.synchronous:
+            target = obs.now + 1.0 / self.rate
+            end = time.monotonic() + self.service_timeout
+            while self.now() < target:
+                if time.monotonic() > end:
+                    raise NodeTimeout('the simulated clock stopped (simulator gone?)')
+                time.sleep(0.001)
+            return self._observe(round(self.now() * 1e9), None)
+        before, after = self._step(self.steps_per_tick)
+        state_due = self.state_grid.advance(before, after)
+        frames = self.camera_grid.advance(before, after) if self.camera_grid else []
+        if state_due:
+            self._wait_states(state_due[-1])
+        self._wait_frames(frames)
+        return self._observe(after * self.dt_ns, frames)
+
+    def _have_states(self) -> bool:
+        with self._lock:
+            return len(self._joints) == 2 and len(self._grip) == 2 and self._odom is not None
+
+    def _wait_states(self, stamp_ns: int, first: bool = False) -> None:
+        def ready() -> bool:
+            stamps = [s for s, _ in self._joints.values()] + [s for s, _ in self._grip.values()]
+            stamps += [self._odom[0]] if self._odom else []
+            if len(stamps) < 5:
+                return False
+            return all(s >= stamp_ns for s in stamps) if first else \
+                all(s == stamp_ns for s in stamps)
+        with self._lock:
+            if not self._lock.wait_for(ready, timeout=self.service_timeout):
+                have = {**{f'{a} joints': s for a, (s, _) in self._joints.items()},
+                        **{f'{a} grip': s for a, (s, _) in self._grip.items()},
+                        'odom': self._odom[0] if self._odom else None}
+                raise NodeTimeout(f'no states from the simulator for t = {stamp_ns * 1e-9:.3f} s'
+                                  f' (latest stamps [ns]: {have})')
+
+    def _wait_frames(self, frames: Sequence[int]) -> None:
+        for stamp in frames:
+            with self._lock:
+                if not self._lock.wait_for(lambda s=stamp: s in self._detections,
+                                           timeout=self.service_timeout):
+                    raise NodeTimeout(f'no detections for the camera frame at {stamp * 1e-9:.3f}'
+                                      ' s (vision_node gone, or its frame lost)')
+
+    def _observe(self, t_ns: int, frames: Optional[Sequence[int]]) -> Observation:
+        with self._lock:
+            if frames is None:               # real time: whatever arrived since last time
+                frames = sorted(self._detections)
+            dets = [d for f in frames for d in self._detections.pop(f, [])]
+            for f in [f for f in self._detections if f <= t_ns]:
+                del self._detections[f]
+            odom = self._odom
+            return Observation(
+                now=t_ns * 1e-9, zu12_q=self._joints['zu12'][1],
+                youbot_q=self._joints['youbot'][1], youbot_pose=odom[1],
+                youbot_velocity=odom[2], zu12_holding=self._grip['zu12'][1],
+                youbot_holding=self._grip['youbot'][1], detections=dets)
+
+    # --- the end ------------------------------------------------------------------------------
+    def _final_truth(self) -> list:
+        """The materials' true poses after the run (the score's ground truth)."""
+        end = self.pipeline.start_time + self.pipeline.result.completion_time
+        if self.synchronous:
+            try:
+                for _ in range(12):                  # let dropped materials settle (0.4 s)
+                    self._step(self.steps_per_tick)
+            except NodeTimeout:
+                pass
+        deadline = time.monotonic() + 5.0
+        while time.monotonic() < deadline:
+            with self._lock:
+                if self._markers and self._markers[-1][0] * 1e-9 >= end:
+                    return self._markers[-1][1]
+            time.sleep(0.01)
+        with self._lock:
+            return self._markers[-1][1] if self._markers else []
+
+    def _report(self) -> Dict:
+        result = self.pipeline.result
+        truth = self._final_truth()
+        out = score(result, truth, self._seen_truth, self.regions)
+        out['final_materials'] = [
+            {'color': color, 'position': [round(float(v), 4) for v in p],
+             'at_destination': at_destination(color, p, self.regions)} for color, p in truth]
+        out.update({'scenario_seed': self.seed, 'belt_speed': self.layout.belt_speed,
+                    'mode': 'lock-step' if self.synchronous else 'real-time',
+                    'youbot_path': [[round(x, 4), round(y, 4)] for x, y in self._path[::3]],
+                    'events': [[round(e.time - self.pipeline.start_time, 4), e.kind, e.robot,
+                                e.material, e.color, e.detail]
+                               for e in self.pipeline.events if e.kind != 'state']})
+        self._publish_state(self.now(), json.dumps(out))
+        if self.result_file:
+            path = Path(self.result_file)
+            path.parent.mkdir(parents=True, exist_ok=True)
+            path.write_text(json.dumps(out, indent=1))
+        self.get_logger().info(
+            f'run {result.status} in {result.completion_time:.1f} s (sim): identification '
+            f'{out["identification_rate"]:.0%}, grasp {out["grasp_success_rate"]:.0%} '
+            f'({result.grasp_successes}/{result.grasp_attempts}), handling '
+            f'{out["handling_success_rate"]:.0%} ({out["handled_verified"]}/{result.total})'
+            + (f'; {result.message}' if result.message else ''))
+        return out
+
+    def _publish_state(self, now: float, result_json: str = '') -> None:
+        p = self.pipeline
+        mats = list(p.materials.values())
+        msg = PipelineState(loader_state=p.loader_state, transport_state=p.transport_state,
+                            status=p.result.status if p.result else 'running',
+                            total=self.layout.total, identified=len(mats),
+                            picked=sum(1 for m in mats if m.picked),
+                            delivered=sum(1 for m in mats if m.status in ('placed', 'delivered')),
+                            missed=sum(1 for m in mats if m.status == 'missed'),
+                            failed=sum(1 for m in mats if m.status == 'failed'),
+                            elapsed=float(now - p.start_time), result_json=result_json)
+        msg.header.stamp = _stamp(now)
+        self.state_pub.publish(msg)
+
+
+def _replace(layout, **changes):
+    from dataclasses import replace
+    return replace(layout, **changes)
+
+
+def _ns(stamp) -> int:
+    return stamp.sec * 1_000_000_000 + stamp.nanosec
+
+
+def _stamp(t: float):
+    from builtin_interfaces.msg import Time
+    ns = max(0, round(t * 1e9))
+    return Time(sec=ns // 1_000_000_000, nanosec=ns % 1_000_000_000)
+
+
+def main(args=None) -> int:
+    rclpy.init(args=args)
+    try:
+        node = CoordinatorNode()
+    except (CoordinatorError, rclpy.exceptions.ParameterException, FileNotFoundError,
+            KeyError, ValueError) as exc:
+        rclpy.logging.get_logger('coordinator_node').fatal(f'cannot start: {exc}')
+        rclpy.try_shutdown()
+        return 2
+    executor = SingleThreadedExecutor()
+    executor.add_node(node)
+    spinner = threading.Thread(target=executor.spin, daemon=True)
+    spinner.start()
+    code = 1
+    try:
+        out = node.run()
+        code = 0 if out['status'] == 'completed' else 1
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    finally:
+        try:
+            node.drive(0.0, 0.0, 0.0)
+        except Exception:   # noqa: BLE001 - shutting down: the context may be gone already
+            pass
+        executor.shutdown(timeout_sec=2.0)
+        spinner.join(2.0)
+        node.destroy_node()
+        rclpy.try_shutdown()
+    return code
+
+
+if __name__ == '__main__':
+    sys.exit(main())

@@ -1,0 +1,95 @@
+"""Scoring a run as the paper's Table 2 does, checked against the simulator's ground truth.
+
+The coordinator acts on what its sensors tell it; the score does not trust that. At the end of
+a run, every material's true resting place (``/cell/materials``) is checked against its
+destination, and every identification against the true colour of the material it was made on.
+
+Definitions (the README repeats them):
+- identification rate: materials whose vision track carried their true colour / materials in
+  the batch;
+- grasp success rate: successful grasps / grasp attempts, both arms (first-attempt and retried);
+- handling success rate: materials resting at their destination at the end / materials in the
+  batch (purple on the ground target, orange inside the pool, blue on the pool platform);
+- completion time: simulated seconds from the start until both robots are back at their start
+  poses (or the run ended).
+"""
+from __future__ import annotations
+
+from dataclasses import asdict
+from typing import Dict, List, Optional, Sequence, Tuple
+
+import numpy as np
+
+from coordinator.pipeline import RunResult
+
+TruePose = Tuple[str, np.ndarray]            # (true colour, centre position)
+
+
+def at_destination(color: str, position: Sequence[float], regions: Dict[str, Tuple]) -> bool:
+    """Whether a material of ``color`` resting at ``position`` is where it belongs. A region is
+    (x_min, x_max, y_min, y_max, z_min, z_max) in the world."""
+    key = {'purple': 'ground_target', 'blue': 'platform'}.get(color, 'pool')
+    x0, x1, y0, y1, z0, z1 = regions[key]
+    x, y, z = (float(v) for v in position)
+    return x0 <= x <= x1 and y0 <= y <= y1 and z0 <= z <= z1
+
+
+def regions_from_world(world, size: float) -> Dict[str, Tuple]:
+    """Destination boxes from the world's named obstacles (a material's centre inside)."""
+    named = {o.name: o for o in world.obstacles if o.name}
+
+    def box(name: str, z0: float, z1: float, margin: float = 0.0) -> Tuple:
+        o = named[name]
+        hx, hy = o.size[0] / 2 + margin, o.size[1] / 2 + margin
+        return (o.position[0] - hx, o.position[0] + hx, o.position[1] - hy, o.position[1] + hy,
+                z0, z1)
+    platform = named['pool_platform']
+    top = platform.position[2] + platform.size[2] / 2
+    return {'ground_target': box('ground_target', 0.0, size),
+            'pool': box('pool_floor', 0.0, 0.1),
+            'platform': box('pool_platform', top, top + size)}
+
+
+def match_identification(position: Sequence[float], truth: Sequence[TruePose],
+                         tolerance: float = 0.04) -> Optional[str]:
+    """The true colour of the material nearest ``position`` (within ``tolerance``), or None."""
+    best, best_d = None, tolerance
+    for color, p in truth:
+        d = float(np.linalg.norm(np.asarray(p, float) - np.asarray(position, float)))
+        if d <= best_d:
+            best, best_d = color, d
+    return best
+
+
+def score(result: RunResult, final_truth: Sequence[TruePose], identifications: Sequence[bool],
+          regions: Dict[str, Tuple]) -> Dict:
+    """The run's figures: counts, the three rates and the completion time, as a dict."""
+    total = max(result.total, 1)
+    handled = sum(1 for color, p in final_truth if at_destination(color, p, regions))
+    correct = sum(1 for ok in identifications if ok)
+    out = asdict(result)
+    out.update({
+        'identified_correct': correct,
+        'handled_verified': handled,
+        'identification_rate': correct / total,
+        'grasp_success_rate': (result.grasp_successes / result.grasp_attempts
+                               if result.grasp_attempts else 0.0),
+        'handling_success_rate': handled / total,
+    })
+    return out
+
+
+def summary_rows(trials: List[Dict]) -> Dict[str, float]:
+    """Mean rates and median completion time over trials (for the report)."""
+    if not trials:
+        return {}
+    times = [t['completion_time'] for t in trials]
+    return {
+        'trials': len(trials),
+        'completed': sum(1 for t in trials if t['status'] == 'completed'),
+        'median_completion_time': float(np.median(times)),
+        'p90_completion_time': float(np.percentile(times, 90)),
+        'identification_rate': float(np.mean([t['identification_rate'] for t in trials])),
+        'grasp_success_rate': float(np.mean([t['grasp_success_rate'] for t in trials])),
+        'handling_success_rate': float(np.mean([t['handling_success_rate'] for t in trials])),
+    }

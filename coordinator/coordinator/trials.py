@@ -1,0 +1,202 @@
+"""Run the pipeline scenario N times with varied seeds and write the paper's Table 2 for them.
+
+Each trial is its own process group (sim_node in lock-step, vision_node, two kinematics_nodes,
+coordinator_node) on its own ROS_DOMAIN_ID, so trials run side by side (``--parallel``) or on
+several machines (``--first-trial``/``--domain-base`` split the seeds). The scenario seed sets
+the material order, spacing and lateral placement; the belt speed is drawn per trial from
+``--belt-speed``. Writes trials.csv, report.md and PNG plots into ``--out``.
+"""
+from __future__ import annotations
+
+import argparse
+import csv
+import json
+import os
+import random
+import signal
+import subprocess
+import sys
+import time
+from concurrent.futures import ThreadPoolExecutor, as_completed
+from pathlib import Path
+from typing import Dict, List, Optional, Sequence
+
+WORLD = 'package://sim_bridge/worlds/pipeline_cell.yaml'
+CONTROL_RATE = 30.0
+CSV_FIELDS = ('trial', 'scenario_seed', 'belt_speed', 'status', 'completion_time',
+              'identification_rate', 'grasp_success_rate', 'handling_success_rate', 'identified',
+              'identified_correct', 'picked', 'delivered', 'handled_verified', 'grasp_attempts',
+              'grasp_successes', 'missed', 'failed', 'wall_time', 'message')
+
+
+def trial_commands(seed: int, belt_speed: float, result_file: Path,
+                   record_dir: Optional[Path] = None) -> Dict[str, List[str]]:
+    """The processes of one lock-step trial (executables as installed by the workspace)."""
+    sim = ['sim_node', '--ros-args', '-p', f'world:={WORLD}', '-p', 'synchronous:=true',
+           '-p', f'state_publish_rate:={CONTROL_RATE}', '-p', f'scenario_seed:={seed}',
+           '-p', f'belt_speed:={belt_speed}', '-p', 'max_speed:=0.8', '-p', 'max_turn:=1.5']
+    commands = {
+        'sim_node': sim,
+        'vision_node': ['vision_node', '--ros-args', '-r', 'image_raw:=/belt_camera/image_raw',
+                        '-r', 'camera_info:=/belt_camera/camera_info', '-p',
+                        'use_sim_time:=true'],
+        'zu12_kinematics': ['kinematics_node', '--ros-args', '-r', '__ns:=/zu12', '-p',
+                            'arm:=zu12', '-p', 'use_sim_time:=true'],
+        'youbot_kinematics': ['kinematics_node', '--ros-args', '-r', '__ns:=/youbot', '-p',
+                              'arm:=youbot', '-p', 'use_sim_time:=true'],
+        'coordinator_node': ['coordinator_node', '--ros-args', '-p', 'use_sim_time:=true',
+                             '-p', 'synchronous:=true', '-p', f'control_rate:={CONTROL_RATE}',
+                             '-p', f'belt_speed:={belt_speed}', '-p', f'scenario_seed:={seed}',
+                             '-p', f'result_file:={result_file}'],
+    }
+    if record_dir is not None:
+        commands['recorder'] = ['recorder', '--ros-args', '-p', f'output_dir:={record_dir}',
+                                '-p', 'bag_name:=bag', '-p', 'use_sim_time:=true']
+    return commands
+
+
+def run_trial(trial: int, seed: int, belt_speed: float, domain_id: int, out_dir: Path,
+              wall_timeout: float = 900.0, record: bool = False) -> Dict:
+    """One trial as a process group; returns its result (or a failure record)."""
+    trial_dir = out_dir / f'trial_{trial:03d}'
+    trial_dir.mkdir(parents=True, exist_ok=True)
+    result_file = trial_dir / 'result.json'
+    result_file.unlink(missing_ok=True)
+    env = {**os.environ, 'ROS_DOMAIN_ID': str(domain_id),
+           'ROS_AUTOMATIC_DISCOVERY_RANGE': os.environ.get('ROS_AUTOMATIC_DISCOVERY_RANGE',
+                                                           'LOCALHOST')}
+    commands = trial_commands(seed, belt_speed, result_file, trial_dir if record else None)
+    procs: Dict[str, subprocess.Popen] = {}
+    group: Optional[int] = None
+    start = time.monotonic()
+    try:
+        for name, argv in commands.items():
+            log = open(trial_dir / f'{name}.log', 'w')
+            procs[name] = subprocess.Popen(
+                argv, stdout=log, stderr=subprocess.STDOUT, env=env,
+                # One process group per trial: stopped together, never mixed with another.
+                process_group=0 if group is None else group)
+            log.close()
+            group = procs[name].pid if group is None else group
+        try:
+            procs['coordinator_node'].wait(timeout=wall_timeout)
+        except subprocess.TimeoutExpired:
+            pass
+    finally:
+        _stop_group(group, procs)
+    wall = time.monotonic() - start
+    if result_file.exists():
+        result = json.loads(result_file.read_text())
+    else:
+        result = {'status': 'error', 'completion_time': float('nan'), 'message':
+                  f'no result (coordinator exit {procs["coordinator_node"].returncode}); see '
+                  f'{trial_dir}'}
+    result.update({'trial': trial, 'scenario_seed': seed, 'belt_speed': belt_speed,
+                   'wall_time': wall})
+    return result
+
+
+def _stop_group(group: Optional[int], procs: Dict[str, subprocess.Popen]) -> None:
+    if group is None:
+        return
+    for sig, wait in ((signal.SIGINT, 10.0), (signal.SIGKILL, 5.0)):
+        try:
+            os.killpg(group, sig)
+        except ProcessLookupError:
+            return
+        end = time.monotonic() + wait
+        while time.monotonic() < end and any(p.poll() is None for p in procs.values()):
+            time.sleep(0.05)
+        if all(p.poll() is not None for p in procs.values()):
+            return
+
+
+def trial_plan(count: int, first: int, seed0: int, belt_range: Sequence[float]) -> List[Dict]:
+    rng = random.Random(seed0)
+    plan = []
+    for k in range(first + count):
+        seed = rng.randrange(1, 2 ** 31 - 1)
+        speed = round(rng.uniform(*belt_range), 4)
+        if k >= first:
+            plan.append({'trial': k, 'seed': seed, 'belt_speed': speed})
+    return plan
+
+
+def write_csv(trials: List[Dict], path: Path) -> None:
+    with open(path, 'w', newline='') as f:
+        writer = csv.DictWriter(f, CSV_FIELDS, extrasaction='ignore')
+        writer.writeheader()
+        for t in sorted(trials, key=lambda t: t['trial']):
+            writer.writerow({k: t.get(k, '') for k in CSV_FIELDS})
+
+
+def main(argv: Optional[Sequence[str]] = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument('--trials', type=int, default=10)
+    parser.add_argument('--parallel', type=int, default=1,
+                        help='trials at once (each a process group on its own DDS domain)')
+    parser.add_argument('--seed0', type=int, default=2026, help='seeds the trial plan')
+    parser.add_argument('--seeds', type=int, nargs='+', default=None,
+                        help='run exactly these scenario seeds (instead of --trials drawn ones)')
+    parser.add_argument('--first-trial', type=int, default=0,
+                        help='skip this many trials of the plan (split a plan over machines)')
+    parser.add_argument('--belt-speed', type=float, nargs=2, default=(0.08, 0.14),
+                        metavar=('LO', 'HI'), help='belt speed range [m/s]')
+    parser.add_argument('--domain-base', type=int, default=int(os.environ.get(
+        'TRIALS_DOMAIN_BASE', '40')), help='trial k uses domain base + worker index')
+    parser.add_argument('--wall-timeout', type=float, default=900.0)
+    parser.add_argument('--record', action='store_true', help='record a bag per trial')
+    parser.add_argument('--out', type=Path, default=Path('runs') / time.strftime(
+        'trials-%Y%m%d-%H%M%S'))
+    args = parser.parse_args(argv)
+    if args.trials < 1 or args.parallel < 1:
+        parser.error('--trials and --parallel must be >= 1')
+    lo, hi = args.belt_speed
+    if not 0.0 < lo <= hi <= 0.5:
+        parser.error('--belt-speed needs 0 < LO <= HI <= 0.5')
+    if args.domain_base + args.parallel > 232:
+        parser.error('--domain-base + --parallel must stay within DDS domain 232')
+    args.out.mkdir(parents=True, exist_ok=True)
+    plan = trial_plan(args.trials, args.first_trial, args.seed0, (lo, hi))
+    if args.seeds is not None:
+        plan = [{**item, 'trial': k, 'seed': seed} for k, (item, seed) in enumerate(
+            zip(trial_plan(len(args.seeds), 0, args.seed0, (lo, hi)), args.seeds))]
+    print(f'[trials] {len(plan)} trials, {args.parallel} at a time, into {args.out}', flush=True)
+    results: List[Dict] = []
+    free = list(range(args.parallel))
+    started = time.monotonic()
+    with ThreadPoolExecutor(args.parallel) as pool:
+        futures = {}
+        pending = list(plan)
+
+        def submit() -> None:
+            item, worker = pending.pop(0), free.pop(0)
+            futures[pool.submit(run_trial, item['trial'], item['seed'], item['belt_speed'],
+                                args.domain_base + worker, args.out, args.wall_timeout,
+                                args.record)] = worker
+        while pending and free:
+            submit()
+        while futures:
+            done = next(as_completed(futures))
+            free.append(futures.pop(done))
+            r = done.result()
+            results.append(r)
+            elapsed = time.monotonic() - started
+            print(f'[trials] {len(results)}/{len(plan)} trial {r["trial"]} seed '
+                  f'{r["scenario_seed"]} belt {r["belt_speed"]:.3f}: {r["status"]}, '
+                  f'{r.get("completion_time", float("nan")):.1f} s sim, '
+                  f'handling {r.get("handling_success_rate", 0.0):.0%}, wall '
+                  f'{r["wall_time"]:.0f} s (elapsed {elapsed:.0f} s)', flush=True)
+            if pending:
+                submit()
+    write_csv(results, args.out / 'trials.csv')
+    from coordinator.report import write_report
+    report = write_report(results, args.out, {
+        'seed0': args.seed0, 'belt_speed': (lo, hi), 'parallel': args.parallel,
+        'wall_time': time.monotonic() - started})
+    print(f'[trials] CSV {args.out / "trials.csv"}, report {report}', flush=True)
+    return 0 if all(r['status'] == 'completed' for r in results) else 1
+
+
+if __name__ == '__main__':
+    sys.exit(main())

@@ -1,0 +1,110 @@
+"""Bezier paths through key poses, the dummy's motion profile and the PD follower."""
+import math
+
+import numpy as np
+import pytest
+
+from controllers.bezier import BezierPath, MotionProfile, PathError, key_poses_between
+from controllers.path_follower import PathFollower, PDGains, simulate_kinematic
+
+KEYS = [(0.6, -0.55, 0.0), (1.2, -1.0, 0.3), (1.72, -1.75, 0.0), (1.78, -2.15, -0.5)]
+
+
+def test_the_path_passes_through_every_key_pose():
+    path = BezierPath(KEYS)
+    dense = path.sample(0.001)
+    for key in KEYS[1:-1]:
+        d = np.hypot(dense[:, 0] - key[0], dense[:, 1] - key[1])
+        assert d.min() < 2e-3
+    assert path.pose(0.0) == pytest.approx(KEYS[0], abs=1e-9)
+    assert path.pose(path.length) == pytest.approx(KEYS[-1], abs=1e-9)
+
+
+def test_arc_length_is_at_least_the_chord_and_close_for_a_straight_line():
+    straight = BezierPath([(0.0, 0.0, 0.0), (1.0, 0.0, 0.0), (2.0, 0.0, 0.0)])
+    assert straight.length == pytest.approx(2.0, abs=1e-9)
+    assert straight.pose(0.7)[:2] == pytest.approx((0.7, 0.0), abs=1e-6)
+    curved = BezierPath(KEYS)
+    chords = sum(math.dist(a[:2], b[:2]) for a, b in zip(KEYS, KEYS[1:]))
+    assert chords <= curved.length < 1.2 * chords
+
+
+def test_the_tangent_is_continuous_at_the_key_points():
+    path = BezierPath(KEYS)
+    s = np.linspace(0.0, path.length, 4001)
+    tangents = np.array([path.tangent(v) for v in s])
+    turn = np.arccos(np.clip(np.sum(tangents[1:] * tangents[:-1], axis=1), -1, 1))
+    assert turn.max() < 0.02          # no corner anywhere (rad per 0.6 mm)
+
+
+def test_headings_blend_the_short_way_round():
+    path = BezierPath([(0.0, 0.0, math.radians(170)), (1.0, 0.0, math.radians(-170))])
+    mid = path.pose(path.length / 2)[2]
+    assert abs(abs(mid) - math.pi) < 1e-6
+
+
+@pytest.mark.parametrize('keys', [[(0, 0, 0)], [(0, 0, 0), (0, 0, 1)],
+                                  [(0, 0, 0), (1, float('nan'), 0)], [(0, 0), (1, 1)]])
+def test_bad_key_poses_are_refused(keys):
+    with pytest.raises(PathError):
+        BezierPath(keys)
+
+
+def test_the_profile_respects_speed_and_acceleration():
+    p = MotionProfile(2.0, 0.4, 0.4)
+    t = np.linspace(0.0, p.duration, 2001)
+    s, v = np.array([p.at(x) for x in t]).T
+    assert s[0] == 0.0 and s[-1] == pytest.approx(2.0)
+    assert v.max() <= 0.4 + 1e-12
+    assert np.all(np.diff(s) >= -1e-12)
+    accel = np.abs(np.diff(v) / np.diff(t))
+    assert accel.max() <= 0.4 + 1e-6
+    assert p.duration == pytest.approx(2.0 / 0.4 + 0.4 / 0.4)
+    short = MotionProfile(0.1, 0.4, 0.4)       # triangular: never reaches 0.4 m/s
+    assert max(short.at(x)[1] for x in np.linspace(0, short.duration, 500)) < 0.4
+
+
+def test_the_follower_tracks_the_dummy_and_settles_on_the_goal():
+    path = BezierPath(KEYS)
+    follower = PathFollower(path, 0.0, max_speed=0.4, max_accel=0.4)
+    poses, statuses = simulate_kinematic(follower, KEYS[0])
+    assert statuses[-1].finished
+    assert np.hypot(*(poses[-1][:2] - KEYS[-1][:2])) <= 0.01
+    assert max(s.position_error for s in statuses) < 0.03
+    assert statuses[-1].yaw_error <= 0.02
+
+
+def test_the_follower_converges_from_an_offset_start():
+    path = BezierPath(KEYS)
+    follower = PathFollower(path, 0.0)
+    poses, statuses = simulate_kinematic(follower, (0.45, -0.35, 0.4))
+    errors = [s.position_error for s in statuses]
+    assert errors[0] > 0.2
+    assert statuses[-1].finished
+    # The error falls below 2 cm within 3 s and stays there.
+    after = int(3.0 / 0.02)
+    assert max(errors[after:]) < 0.02
+
+
+def test_the_derivative_term_damps_the_approach():
+    path = BezierPath([(0.0, 0.0, 0.0), (1.0, 0.0, 0.0)])
+    overshoot = {}
+    for kd in (0.0, 0.6):
+        follower = PathFollower(path, 0.0, gains=PDGains(kp_xy=4.0, kd_xy=kd))
+        poses, _ = simulate_kinematic(follower, (0.0, 0.2, 0.0), lag=0.25)
+        overshoot[kd] = -poses[:, 1].min()     # crossing the line y = 0
+    assert overshoot[0.6] < overshoot[0.0]
+
+
+def test_commands_respect_the_limits():
+    path = BezierPath([(0.0, 0.0, 0.0), (3.0, 0.0, 0.0)])
+    follower = PathFollower(path, 0.0, max_speed=0.8, gains=PDGains(max_speed=0.3,
+                                                                    max_turn=0.5))
+    _, statuses = simulate_kinematic(follower, (0.0, 0.5, 1.0))
+    cmds = np.array([s.command for s in statuses])
+    assert np.abs(cmds[:, :2]).max() <= 0.3 + 1e-9 and np.abs(cmds[:, 2]).max() <= 0.5 + 1e-9
+
+
+def test_key_poses_between_keeps_the_start_heading_for_via_points():
+    keys = key_poses_between((0, 0, 0.5), (2, 0, 0.0), [(1, 1)])
+    assert keys == [(0, 0, 0.5), (1, 1, 0.5), (2, 0, 0.0)]

@@ -1,0 +1,308 @@
+"""The coordinator's state machine against a fake cell: the whole run and every failure path."""
+import math
+from dataclasses import replace
+from typing import Dict, List
+
+import numpy as np
+import pytest
+
+from coordinator.layout import CellLayout, layout_from_world
+from coordinator.pipeline import (Detection, NodeTimeout, Observation, Pipeline, Settings,
+                                  youbot_tool_quaternion)
+from sim_bridge.world import resolve_resource
+from sim_bridge.world_config import load_world
+
+DT = 1.0 / 30.0
+CAMERA_X = (-1.0, -0.1)          # the fake camera sees this stretch of the belt
+
+
+def cell_layout() -> CellLayout:
+    world = load_world(resolve_resource('package://sim_bridge/worlds/pipeline_cell.yaml'))
+    return layout_from_world(world)
+
+
+class FakeCell:
+    """Kinematic stand-in for the simulator, vision and kinematics nodes."""
+
+    def __init__(self, layout: CellLayout, colors: List[str], gap: float = 0.35,
+                 grasp_failures: Dict[int, int] = None, unreachable=lambda arm, p: False,
+                 stall: bool = False, blind: bool = False, timeout_on: str = '',
+                 drop_on_transfer: int = -1, drive_works: bool = True) -> None:
+        self.layout = layout
+        self.now = 0.0
+        self.belt_speed = 0.0
+        # Materials: id -> [x, y, colour, on_belt]
+        self.materials = {i + 1: [-1.15 - i * gap, layout.belt_y, c, True]
+                          for i, c in enumerate(colors)}
+        self.hits: Dict[int, int] = {}
+        self.q = {'zu12': np.zeros(6), 'youbot': np.zeros(5)}
+        self.goal = {'zu12': (0.0, np.zeros(6)), 'youbot': (0.0, np.zeros(5))}
+        self.armed = {'zu12': None, 'youbot': None}
+        self.holding = {'zu12': False, 'youbot': False}
+        self.pose = np.array(layout.youbot_home, float)
+        self.twist = np.zeros(3)
+        self.grasp_failures = dict(grasp_failures or {})
+        self.unreachable, self.stall, self.blind = unreachable, stall, blind
+        self.timeout_on, self.drop_on_transfer = timeout_on, drop_on_transfer
+        self.drive_works = drive_works
+        self.events = []
+        self.belt_calls: List[float] = []
+        self.drive_calls: List[tuple] = []
+        self.pipeline: Pipeline = None
+
+    # --- ports ---
+    def solve(self, arm, position, orientation, frame, seed):
+        if self.timeout_on == 'solve':
+            raise NodeTimeout('/zu12/solve_ik did not answer')
+        if self.unreachable(arm, position):
+            return None, 'out of reach'
+        n = 6 if arm == 'zu12' else 5
+        q = np.zeros(n)
+        q[:3] = position
+        return q, ''
+
+    def trajectory(self, arm, points):
+        self.goal[arm] = (points[-1][0], np.array(points[-1][1]))
+
+    def grip(self, arm, on):
+        if self.timeout_on == 'grip':
+            raise NodeTimeout('/zu12/suction did not answer')
+        if on:
+            self.armed[arm] = self.now
+        else:
+            self.armed[arm] = None
+            self.holding[arm] = False
+        return True, 'ok'
+
+    def belt(self, speed):
+        self.belt_calls.append(speed)
+        self.belt_speed = speed
+
+    def drive(self, vx, vy, wz):
+        self.drive_calls.append((vx, vy, wz))
+        self.twist = np.array([vx, vy, wz]) if self.drive_works else np.zeros(3)
+
+    def event(self, e):
+        self.events.append(e)
+
+    # --- the world ---
+    def step(self) -> Observation:
+        self.now += DT
+        for m in self.materials.values():
+            if m[3]:
+                m[0] += self.belt_speed * DT
+        for arm in ('zu12', 'youbot'):
+            t_end, goal = self.goal[arm]
+            if self.now >= t_end and not self.stall:
+                self.q[arm] = goal.copy()
+            armed = self.armed[arm]
+            # The cup seals once it has been armed for a while (it reaches the part).
+            if armed is not None and not self.holding[arm] and self.now - armed > 0.3:
+                key = self._material_for(arm)
+                if self.grasp_failures.get(key, 0) > 0:
+                    self.grasp_failures[key] -= 1
+                    self.armed[arm] = None
+                else:
+                    self.holding[arm] = True
+                    if arm == 'zu12' and key in self.materials:
+                        self.materials[key][3] = False
+        p = self.pipeline
+        if (self.drop_on_transfer >= 0 and p._pick is not None
+                and p._pick.id == self.drop_on_transfer and p.loader_state == 'place'):
+            self.holding['zu12'] = False
+        c, s = math.cos(self.pose[2]), math.sin(self.pose[2])
+        vx, vy, wz = self.twist
+        world_v = (c * vx - s * vy, s * vx + c * vy, wz)
+        self.pose += np.array(world_v) * DT
+        dets = []
+        if not self.blind:
+            for i, (x, y, color, on_belt) in self.materials.items():
+                if on_belt and CAMERA_X[0] <= x <= CAMERA_X[1]:
+                    self.hits[i] = self.hits.get(i, 0) + 1
+                    dets.append(Detection(i, color, np.array([x, y, 0.425]), self.now,
+                                          self.hits[i]))
+        return Observation(self.now, self.q['zu12'].copy(), self.q['youbot'].copy(),
+                           tuple(self.pose), world_v, self.holding['zu12'],
+                           self.holding['youbot'], dets)
+
+    def _material_for(self, arm):
+        p = self.pipeline
+        if arm == 'zu12':
+            return p._pick.id if p._pick else -1
+        return p._unload[0].id if p._unload else -1
+
+
+PAPER = ['orange', 'purple', 'orange', 'blue', 'orange', 'orange', 'orange', 'orange']
+
+
+def run(cell: FakeCell, settings: Settings = Settings(), limit: float = 600.0) -> Pipeline:
+    pipeline = Pipeline(cell.layout, cell, settings, 0.0)
+    cell.pipeline = pipeline
+    obs = cell.step()
+    while not pipeline.finished:
+        pipeline.tick(obs)
+        assert cell.now < limit, 'the run did not end'
+        obs = cell.step()
+    return pipeline
+
+
+def kinds(cell: FakeCell, kind: str):
+    return [e for e in cell.events if e.kind == kind]
+
+
+def test_the_whole_run_delivers_every_material_and_both_robots_return():
+    layout = cell_layout()
+    cell = FakeCell(layout, PAPER)
+    p = run(cell)
+    r = p.result
+    assert r.status == 'completed', r
+    assert (r.total, r.identified, r.picked, r.delivered) == (8, 8, 8, 8)
+    assert r.grasp_attempts == r.grasp_successes == 15          # 8 picks + 7 unloads
+    assert len(kinds(cell, 'placed')) == 1 and kinds(cell, 'placed')[0].color == 'purple'
+    assert len(kinds(cell, 'loaded')) == 7
+    delivered = kinds(cell, 'delivered')
+    assert sorted(e.detail for e in delivered) == ['platform'] + ['pool'] * 6
+    # The youBot left only with its whole load, and is home again; the belt is stopped.
+    first_delivery = min(e.time for e in delivered)
+    assert first_delivery > max(e.time for e in kinds(cell, 'loaded'))
+    assert np.hypot(*(cell.pose[:2] - layout.youbot_home[:2])) < 0.02
+    assert cell.belt_calls[-1] == 0.0 and cell.drive_calls[-1] == (0.0, 0.0, 0.0)
+    assert np.allclose(cell.q['zu12'], 0.0) and np.allclose(cell.q['youbot'], 0.0)
+    assert r.completion_time == pytest.approx(cell.now - DT, abs=1e-9)
+
+
+def test_each_pick_stops_the_belt_with_the_material_at_the_pick_point():
+    cell = FakeCell(cell_layout(), PAPER[:3])
+    stops = []
+    belt = cell.belt
+
+    def recording_belt(speed):
+        if speed == 0.0:
+            stops.append({i: m[0] for i, m in cell.materials.items() if m[3]})
+        belt(speed)
+    cell.belt = recording_belt
+    run(cell)
+    picked = [e.material for e in kinds(cell, 'picked')]
+    assert picked == [1, 2, 3]
+    # The front material is stopped within one control period's travel past pick_x = 0.
+    for material, at_stop in zip(picked, stops):
+        assert 0.0 <= at_stop[material] <= cell.layout.belt_speed * DT + 1e-9
+        assert max(at_stop, key=at_stop.get) == material
+
+
+def test_a_missed_grasp_is_retried():
+    cell = FakeCell(cell_layout(), PAPER, grasp_failures={2: 1})
+    p = run(cell)
+    assert p.result.status == 'completed'
+    missed = kinds(cell, 'grasp_missed')
+    assert [(e.material, e.detail) for e in missed] == [(2, 'attempt 1')]
+    assert [e.detail for e in kinds(cell, 'picked') if e.material == 2] == ['attempt 2']
+    assert p.result.grasp_attempts == 16 and p.result.grasp_successes == 15
+
+
+def test_a_grasp_that_keeps_missing_is_reported_and_the_run_goes_on():
+    cell = FakeCell(cell_layout(), PAPER, grasp_failures={3: 5})
+    p = run(cell, Settings(max_retries=1))
+    r = p.result
+    assert r.status == 'incomplete'
+    failed = kinds(cell, 'grasp_failed')
+    assert [e.material for e in failed] == [3] and 'after 2 attempts' in failed[0].detail
+    assert r.delivered == 7 and r.failed == 1
+    # The belt went on after the failure and the youBot still delivered the rest.
+    assert len(kinds(cell, 'delivered')) == 6
+
+
+def test_materials_that_leave_the_belt_unpicked_are_counted_missed():
+    layout = cell_layout()
+    cell = FakeCell(layout, PAPER[:3])
+    p = run(cell, Settings(pick_x=layout.belt_end_x + 1.0, idle_timeout=5.0))
+    r = p.result
+    assert r.status == 'incomplete' and r.missed == 3 and r.delivered == 0
+    assert {e.material for e in kinds(cell, 'missed')} == {1, 2, 3}
+    assert not kinds(cell, 'departing')           # nothing to carry: the youBot stays
+
+
+def test_a_silent_vision_ends_the_loading_after_the_idle_timeout():
+    cell = FakeCell(cell_layout(), PAPER, blind=True)
+    p = run(cell, Settings(idle_timeout=5.0))
+    assert p.result.status == 'incomplete' and p.result.identified == 0
+    over = kinds(cell, 'loading_over')
+    assert over and 'nothing new for 5 s' in over[0].detail
+    assert over[0].time == pytest.approx(5.0, abs=2 * DT)
+
+
+@pytest.mark.parametrize('where', ['solve', 'grip'])
+def test_a_node_that_stops_answering_ends_the_run_safely(where):
+    cell = FakeCell(cell_layout(), PAPER, timeout_on=where)
+    p = run(cell)
+    assert p.result.status == 'node_timeout'
+    assert 'did not answer' in p.result.message
+    assert cell.belt_calls[-1] == 0.0 and cell.drive_calls[-1] == (0.0, 0.0, 0.0)
+
+
+def test_a_stalled_arm_is_detected_by_the_state_deadline():
+    cell = FakeCell(cell_layout(), PAPER[:1], stall=True)
+    p = run(cell, Settings(idle_timeout=5.0))
+    assert p.result.status == 'incomplete'
+    failed = kinds(cell, 'grasp_failed')
+    assert failed and 'did not reach the lift point' in failed[0].detail
+    # A state ends no later than its planned end plus the settle margin.
+    picked = kinds(cell, 'picked')[0].time
+    assert failed[0].time - picked < 2.5 + Settings().settle_margin
+
+
+def test_a_material_dropped_on_the_way_is_reported():
+    cell = FakeCell(cell_layout(), PAPER, drop_on_transfer=3)
+    p = run(cell)
+    failed = kinds(cell, 'grasp_failed')
+    assert [e.material for e in failed] == [3] and 'dropped' in failed[0].detail
+    assert p.result.delivered == 7
+
+
+def test_an_unreachable_pick_is_reported_not_attempted():
+    far = lambda arm, p: arm == 'zu12' and p[2] > 0.5 and p[1] > 0.7   # noqa: E731
+    cell = FakeCell(cell_layout(), PAPER[:2], unreachable=far)
+    p = run(cell, Settings(idle_timeout=5.0))
+    assert p.result.picked == 0 and p.result.failed == 2
+    assert kinds(cell, 'ik_failed') and p.result.grasp_attempts == 0
+
+
+def test_a_base_that_does_not_move_ends_with_a_result():
+    cell = FakeCell(cell_layout(), PAPER[:2], drive_works=False)
+    p = run(cell, Settings(run_timeout=200.0, drive_margin=5.0))
+    assert p.finished
+    assert kinds(cell, 'drive_stalled')
+    assert p.result.status in ('incomplete', 'timeout')
+
+
+def test_the_run_timeout_ends_a_run_in_progress():
+    cell = FakeCell(cell_layout(), PAPER)
+    p = run(cell, Settings(run_timeout=20.0))
+    assert p.result.status == 'timeout' and p.result.completion_time <= 20.0 + 2 * DT
+
+
+def test_the_same_inputs_give_the_same_events():
+    a, b = FakeCell(cell_layout(), PAPER), FakeCell(cell_layout(), PAPER)
+    run(a), run(b)
+    assert [(e.time, e.kind, e.material, e.detail) for e in a.events] == \
+        [(e.time, e.kind, e.material, e.detail) for e in b.events]
+
+
+def test_youbot_tool_orientation_leans_outwards_in_the_arm_plane():
+    from controllers.transforms import quaternion_to_matrix
+    r = quaternion_to_matrix(youbot_tool_quaternion((-0.1, 0.11, 0.1), math.radians(30)))
+    z = r[:, 2]
+    assert z[2] == pytest.approx(-math.cos(math.radians(30)))
+    # Leaning away from the arm base (at x = 0.167), towards the target's side.
+    assert z[0] < 0 and z[1] > 0
+    assert np.allclose(r.T @ r, np.eye(3))
+
+
+def test_the_layout_of_the_cell_world():
+    layout = cell_layout()
+    assert layout.total == 8 and layout.plate_bound() == 7
+    assert layout.destination('blue') == 'platform' and layout.destination('orange') == 'pool'
+    # The youBot's front (0.285 m ahead) stays west of the pool's west wall at both stands.
+    assert layout.pool_stand[0] + 0.285 < 2.08 and layout.platform_stand[0] + 0.285 < 2.08
+    bad = replace(layout, belt_speed=0.0)
+    assert bad.belt_speed == 0.0
