@@ -90,8 +90,8 @@ class Settings:
     pick_x: float = 0.0               # the belt stops when the front material reaches this x
     confirm_hits: int = 8             # frames a track needs before it is acted on
     max_retries: int = 1              # extra grasp attempts on a missed grasp
-    zu12_scaling: float = 0.8         # fraction of the Zu 12's joint speed limits
-    youbot_scaling: float = 0.8
+    zu12_scaling: float = 1.0         # fraction of the Zu 12's joint speed limits
+    youbot_scaling: float = 1.0
     arrive_tolerance: float = 0.03    # joint error [rad] that counts as arrived
     settle_margin: float = 2.0        # a motion may end this late before it is a failure [s]
     drive_margin: float = 15.0        # a drive may end this late [s]
@@ -554,16 +554,12 @@ class Pipeline:
                                % len(drops)]
         drop = world_to_base(obs.youbot_pose, drop_world)
         drop[2] -= self._youbot_base_z()
-        seed = np.array(obs.youbot_q, float)
-        plan = []
-        for p in (hover, contact, hover, drop + np.array([0.0, 0.0, 0.05]), drop):
-            q = self._solve_tilted(p, seed)
-            if q is None:
-                self._unload.pop(0)
-                self._fail(now, m, 'grasp_failed', 'unload: no IK solution', 'youbot')
-                return self._next_unload(obs)
-            plan.append(q)
-            seed = q
+        plan = self._solve_tilted([hover, contact, hover, drop + np.array([0.0, 0.0, 0.05]),
+                                   drop], np.array(obs.youbot_q, float))
+        if plan is None:
+            self._unload.pop(0)
+            self._fail(now, m, 'grasp_failed', 'unload: no IK solution', 'youbot')
+            return self._next_unload(obs)
         lim, sc = self._limits('youbot'), self.s.youbot_scaling
         t0 = now + motion_duration(obs.youbot_q, plan[0], lim, sc, 0.5)
         t1 = t0 + t.descend
@@ -644,15 +640,24 @@ class Pipeline:
             seed = q
         return points
 
-    def _solve_tilted(self, p: np.ndarray, seed: np.ndarray) -> Optional[np.ndarray]:
-        """The youBot reaches its plate's far slots only with the tool leaning outwards."""
-        for tilt_deg in range(0, 70, 10):
-            q, _ = self.ports.solve('youbot', p, youbot_tool_quaternion(p, math.radians(tilt_deg)),
-                                    'base_link', seed)
-            if q is not None:
-                return q
+    def _solve_tilted(self, points: Sequence[np.ndarray], seed: np.ndarray
+                      ) -> Optional[List[np.ndarray]]:
+        """Joint positions for a youBot path whose every point has the same tool tilt: its arm
+        reaches the plate's far slots only leaning outwards, and a material held at one tilt
+        stays level only if it is set down at the same tilt."""
+        for tilt_deg in range(0, 90, 10):
+            plan, q = [], seed
+            for p in points:
+                q, _ = self.ports.solve('youbot', p, youbot_tool_quaternion(
+                    p, math.radians(tilt_deg)), 'base_link', q)
+                if q is None:
+                    break
+                plan.append(q)
+            if len(plan) == len(points):
+                return plan
         self._event(self._now, 'ik_failed', 'youbot',
-                    detail=f'{np.round(p, 3).tolist()} at every tilt up to 60 deg')
+                    detail=f'{np.round(points[1], 3).tolist()} via '
+                           f'{np.round(points[-1], 3).tolist()} at any one tilt up to 80 deg')
         return None
 
     def _limits(self, arm: str) -> np.ndarray:

@@ -140,7 +140,7 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
                         help='run exactly these scenario seeds (instead of --trials drawn ones)')
     parser.add_argument('--first-trial', type=int, default=0,
                         help='skip this many trials of the plan (split a plan over machines)')
-    parser.add_argument('--belt-speed', type=float, nargs=2, default=(0.08, 0.14),
+    parser.add_argument('--belt-speed', type=float, nargs=2, default=(0.10, 0.16),
                         metavar=('LO', 'HI'), help='belt speed range [m/s]')
     parser.add_argument('--domain-base', type=int, default=int(os.environ.get(
         'TRIALS_DOMAIN_BASE', '40')), help='trial k uses domain base + worker index')
@@ -181,6 +181,7 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
             free.append(futures.pop(done))
             r = done.result()
             results.append(r)
+            write_csv(results, args.out / 'trials.csv')      # partial results survive
             elapsed = time.monotonic() - started
             print(f'[trials] {len(results)}/{len(plan)} trial {r["trial"]} seed '
                   f'{r["scenario_seed"]} belt {r["belt_speed"]:.3f}: {r["status"]}, '

@@ -345,7 +345,8 @@ class SimNode(Node):
         suction = self._world.suctions[robot]
         response.success, response.message = (suction.switch_on(self._world.source)
                                                if request.data else suction.release())
-        text = f'{robot}/suction {"on" if request.data else "off"}: {response.message}'
+        service = self._world.robots[robot].config.suction.service
+        text = f'{robot}/{service} {"on" if request.data else "off"}: {response.message}'
         # (rclpy forbids two severities from one logging call site.)
         if response.success:
             self.get_logger().info(text)
