@@ -247,12 +247,13 @@ class CoordinatorNode(Node):
         if not client.wait_for_service(timeout_sec=self.service_timeout):
             raise NodeTimeout(f'{client.srv_name} is not available ({what})')
         future = client.call_async(request)
-        end = time.monotonic() + self.service_timeout
-        while not future.done():
-            if time.monotonic() > end or not rclpy.ok():
-                raise NodeTimeout(f'{client.srv_name} did not answer within '
-                                  f'{self.service_timeout} s ({what})')
-            time.sleep(0.0005)
+        answered = threading.Event()
+        future.add_done_callback(lambda _: answered.set())
+        # (An event, not polling: in lock-step every decision waits on a few of these, and
+        # polling would take CPU from the simulator on a small machine.)
+        if not answered.wait(self.service_timeout) or not rclpy.ok():
+            raise NodeTimeout(f'{client.srv_name} did not answer within '
+                              f'{self.service_timeout} s ({what})')
         return future.result()
 
     def solve(self, arm, position, orientation, frame, seed):

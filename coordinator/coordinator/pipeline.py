@@ -192,12 +192,13 @@ class Pipeline:
     def tick(self, obs: Observation) -> None:
         if self.finished:
             return
-        self._now = obs.now
+        self._now, self._q_now = obs.now, obs.zu12_q
         try:
             if self.loader_state == 'start':
                 self._start(obs)
             self._see(obs)
             getattr(self, '_loader_' + self.loader_state)(obs)
+            self._belt(obs.now, self._belt_wanted(obs.now))
             getattr(self, '_transport_' + self.transport_state)(obs)
             if obs.now - self.start_time > self.s.run_timeout:
                 self._finish(obs.now, 'timeout', f'the run took over {self.s.run_timeout} s')
@@ -239,6 +240,17 @@ class Pipeline:
     def _send(self, motion: Motion) -> None:
         self._motion[motion.arm] = motion
         self.ports.trajectory(motion.arm, motion.points)
+
+    def _belt_wanted(self, now: float) -> bool:
+        """The belt runs while loading, except while a material waits at the pick point or the
+        cup is on one still on the belt: nothing passes the pick point unnoticed."""
+        if self.loader_state in ('home', 'done'):
+            return False
+        if self.loader_state == 'pick' and self._pick is not None and not (
+                self._pick.picked and self._arrived('zu12', self._q_now, now)):
+            return False
+        return not any(self._belt_x(m, now) >= self.s.pick_x
+                       for m in self.materials.values() if m.status == 'seen')
 
     def _arrived(self, arm: str, q: np.ndarray, now: float) -> Optional[bool]:
         """After a motion's end: True when the arm is at its goal, None while it may still get
@@ -311,7 +323,6 @@ class Pipeline:
     def _start(self, obs: Observation) -> None:
         self._home_q = {'zu12': np.array(obs.zu12_q, float),
                         'youbot': np.array(obs.youbot_q, float)}
-        self._belt(obs.now, True)
         self._set_state('loader', 'wait', obs.now, self.s.idle_timeout)
 
     def _loader_wait(self, obs: Observation) -> None:
@@ -322,7 +333,6 @@ class Pipeline:
             why = ('every material handled' if accounted >= self.layout.total else
                    f'nothing new for {self.s.idle_timeout:.0f} s')
             self._event(now, 'loading_over', 'zu12', detail=why)
-            self._belt(now, False)
             self._plan_home('zu12', obs)
             self._set_state('loader', 'home', now, self._motion['zu12'].end - now
                             + self.s.settle_margin)
@@ -335,7 +345,6 @@ class Pipeline:
         x = self._belt_x(front, now)
         if x < self.s.pick_x:
             return
-        self._belt(now, False)
         front.position = np.array([x, front.position[1], front.position[2]])
         front.stamp = now
         self._pick = front
@@ -369,7 +378,6 @@ class Pipeline:
     def _pick_failed(self, obs: Observation, m: Material, why: str) -> None:
         self._fail(obs.now, m, 'grasp_failed', why, 'zu12')
         self._pick = None
-        self._belt(obs.now, True)
         self._plan_home('zu12', obs, ready=True)
         self._set_state('loader', 'retreat', obs.now,
                         self._motion['zu12'].end - obs.now + self.s.settle_margin)
@@ -398,7 +406,6 @@ class Pipeline:
         if arrived is False or self._late('loader', now):
             return self._pick_failed(obs, m, 'the arm did not reach the lift point')
         if arrived:
-            self._belt(now, True)             # the material is clear of the belt
             self._plan_place(obs, m)
 
     def _plan_place(self, obs: Observation, m: Material) -> None:

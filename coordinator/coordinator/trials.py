@@ -23,6 +23,8 @@ from typing import Dict, List, Optional, Sequence
 
 WORLD = 'package://sim_bridge/worlds/pipeline_cell.yaml'
 CONTROL_RATE = 30.0
+# Process groups of the trials running now (stopped when the runner is interrupted).
+_ACTIVE_GROUPS: set = set()
 CSV_FIELDS = ('trial', 'scenario_seed', 'belt_speed', 'status', 'completion_time',
               'identification_rate', 'grasp_success_rate', 'handling_success_rate', 'identified',
               'identified_correct', 'picked', 'delivered', 'handled_verified', 'grasp_attempts',
@@ -67,6 +69,7 @@ def run_trial(trial: int, seed: int, belt_speed: float, domain_id: int, out_dir:
                                                            'LOCALHOST')}
     commands = trial_commands(seed, belt_speed, result_file, trial_dir if record else None)
     procs: Dict[str, subprocess.Popen] = {}
+    cpu: Dict[str, float] = {}
     group: Optional[int] = None
     start = time.monotonic()
     try:
@@ -78,12 +81,15 @@ def run_trial(trial: int, seed: int, belt_speed: float, domain_id: int, out_dir:
                 process_group=0 if group is None else group)
             log.close()
             group = procs[name].pid if group is None else group
+            _ACTIVE_GROUPS.add(group)
         try:
             procs['coordinator_node'].wait(timeout=wall_timeout)
         except subprocess.TimeoutExpired:
             pass
+        cpu = {name: _cpu_seconds(p.pid) for name, p in procs.items() if p.poll() is None}
     finally:
         _stop_group(group, procs)
+        _ACTIVE_GROUPS.discard(group)
     wall = time.monotonic() - start
     if result_file.exists():
         result = json.loads(result_file.read_text())
@@ -92,8 +98,18 @@ def run_trial(trial: int, seed: int, belt_speed: float, domain_id: int, out_dir:
                   f'no result (coordinator exit {procs["coordinator_node"].returncode}); see '
                   f'{trial_dir}'}
     result.update({'trial': trial, 'scenario_seed': seed, 'belt_speed': belt_speed,
-                   'wall_time': wall})
+                   'wall_time': wall, 'cpu_seconds': cpu})
+    result_file.write_text(json.dumps(result, indent=1))
     return result
+
+
+def _cpu_seconds(pid: int) -> float:
+    """User + system CPU time of a running process (Linux /proc), or NaN."""
+    try:
+        fields = Path(f'/proc/{pid}/stat').read_text().rsplit(')', 1)[1].split()
+        return (int(fields[11]) + int(fields[12])) / os.sysconf('SC_CLK_TCK')
+    except (OSError, IndexError, ValueError):
+        return float('nan')
 
 
 def _stop_group(group: Optional[int], procs: Dict[str, subprocess.Popen]) -> None:
@@ -130,7 +146,39 @@ def write_csv(trials: List[Dict], path: Path) -> None:
             writer.writerow({k: t.get(k, '') for k in CSV_FIELDS})
 
 
+def _rebuild(out: Path) -> int:
+    results = []
+    for path in sorted(out.glob('trial_*/result.json')):
+        r = json.loads(path.read_text())
+        r.setdefault('trial', int(path.parent.name.split('_')[1]))
+        results.append(r)
+    if not results:
+        print(f'[trials] no trial_*/result.json in {out}', file=sys.stderr)
+        return 1
+    write_csv(results, out / 'trials.csv')
+    from coordinator.report import write_report
+    report = write_report(results, out, {'seed0': 'see trials.csv', 'belt_speed': 'see CSV',
+                                         'parallel': '-', 'wall_time': sum(
+                                             r.get('wall_time', 0.0) for r in results)})
+    print(f'[trials] {len(results)} trials: CSV {out / "trials.csv"}, report {report}')
+    return 0
+
+
 def main(argv: Optional[Sequence[str]] = None) -> int:
+    try:
+        return _main(argv)
+    except KeyboardInterrupt:
+        for group in list(_ACTIVE_GROUPS):
+            try:
+                os.killpg(group, signal.SIGKILL)
+            except ProcessLookupError:
+                pass
+        print('[trials] interrupted: running trials stopped; finished ones are in trials.csv',
+              flush=True)
+        return 130
+
+
+def _main(argv: Optional[Sequence[str]]) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument('--trials', type=int, default=10)
     parser.add_argument('--parallel', type=int, default=1,
@@ -148,7 +196,11 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     parser.add_argument('--record', action='store_true', help='record a bag per trial')
     parser.add_argument('--out', type=Path, default=Path('runs') / time.strftime(
         'trials-%Y%m%d-%H%M%S'))
+    parser.add_argument('--report-only', action='store_true',
+                        help='rebuild trials.csv and the report from the results in --out')
     args = parser.parse_args(argv)
+    if args.report_only:
+        return _rebuild(args.out)
     if args.trials < 1 or args.parallel < 1:
         parser.error('--trials and --parallel must be >= 1')
     lo, hi = args.belt_speed

@@ -306,3 +306,20 @@ def test_the_layout_of_the_cell_world():
     assert layout.pool_stand[0] + 0.285 < 2.08 and layout.platform_stand[0] + 0.285 < 2.08
     bad = replace(layout, belt_speed=0.0)
     assert bad.belt_speed == 0.0
+
+
+def test_nothing_passes_the_pick_point_while_the_arm_is_busy():
+    # Materials close together: each reaches the pick point while the arm still places the
+    # one before; the belt must hold them (a run once lost one off the end this way).
+    cell = FakeCell(cell_layout(), PAPER, gap=0.07)
+    furthest = []
+    step = cell.step
+
+    def watching_step():
+        obs = step()
+        furthest.append(max((m[0] for m in cell.materials.values() if m[3]), default=-9.0))
+        return obs
+    cell.step = watching_step
+    p = run(cell)
+    assert p.result.status == 'completed' and p.result.missed == 0
+    assert max(furthest) <= cell.layout.belt_speed * DT + 1e-9

@@ -1,0 +1,116 @@
+"""Pipeline benchmark: wall time and real-time factor of a whole lock-step run over DDS (cameras
+on), where its CPU goes, and the trial throughput with trials side by side.
+
+Baseline in the same run: the same cell world stepped in-process (SimRunner, belt camera
+rendered at its rate, no ROS) for the same simulated time. Prints the figures and writes JSON
+to bench/results/.
+"""
+import argparse
+import json
+import math
+import os
+import sys
+import tempfile
+import time
+from concurrent.futures import ThreadPoolExecutor
+from pathlib import Path
+
+from coordinator.trials import run_trial
+from sim_bridge.runner import DriveLimits, SimRunner
+from sim_bridge.world import SimWorld, resolve_resource
+from sim_bridge.world_config import load_world
+
+HERE = Path(__file__).resolve().parent
+DT = 1.0 / 240.0
+SEED, BELT = 5, 0.12
+
+
+class _RenderSink:
+    """Renders every due camera frame (as the simulator does for a vision subscriber)."""
+
+    def on_clock(self, t):
+        pass
+
+    def on_state(self, robot, t):
+        pass
+
+    def on_camera_due(self, i, t, render):
+        render()
+
+    def on_command_timeout(self, robot):
+        pass
+
+    def on_world_state(self, t):
+        pass
+
+
+def in_process_baseline(sim_seconds: float) -> dict:
+    world = SimWorld(load_world(resolve_resource(
+        'package://sim_bridge/worlds/pipeline_cell.yaml')), time_step=DT, scenario_seed=SEED)
+    world.conveyor.speed = BELT
+    runner = SimRunner(world, DriveLimits(0.8, 1.5, 0.5), 30.0)
+    steps = int(round(sim_seconds / DT))
+    start = time.perf_counter()
+    runner.advance(steps, _RenderSink())
+    wall = time.perf_counter() - start
+    world.close()
+    return {'sim_seconds': steps * DT, 'wall_seconds': wall, 'rtf': steps * DT / wall}
+
+
+def trials(count: int, parallel: int, out: Path, domain: int) -> dict:
+    start = time.perf_counter()
+    with ThreadPoolExecutor(parallel) as pool:
+        futures = [pool.submit(run_trial, k, SEED, BELT, domain + k % parallel,
+                               out / f'p{parallel}') for k in range(count)]
+        results = [f.result() for f in futures]
+    wall = time.perf_counter() - start
+    return {'trials': count, 'parallel': parallel, 'wall_seconds': wall,
+            'trials_per_hour': 3600.0 * count / wall,
+            'statuses': [r['status'] for r in results], 'runs': [
+                {k: r.get(k) for k in ('completion_time', 'wall_time', 'cpu_seconds')}
+                for r in results]}
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument('--count', type=int, default=2, help='trials per throughput run')
+    parser.add_argument('--domain', type=int, default=int(os.environ.get('BENCH_DOMAIN', 150)))
+    args = parser.parse_args()
+    with tempfile.TemporaryDirectory() as tmp:
+        out = Path(tmp)
+        single = trials(1, 1, out / 'single', args.domain)
+        run = single['runs'][0]
+        if single['statuses'] != ['completed']:
+            print(f'the benchmark run did not complete: {single["statuses"]}', file=sys.stderr)
+            return 1
+        base = in_process_baseline(run['completion_time'])
+        seq = trials(args.count, 1, out, args.domain)
+        par = trials(args.count, 2, out, args.domain)
+    rtf = run['completion_time'] / run['wall_time']
+    cpu = run['cpu_seconds']
+    figures = {
+        'single_run': {'sim_seconds': run['completion_time'], 'wall_seconds': run['wall_time'],
+                       'rtf': rtf, 'cpu_seconds_by_node': cpu},
+        'in_process_baseline': base, 'ratio_rtf_vs_in_process': rtf / base['rtf'],
+        'sequential': seq, 'parallel_2': par,
+        'parallel_speedup': par['trials_per_hour'] / seq['trials_per_hour'],
+        'cpus': os.cpu_count()}
+    print(f'one lock-step run (seed {SEED}, belt {BELT} m/s, camera 320x240 at 15 Hz): '
+          f'{run["completion_time"]:.1f} s simulated in {run["wall_time"]:.1f} s wall '
+          f'(real-time factor {rtf:.2f})')
+    print('  CPU seconds by node (the coordinator exits first): ' + ', '.join(
+        f'{k} {v:.1f}' for k, v in sorted(cpu.items(), key=lambda kv: -kv[1])
+        if not math.isnan(v)))
+    print(f'in-process baseline, same world and camera, no ROS: real-time factor '
+          f'{base["rtf"]:.2f}; the node graph runs at {rtf / base["rtf"]:.2f} of it')
+    print(f'throughput: {seq["trials_per_hour"]:.1f} trials/h one at a time, '
+          f'{par["trials_per_hour"]:.1f} trials/h two at a time '
+          f'(x{figures["parallel_speedup"]:.2f} on {os.cpu_count()} CPUs); statuses '
+          f'{seq["statuses"] + par["statuses"]}')
+    (HERE / 'results').mkdir(exist_ok=True)
+    (HERE / 'results' / 'bench_pipeline.json').write_text(json.dumps(figures, indent=1))
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())
