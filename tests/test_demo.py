@@ -23,3 +23,22 @@ def test_demo_drives_the_square_records_and_passes(tmp_path):
     assert (run / 'bag' / 'metadata.yaml').is_file()
     report = (run / 'report' / 'report.md').read_text()
     assert '/mini_robot/odom' in report and (run / 'report' / 'paths.png').is_file()
+
+
+def test_the_pipeline_demo_runs_the_scenario_prints_its_table_and_records(tmp_path):
+    env = {**os.environ, 'DEMO_RUNS_DIR': str(tmp_path)}
+    env.pop('ROS_DOMAIN_ID', None)
+    out = subprocess.run(['bash', str(ROOT / 'scripts' / 'demo.sh')], env=env,
+                         capture_output=True, text=True, timeout=900)
+    text = out.stdout + out.stderr
+    assert out.returncode == 0, text[-2500:]
+    assert '[demo] PASS' in text
+    # The results table beside the paper's rows, with every material delivered.
+    row = re.search(r'\| \*\*these trials\*\* \| 1 \| ([0-9.]+) .*\| ([0-9.]+) \| ([0-9.]+) \| '
+                    r'([0-9.]+) \|', text)
+    assert row, text[-2500:]
+    assert [float(v) for v in row.groups()[1:]] == [100.0, 100.0, 100.0]
+    assert '| paper, trials 100-110 | | 61 |' in text
+    run = next(tmp_path.glob('pipeline-*'))
+    assert (run / 'trial_000' / 'bag' / 'metadata.yaml').is_file()
+    assert (run / 'report.md').is_file() and (run / 'youbot_paths.png').is_file()

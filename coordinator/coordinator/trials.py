@@ -37,7 +37,14 @@ def trial_commands(seed: int, belt_speed: float, result_file: Path,
     sim = ['sim_node', '--ros-args', '-p', f'world:={WORLD}', '-p', 'synchronous:=true',
            '-p', f'state_publish_rate:={CONTROL_RATE}', '-p', f'scenario_seed:={seed}',
            '-p', f'belt_speed:={belt_speed}', '-p', 'max_speed:=0.8', '-p', 'max_turn:=1.5']
-    commands = {
+    commands = {}
+    if record_dir is not None:
+        # Camera frames (and the debug image, published only for subscribers) stay out of the
+        # bag: 15 Hz of 230 kB frames would make it about 500 MB per run.
+        commands['recorder'] = ['recorder', '--ros-args', '-p', f'output_dir:={record_dir}',
+                                '-p', 'bag_name:=bag', '-p', 'use_sim_time:=true', '-p',
+                                "exclude:=['/belt_camera/image_raw', '/debug_image']"]
+    commands.update({
         'sim_node': sim,
         'vision_node': ['vision_node', '--ros-args', '-r', 'image_raw:=/belt_camera/image_raw',
                         '-r', 'camera_info:=/belt_camera/camera_info', '-p',
@@ -50,10 +57,7 @@ def trial_commands(seed: int, belt_speed: float, result_file: Path,
                              '-p', 'synchronous:=true', '-p', f'control_rate:={CONTROL_RATE}',
                              '-p', f'belt_speed:={belt_speed}', '-p', f'scenario_seed:={seed}',
                              '-p', f'result_file:={result_file}'],
-    }
-    if record_dir is not None:
-        commands['recorder'] = ['recorder', '--ros-args', '-p', f'output_dir:={record_dir}',
-                                '-p', 'bag_name:=bag', '-p', 'use_sim_time:=true']
+    })
     return commands
 
 
@@ -74,6 +78,8 @@ def run_trial(trial: int, seed: int, belt_speed: float, domain_id: int, out_dir:
     start = time.monotonic()
     try:
         for name, argv in commands.items():
+            if name == 'coordinator_node' and 'recorder' in procs:
+                _wait_for_line(trial_dir / 'recorder.log', 'recording /clock', 30.0)
             log = open(trial_dir / f'{name}.log', 'w')
             procs[name] = subprocess.Popen(
                 argv, stdout=log, stderr=subprocess.STDOUT, env=env,
@@ -101,6 +107,16 @@ def run_trial(trial: int, seed: int, belt_speed: float, domain_id: int, out_dir:
                    'wall_time': wall, 'cpu_seconds': cpu})
     result_file.write_text(json.dumps(result, indent=1))
     return result
+
+
+def _wait_for_line(path: Path, text: str, timeout: float) -> bool:
+    """Until a process's log holds ``text`` (the recorder subscribed to the simulator)."""
+    end = time.monotonic() + timeout
+    while time.monotonic() < end:
+        if path.exists() and text in path.read_text(errors='replace'):
+            return True
+        time.sleep(0.05)
+    return False
 
 
 def _cpu_seconds(pid: int) -> float:
