@@ -52,6 +52,8 @@ from coordinator.results import (at_destination, match_identification, regions_f
                                  score)
 
 ARMS = {'zu12': ZU12_JOINTS, 'youbot': YOUBOT_JOINTS}
+CAMERA_TOPIC = '/belt_camera/image_raw'
+STARTUP_GRACE_S = 1.0      # simulated seconds in which a lost camera frame is tolerated
 GRIP_SERVICES = {'zu12': '/zu12/suction', 'youbot': '/youbot/gripper/grasp'}
 
 
@@ -163,6 +165,7 @@ class CoordinatorNode(Node):
         self._detections: Dict[int, List[Detection]] = {}
         self._markers: List[Tuple[int, list]] = []
         self._seen_truth: List[bool] = []
+        self._start_time = 0.0
         self._path: List[Tuple[float, float]] = []
         qos = QoSProfile(depth=100)
         for arm, names in ARMS.items():
@@ -349,9 +352,28 @@ class CoordinatorNode(Node):
                               'with synchronous:=true?)')
         return int(reply.step_count) - steps, int(reply.step_count)
 
+    def _wait_for_graph(self) -> None:
+        """Until the nodes the run needs are up: services, the vision node on the camera."""
+        clients = list(self.ik.values()) + list(self.grips.values()) + [self.param_client]
+        if self.synchronous:
+            clients.append(self.step_client)
+        end = time.monotonic() + self.service_timeout
+        for client in clients:
+            if not client.wait_for_service(timeout_sec=max(0.1, end - time.monotonic())):
+                raise NodeTimeout(f'{client.srv_name} is not available')
+        while time.monotonic() < end:
+            if (self.count_publishers('/detections') > 0
+                    and self.count_subscribers(CAMERA_TOPIC) > 0):
+                return
+            time.sleep(0.05)
+        raise NodeTimeout(f'no vision node: nothing publishes /detections or subscribes '
+                          f'{CAMERA_TOPIC}')
+
     def _first_observation(self) -> Observation:
+        self._wait_for_graph()
         if self.synchronous:
             before, after = self._step(self.steps_per_tick)
+            self._start_time = after * self.dt_ns * 1e-9
             self.state_grid.start_after(after * self.dt_ns)
             if self.camera_grid:
                 self.camera_grid.start_after(after * self.dt_ns)
@@ -404,11 +426,18 @@ class CoordinatorNode(Node):
 
     def _wait_frames(self, frames: Sequence[int]) -> None:
         for stamp in frames:
+            # The first frames can go out before DDS has matched the camera's best-effort
+            # subscriber: nothing is in view yet, so a lost one there changes nothing.
+            startup = stamp * 1e-9 - self._start_time < STARTUP_GRACE_S
             with self._lock:
-                if not self._lock.wait_for(lambda s=stamp: s in self._detections,
-                                           timeout=self.service_timeout):
-                    raise NodeTimeout(f'no detections for the camera frame at {stamp * 1e-9:.3f}'
-                                      ' s (vision_node gone, or its frame lost)')
+                if self._lock.wait_for(lambda s=stamp: s in self._detections,
+                                       timeout=1.0 if startup else self.service_timeout):
+                    continue
+            if not startup:
+                raise NodeTimeout(f'no detections for the camera frame at {stamp * 1e-9:.3f}'
+                                  ' s (vision_node gone, or its frame lost)')
+            self.get_logger().warn(f'no detections for the start-up frame at '
+                                   f'{stamp * 1e-9:.3f} s (not matched yet); going on')
 
     def _observe(self, t_ns: int, frames: Optional[Sequence[int]]) -> Observation:
         with self._lock:

@@ -529,14 +529,20 @@ class Pipeline:
                     f'{status.position_error * 1000:.0f} mm from {self._drive_goal}'))
             self._event(obs.now, 'arrived', 'youbot', detail=self._drive_goal)
             if self._drive_goal == 'home':
-                return self._plan_youbot_home(obs)
+                # Folded only at home: the folded arm reaches down in front of the base, where
+                # the platform and what was just set on it are.
+                self._plan_home('youbot', obs)
+                return self._set_state('transport', 'fold', obs.now, self._motion['youbot'].end
+                                       - obs.now + self.s.settle_margin)
             self._next_unload(obs)
 
     def _next_unload(self, obs: Observation) -> None:
         if not self._unload:
-            self._plan_home('youbot', obs)
-            self._set_state('transport', 'fold', obs.now,
-                            self._motion['youbot'].end - obs.now + self.s.settle_margin)
+            q = np.asarray(obs.youbot_q, float)
+            d = motion_duration(q, YOUBOT_CARRY_Q, self._limits('youbot'),
+                                self.s.youbot_scaling, 0.5)
+            self._send(Motion('youbot', [(obs.now + d, YOUBOT_CARRY_Q.copy())]))
+            self._set_state('transport', 'stow', obs.now, d + self.s.settle_margin)
             return
         m = self._unload[0]
         here = self._drive_goal
@@ -618,13 +624,19 @@ class Pipeline:
             self._unload.pop(0)
             self._next_unload(obs)
 
+    def _transport_stow(self, obs: Observation) -> None:
+        arrived = self._arrived('youbot', obs.youbot_q, obs.now)
+        if arrived is not None or self._late('transport', obs.now):
+            if not arrived:
+                self._event(obs.now, 'arm_stalled', 'youbot', detail='carry pose not reached')
+            self._drive_to(obs, 'home')
+
     def _transport_fold(self, obs: Observation) -> None:
         arrived = self._arrived('youbot', obs.youbot_q, obs.now)
         if arrived is not None or self._late('transport', obs.now):
-            self._drive_to(obs, 'home')
-
-    def _plan_youbot_home(self, obs: Observation) -> None:
-        self._set_state('transport', 'done', obs.now, math.inf)
+            if not arrived:
+                self._event(obs.now, 'arm_stalled', 'youbot', detail='home pose not reached')
+            self._set_state('transport', 'done', obs.now, math.inf)
 
     def _transport_done(self, obs: Observation) -> None:
         pass
@@ -683,6 +695,8 @@ class Pipeline:
 
 # base_link's height above the floor when the youBot stands on its wheels [m].
 YOUBOT_BASE_Z_M = 0.0815
+# The youBot's arm upright (the datasheet's candle pose) while the base drives home.
+YOUBOT_CARRY_Q = np.zeros(5)
 # The youBot's fingertips reach 10.4 mm beyond gripper_tcp: it grasps a material's top face with
 # the TCP this far above it, so that the fingertips do not push the material away.
 YOUBOT_GRASP_STANDOFF_M = 0.0104 + 0.002

@@ -135,14 +135,23 @@ def test_unusable_frames_are_rejected_with_a_warning(start_node, probe):
            (Image(width=320, height=240, encoding='rgb8', step=960), 'empty frame rejected'),
            (Image(width=320, height=240, encoding='rgb8', step=960, data=bytes(100)),
             'frame rejected: 100 bytes')]
-    for msg, warning in bad:
+    for k, (msg, warning) in enumerate(bad, start=1):
+        msg.header.stamp.sec = k
         end = time.monotonic() + 10.0
         while warning not in vision.output() and time.monotonic() < end:
             info_pub.publish(info)
             image_pub.publish(msg)
             time.sleep(0.2)
         assert warning in vision.output(), warning
-    assert not detections                        # nothing published for unusable frames
+    # An unusable frame is answered with no detections, stamped with the frame's time (a
+    # lock-step consumer waits for an answer to every frame).
+    def answered():
+        for msg, _ in bad:                  # again: the probe may have matched late
+            image_pub.publish(msg)
+        return {d.header.stamp.sec for _, d in detections} >= {1, 2, 3, 4}
+    wait_for(answered, 10.0, period=0.2, what='answers to the rejected frames')
+    assert all(d.detections == [] for _, d in detections)
+    detections.clear()
     def processed():
         image_pub.publish(frame)
         return bool(detections)

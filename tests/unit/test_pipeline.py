@@ -169,6 +169,10 @@ def test_the_whole_run_delivers_every_material_and_both_robots_return():
     assert cell.belt_calls[-1] == 0.0 and cell.drive_calls[-1] == (0.0, 0.0, 0.0)
     assert np.allclose(cell.q['zu12'], 0.0) and np.allclose(cell.q['youbot'], 0.0)
     assert r.completion_time == pytest.approx(cell.now - DT, abs=1e-9)
+    # The youBot's arm drives home upright and folds only there (folded, it reaches down in
+    # front of the base, where the platform is).
+    transport = [e.detail for e in cell.events if e.kind == 'state' and e.robot == 'transport']
+    assert transport[-4:] == ['stow', 'drive', 'fold', 'done']
 
 
 def test_each_pick_stops_the_belt_with_the_material_at_the_pick_point():
