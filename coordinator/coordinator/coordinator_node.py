@@ -284,13 +284,16 @@ class CoordinatorNode(Node):
         reply = self._call(self.grips[arm], SetBool.Request(data=on), 'grip')
         return reply.success, reply.message
 
-    def belt(self, speed: float) -> None:
+    def belt(self, speed: float) -> Optional[float]:
         value = ParameterValue(type=ParameterType.PARAMETER_DOUBLE, double_value=float(speed))
         reply = self._call(self.param_client, SetParameters.Request(
             parameters=[Parameter(name='belt_speed', value=value)]), 'belt speed')
         if not reply.results or not reply.results[0].successful:
             reason = reply.results[0].reason if reply.results else 'no result'
             raise NodeTimeout(f'the simulator refused the belt speed: {reason}')
+        # In real time the simulator ran on while the request travelled: the clock seen after
+        # the reply bounds when the change took effect (within a /clock hop).
+        return None if self.synchronous else self.now()
 
     def drive(self, vx: float, vy: float, wz: float) -> None:
         msg = Twist()

@@ -77,8 +77,9 @@ class Ports(Protocol):
     def grip(self, arm: str, on: bool) -> Tuple[bool, str]:
         """Arm (on) or release (off) the arm's gripping tool. Raises NodeTimeout."""
 
-    def belt(self, speed: float) -> None:
-        """Set the belt speed. Raises NodeTimeout."""
+    def belt(self, speed: float) -> Optional[float]:
+        """Set the belt speed; returns the (simulated) time it took effect if that is later
+        than the decision (real time), or None (lock-step: at once). Raises NodeTimeout."""
 
     def drive(self, vx: float, vy: float, wz: float) -> None: ...
 
@@ -232,9 +233,9 @@ class Pipeline:
 
     def _belt(self, now: float, running: bool) -> None:
         if running != self._belt_running:
-            self.ports.belt(self.layout.belt_speed if running else 0.0)
+            effective = self.ports.belt(self.layout.belt_speed if running else 0.0)
             self._belt_running = running
-            self._belt_log.append((now, running))
+            self._belt_log.append((max(now, effective or now), running))
             self._event(now, 'belt_started' if running else 'belt_stopped')
 
     def _send(self, motion: Motion) -> None:
@@ -343,8 +344,8 @@ class Pipeline:
         if front is None:
             return
         x = self._belt_x(front, now)
-        if x < self.s.pick_x:
-            return
+        if x < self.s.pick_x or self._belt_running:
+            return                  # (picked once the belt rule has stopped it, at a known x)
         front.position = np.array([x, front.position[1], front.position[2]])
         front.stamp = now
         self._pick = front
