@@ -116,6 +116,10 @@ class CoordinatorNode(Node):
                                                          10.0, 3600.0))
         self.declare_parameter('idle_timeout', 20.0, rng(
             'Belt running with nothing to pick for this long ends the loading [s]', 1.0, 600.0))
+        self.declare_parameter('plan_latency', -1.0, rng(
+            'Start motions this much after the decision [s of sim time]; -1: 0 in lock-step, '
+            '0.5 in real time (the plan and the message take time while the simulator runs)',
+            -1.0, 5.0))
         self.declare_parameter('service_timeout', 10.0, rng(
             'A node that does not answer within this many wall seconds has failed', 0.5, 120.0))
         self.declare_parameter('result_file', '', ro(
@@ -136,7 +140,10 @@ class CoordinatorNode(Node):
         if layout.belt_speed <= 0.0:
             raise CoordinatorError('the belt speed must be > 0 to bring materials')
         self.layout = layout
-        self.settings = Settings(pick_x=float(get('pick_x')),
+        latency = float(get('plan_latency'))
+        if latency < 0.0:
+            latency = 0.0 if get('synchronous') else 0.5
+        self.settings = Settings(pick_x=float(get('pick_x')), plan_latency=latency,
                                  max_retries=int(get('max_retries')),
                                  drive_speed=float(get('drive_speed')),
                                  run_timeout=float(get('run_timeout')),

@@ -29,6 +29,10 @@ from coordinator.layout import (PLATE_SLOTS_IN_BASE_M, PLATE_TOP_IN_BASE_M, Cell
                                 slot_in_world, world_to_base)
 
 DOWN = (1.0, 0.0, 0.0, 0.0)                  # tool z pointing down (x, y, z, w)
+# A material seen this recently before the belt stopped is in the camera's view [s]; its pick
+# waits this long after the stop, for frames of it at rest [s].
+VIEW_GAP_S = 0.2
+STOP_FRAME_WAIT_S = 0.4
 Points = List[Tuple[float, np.ndarray]]      # (absolute time [s], joint positions)
 
 
@@ -99,6 +103,9 @@ class Settings:
     idle_timeout: float = 20.0        # belt running, nothing new to pick: loading is over [s]
     run_timeout: float = 300.0        # the whole run [s]
     drive_speed: float = 0.4          # the dummy's speed along a path [m/s]
+    # A motion starts this much later than planned-for "now" (real time: the plan's IK calls
+    # and the message's trip; a late first segment would be too fast and rejected) [s].
+    plan_latency: float = 0.0
     drive_accel: float = 0.4
     timing: PickTiming = PickTiming()
 
@@ -115,6 +122,7 @@ class Material:
     slot: int = -1
     failure: str = ''
     picked: bool = False          # lifted off the belt by the Zu 12
+    last_seen: float = -math.inf  # when a frame last showed it
     unload_attempts: int = 0
 
 
@@ -302,6 +310,7 @@ class Pipeline:
                             f'at {np.round(m.position, 3).tolist()}')
             elif m.status == 'seen':
                 m.position, m.stamp, m.hits = np.asarray(d.position, float), d.stamp, d.hits
+            m.last_seen = obs.now
         # A material still on the belt that has gone past its end was not picked.
         for m in self.materials.values():
             if m.status == 'seen' and self._belt_x(m, obs.now) > self.layout.belt_end_x:
@@ -346,7 +355,13 @@ class Pipeline:
         x = self._belt_x(front, now)
         if x < self.s.pick_x or self._belt_running:
             return                  # (picked once the belt rule has stopped it, at a known x)
-        front.position = np.array([x, front.position[1], front.position[2]])
+        stopped = self._belt_log[-1][0]
+        if stopped - front.last_seen < VIEW_GAP_S and now - stopped < STOP_FRAME_WAIT_S:
+            # Still in the camera's view: use its frames at rest (in real time the belt stops
+            # a little later than decided, by an unknown delay below this wait).
+            return
+        if front.stamp < stopped:
+            front.position = np.array([x, front.position[1], front.position[2]])
         front.stamp = now
         self._pick = front
         front.status = 'picking'
@@ -363,7 +378,7 @@ class Pipeline:
         if q_hover is None:
             return self._pick_failed(obs, m, 'no IK solution for the pick')
         lead = motion_duration(obs.zu12_q, q_hover, self._limits('zu12'), self.s.zu12_scaling,
-                               0.5) + 0.1
+                               0.5) + 0.1 + self.s.plan_latency
         waypoints, t_arm = pick_waypoints(m.position, now, (0.0, 0.0, 0.0),
                                           now + lead + timing.descend, size, timing)
         points = self._solve_path('zu12', waypoints, q_hover)
@@ -426,7 +441,8 @@ class Pipeline:
         q_above = self._solve('zu12', above, DOWN, 'world', seed)
         if q_above is None:
             return self._place_failed(obs, m, 'no IK solution above the place')
-        d = motion_duration(obs.zu12_q, q_above, self._limits('zu12'), self.s.zu12_scaling, 0.8)
+        d = motion_duration(obs.zu12_q, q_above, self._limits('zu12'), self.s.zu12_scaling,
+                            0.8) + self.s.plan_latency
         waypoints, t_release = place_waypoints(now + d, target, size, self.s.timing)
         points = self._solve_path('zu12', waypoints, q_above)
         if points is None:
@@ -482,7 +498,8 @@ class Pipeline:
     def _plan_home(self, arm: str, obs: Observation, ready: bool = False) -> None:
         q = obs.zu12_q if arm == 'zu12' else obs.youbot_q
         goal = self._home_q[arm]
-        d = motion_duration(q, goal, self._limits(arm), self._scaling(arm), 0.5)
+        d = motion_duration(q, goal, self._limits(arm), self._scaling(arm),
+                            0.5) + self.s.plan_latency
         self._send(Motion(arm, [(obs.now + d, goal.copy())]))
         if not ready:
             self._event(obs.now, 'returning', arm)
@@ -541,7 +558,7 @@ class Pipeline:
         if not self._unload:
             q = np.asarray(obs.youbot_q, float)
             d = motion_duration(q, YOUBOT_CARRY_Q, self._limits('youbot'),
-                                self.s.youbot_scaling, 0.5)
+                                self.s.youbot_scaling, 0.5) + self.s.plan_latency
             self._send(Motion('youbot', [(obs.now + d, YOUBOT_CARRY_Q.copy())]))
             self._set_state('transport', 'stow', obs.now, d + self.s.settle_margin)
             return
@@ -575,7 +592,7 @@ class Pipeline:
             self._fail(now, m, 'grasp_failed', 'unload: no IK solution', 'youbot')
             return self._next_unload(obs)
         lim, sc = self._limits('youbot'), self.s.youbot_scaling
-        t0 = now + motion_duration(obs.youbot_q, plan[0], lim, sc, 0.5)
+        t0 = now + motion_duration(obs.youbot_q, plan[0], lim, sc, 0.5) + self.s.plan_latency
         t1 = t0 + t.descend
         t2 = t1 + t.dwell
         t3 = t2 + t.lift

@@ -27,7 +27,8 @@ class FakeCell:
     def __init__(self, layout: CellLayout, colors: List[str], gap: float = 0.35,
                  grasp_failures: Dict[int, int] = None, unreachable=lambda arm, p: False,
                  stall: bool = False, blind: bool = False, timeout_on: str = '',
-                 drop_on_transfer: int = -1, drive_works: bool = True) -> None:
+                 drop_on_transfer: int = -1, drive_works: bool = True,
+                 belt_latency: float = 0.0) -> None:
         self.layout = layout
         self.now = 0.0
         self.belt_speed = 0.0
@@ -45,6 +46,11 @@ class FakeCell:
         self.unreachable, self.stall, self.blind = unreachable, stall, blind
         self.timeout_on, self.drop_on_transfer = timeout_on, drop_on_transfer
         self.drive_works = drive_works
+        # A belt command takes effect this late (real time), and the port does not say so.
+        self.belt_latency = belt_latency
+        self._belt_pending: List[tuple] = []
+        self.trajectories: List[tuple] = []
+        self.final_x: Dict[int, float] = {}          # where each material was when lifted
         self.events = []
         self.belt_calls: List[float] = []
         self.drive_calls: List[tuple] = []
@@ -63,6 +69,7 @@ class FakeCell:
 
     def trajectory(self, arm, points):
         self.goal[arm] = (points[-1][0], np.array(points[-1][1]))
+        self.trajectories.append((arm, self.now, points))
 
     def grip(self, arm, on):
         if self.timeout_on == 'grip':
@@ -76,7 +83,10 @@ class FakeCell:
 
     def belt(self, speed):
         self.belt_calls.append(speed)
-        self.belt_speed = speed
+        if self.belt_latency > 0.0:
+            self._belt_pending.append((self.now + self.belt_latency, speed))
+        else:
+            self.belt_speed = speed
 
     def drive(self, vx, vy, wz):
         self.drive_calls.append((vx, vy, wz))
@@ -88,6 +98,8 @@ class FakeCell:
     # --- the world ---
     def step(self) -> Observation:
         self.now += DT
+        while self._belt_pending and self._belt_pending[0][0] <= self.now:
+            self.belt_speed = self._belt_pending.pop(0)[1]
         for m in self.materials.values():
             if m[3]:
                 m[0] += self.belt_speed * DT
@@ -106,6 +118,7 @@ class FakeCell:
                     self.holding[arm] = True
                     if arm == 'zu12' and key in self.materials:
                         self.materials[key][3] = False
+                        self.final_x[key] = self.materials[key][0]
         p = self.pipeline
         if (self.drop_on_transfer >= 0 and p._pick is not None
                 and p._pick.id == self.drop_on_transfer and p.loader_state == 'place'):
@@ -327,3 +340,30 @@ def test_nothing_passes_the_pick_point_while_the_arm_is_busy():
     p = run(cell)
     assert p.result.status == 'completed' and p.result.missed == 0
     assert max(furthest) <= cell.layout.belt_speed * DT + 1e-9
+
+
+def test_a_material_stopped_in_view_is_picked_where_the_camera_sees_it_at_rest():
+    # Real time: the belt stops 0.15 s after the decision (1.8 cm at 0.12 m/s) and the port
+    # cannot tell; with the pick point in the camera's view the pick uses a frame at rest.
+    layout = cell_layout()
+    cell = FakeCell(layout, PAPER[:3], belt_latency=0.15)
+    p = run(cell, Settings(pick_x=-0.3, idle_timeout=5.0))
+    assert p.result.picked == 3
+    picks = [(t, pts) for arm, t, pts in cell.trajectories if arm == 'zu12' and len(pts) == 7]
+    assert len(picks) == 3
+    for material, (_, points) in zip((1, 2, 3), picks):
+        contact = points[3][1][:3]              # the fake's joint vector is the tool position
+        true_x = [e for e in cell.events if e.kind == 'picked' and e.material == material]
+        assert true_x
+        assert abs(contact[0] - cell.final_x[material]) < 1e-3
+
+
+def test_real_time_plans_leave_room_for_the_plan_latency():
+    fast, slow = FakeCell(cell_layout(), PAPER[:1]), FakeCell(cell_layout(), PAPER[:1])
+    run(fast, Settings(idle_timeout=3.0))
+    run(slow, Settings(idle_timeout=3.0, plan_latency=0.5))
+    first = [pts[0][0] - t for arm, t, pts in fast.trajectories]
+    later = [pts[0][0] - t for arm, t, pts in slow.trajectories]
+    assert len(first) == len(later)
+    # Every motion's first point comes 0.5 s later relative to its decision.
+    assert all(b - a == pytest.approx(0.5, abs=1e-6) for a, b in zip(first, later))
