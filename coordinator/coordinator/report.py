@@ -96,10 +96,10 @@ def write_report(trials: List[Dict], out_dir: Path, setup: Dict) -> Path:
              for t in sorted(ok, key=lambda t: t['trial'])[:5]}
     if paths:
         plot_paths(paths, out_dir / 'youbot_paths.png', "The youBot's paths over the cell")
-    lines = ['# Pipeline trials', '',
-             f'{len(trials)} trials (lock-step), plan seed {setup.get("seed0")}, belt speed '
-             f'{setup.get("belt_speed")} m/s, {setup.get("parallel")} in parallel, wall time '
-             f'{setup.get("wall_time", 0.0):.0f} s.', '']
+    lines = ['# Pipeline trials', '', setup['note'] if 'note' in setup else (
+        f'{len(trials)} trials (lock-step), plan seed {setup.get("seed0")}, belt speed '
+        f'{setup.get("belt_speed")} m/s, {setup.get("parallel")} in parallel, wall time '
+        f'{setup.get("wall_time", 0.0):.0f} s.'), '']
     if s:
         lines += ['| | trials | completion time (s, median) | identification (%) | grasp (%) | '
                   'handling (%) |', '|---|---|---|---|---|---|',

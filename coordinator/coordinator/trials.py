@@ -173,9 +173,11 @@ def _rebuild(out: Path) -> int:
         return 1
     write_csv(results, out / 'trials.csv')
     from coordinator.report import write_report
-    report = write_report(results, out, {'seed0': 'see trials.csv', 'belt_speed': 'see CSV',
-                                         'parallel': '-', 'wall_time': sum(
-                                             r.get('wall_time', 0.0) for r in results)})
+    speeds = [r['belt_speed'] for r in results if 'belt_speed' in r]
+    note = (f'{len(results)} trials (lock-step), rebuilt from their results; belt speeds '
+            f'{min(speeds):.3f}-{max(speeds):.3f} m/s; seeds and wall times in trials.csv.'
+            if speeds else f'{len(results)} trials, rebuilt from their results.')
+    report = write_report(results, out, {'note': note})
     print(f'[trials] {len(results)} trials: CSV {out / "trials.csv"}, report {report}')
     return 0
 
