@@ -184,7 +184,6 @@ class Pipeline:
         self._belt_running = False
         self._belt_log: List[Tuple[float, bool]] = [(start_time, False)]
         self._now = start_time
-        self._last_new = start_time
         self._next_slot = 0
         self._pick: Optional[Material] = None
         self._unload: List[Material] = []
@@ -305,7 +304,6 @@ class Pipeline:
                     continue
                 m = self.materials[d.id] = Material(d.id, d.color, np.asarray(d.position, float),
                                                     d.stamp, d.hits)
-                self._last_new = obs.now
                 self._event(obs.now, 'seen', 'vision', m,
                             f'at {np.round(m.position, 3).tolist()}')
             elif m.status == 'seen':
