@@ -1,0 +1,86 @@
+"""Scoring a run against ground truth, the trials' summary, CSV and report."""
+import csv
+
+import numpy as np
+import pytest
+
+from coordinator.pipeline import RunResult
+from coordinator.report import write_report
+from coordinator.results import (at_destination, match_identification, regions_from_world,
+                                 score, summary_rows)
+from coordinator.trials import trial_plan, write_csv
+from sim_bridge.world import resolve_resource
+from sim_bridge.world_config import load_world
+
+
+@pytest.fixture(scope='module')
+def regions():
+    world = load_world(resolve_resource('package://sim_bridge/worlds/pipeline_cell.yaml'))
+    return regions_from_world(world, world.materials.size)
+
+
+def test_destinations_by_colour(regions):
+    assert at_destination('purple', (-0.45, -0.6, 0.025), regions)
+    assert not at_destination('purple', (-0.45, -0.9, 0.025), regions)     # beside the target
+    assert at_destination('orange', (2.2, -1.7, 0.075), regions)            # in the pool, stacked
+    assert not at_destination('orange', (2.2, -1.7, 0.125), regions)        # on the wall top
+    assert at_destination('blue', (2.3, -2.15, 0.175), regions)             # on the platform
+    assert not at_destination('blue', (2.21, -1.95, 0.025), regions)        # fell off it
+    assert not at_destination('orange', (1.0, 0.75, 0.425), regions)        # still on the belt
+
+
+def test_identifications_are_matched_to_the_nearest_true_material():
+    truth = [('orange', np.array([-0.5, 0.75, 0.425])), ('blue', np.array([-0.8, 0.75, 0.425]))]
+    assert match_identification((-0.51, 0.752, 0.425), truth) == 'orange'
+    assert match_identification((-0.79, 0.75, 0.425), truth) == 'blue'
+    assert match_identification((-0.65, 0.75, 0.425), truth) is None        # nothing within 4 cm
+
+
+def _result(**kw):
+    base = dict(status='completed', completion_time=139.0, total=8, identified=8, picked=8,
+                delivered=8, grasp_attempts=16, grasp_successes=15, missed=0, failed=0)
+    base.update(kw)
+    return RunResult(**base)
+
+
+def test_score_takes_handling_from_ground_truth_not_from_the_coordinator(regions):
+    truth = [('orange', np.array([2.2, -1.7, 0.025]))] * 6 + [
+        ('purple', np.array([-0.45, -0.6, 0.025])), ('blue', np.array([2.21, -1.95, 0.025]))]
+    out = score(_result(), truth, [True] * 7 + [False], regions)
+    assert out['delivered'] == 8                       # what the coordinator believed
+    assert out['handled_verified'] == 7 and out['handling_success_rate'] == 7 / 8
+    assert out['identification_rate'] == 7 / 8
+    assert out['grasp_success_rate'] == 15 / 16
+
+
+def test_summary_and_report(tmp_path):
+    trials = []
+    for k, (t, handling) in enumerate([(130.0, 1.0), (140.0, 0.875), (150.0, 1.0)]):
+        trials.append({'trial': k, 'scenario_seed': 10 + k, 'belt_speed': 0.12,
+                       'status': 'completed' if handling == 1.0 else 'incomplete',
+                       'completion_time': t, 'identification_rate': 1.0,
+                       'grasp_success_rate': 1.0, 'handling_success_rate': handling,
+                       'youbot_path': [[0.6, -0.55], [1.7, -1.7], [0.6, -0.55]],
+                       'materials': [{'id': 3, 'color': 'blue', 'status': 'failed',
+                                      'failure': 'not held after 2 attempts'}]
+                       if handling < 1.0 else [], 'wall_time': 80.0})
+    s = summary_rows(trials)
+    assert s['median_completion_time'] == 140.0 and s['completed'] == 2
+    assert s['handling_success_rate'] == pytest.approx((2 + 0.875) / 3)
+    report = write_report(trials, tmp_path, {'note': 'three trials'}).read_text()
+    assert '| **these trials** | 3 | 140.0' in report
+    assert '| paper, trials 100-110 | | 61 | 99 | 99 | 10 |' in report
+    assert 'trial 1 (seed 11, belt 0.120): incomplete' in report and 'blue 3' in report
+    for png in ('completion_times.png', 'success_rates.png', 'youbot_paths.png'):
+        assert (tmp_path / png).stat().st_size > 1000
+    write_csv(trials, tmp_path / 'trials.csv')
+    rows = list(csv.DictReader(open(tmp_path / 'trials.csv')))
+    assert [r['trial'] for r in rows] == ['0', '1', '2'] and rows[1]['status'] == 'incomplete'
+
+
+def test_a_trial_plan_is_reproducible_and_splits_over_machines():
+    whole = trial_plan(10, 0, 2026, (0.1, 0.16))
+    assert whole == trial_plan(10, 0, 2026, (0.1, 0.16))
+    assert trial_plan(4, 6, 2026, (0.1, 0.16)) == whole[6:]
+    assert all(0.1 <= t['belt_speed'] <= 0.16 for t in whole)
+    assert len({t['seed'] for t in whole}) == 10
