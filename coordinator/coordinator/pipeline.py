@@ -477,18 +477,23 @@ class Pipeline:
             self._set_state('loader', 'wait', now, self.s.idle_timeout)
 
     def _loader_retreat(self, obs: Observation) -> None:
-        arrived = self._arrived('zu12', obs.zu12_q, obs.now)
-        if arrived is not None or self._late('loader', obs.now):
-            if not arrived:
-                self._event(obs.now, 'arm_stalled', 'zu12', detail='retreat not reached')
+        if self._motion_over('loader', 'zu12', obs, 'retreat'):
             self._set_state('loader', 'wait', obs.now, self.s.idle_timeout)
 
     def _loader_home(self, obs: Observation) -> None:
-        arrived = self._arrived('zu12', obs.zu12_q, obs.now)
-        if arrived is not None or self._late('loader', obs.now):
-            if not arrived:
-                self._event(obs.now, 'arm_stalled', 'zu12', detail='home not reached')
+        if self._motion_over('loader', 'zu12', obs, 'home'):
             self._set_state('loader', 'done', obs.now, math.inf)
+
+    def _motion_over(self, machine: str, arm: str, obs: Observation, what: str) -> bool:
+        """Whether an arm's last motion is over: arrived, or past its state's deadline (then
+        reported as stalled)."""
+        q = obs.zu12_q if arm == 'zu12' else obs.youbot_q
+        arrived = self._arrived(arm, q, obs.now)
+        if arrived is None and not self._late(machine, obs.now):
+            return False
+        if not arrived:
+            self._event(obs.now, 'arm_stalled', arm, detail=f'{what} not reached')
+        return True
 
     def _loader_done(self, obs: Observation) -> None:
         pass
@@ -641,17 +646,11 @@ class Pipeline:
             self._next_unload(obs)
 
     def _transport_stow(self, obs: Observation) -> None:
-        arrived = self._arrived('youbot', obs.youbot_q, obs.now)
-        if arrived is not None or self._late('transport', obs.now):
-            if not arrived:
-                self._event(obs.now, 'arm_stalled', 'youbot', detail='carry pose not reached')
+        if self._motion_over('transport', 'youbot', obs, 'carry pose'):
             self._drive_to(obs, 'home')
 
     def _transport_fold(self, obs: Observation) -> None:
-        arrived = self._arrived('youbot', obs.youbot_q, obs.now)
-        if arrived is not None or self._late('transport', obs.now):
-            if not arrived:
-                self._event(obs.now, 'arm_stalled', 'youbot', detail='home pose not reached')
+        if self._motion_over('transport', 'youbot', obs, 'home pose'):
             self._set_state('transport', 'done', obs.now, math.inf)
 
     def _transport_done(self, obs: Observation) -> None:

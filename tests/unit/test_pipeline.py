@@ -1,12 +1,11 @@
 """The coordinator's state machine against a fake cell: the whole run and every failure path."""
 import math
-from dataclasses import replace
 from typing import Dict, List
 
 import numpy as np
 import pytest
 
-from coordinator.layout import CellLayout, layout_from_world
+from coordinator.layout import CellLayout, LayoutError, layout_from_world
 from coordinator.pipeline import (Detection, NodeTimeout, Observation, Pipeline, Settings,
                                   youbot_tool_quaternion)
 from sim_bridge.world import resolve_resource
@@ -321,8 +320,12 @@ def test_the_layout_of_the_cell_world():
     assert layout.destination('blue') == 'platform' and layout.destination('orange') == 'pool'
     # The youBot's front (0.285 m ahead) stays west of the pool's west wall at both stands.
     assert layout.pool_stand[0] + 0.285 < 2.08 and layout.platform_stand[0] + 0.285 < 2.08
-    bad = replace(layout, belt_speed=0.0)
-    assert bad.belt_speed == 0.0
+
+
+def test_a_world_without_the_cell_is_refused():
+    world = load_world(resolve_resource('package://sim_bridge/worlds/youbot.yaml'))
+    with pytest.raises(LayoutError, match='conveyor'):
+        layout_from_world(world)
 
 
 def test_nothing_passes_the_pick_point_while_the_arm_is_busy():
