@@ -1,10 +1,12 @@
 """Helpers for graph tests: node processes, a probe node, and condition waits."""
 from __future__ import annotations
 
+import contextlib
 import os
 import shutil
 import signal
 import subprocess
+import sys
 import threading
 import time
 from pathlib import Path
@@ -105,6 +107,22 @@ class Probe:
         self.executor.shutdown()
         self.node.destroy_node()
         rclpy.try_shutdown(context=self.context)
+
+
+@contextlib.contextmanager
+def cpu_load(processes: Optional[int] = None):
+    """A busy process per core (by default) for as long as the block runs: what a test that
+    must not depend on the machine's load runs under."""
+    count = processes or os.cpu_count() or 1
+    busy = [subprocess.Popen([sys.executable, '-c', 'while True: pass'],
+                             stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+                             start_new_session=True) for _ in range(count)]
+    try:
+        yield busy
+    finally:
+        for proc in busy:
+            proc.kill()
+            proc.wait()
 
 
 def stamp_s(stamp) -> float:

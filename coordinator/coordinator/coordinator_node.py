@@ -42,6 +42,7 @@ from std_srvs.srv import SetBool
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 from visualization_msgs.msg import MarkerArray
 
+from controllers.lockstep import CommandCounter, DueGrid
 from controllers.params import float_range
 from controllers.youbot_arm import JOINT_NAMES as YOUBOT_JOINTS
 from controllers.zu12_arm import JOINT_NAMES as ZU12_JOINTS
@@ -59,29 +60,6 @@ GRIP_SERVICES = {'zu12': '/zu12/suction', 'youbot': '/youbot/gripper/grasp'}
 
 class CoordinatorError(RuntimeError):
     pass
-
-
-class DueGrid:
-    """When the simulator publishes something on its own grid of simulated time (the first step
-    at or after each multiple of the period, see sim_bridge.runner): replayed here so that a
-    lock-step controller knows which stamps a batch of steps produced."""
-
-    def __init__(self, dt_ns: int, period_ns: int) -> None:
-        self.dt_ns, self.period_ns = dt_ns, max(dt_ns, period_ns)
-        self.next_ns = 0
-
-    def start_after(self, t_ns: int) -> None:
-        self.next_ns = (t_ns // self.period_ns + 1) * self.period_ns
-
-    def advance(self, from_step: int, to_step: int) -> List[int]:
-        """Stamps [ns] due in steps from_step+1 .. to_step."""
-        due = []
-        for k in range(from_step + 1, to_step + 1):
-            t = k * self.dt_ns
-            if t >= self.next_ns:
-                due.append(t)
-                self.next_ns = (t // self.period_ns + 1) * self.period_ns
-        return due
 
 
 class CoordinatorNode(Node):
@@ -173,6 +151,10 @@ class CoordinatorNode(Node):
         self._markers: List[Tuple[int, list]] = []
         self._seen_truth: List[bool] = []
         self._start_time = 0.0
+        # Lock-step: the commands of each decision are announced with the next step request,
+        # and stamped with the decision's own step time, not with a /clock that may lag it.
+        self._commands = CommandCounter()
+        self._decision_ns: Optional[int] = None
         self._path: List[Tuple[float, float]] = []
         qos = QoSProfile(depth=100)
         for arm, names in ARMS.items():
@@ -275,8 +257,13 @@ class CoordinatorNode(Node):
         reply = self._call(self.ik[arm], req, 'IK')
         return (np.array(reply.positions), '') if reply.success else (None, reply.message)
 
+    def _command_time_ns(self) -> int:
+        if self.synchronous and self._decision_ns is not None:
+            return self._decision_ns
+        return self.get_clock().now().nanoseconds
+
     def trajectory(self, arm: str, points: Points) -> None:
-        now_ns = self.get_clock().now().nanoseconds
+        now_ns = self._command_time_ns()
         msg = JointTrajectory(joint_names=list(ARMS[arm]))
         # An absolute start: the plan's times are simulated times.
         msg.header.stamp.sec, msg.header.stamp.nanosec = divmod(now_ns, 1_000_000_000)
@@ -286,6 +273,7 @@ class CoordinatorNode(Node):
                 positions=[float(v) for v in q],
                 time_from_start=Duration(sec=ns // 1_000_000_000, nanosec=ns % 1_000_000_000)))
         self.traj_pubs[arm].publish(msg)
+        self._commands.sent()
 
     def grip(self, arm: str, on: bool):
         reply = self._call(self.grips[arm], SetBool.Request(data=on), 'grip')
@@ -306,6 +294,7 @@ class CoordinatorNode(Node):
         msg = Twist()
         msg.linear.x, msg.linear.y, msg.angular.z = float(vx), float(vy), float(wz)
         self.cmd_pub.publish(msg)
+        self._commands.sent()
 
     def event(self, e: Event) -> None:
         msg = PipelineEvent(kind=e.kind, robot=e.robot, material_id=e.material, color=e.color,
@@ -356,7 +345,8 @@ class CoordinatorNode(Node):
 
     def _step(self, steps: int) -> Tuple[int, int]:
         """Lock-step: advance; returns (step count before, after)."""
-        reply = self._call(self.step_client, StepSimulation.Request(steps=steps), 'step')
+        reply = self._call(self.step_client, StepSimulation.Request(
+            steps=steps, commands=self._commands.take()), 'step')
         if not reply.success:
             raise NodeTimeout(f'the simulator refused to step: {reply.message} (is it running '
                               'with synchronous:=true?)')
@@ -450,6 +440,7 @@ class CoordinatorNode(Node):
                                    f'{stamp * 1e-9:.3f} s (not matched yet); going on')
 
     def _observe(self, t_ns: int, frames: Optional[Sequence[int]]) -> Observation:
+        self._decision_ns = t_ns
         with self._lock:
             if frames is None:               # real time: whatever arrived since last time
                 frames = sorted(self._detections)

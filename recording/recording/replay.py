@@ -100,13 +100,26 @@ class Replay(Node):
     def run(self) -> int:
         try:
             return self._play()
+        except Exception:  # noqa: BLE001 - classified below
+            # SIGINT shuts the context down wherever the loop is: a publish or the final ack
+            # wait then fails. That is a requested stop, not an error.
+            if not self.context.ok():
+                self.get_logger().info(f'stopped: {self.published} messages published')
+                return 0
+            raise
+
+    def _play(self) -> int:
+        try:
+            return self._play_bag()
         except (AnyReaderError, ReaderError, OSError, ValueError, KeyError, IndexError) as exc:
+            if not self.context.ok():
+                raise
             # The index opened, but a chunk is damaged: say so instead of a traceback.
             self.get_logger().error(f'{self.bag}: unreadable data after {self.published} '
                                     f'messages ({exc}); the bag is truncated or corrupt')
             return 1
 
-    def _play(self) -> int:
+    def _play_bag(self) -> int:
         if self.wait_for_subscribers > 0.0:
             self._wait_for_subscribers()
         if self.delay > 0.0:
@@ -134,8 +147,9 @@ class Replay(Node):
                     break
             if not self.loop:
                 break
-        for pub in self._topic_pubs.values():
-            pub.wait_for_all_acked(Duration(seconds=2.0))
+        if self.context.ok():
+            for pub in self._topic_pubs.values():
+                pub.wait_for_all_acked(Duration(seconds=2.0))
         self.get_logger().info(f'replay done: {self.published} messages published')
         return 0
 

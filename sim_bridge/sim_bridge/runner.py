@@ -9,6 +9,7 @@ import numpy as np
 
 from controllers.cmd_guard import CommandGuard, GuardResult
 from controllers.joint_trajectory import TrajectoryRequest, TrajectoryResult
+from controllers.lockstep import next_on_grid
 from sim_bridge.world import SimWorld
 
 
@@ -113,16 +114,16 @@ class SimRunner:
             t_ns = world.sim_time_ns
             sink.on_clock(t_ns)
             if t_ns >= self._state_next_ns:
-                self._state_next_ns = _next_on_grid(t_ns, self.state_period_ns)
+                self._state_next_ns = next_on_grid(t_ns, self.state_period_ns)
                 for name in world.robots:
                     sink.on_state(name, t_ns)
             if world.source is not None and t_ns >= self._world_state_next_ns:
-                self._world_state_next_ns = _next_on_grid(t_ns, self.world_state_period_ns)
+                self._world_state_next_ns = next_on_grid(t_ns, self.world_state_period_ns)
                 sink.on_world_state(t_ns)
             for i, cam in enumerate(world.cameras):
                 if t_ns >= self._camera_next_ns[i]:
                     # Keep the camera's own grid of due times, skipping frames nobody wanted.
-                    self._camera_next_ns[i] = _next_on_grid(t_ns, self._camera_period_ns[i])
+                    self._camera_next_ns[i] = next_on_grid(t_ns, self._camera_period_ns[i])
                     sink.on_camera_due(i, t_ns, lambda cam=cam: world.render(cam))
 
     def reset(self) -> None:
@@ -142,7 +143,3 @@ class SimRunner:
         self.world.robots[robot].set_body_twist(vx, vy, wz)
         self._applied[robot] = tuple(command)
 
-
-def _next_on_grid(t_ns: int, period_ns: int) -> int:
-    """The first point of the grid k * period strictly after t (skipping missed points)."""
-    return (t_ns // period_ns + 1) * period_ns

@@ -3,15 +3,17 @@ from __future__ import annotations
 
 import sys
 import time
-from typing import List
+from typing import List, Optional, Tuple
 
 import rclpy
 from builtin_interfaces.msg import Time
 from geometry_msgs.msg import Twist, TwistStamped
 from nav_msgs.msg import Odometry
 from rcl_interfaces.msg import IntegerRange, ParameterDescriptor, SetParametersResult
+from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
 from rclpy.clock import Clock, ClockType
 from rclpy.executors import ExternalShutdownException
+from rclpy.task import Future
 from rclpy.node import Node
 from rclpy.qos import QoSProfile, qos_profile_sensor_data
 from rosgraph_msgs.msg import Clock as ClockMsg
@@ -24,6 +26,7 @@ from std_msgs.msg import Bool
 from std_srvs.srv import SetBool, Trigger
 
 from controllers.joint_trajectory import TrajectoryPoint, TrajectoryRequest
+from controllers.lockstep import CommandBarrier
 from controllers.params import float_range
 from controllers.transforms import matrix_to_quaternion
 from sim_bridge.camera import ImageBuffer
@@ -88,11 +91,16 @@ class SimNode(Node):
         self.declare_parameter('materials_publish_rate', 10.0, float_range(
             'Rate of the materials\' ground truth on /cell/materials [Hz of simulated time]',
             0.1, 1000.0))
+        self.declare_parameter('command_wait_timeout', 10.0, float_range(
+            'Lock-step: a step waits this long for the commands announced with it [wall s]',
+            0.1, 600.0))
 
         p = {name: self.get_parameter(name).value for name in (
             'world', 'gui', 'time_step', 'real_time_factor', 'synchronous', 'state_publish_rate',
             'max_speed', 'max_turn', 'cmd_vel_timeout', 'use_stamped_vel', 'rtf_log_period',
-            'max_steps_per_tick', 'belt_speed', 'scenario_seed', 'materials_publish_rate')}
+            'max_steps_per_tick', 'belt_speed', 'scenario_seed', 'materials_publish_rate',
+            'command_wait_timeout')}
+        self._command_wait_timeout = p['command_wait_timeout']
         if p['state_publish_rate'] * p['time_step'] > 1.0 + 1e-9:
             raise SimConfigError(
                 f'state_publish_rate {p["state_publish_rate"]} Hz exceeds the physics rate '
@@ -182,7 +190,12 @@ class SimNode(Node):
         self.create_service(Trigger, '~/reset', self._on_reset)
         self.create_service(Trigger, '~/pause', self._on_pause)
         self.create_service(Trigger, '~/resume', self._on_resume)
-        self.create_service(StepSimulation, '~/step', self._on_step)
+        # The step service waits for announced commands (lockstep.py): in a group of its own, so
+        # that the subscriptions that bring them run while it waits.
+        self._barrier = CommandBarrier()
+        self._command_wait: Optional[Tuple[int, Future]] = None
+        self.create_service(StepSimulation, '~/step', self._on_step,
+                            callback_group=MutuallyExclusiveCallbackGroup())
         # The simulator is the time source: it paces itself on the steady wall clock.
         self._steady = Clock(clock_type=ClockType.STEADY_TIME)
         rtf = p['real_time_factor']
@@ -315,6 +328,7 @@ class SimNode(Node):
 
     # --- subscriptions and services --------------------------------------------------------
     def _on_cmd_vel(self, robot: str, msg) -> None:
+        self._command_arrived()
         twist = msg.twist if isinstance(msg, TwistStamped) else msg
         holonomic = self._runner.holonomic(robot)
         if twist.linear.y != 0.0 and not holonomic:
@@ -332,6 +346,7 @@ class SimNode(Node):
                 f'(limits {_fmt(self._runner.guards[robot].limits)})', throttle_duration_sec=1.0)
 
     def _on_trajectory(self, robot: str, controller: str, msg: JointTrajectory) -> None:
+        self._command_arrived()
         result = self._runner.set_trajectory(robot, controller, trajectory_request(msg))
         where = f'{robot}/{controller}'
         if result.accepted:
@@ -390,20 +405,54 @@ class SimNode(Node):
             response.success, response.message = True, 'resumed'
         return response
 
-    def _on_step(self, request, response):
+    def _command_arrived(self) -> None:
+        self._barrier.arrived()
+        if self._command_wait is not None:
+            expected, arrived = self._command_wait
+            if self._barrier.ready(expected) and not arrived.done():
+                arrived.set_result(True)
+
+    async def _on_step(self, request, response):
         if not (self._synchronous or self._paused):
             response.success = False
             response.message = 'step needs synchronous:=true or a paused simulation'
         elif not (1 <= request.steps <= MAX_STEPS_PER_REQUEST):
             response.success = False
             response.message = f'steps must be within 1..{MAX_STEPS_PER_REQUEST}'
+        elif not await self._commands_in(request.commands):
+            response.success = False
+            response.message = (f'only {self._barrier.received} of the {request.commands} '
+                                f'commands announced for this step arrived within '
+                                f'{self._command_wait_timeout:g} s; not stepped')
+            self.get_logger().error(response.message)
         else:
+            claim = self._barrier.claim(request.commands)
+            if request.commands > 0 and claim.surplus:
+                self.get_logger().warn(
+                    f'{claim.received} commands arrived for a step announced with '
+                    f'{claim.expected}: another node commands this lock-step run, which is '
+                    'then not reproducible', throttle_duration_sec=5.0)
             self._runner.advance(request.steps, self)
             self._note_progress()
             response.success = True
         response.step_count = self._world.step_count
         response.sim_time = _stamp(self._world.sim_time_ns)
         return response
+
+    async def _commands_in(self, expected: int) -> bool:
+        """Until every command announced for this step has been received (lockstep.py)."""
+        if self._barrier.ready(expected):
+            return True
+        arrived = Future()
+        self._command_wait = (expected, arrived)
+        timer = self.create_timer(self._command_wait_timeout,
+                                  lambda: arrived.done() or arrived.set_result(False),
+                                  clock=self._steady)
+        try:
+            return bool(await arrived)
+        finally:
+            self._command_wait = None
+            self.destroy_timer(timer)
 
     def destroy_node(self) -> None:
         # Leave no robot driving on a stale command.

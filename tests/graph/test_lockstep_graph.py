@@ -1,0 +1,98 @@
+"""The lock-step ordering hazard, shown directly: a command that DDS delivers after the step
+request it was meant to precede. With the command announced in the request, the simulator waits
+for it and the step is the same as with prompt delivery; without, the step runs without it."""
+import time
+
+import pytest
+from geometry_msgs.msg import Twist
+from nav_msgs.msg import Odometry
+from sim_interfaces.srv import StepSimulation
+
+from helpers import wait_for
+
+BATCH = 48                 # steps of 1/240 s: 0.2 s of simulated time
+DELAY_S = 0.5              # how late the command is delivered after the step request [wall s]
+
+
+class LockStep:
+    def __init__(self, probe):
+        self.probe = probe
+        self.odom = probe.collect(Odometry, '/mini_robot/odom')
+        self.pub = probe.node.create_publisher(Twist, '/mini_robot/cmd_vel', 10)
+        self.client = probe.node.create_client(StepSimulation, '/sim_node/step')
+        assert self.client.wait_for_service(timeout_sec=15.0)
+        wait_for(lambda: self.pub.get_subscription_count() > 0, 15.0, what='cmd_vel matched')
+
+    def x_at(self, stamp) -> float:
+        def found():
+            return any(m.header.stamp == stamp for _, m in self.odom)
+        wait_for(found, 10.0, what='the odometry of the step')
+        return next(m.pose.pose.position.x for _, m in self.odom if m.header.stamp == stamp)
+
+    def step(self, steps, commands=0):
+        future = self.client.call_async(StepSimulation.Request(steps=steps, commands=commands))
+        return future
+
+    def reply(self, future):
+        wait_for(future.done, 20.0, what='the step reply')
+        return future.result()
+
+    def drive(self, vx):
+        msg = Twist()
+        msg.linear.x = vx
+        self.pub.publish(msg)
+
+    def batch(self, commands: int, late: bool) -> float:
+        """x travelled in one batch whose forward command arrives before or after the step
+        request; the robot starts at rest."""
+        x0 = self.x_at(self.reply(self.step(1)).sim_time)
+        if not late:
+            self.drive(0.15)
+            future = self.step(BATCH, commands)
+        else:
+            future = self.step(BATCH, commands)
+            time.sleep(DELAY_S)                # the delivery delay being simulated
+            if commands:
+                assert not future.done(), 'the step ran before its announced command arrived'
+            self.drive(0.15)
+        reply = self.reply(future)
+        assert reply.success, reply.message
+        travelled = self.x_at(reply.sim_time) - x0
+        return travelled
+
+
+@pytest.fixture
+def fresh_sim(start_node, probe):
+    """A new lock-step simulator for each measurement: every batch starts from the same state."""
+    running = []
+
+    def start():
+        for proc in running:
+            proc.stop()
+        running.append(start_node('sim_node', '-p', 'synchronous:=true', '-p',
+                                  'state_publish_rate:=240.0', '-p', 'command_wait_timeout:=2.0'))
+        return LockStep(probe)
+    return start
+
+
+def test_a_late_command_announced_with_its_step_acts_as_if_it_were_prompt(fresh_sim):
+    prompt = fresh_sim().batch(commands=1, late=False)
+    late = fresh_sim().batch(commands=1, late=True)
+    assert prompt > 0.005                    # it drove during the batch
+    assert late == prompt                    # bit for bit: the same steps with the same inputs
+
+
+def test_a_late_command_not_announced_misses_its_step(fresh_sim):
+    # The hazard the protocol removes: the batch ran before the command was there.
+    late = fresh_sim().batch(commands=0, late=True)
+    assert abs(late) < 1e-4
+
+
+def test_a_step_whose_commands_never_arrive_is_refused_not_run(fresh_sim):
+    lockstep = fresh_sim()
+    before = lockstep.reply(lockstep.step(1))
+    lockstep.drive(0.0)
+    reply = lockstep.reply(lockstep.step(BATCH, commands=2))
+    assert not reply.success
+    assert 'only 1 of the 2 commands' in reply.message
+    assert reply.step_count == before.step_count           # nothing ran
