@@ -502,7 +502,8 @@ class CoordinatorNode(Node):
     def _publish_state(self, now: float, result_json: str = '') -> None:
         p = self.pipeline
         mats = list(p.materials.values())
-        msg = PipelineState(loader_state=p.loader_state, transport_state=p.transport_state,
+        msg = PipelineState(loader_state=p.loader.state.value,
+                            transport_state=p.transport.state.value,
                             status=p.result.status if p.result else 'running',
                             total=self.layout.total, identified=len(mats),
                             picked=sum(1 for m in mats if m.picked),

@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 
 from coordinator.layout import CellLayout, LayoutError, layout_from_world
-from coordinator.pipeline import (Detection, NodeTimeout, Observation, Pipeline, Settings,
-                                  youbot_tool_quaternion)
+from coordinator.pipeline import (Detection, LoaderState, NodeTimeout, Observation, Pipeline,
+                                  Settings, youbot_tool_quaternion)
 from sim_bridge.world import resolve_resource
 from sim_bridge.world_config import load_world
 
@@ -119,8 +119,9 @@ class FakeCell:
                         self.materials[key][3] = False
                         self.final_x[key] = self.materials[key][0]
         p = self.pipeline
-        if (self.drop_on_transfer >= 0 and p._pick is not None
-                and p._pick.id == self.drop_on_transfer and p.loader_state == 'place'):
+        held = p.loader.current
+        if (self.drop_on_transfer >= 0 and held is not None
+                and held.id == self.drop_on_transfer and p.loader.state is LoaderState.PLACE):
             self.holding['zu12'] = False
         c, s = math.cos(self.pose[2]), math.sin(self.pose[2])
         vx, vy, wz = self.twist
@@ -139,9 +140,8 @@ class FakeCell:
 
     def _material_for(self, arm):
         p = self.pipeline
-        if arm == 'zu12':
-            return p._pick.id if p._pick else -1
-        return p._unload[0].id if p._unload else -1
+        current = p.loader.current if arm == 'zu12' else p.transport.current
+        return current.id if current else -1
 
 
 PAPER = ['orange', 'purple', 'orange', 'blue', 'orange', 'orange', 'orange', 'orange']
