@@ -49,6 +49,7 @@ from controllers.zu12_arm import JOINT_NAMES as ZU12_JOINTS
 from coordinator.layout import LayoutError, layout_from_world
 from coordinator.pipeline import (Detection, Event, NodeTimeout, Observation, Pipeline,
                                   Points, Settings)
+from coordinator.progress import write_progress
 from coordinator.results import (at_destination, match_identification, regions_from_world,
                                  score)
 
@@ -102,6 +103,9 @@ class CoordinatorNode(Node):
             'A node that does not answer within this many wall seconds has failed', 0.5, 120.0))
         self.declare_parameter('result_file', '', ro(
             description='Write the result (JSON) here at the end', read_only=True))
+        self.declare_parameter('progress_file', '', ro(
+            description='Write the progress (JSON) here once per simulated second',
+            read_only=True))
         self.declare_parameter('scenario_seed', -1, ro(
             description='Recorded with the result (the simulator draws the scenario)',
             read_only=True))
@@ -140,6 +144,7 @@ class CoordinatorNode(Node):
         self.camera_grid = (DueGrid(self.dt_ns, round(1e9 / cams[0].rate)) if cams else None)
         self.service_timeout = float(get('service_timeout'))
         self.result_file = get('result_file')
+        self.progress_file = Path(get('progress_file')) if get('progress_file') else None
         self.seed = int(get('scenario_seed'))
         self.regions = regions_from_world(self.world, layout.material_size)
 
@@ -513,6 +518,14 @@ class CoordinatorNode(Node):
                             elapsed=float(now - p.start_time), result_json=result_json)
         msg.header.stamp = _stamp(now)
         self.state_pub.publish(msg)
+        if self.progress_file is not None:
+            try:
+                write_progress(self.progress_file, sim_time=msg.elapsed, delivered=msg.delivered,
+                               total=msg.total, loader=msg.loader_state,
+                               transport=msg.transport_state, status=msg.status)
+            except OSError as exc:
+                self.get_logger().warn(f'progress file {self.progress_file}: {exc}',
+                                       throttle_duration_sec=60.0)
 
 
 def _replace(layout, **changes):

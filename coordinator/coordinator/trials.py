@@ -17,12 +17,17 @@ import signal
 import subprocess
 import sys
 import time
-from concurrent.futures import ThreadPoolExecutor, as_completed
+from concurrent.futures import FIRST_COMPLETED, ThreadPoolExecutor, wait
 from pathlib import Path
 from typing import Dict, List, Optional, Sequence
 
+from coordinator.progress import (TrialProgress, eta_seconds, progress_line,
+                                  read_progress)
+
 WORLD = 'package://sim_bridge/worlds/pipeline_cell.yaml'
 CONTROL_RATE = 30.0
+PROGRESS_FILE = 'progress.json'
+PROGRESS_PERIOD_S = 10.0     # wall seconds between two progress lines
 # Process groups of the trials running now (stopped when the runner is interrupted).
 _ACTIVE_GROUPS: set = set()
 CSV_FIELDS = ('trial', 'scenario_seed', 'belt_speed', 'status', 'completion_time',
@@ -56,7 +61,8 @@ def trial_commands(seed: int, belt_speed: float, result_file: Path,
         'coordinator_node': ['coordinator_node', '--ros-args', '-p', 'use_sim_time:=true',
                              '-p', 'synchronous:=true', '-p', f'control_rate:={CONTROL_RATE}',
                              '-p', f'belt_speed:={belt_speed}', '-p', f'scenario_seed:={seed}',
-                             '-p', f'result_file:={result_file}'],
+                             '-p', f'result_file:={result_file}', '-p',
+                             f'progress_file:={result_file.with_name(PROGRESS_FILE)}'],
     })
     return commands
 
@@ -68,6 +74,7 @@ def run_trial(trial: int, seed: int, belt_speed: float, domain_id: int, out_dir:
     trial_dir.mkdir(parents=True, exist_ok=True)
     result_file = trial_dir / 'result.json'
     result_file.unlink(missing_ok=True)
+    (trial_dir / PROGRESS_FILE).unlink(missing_ok=True)
     env = {**os.environ, 'ROS_DOMAIN_ID': str(domain_id),
            'ROS_AUTOMATIC_DISCOVERY_RANGE': os.environ.get('ROS_AUTOMATIC_DISCOVERY_RANGE',
                                                            'LOCALHOST')}
@@ -107,6 +114,21 @@ def run_trial(trial: int, seed: int, belt_speed: float, domain_id: int, out_dir:
                    'wall_time': wall, 'cpu_seconds': cpu})
     result_file.write_text(json.dumps(result, indent=1))
     return result
+
+
+def _progress(out: Path, running: Dict[int, float], results: List[Dict], pending: int,
+              planned: int, parallel: int) -> str:
+    """One line: every running trial's simulated time and deliveries, and the campaign's ETA."""
+    now, states = time.monotonic(), []
+    for trial, since in sorted(running.items()):
+        p = read_progress(out / f'trial_{trial:03d}' / PROGRESS_FILE) or {}
+        states.append(TrialProgress(trial, float(p.get('sim_time', 0.0)),
+                                    int(p.get('delivered', 0)), int(p.get('total', 0)),
+                                    now - since, p.get('loader', '-'), p.get('transport', '-')))
+    ok = [r for r in results if r['status'] == 'completed']
+    eta = eta_seconds(states, [r['wall_time'] for r in results],
+                      [r['completion_time'] for r in ok], pending, parallel)
+    return progress_line(len(results), planned, states, eta)
 
 
 def _wait_for_line(path: Path, text: str, timeout: float) -> bool:
@@ -214,6 +236,8 @@ def _main(argv: Optional[Sequence[str]]) -> int:
     parser.add_argument('--record', action='store_true', help='record a bag per trial')
     parser.add_argument('--out', type=Path, default=Path('runs') / time.strftime(
         'trials-%Y%m%d-%H%M%S'))
+    parser.add_argument('--progress-period', type=float, default=PROGRESS_PERIOD_S,
+                        help='wall seconds between progress lines')
     parser.add_argument('--report-only', action='store_true',
                         help='rebuild trials.csv and the report from the results in --out')
     args = parser.parse_args(argv)
@@ -235,21 +259,30 @@ def _main(argv: Optional[Sequence[str]]) -> int:
     results: List[Dict] = []
     free = list(range(args.parallel))
     started = time.monotonic()
+    running: Dict[int, float] = {}                   # trial -> when it started (monotonic)
     with ThreadPoolExecutor(args.parallel) as pool:
         futures = {}
         pending = list(plan)
 
         def submit() -> None:
             item, worker = pending.pop(0), free.pop(0)
+            running[item['trial']] = time.monotonic()
             futures[pool.submit(run_trial, item['trial'], item['seed'], item['belt_speed'],
                                 args.domain_base + worker, args.out, args.wall_timeout,
                                 args.record)] = worker
         while pending and free:
             submit()
         while futures:
-            done = next(as_completed(futures))
+            finished, _ = wait(futures, timeout=args.progress_period,
+                               return_when=FIRST_COMPLETED)
+            if not finished:
+                print(_progress(args.out, running, results, len(pending), len(plan),
+                                args.parallel), flush=True)
+                continue
+            done = finished.pop()
             free.append(futures.pop(done))
             r = done.result()
+            running.pop(r['trial'], None)
             results.append(r)
             write_csv(results, args.out / 'trials.csv')      # partial results survive
             elapsed = time.monotonic() - started
