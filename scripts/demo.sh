@@ -26,7 +26,7 @@ set -e
 echo
 sed -n '/^| /p' "$RUN_DIR/report.md"
 echo
-grep -h "^\- trial" "$RUN_DIR/report.md" || true
+grep -h "^\- trial\|^Peak joint speed" "$RUN_DIR/report.md" || true
 echo "[demo] events and logs: ${RUN_DIR#"$ROOT"/}/trial_000/ (result.json, *.log$(
   [ "${DEMO_RECORD:-1}" != 0 ] && echo ', bag/'))"
 echo "[demo] report: ${RUN_DIR#"$ROOT"/}/report.md (plots: completion_times.png, success_rates.png, youbot_paths.png)"

@@ -45,13 +45,15 @@ from visualization_msgs.msg import MarkerArray
 from controllers.lockstep import CommandCounter, DueGrid
 from controllers.params import float_range
 from controllers.youbot_arm import JOINT_NAMES as YOUBOT_JOINTS
+from controllers.youbot_arm import JOINT_VELOCITY_LIMIT as YOUBOT_VELOCITY_LIMIT
 from controllers.zu12_arm import JOINT_NAMES as ZU12_JOINTS
+from controllers.zu12_arm import JOINT_VELOCITY_LIMITS as ZU12_VELOCITY_LIMITS
 from coordinator.layout import LayoutError, layout_from_world
 from coordinator.pipeline import (Detection, Event, NodeTimeout, Observation, Pipeline,
                                   Points, Settings)
 from coordinator.progress import write_progress
-from coordinator.results import (at_destination, match_identification, regions_from_world,
-                                 score)
+from coordinator.results import (PeakJointSpeed, at_destination, match_identification,
+                                 regions_from_world, score)
 
 ARMS = {'zu12': ZU12_JOINTS, 'youbot': YOUBOT_JOINTS}
 CAMERA_TOPIC = '/belt_camera/image_raw'
@@ -161,6 +163,8 @@ class CoordinatorNode(Node):
         self._commands = CommandCounter()
         self._decision_ns: Optional[int] = None
         self._path: List[Tuple[float, float]] = []
+        self._peak = {'zu12': PeakJointSpeed(ZU12_VELOCITY_LIMITS),
+                      'youbot': PeakJointSpeed([YOUBOT_VELOCITY_LIMIT] * len(YOUBOT_JOINTS))}
         qos = QoSProfile(depth=100)
         for arm, names in ARMS.items():
             self.create_subscription(JointState, f'/{arm}/joint_states',
@@ -197,6 +201,8 @@ class CoordinatorNode(Node):
         with self._lock:
             self._joints[arm] = (_ns(msg.header.stamp),
                                  np.array([msg.position[index[n]] for n in names]))
+            if len(msg.velocity) == len(msg.name):
+                self._peak[arm].update([msg.velocity[index[n]] for n in names])
             self._lock.notify_all()
 
     def _on_grip(self, arm: str, msg: GripState) -> None:
@@ -485,6 +491,10 @@ class CoordinatorNode(Node):
         out['final_materials'] = [
             {'color': color, 'position': [round(float(v), 4) for v in p],
              'at_destination': at_destination(color, p, self.regions)} for color, p in truth]
+        with self._lock:
+            out['peak_joint_speed'] = {arm: {'fraction_of_limit': round(p.fraction, 4),
+                                             'joint': ARMS[arm][p.joint] if p.joint >= 0 else ''}
+                                       for arm, p in self._peak.items()}
         out.update({'scenario_seed': self.seed, 'belt_speed': self.layout.belt_speed,
                     'mode': 'lock-step' if self.synchronous else 'real-time',
                     'youbot_path': [[round(x, 4), round(y, 4)] for x, y in self._path[::3]],

@@ -162,12 +162,18 @@ class RunResult:
     identified: int                    # materials the vision reported with a colour
     picked: int                        # materials the Zu 12 lifted off the belt
     delivered: int                     # materials at their destination (as the machine saw it)
-    grasp_attempts: int
+    grasp_attempts: int                # both arms
     grasp_successes: int
     missed: int                        # went off the belt end unpicked
     failed: int
     message: str = ''
     materials: List[Dict] = field(default_factory=list)
+    # Per arm, as the paper splits its rates: the Zu 12's picks, the youBot's unloads.
+    zu12_grasp_attempts: int = 0
+    zu12_grasp_successes: int = 0
+    youbot_grasp_attempts: int = 0
+    youbot_grasp_successes: int = 0
+    loaded: int = 0                    # materials the Zu 12 set down on the youBot's plate
 
 
 class LoaderState(Enum):
@@ -309,7 +315,7 @@ class Loader(Machine):
         run.send(Motion('zu12', points, {'arm': waypoints[1][0],
                                          'check': t_contact + timing.dwell}))
         m.attempts += 1
-        run.grasp_attempts += 1
+        run.count_grasp('zu12')
         self.enter(LoaderState.PICK, now, points[-1][0] - now + run.s.settle_margin)
 
     def _pick_failed(self, obs: Observation, m: Material, why: str) -> None:
@@ -326,7 +332,7 @@ class Loader(Machine):
             run.ports.grip('zu12', True)
         if motion.due('check', now):
             if obs.zu12_holding:
-                run.grasp_successes += 1
+                run.count_grasp('zu12', success=True)
                 m.picked = True
                 run.event(now, 'picked', 'zu12', m, f'attempt {m.attempts}')
             else:
@@ -389,6 +395,7 @@ class Loader(Machine):
                 run.event(now, 'placed', 'zu12', m, 'ground target')
             else:
                 m.status = 'on_plate'
+                run.loaded += 1
                 run.event(now, 'loaded', 'zu12', m, f'plate slot {m.slot}')
         arrived = run.arrived('zu12', obs.zu12_q, now)
         if arrived is False or self.late(now):
@@ -532,7 +539,7 @@ class Transport(Machine):
         run.send(Motion('youbot', points, {'arm': (t0 + t1) / 2, 'check': t2,
                                            'release': t5 + 0.1}))
         m.unload_attempts += 1
-        run.grasp_attempts += 1
+        run.count_grasp('youbot')
         self.enter(TransportState.UNLOAD, now, t5 + 0.3 - now + run.s.settle_margin)
 
     def _unload(self, obs: Observation) -> None:
@@ -541,7 +548,7 @@ class Transport(Machine):
             run.ports.grip('youbot', True)
         if motion.due('check', now):
             if obs.youbot_holding:
-                run.grasp_successes += 1
+                run.count_grasp('youbot', success=True)
                 run.event(now, 'unload_grasped', 'youbot', m, f'attempt {m.unload_attempts}')
             else:
                 run.ports.grip('youbot', False)
@@ -589,7 +596,8 @@ class Pipeline:
         self.events: List[Event] = []
         self.materials: Dict[int, Material] = {}
         self.result: Optional[RunResult] = None
-        self.grasp_attempts = self.grasp_successes = 0
+        self.grasps = {'zu12': [0, 0], 'youbot': [0, 0]}     # attempts, successes
+        self.loaded = 0
         self.motions: Dict[str, Optional[Motion]] = {'zu12': None, 'youbot': None}
         self.belt_running = False
         self.belt_log: List[Tuple[float, bool]] = [(start_time, False)]
@@ -639,7 +647,18 @@ class Pipeline:
         if not self.finished:
             self._finish(now, status, message)
 
+    @property
+    def grasp_attempts(self) -> int:
+        return sum(a for a, _ in self.grasps.values())
+
+    @property
+    def grasp_successes(self) -> int:
+        return sum(s for _, s in self.grasps.values())
+
     # --- what the machines share --------------------------------------------------------------
+    def count_grasp(self, arm: str, success: bool = False) -> None:
+        self.grasps[arm][1 if success else 0] += 1
+
     def event(self, now: float, kind: str, robot: str = '', m: Optional[Material] = None,
               detail: str = '') -> None:
         e = Event(now, kind, robot, m.id if m else -1, m.color if m else '', detail)
@@ -738,6 +757,10 @@ class Pipeline:
             picked=sum(1 for m in mats if m.picked),
             delivered=sum(1 for m in mats if m.status in ('placed', 'delivered')),
             grasp_attempts=self.grasp_attempts, grasp_successes=self.grasp_successes,
+            zu12_grasp_attempts=self.grasps['zu12'][0],
+            zu12_grasp_successes=self.grasps['zu12'][1],
+            youbot_grasp_attempts=self.grasps['youbot'][0],
+            youbot_grasp_successes=self.grasps['youbot'][1], loaded=self.loaded,
             missed=sum(1 for m in mats if m.status == 'missed'),
             failed=sum(1 for m in mats if m.status == 'failed'), message=message,
             materials=[{'id': m.id, 'color': m.color, 'status': m.status,

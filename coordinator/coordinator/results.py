@@ -10,6 +10,9 @@ Definitions (the README repeats them):
 - grasp success rate: successful grasps / grasp attempts, both arms (first-attempt and retried);
 - handling success rate: materials resting at their destination at the end / materials in the
   batch (purple on the ground target, orange inside the pool, blue on the pool platform);
+- split as the paper's columns: the Zu 12's grasp rate (its picks) and the youBot's grasp rate
+  (its unloads); the youBot's transport rate: materials loaded onto its plate that rest at
+  their destination / materials loaded onto its plate;
 - completion time: simulated seconds from the start until both robots are back at their start
   poses (or the run ended).
 """
@@ -68,7 +71,14 @@ def score(result: RunResult, final_truth: Sequence[TruePose], identifications: S
     handled = sum(1 for color, p in final_truth if at_destination(color, p, regions))
     correct = sum(1 for ok in identifications if ok)
     out = asdict(result)
+    plate_bound = sum(1 for color, p in final_truth
+                      if color != 'purple' and at_destination(color, p, regions))
     out.update({
+        # The paper's split: the Zu 12's recognition and grasps, the youBot's transport.
+        'zu12_grasp_rate': _rate(result.zu12_grasp_successes, result.zu12_grasp_attempts),
+        'youbot_grasp_rate': _rate(result.youbot_grasp_successes,
+                                   result.youbot_grasp_attempts),
+        'transport_rate': _rate(min(plate_bound, result.loaded), result.loaded),
         'identified_correct': correct,
         'handled_verified': handled,
         'identification_rate': correct / total,
@@ -77,6 +87,30 @@ def score(result: RunResult, final_truth: Sequence[TruePose], identifications: S
         'handling_success_rate': handled / total,
     })
     return out
+
+
+class PeakJointSpeed:
+    """The largest joint speed seen in an arm's joint states, as a fraction of each joint's
+    published limit (1.0 = at the limit): the proof, from what the simulator reported, that the
+    arms kept their limits."""
+
+    def __init__(self, limits: Sequence[float]) -> None:
+        self.limits = np.asarray(limits, float)
+        self.fraction = 0.0
+        self.joint = -1
+
+    def update(self, velocities: Sequence[float]) -> None:
+        v = np.abs(np.asarray(velocities, float))
+        if v.shape != self.limits.shape or not np.all(np.isfinite(v)):
+            return
+        ratios = v / self.limits
+        k = int(np.argmax(ratios))
+        if ratios[k] > self.fraction:
+            self.fraction, self.joint = float(ratios[k]), k
+
+
+def _rate(part: int, whole: int) -> float:
+    return part / whole if whole else 0.0
 
 
 def summary_rows(trials: List[Dict]) -> Dict[str, float]:
@@ -92,4 +126,10 @@ def summary_rows(trials: List[Dict]) -> Dict[str, float]:
         'identification_rate': float(np.mean([t['identification_rate'] for t in trials])),
         'grasp_success_rate': float(np.mean([t['grasp_success_rate'] for t in trials])),
         'handling_success_rate': float(np.mean([t['handling_success_rate'] for t in trials])),
+        **{k: float(np.mean([t.get(k, 0.0) for t in trials]))
+           for k in ('zu12_grasp_rate', 'youbot_grasp_rate', 'transport_rate')},
+        # The largest over all trials: the limits hold only if they hold in every run.
+        **{f'peak_joint_speed_{arm}': max(
+            (t.get('peak_joint_speed', {}).get(arm, {}).get('fraction_of_limit', 0.0)
+             for t in trials), default=0.0) for arm in ('zu12', 'youbot')},
     }

@@ -53,6 +53,34 @@ def test_score_takes_handling_from_ground_truth_not_from_the_coordinator(regions
     assert out['grasp_success_rate'] == 15 / 16
 
 
+def test_the_rates_split_as_the_paper_splits_them(regions):
+    # The Zu 12 picked 8 in 9 attempts; the youBot unloaded in 7 of 8; of the 7 materials on
+    # its plate one orange ended outside the pool.
+    r = _result(zu12_grasp_attempts=9, zu12_grasp_successes=8, youbot_grasp_attempts=8,
+                youbot_grasp_successes=7, loaded=7)
+    truth = ([('purple', np.array([-0.45, -0.6, 0.025])), ('blue', np.array([2.3, -2.15, 0.175]))]
+             + [('orange', np.array([2.2, -1.7, 0.075]))] * 5
+             + [('orange', np.array([1.0, 0.0, 0.025]))])
+    out = score(r, truth, [True] * 8, regions)
+    assert out['zu12_grasp_rate'] == pytest.approx(8 / 9)
+    assert out['youbot_grasp_rate'] == pytest.approx(7 / 8)
+    assert out['transport_rate'] == pytest.approx(6 / 7)
+    assert out['handling_success_rate'] == pytest.approx(7 / 8)
+    # Nothing loaded: no transport to rate, not a division by zero.
+    assert score(_result(), truth, [True] * 8, regions)['transport_rate'] == 0.0
+
+
+def test_the_peak_joint_speed_is_the_largest_fraction_of_any_joints_limit():
+    from coordinator.results import PeakJointSpeed
+    peak = PeakJointSpeed([2.0, 3.0, 1.0])
+    peak.update([1.0, -2.7, 0.5])                      # joint 1 at 0.9 of its limit
+    peak.update([0.1, 0.1, float('nan')])              # a bad sample is ignored
+    peak.update([0.5, 0.5])                            # so is one of the wrong size
+    assert peak.fraction == pytest.approx(0.9) and peak.joint == 1
+    peak.update([0.0, 0.0, -1.02])                     # over the limit: shown, not hidden
+    assert peak.fraction == pytest.approx(1.02) and peak.joint == 2
+
+
 def test_summary_and_report(tmp_path):
     trials = []
     for k, (t, handling) in enumerate([(130.0, 1.0), (140.0, 0.875), (150.0, 1.0)]):
