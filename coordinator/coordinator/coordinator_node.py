@@ -158,9 +158,8 @@ class CoordinatorNode(Node):
         self._markers: List[Tuple[int, list]] = []
         self._seen_truth: List[bool] = []
         self._start_time = 0.0
-        # Lock-step: the commands of each decision are announced with the next step request.
-        # Motions are timed from the decision's time (the observation's), not from a /clock
-        # that may lag it.
+        # Lock-step: the commands of each decision are announced with the next step request,
+        # and stamped with the decision's own step time, not with a /clock that may lag it.
         self._commands = CommandCounter()
         self._decision_ns: Optional[int] = None
         self._path: List[Tuple[float, float]] = []
@@ -269,19 +268,18 @@ class CoordinatorNode(Node):
         reply = self._call(self.ik[arm], req, 'IK')
         return (np.array(reply.positions), '') if reply.success else (None, reply.message)
 
+    def _command_time_ns(self) -> int:
+        if self.synchronous and self._decision_ns is not None:
+            return self._decision_ns
+        return self.get_clock().now().nanoseconds
+
     def trajectory(self, arm: str, points: Points) -> None:
-        # The plan's times are simulated times from the decision. Lock-step: an absolute start,
-        # the decision's own step. Real time: a zero stamp (start on arrival), so that a motion
-        # that reaches the simulator late (a busy machine, a lagging /clock) keeps its planned
-        # durations and is never too fast; the state machine judges its progress from the
-        # joint feedback (Motion.due), not from the planned times.
-        base_ns = (self._decision_ns if self._decision_ns is not None
-                   else self.get_clock().now().nanoseconds)
+        now_ns = self._command_time_ns()
         msg = JointTrajectory(joint_names=list(ARMS[arm]))
-        if self.synchronous:
-            msg.header.stamp.sec, msg.header.stamp.nanosec = divmod(base_ns, 1_000_000_000)
+        # An absolute start: the plan's times are simulated times.
+        msg.header.stamp.sec, msg.header.stamp.nanosec = divmod(now_ns, 1_000_000_000)
         for t, q in points:
-            ns = max(1, round(t * 1e9) - base_ns)
+            ns = max(1, round(t * 1e9) - now_ns)
             msg.points.append(JointTrajectoryPoint(
                 positions=[float(v) for v in q],
                 time_from_start=Duration(sec=ns // 1_000_000_000, nanosec=ns % 1_000_000_000)))

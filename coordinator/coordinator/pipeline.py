@@ -132,17 +132,10 @@ class Material:
 
 @dataclass
 class Motion:
-    """A planned arm motion: its points, and the times of what happens on the way.
-
-    A mark may also name the joint positions the arm must have reached (``poses``): it is then
-    due once its time has come *and* the joint feedback shows the arm there, or at the latest
-    ``grace`` seconds after its time. A motion that starts late (real time: the message's trip,
-    a busy machine) thus acts where the arm is, not where the plan said it would be.
-    """
+    """A planned arm motion: its points, and the times of what happens on the way."""
     arm: str
     points: Points
     marks: Dict[str, float] = field(default_factory=dict)
-    poses: Dict[str, np.ndarray] = field(default_factory=dict)
     done: set = field(default_factory=set)
 
     @property
@@ -153,17 +146,12 @@ class Motion:
     def goal(self) -> np.ndarray:
         return self.points[-1][1]
 
-    def due(self, mark: str, now: float, q: Optional[np.ndarray] = None,
-            tolerance: float = math.inf, grace: float = math.inf) -> bool:
-        """True once when ``now`` reaches the mark's time (and the arm its pose)."""
-        if mark not in self.marks or mark in self.done or now < self.marks[mark]:
-            return False
-        pose = self.poses.get(mark)
-        if (pose is not None and q is not None and now < self.marks[mark] + grace
-                and float(np.max(np.abs(np.asarray(q) - pose))) > tolerance):
-            return False
-        self.done.add(mark)
-        return True
+    def due(self, mark: str, now: float) -> bool:
+        """True once when ``now`` reaches the mark's time."""
+        if mark in self.marks and mark not in self.done and now >= self.marks[mark]:
+            self.done.add(mark)
+            return True
+        return False
 
 
 @dataclass
@@ -325,8 +313,7 @@ class Loader(Machine):
             return self._pick_failed(obs, m, 'no IK solution for the pick path')
         t_contact = now + lead + timing.descend
         run.send(Motion('zu12', points, {'arm': waypoints[1][0],
-                                         'check': t_contact + timing.dwell},
-                        {'check': points[5][1]}))
+                                         'check': t_contact + timing.dwell}))
         m.attempts += 1
         run.count_grasp('zu12')
         self.enter(LoaderState.PICK, now, points[-1][0] - now + run.s.settle_margin)
@@ -343,7 +330,7 @@ class Loader(Machine):
         run, m, motion, now = self.run, self.current, self.run.motions['zu12'], obs.now
         if motion.due('arm', now):
             run.ports.grip('zu12', True)
-        if run.mark_due(motion, 'check', obs):
+        if motion.due('check', now):
             if obs.zu12_holding:
                 run.count_grasp('zu12', success=True)
                 m.picked = True
@@ -388,7 +375,7 @@ class Loader(Machine):
         points = run.solve_path('zu12', waypoints, q_above)
         if points is None:
             return self._place_failed(obs, m, 'no IK solution for the place path')
-        run.send(Motion('zu12', points, {'release': t_release}, {'release': points[1][1]}))
+        run.send(Motion('zu12', points, {'release': t_release}))
         self.enter(LoaderState.PLACE, now, points[-1][0] - now + run.s.settle_margin)
 
     def _place_failed(self, obs: Observation, m: Material, why: str) -> None:
@@ -399,7 +386,7 @@ class Loader(Machine):
         run, m, motion, now = self.run, self.current, self.run.motions['zu12'], obs.now
         if 'release' not in motion.done and not obs.zu12_holding:
             return self._place_failed(obs, m, 'dropped on the way to its place')
-        if run.mark_due(motion, 'release', obs):
+        if motion.due('release', now):
             ok, why = run.ports.grip('zu12', False)
             if not ok:
                 return self._place_failed(obs, m, f'release failed: {why}')
@@ -550,8 +537,7 @@ class Transport(Machine):
         points = [(t0, plan[0]), (t1, plan[1]), (t2, plan[1].copy()), (t3, plan[2]),
                   (t4, plan[3]), (t5, plan[4]), (t5 + 0.3, plan[4].copy())]
         run.send(Motion('youbot', points, {'arm': (t0 + t1) / 2, 'check': t2,
-                                           'release': t5 + 0.1},
-                        {'check': plan[1], 'release': plan[4]}))
+                                           'release': t5 + 0.1}))
         m.unload_attempts += 1
         run.count_grasp('youbot')
         self.enter(TransportState.UNLOAD, now, t5 + 0.3 - now + run.s.settle_margin)
@@ -560,7 +546,7 @@ class Transport(Machine):
         run, m, motion, now = self.run, self.queue[0], self.run.motions['youbot'], obs.now
         if motion.due('arm', now):
             run.ports.grip('youbot', True)
-        if run.mark_due(motion, 'check', obs):
+        if motion.due('check', now):
             if obs.youbot_holding:
                 run.count_grasp('youbot', success=True)
                 run.event(now, 'unload_grasped', 'youbot', m, f'attempt {m.unload_attempts}')
@@ -578,7 +564,7 @@ class Transport(Machine):
             self.queue.pop(0)
             run.fail(now, m, 'failed', 'unload: dropped on the way', 'youbot')
             return self._next_unload(obs)
-        if run.mark_due(motion, 'release', obs):
+        if motion.due('release', now):
             run.ports.grip('youbot', False)
             m.status = 'delivered'
             run.event(now, 'delivered', 'youbot', m, run.layout.destination(m.color))
@@ -678,11 +664,6 @@ class Pipeline:
         e = Event(now, kind, robot, m.id if m else -1, m.color if m else '', detail)
         self.events.append(e)
         self.ports.event(e)
-
-    def mark_due(self, motion: Motion, mark: str, obs: Observation) -> bool:
-        """A mark of an arm's motion, judged from the joint feedback (Motion.due)."""
-        q = obs.zu12_q if motion.arm == 'zu12' else obs.youbot_q
-        return motion.due(mark, obs.now, q, self.s.arrive_tolerance, self.s.settle_margin)
 
     def send(self, motion: Motion) -> None:
         self.motions[motion.arm] = motion

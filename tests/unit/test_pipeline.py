@@ -37,7 +37,6 @@ class FakeCell:
         self.hits: Dict[int, int] = {}
         self.q = {'zu12': np.zeros(6), 'youbot': np.zeros(5)}
         self.goal = {'zu12': (0.0, np.zeros(6)), 'youbot': (0.0, np.zeros(5))}
-        self.plan = {'zu12': [], 'youbot': []}     # the arm is at each point at its time
         self.armed = {'zu12': None, 'youbot': None}
         self.holding = {'zu12': False, 'youbot': False}
         self.pose = np.array(layout.youbot_home, float)
@@ -69,7 +68,6 @@ class FakeCell:
 
     def trajectory(self, arm, points):
         self.goal[arm] = (points[-1][0], np.array(points[-1][1]))
-        self.plan[arm] = [(t, np.array(q)) for t, q in points]
         self.trajectories.append((arm, self.now, points))
 
     def grip(self, arm, on):
@@ -105,9 +103,9 @@ class FakeCell:
             if m[3]:
                 m[0] += self.belt_speed * DT
         for arm in ('zu12', 'youbot'):
-            passed = [q for t, q in self.plan[arm] if t <= self.now]
-            if passed and not self.stall:
-                self.q[arm] = passed[-1].copy()
+            t_end, goal = self.goal[arm]
+            if self.now >= t_end and not self.stall:
+                self.q[arm] = goal.copy()
             armed = self.armed[arm]
             # The cup seals once it has been armed for a while (it reaches the part).
             if armed is not None and not self.holding[arm] and self.now - armed > 0.3:
@@ -372,19 +370,3 @@ def test_real_time_plans_leave_room_for_the_plan_latency():
     assert len(first) == len(later)
     # Every motion's first point comes 0.5 s later relative to its decision.
     assert all(b - a == pytest.approx(0.5, abs=1e-6) for a, b in zip(first, later))
-
-
-def test_a_mark_with_a_pose_waits_for_the_arm_to_be_there():
-    from coordinator.pipeline import Motion
-    contact = np.array([0.5, -1.0])
-    motion = Motion('zu12', [(1.0, contact), (2.0, np.zeros(2))], {'check': 1.0},
-                    {'check': contact})
-    late_arm = np.array([0.3, -0.8])                       # the motion started late
-    assert not motion.due('check', 0.9, contact)             # not its time yet
-    assert not motion.due('check', 1.1, late_arm, 0.03, 2.0)  # its time, but not there
-    assert motion.due('check', 1.2, contact + 0.01, 0.03, 2.0)
-    assert not motion.due('check', 1.3, contact, 0.03, 2.0)  # once only
-    # An arm that never gets there: the mark is judged at the end of its grace.
-    stuck = Motion('zu12', [(1.0, contact)], {'check': 1.0}, {'check': contact})
-    assert not stuck.due('check', 2.9, late_arm, 0.03, 2.0)
-    assert stuck.due('check', 3.0, late_arm, 0.03, 2.0)
