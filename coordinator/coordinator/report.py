@@ -133,7 +133,8 @@ def write_report(trials: List[Dict], out_dir: Path, setup: Dict) -> Path:
               'their destination at the end (checked against the simulator\'s ground truth) / '
               '8. Split: the Zu 12\'s grasp = its successful picks / pick attempts; the youBot\'s '
               'transport = materials loaded onto its plate that rest at their destination / '
-              'materials loaded onto its plate; completion time = simulated seconds until both robots are back home. The '
+              'materials loaded onto its plate; completion time = simulated seconds until both '
+              'robots are back home. The '
               "paper's last row prints 10 % handling (a typo for 100 %, by the rows before it).",
               '', '![completion times](completion_times.png) ![success rates](success_rates.png)'
               ' ![youBot paths](youbot_paths.png)', '']
