@@ -127,3 +127,52 @@ def cpu_load(processes: Optional[int] = None):
 
 def stamp_s(stamp) -> float:
     return stamp.sec + stamp.nanosec * 1e-9
+
+
+class LockStepDriver:
+    """Drives a lock-step (``synchronous:=true``) simulator as the coordinator does: a command
+    is published, then announced in the next step request, so the simulator waits for it and
+    every step runs with exactly the commands meant for it, whatever the machine's load."""
+
+    def __init__(self, probe: Probe, robot: str = 'mini_robot') -> None:
+        from geometry_msgs.msg import Twist
+        from nav_msgs.msg import Odometry
+        from sim_interfaces.srv import StepSimulation
+        self._twist, self._request = Twist, StepSimulation.Request
+        self.odom = probe.collect(Odometry, f'/{robot}/odom')
+        self.pub = probe.node.create_publisher(Twist, f'/{robot}/cmd_vel', 10)
+        self.client = probe.node.create_client(StepSimulation, '/sim_node/step')
+        assert self.client.wait_for_service(timeout_sec=15.0), 'no /sim_node/step'
+        wait_for(lambda: self.pub.get_subscription_count() > 0, 15.0, what='cmd_vel matched')
+
+    def step(self, steps: int, commands: int = 0):
+        """Send a step request; returns its future."""
+        return self.client.call_async(self._request(steps=steps, commands=commands))
+
+    def reply(self, future):
+        wait_for(future.done, 20.0, what='the step reply')
+        return future.result()
+
+    def send(self, vx: float, wz: float = 0.0) -> None:
+        msg = self._twist()
+        msg.linear.x, msg.angular.z = vx, wz
+        self.pub.publish(msg)
+
+    def odom_at(self, stamp):
+        """The odometry published at ``stamp`` (a step's sim_time)."""
+        def found():
+            return any(m.header.stamp == stamp for _, m in self.odom)
+        wait_for(found, 10.0, what='the odometry of the step')
+        return next(m for _, m in self.odom if m.header.stamp == stamp)
+
+    def hold(self, vx: float, wz: float, steps: int, batch: int = 24):
+        """Command (vx, wz) for ``steps`` physics steps, re-sent every ``batch`` steps (well
+        inside the command timeout); returns the last reply."""
+        reply = None
+        while steps > 0:
+            n = min(batch, steps)
+            self.send(vx, wz)
+            reply = self.reply(self.step(n, commands=1))
+            assert reply.success, reply.message
+            steps -= n
+        return reply

@@ -13,14 +13,13 @@ import sys
 from typing import Optional, Tuple
 
 import numpy as np
-import rclpy
 from builtin_interfaces.msg import Duration
 from diagnostic_msgs.msg import DiagnosticStatus, KeyValue
 from geometry_msgs.msg import PoseStamped
 from rcl_interfaces.msg import ParameterDescriptor
-from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from rclpy.qos import QoSProfile
+from ros_common.node_main import run_node
 from sensor_msgs.msg import JointState
 from sim_interfaces.srv import SolveIK
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
@@ -208,21 +207,7 @@ def _trajectory(names, positions: np.ndarray, duration: float) -> JointTrajector
 
 
 def main(args=None) -> int:
-    rclpy.init(args=args)
-    try:
-        node = KinematicsNode()
-    except (KinematicsConfigError, rclpy.exceptions.ParameterException) as exc:
-        rclpy.logging.get_logger('kinematics_node').fatal(f'cannot start: {exc}')
-        rclpy.try_shutdown()
-        return 1
-    try:
-        rclpy.spin(node)
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    finally:
-        node.destroy_node()
-        rclpy.try_shutdown()
-    return 0
+    return run_node(KinematicsNode, 'kinematics_node', (KinematicsConfigError,), args=args)
 
 
 if __name__ == '__main__':

@@ -15,11 +15,10 @@ from collections import deque
 from typing import Optional
 
 import numpy as np
-import rclpy
 from rcl_interfaces.msg import ParameterDescriptor
-from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from rclpy.qos import QoSProfile, qos_profile_sensor_data
+from ros_common.node_main import run_node
 from sensor_msgs.msg import CameraInfo, Image
 from sim_interfaces.msg import MaterialDetection, MaterialDetectionArray
 
@@ -244,21 +243,7 @@ class VisionNode(Node):
 
 
 def main(args=None) -> int:
-    rclpy.init(args=args)
-    try:
-        node = VisionNode()
-    except (VisionConfigError, ValueError, rclpy.exceptions.ParameterException) as exc:
-        rclpy.logging.get_logger('vision_node').fatal(f'cannot start: {exc}')
-        rclpy.try_shutdown()
-        return 1
-    try:
-        rclpy.spin(node)
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    finally:
-        node.destroy_node()
-        rclpy.try_shutdown()
-    return 0
+    return run_node(VisionNode, 'vision_node', (VisionConfigError, ValueError), args=args)
 
 
 if __name__ == '__main__':

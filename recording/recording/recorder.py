@@ -5,12 +5,11 @@ import sys
 from pathlib import Path
 from typing import Set
 
-import rclpy
 from rcl_interfaces.msg import IntegerRange, ParameterDescriptor
 from rclpy.clock import Clock, ClockType
-from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+from ros_common.node_main import run_node
 from rosbags.rosbag2 import WriterError
 
 from controllers.params import float_range
@@ -51,6 +50,7 @@ class Recorder(Node):
         self._depth = get('queue_depth')
         self._writer = BagWriter(Path(get('output_dir')), get('bag_name') or None, storage)
         self._skipped: Set[str] = set()
+        self._receiving: Set[str] = set()  # topics with a message written (or tried)
         self.dropped = 0
         # Wall-clock timers: they must run whether or not simulated time advances.
         steady = Clock(clock_type=ClockType.STEADY_TIME)
@@ -96,6 +96,9 @@ class Recorder(Node):
         self.get_logger().info(f'recording {topic} [{types[0]}]')
 
     def _on_message(self, topic: str, data: bytes) -> None:
+        if topic not in self._receiving:
+            self._receiving.add(topic)
+            self.get_logger().info(f'receiving {topic}')
         try:
             self._writer.write(topic, self.get_clock().now().nanoseconds, data)
         except (OSError, WriterError) as exc:
@@ -116,25 +119,13 @@ class Recorder(Node):
                 f'({counts}){lost}')
 
 
+def _finish(node: Recorder) -> None:
+    # SIGINT and SIGTERM end up here: the bag is finalised and readable.
+    print(f'[recorder] {node.finish()}', flush=True)
+
+
 def main(args=None) -> int:
-    rclpy.init(args=args)
-    try:
-        node = Recorder()
-    except (BagError, OSError, rclpy.exceptions.ParameterException) as exc:
-        rclpy.logging.get_logger('recorder').fatal(f'cannot start: {exc}')
-        rclpy.try_shutdown()
-        return 1
-    try:
-        rclpy.spin(node)
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    finally:
-        # SIGINT and SIGTERM end up here: the bag is finalised and readable.
-        summary = node.finish()
-        print(f'[recorder] {summary}', flush=True)
-        node.destroy_node()
-        rclpy.try_shutdown()
-    return 0
+    return run_node(Recorder, 'recorder', (BagError, OSError), on_exit=_finish, args=args)
 
 
 if __name__ == '__main__':

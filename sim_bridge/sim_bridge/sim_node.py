@@ -5,17 +5,16 @@ import sys
 import time
 from typing import List, Optional, Tuple
 
-import rclpy
 from builtin_interfaces.msg import Time
 from geometry_msgs.msg import Twist, TwistStamped
 from nav_msgs.msg import Odometry
 from rcl_interfaces.msg import IntegerRange, ParameterDescriptor, SetParametersResult
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
 from rclpy.clock import Clock, ClockType
-from rclpy.executors import ExternalShutdownException
 from rclpy.task import Future
 from rclpy.node import Node
 from rclpy.qos import QoSProfile, qos_profile_sensor_data
+from ros_common.node_main import run_node
 from rosgraph_msgs.msg import Clock as ClockMsg
 from sensor_msgs.msg import CameraInfo, Image, JointState
 from sim_interfaces.msg import GripState, JointTrajectoryControllerState
@@ -522,25 +521,8 @@ def _stamp(time_ns: int) -> Time:
 
 
 def main(args=None) -> int:
-    rclpy.init(args=args)
-    try:
-        node = SimNode()
-    except (SimConfigError, WorldConfigError, WorldError, FileNotFoundError) as exc:
-        rclpy.logging.get_logger('sim_node').fatal(f'cannot start: {exc}')
-        rclpy.try_shutdown()
-        return 1
-    except rclpy.exceptions.ParameterException as exc:
-        rclpy.logging.get_logger('sim_node').fatal(f'bad parameter: {exc}')
-        rclpy.try_shutdown()
-        return 1
-    try:
-        rclpy.spin(node)
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    finally:
-        node.destroy_node()
-        rclpy.try_shutdown()
-    return 0
+    return run_node(SimNode, 'sim_node',
+                    (SimConfigError, WorldConfigError, WorldError, FileNotFoundError), args=args)
 
 
 if __name__ == '__main__':

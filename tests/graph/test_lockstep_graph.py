@@ -4,61 +4,32 @@ for it and the step is the same as with prompt delivery; without, the step runs 
 import time
 
 import pytest
-from geometry_msgs.msg import Twist
-from nav_msgs.msg import Odometry
-from sim_interfaces.srv import StepSimulation
-
-from helpers import wait_for
+from helpers import LockStepDriver
 
 BATCH = 48                 # steps of 1/240 s: 0.2 s of simulated time
 DELAY_S = 0.5              # how late the command is delivered after the step request [wall s]
 
 
-class LockStep:
-    def __init__(self, probe):
-        self.probe = probe
-        self.odom = probe.collect(Odometry, '/mini_robot/odom')
-        self.pub = probe.node.create_publisher(Twist, '/mini_robot/cmd_vel', 10)
-        self.client = probe.node.create_client(StepSimulation, '/sim_node/step')
-        assert self.client.wait_for_service(timeout_sec=15.0)
-        wait_for(lambda: self.pub.get_subscription_count() > 0, 15.0, what='cmd_vel matched')
-
+class LockStep(LockStepDriver):
     def x_at(self, stamp) -> float:
-        def found():
-            return any(m.header.stamp == stamp for _, m in self.odom)
-        wait_for(found, 10.0, what='the odometry of the step')
-        return next(m.pose.pose.position.x for _, m in self.odom if m.header.stamp == stamp)
-
-    def step(self, steps, commands=0):
-        future = self.client.call_async(StepSimulation.Request(steps=steps, commands=commands))
-        return future
-
-    def reply(self, future):
-        wait_for(future.done, 20.0, what='the step reply')
-        return future.result()
-
-    def drive(self, vx):
-        msg = Twist()
-        msg.linear.x = vx
-        self.pub.publish(msg)
+        return self.odom_at(stamp).pose.pose.position.x
 
     def batch(self, commands: int, late: bool) -> float:
         """x travelled in one batch whose forward command arrives before or after the step
         request; the robot starts at rest."""
         x0 = self.x_at(self.reply(self.step(1)).sim_time)
         if not late:
-            self.drive(0.15)
+            self.send(0.15)
             future = self.step(BATCH, commands)
         else:
             future = self.step(BATCH, commands)
             time.sleep(DELAY_S)                # the delivery delay being simulated
             if commands:
                 assert not future.done(), 'the step ran before its announced command arrived'
-            self.drive(0.15)
+            self.send(0.15)
         reply = self.reply(future)
         assert reply.success, reply.message
-        travelled = self.x_at(reply.sim_time) - x0
-        return travelled
+        return self.x_at(reply.sim_time) - x0
 
 
 @pytest.fixture
@@ -91,7 +62,7 @@ def test_a_late_command_not_announced_misses_its_step(fresh_sim):
 def test_a_step_whose_commands_never_arrive_is_refused_not_run(fresh_sim):
     lockstep = fresh_sim()
     before = lockstep.reply(lockstep.step(1))
-    lockstep.drive(0.0)
+    lockstep.send(0.0)
     reply = lockstep.reply(lockstep.step(BATCH, commands=2))
     assert not reply.success
     assert 'only 1 of the 2 commands' in reply.message

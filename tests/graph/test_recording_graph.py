@@ -35,8 +35,8 @@ def _start_recording(start_node, tmp_path, *args, name='run'):
     rec = start_node('recorder', '-p', f'output_dir:={tmp_path / "bags"}', '-p',
                      f'bag_name:={name}', *args, name=f'recorder_{name}')
     for topic in ('/clock', '/mini_robot/odom', '/mini_robot/camera/image_raw'):
-        wait_for(lambda t=topic: f'recording {t} ' in rec.output(), 20.0,
-                 what=f'the recorder to subscribe {topic}')
+        wait_for(lambda t=topic: f'receiving {t}\n' in rec.output(), 20.0,
+                 what=f'the recorder to receive {topic}')
     return rec
 
 
@@ -113,7 +113,7 @@ def test_two_recorders_never_share_a_bag(start_node, tmp_path):
     a = _start_recording(start_node, tmp_path, name='same')
     b = start_node('recorder', '-p', f'output_dir:={tmp_path / "bags"}', '-p',
                    'bag_name:=same', name='recorder_b')
-    wait_for(lambda: 'recording /clock ' in b.output(), 20.0, what='the second recorder')
+    wait_for(lambda: 'receiving /clock\n' in b.output(), 20.0, what='the second recorder')
     a.stop()
     b.stop()
     assert sorted(p.name for p in (tmp_path / 'bags').iterdir()) == ['same', 'same_1']
@@ -122,14 +122,27 @@ def test_two_recorders_never_share_a_bag(start_node, tmp_path):
 
 
 def _record_short_run(start_node, probe, tmp_path, name, topics, seconds, twist=None):
-    """Run the simulator with a recorder on ``topics`` for ``seconds`` (driving with ``twist``),
-    stop both, and return the bag path: afterwards only a replay publishes those topics."""
+    """Run the simulator with a recorder on ``topics`` for ``seconds`` of wall time (driving with
+    ``twist`` from the moment the robot is seen moving), stop both, and return the bag path:
+    afterwards only a replay publishes those topics."""
     sim = start_node('sim_node')
     rec = start_node('recorder', '-p', f'output_dir:={tmp_path / "bags"}', '-p',
                      f'bag_name:={name}', '-p', f'topics:=[{", ".join(topics)}]',
                      name=f'recorder_{name}')
-    wait_for(lambda: f'recording {topics[-1]} ' in rec.output(), 20.0, what='recorder')
-    cmd = probe.node.create_publisher(Twist, '/mini_robot/cmd_vel', 10)
+    for topic in topics:
+        wait_for(lambda t=topic: f'receiving {t}\n' in rec.output(), 20.0,
+                 what=f'the recorder to receive {topic}')
+    if twist is not None:
+        # Drive until the robot is seen moving, however long discovery and start-up take on a
+        # busy machine, then keep driving for the recording's length.
+        cmd = probe.node.create_publisher(Twist, '/mini_robot/cmd_vel', 10)
+        odom = probe.collect(Odometry, '/mini_robot/odom')
+        wait_for(lambda: cmd.get_subscription_count() > 0, 20.0, what='the simulator on cmd_vel')
+
+        def moving():
+            cmd.publish(twist)
+            return any(abs(m.twist.twist.linear.x) > 0.5 * twist.linear.x for _, m in odom[-5:])
+        wait_for(moving, 30.0, period=0.05, what='the robot moving')
     end = time.monotonic() + seconds
     while time.monotonic() < end:
         if twist is not None:

@@ -12,7 +12,7 @@ from sensor_msgs.msg import CameraInfo, Image, JointState
 from sim_interfaces.srv import StepSimulation
 from std_srvs.srv import Trigger
 
-from helpers import stamp_s, wait_for
+from helpers import LockStepDriver, stamp_s, wait_for
 from sim_bridge.world import yaw_from_quaternion
 
 RTF = 4.0   # paced, but faster than real time to keep the suite short
@@ -86,33 +86,49 @@ def sim(start_node):
     return start_node('sim_node', '-p', f'real_time_factor:={RTF}', '-p', 'rtf_log_period:=1.0')
 
 
-def test_forward_0p1_for_2s_gives_0p2_m(sim, probe):
-    d = Driver(probe)
-    d.settle()
-    x0, y0, _ = d.pose()
-    d.drive(0.1, 0.0, 2.0)
-    d.wait_at_rest()
-    x, y, yaw = d.pose()
+@pytest.fixture
+def lockstep(start_node, probe):
+    """A lock-step simulator driven with announced commands: the distances below are then
+    exactly those of the commanded intervals, however busy the machine is."""
+    start_node('sim_node', '-p', 'synchronous:=true', '-p', 'state_publish_rate:=240.0')
+    return LockStepDriver(probe)
+
+
+def _pose(msg):
+    p = msg.pose.pose
+    return p.position.x, p.position.y, yaw_from_quaternion(
+        (p.orientation.x, p.orientation.y, p.orientation.z, p.orientation.w))
+
+
+def test_forward_0p1_for_2s_gives_0p2_m(lockstep, probe):
+    joints = probe.collect(JointState, '/mini_robot/joint_states')
+    x0, y0, _ = _pose(lockstep.odom_at(lockstep.hold(0.0, 0.0, 72).sim_time))   # settled
+    lockstep.hold(0.1, 0.0, 480)                                                 # 2 s
+    last = lockstep.hold(0.0, 0.0, 240)                                          # stopped
+    end = lockstep.odom_at(last.sim_time)
+    assert abs(end.twist.twist.linear.x) < 1e-3                                  # at rest
+    x, y, yaw = _pose(end)
     assert x - x0 == pytest.approx(0.2, rel=0.05)
     assert abs(y - y0) < 0.005 and abs(yaw) < 0.02
     # The wheels turned by rolling: about 0.2 m / r of wheel angle.
-    names = list(d.joints[-1][1].name)
-    left = d.joints[-1][1].position[names.index('left_wheel_joint')]
+    wait_for(lambda: any(m.header.stamp == last.sim_time for _, m in joints), 10.0,
+             what='the joint states of the last step')
+    state = next(m for _, m in joints if m.header.stamp == last.sim_time)
+    left = state.position[list(state.name).index('left_wheel_joint')]
     assert left == pytest.approx(0.2 / 0.03, rel=0.05)
 
 
-def test_turn_in_place_for_pi_over_0p2_s_gives_pi(sim, probe):
-    d = Driver(probe)
-    d.settle()
-    start = len(d.odom)
-    d.drive(0.0, 0.2, math.pi / 0.2)
-    d.wait_at_rest()
-    yaws = [yaw_from_quaternion((m.pose.pose.orientation.x, m.pose.pose.orientation.y,
-                                 m.pose.pose.orientation.z, m.pose.pose.orientation.w))
-            for _, m in d.odom[start - 1:]]
+def test_turn_in_place_for_pi_over_0p2_s_gives_pi(lockstep):
+    lockstep.hold(0.0, 0.0, 72)
+    start = len(lockstep.odom) - 1
+    lockstep.hold(0.0, 0.2, round(math.pi / 0.2 * 240))
+    last = lockstep.hold(0.0, 0.0, 240)
+    end = lockstep.odom_at(last.sim_time)
+    assert abs(end.twist.twist.angular.z) < 1e-3
+    yaws = [_pose(m)[2] for _, m in lockstep.odom[start:]]
     turned = np.unwrap(yaws)[-1] - yaws[0]
     assert turned == pytest.approx(math.pi, rel=0.05)
-    x, y, _ = d.pose()
+    x, y, _ = _pose(end)
     assert math.hypot(x, y) < 0.01
 
 
@@ -125,38 +141,38 @@ def test_commands_above_the_limits_are_clamped(sim, probe):
     wait_for(lambda: 'clamped to (0.200, 0.000)' in sim.output(), 5.0, what='clamp warning')
 
 
-def test_silence_past_the_timeout_stops_the_robot(sim, probe):
-    d = Driver(probe)
-    t_end = d.now() + 1.0
-    while d.now() < t_end:
-        d.send(0.1, 0.0)
-        time.sleep(0.05 / RTF)
-    t_last = d.now()
-    assert d.odom[-1][1].twist.twist.linear.x == pytest.approx(0.1, rel=0.05)
+def test_silence_past_the_timeout_stops_the_robot(start_node, probe):
+    sim = start_node('sim_node', '-p', 'synchronous:=true', '-p', 'state_publish_rate:=240.0')
+    lockstep = LockStepDriver(probe)
+    last = lockstep.hold(0.1, 0.0, 240)
+    # The last command arrived before the last batch of 24 steps ran.
+    t_command = stamp_s(last.sim_time) - 24 * DT
+    assert lockstep.odom_at(last.sim_time).twist.twist.linear.x == pytest.approx(0.1, rel=0.05)
     # No zero twist is sent: only the timeout (0.5 s) can stop it.
-    wait_for(lambda: d.now() > t_last + 0.8, 10.0, what='simulated time')
-    assert abs(d.odom[-1][1].twist.twist.linear.x) < 1e-3
-    stopped_at = next(stamp_s(m.header.stamp) for _, m in d.odom
-                      if stamp_s(m.header.stamp) > t_last
+    quiet = lockstep.reply(lockstep.step(240))
+    assert abs(lockstep.odom_at(quiet.sim_time).twist.twist.linear.x) < 1e-3
+    stopped_at = next(stamp_s(m.header.stamp) for _, m in lockstep.odom
+                      if stamp_s(m.header.stamp) > t_command + 0.1
                       and abs(m.twist.twist.linear.x) < 0.01)
-    assert t_last + 0.3 < stopped_at < t_last + 0.7
+    assert t_command + 0.5 < stopped_at < t_command + 0.6
     wait_for(lambda: 'stopping' in sim.output(), 5.0, what='timeout log line')
 
 
-def test_nan_is_rejected_the_robot_stops_and_the_node_lives(sim, probe):
-    d = Driver(probe)
-    d.drive(0.1, 0.0, 0.5)
-    d.send(0.1, 0.0)
-    d.settle(0.1)
-    d.send(math.nan, 0.0)
-    t_nan = d.now()
-    d.settle(0.25)  # well inside the 0.5 s timeout: only the rejection can stop it
-    assert abs(d.odom[-1][1].twist.twist.linear.x) < 2e-3
+def test_nan_is_rejected_the_robot_stops_and_the_node_lives(start_node, probe):
+    sim = start_node('sim_node', '-p', 'synchronous:=true', '-p', 'state_publish_rate:=240.0')
+    lockstep = LockStepDriver(probe)
+    lockstep.hold(0.1, 0.0, 120)
+    lockstep.send(math.nan, 0.0)
+    # 0.25 s, well inside the 0.5 s timeout: only the rejection can stop it.
+    after = lockstep.reply(lockstep.step(60, commands=1))
+    assert after.success, after.message
+    assert abs(lockstep.odom_at(after.sim_time).twist.twist.linear.x) < 2e-3
     assert sim.alive()
-    d.send(0.0, math.inf)
+    lockstep.send(0.0, math.inf)
+    assert lockstep.reply(lockstep.step(1, commands=1)).success
     wait_for(lambda: 'non-finite command' in sim.output(), 5.0, what='rejection warning')
-    assert d.drive(0.1, 0.0, 0.5).linear.x == pytest.approx(0.1, rel=0.05)
-    assert d.now() > t_nan
+    again = lockstep.hold(0.1, 0.0, 120)
+    assert lockstep.odom_at(again.sim_time).twist.twist.linear.x == pytest.approx(0.1, rel=0.05)
 
 
 def test_sideways_velocity_on_a_diff_drive_is_ignored_with_a_warning(sim, probe):
