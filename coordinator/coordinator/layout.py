@@ -97,11 +97,13 @@ def layout_from_world(world) -> CellLayout:
     pool, platform = named['pool_floor'], named['pool_platform']
     px, py = pool.position[0], pool.position[1]
     half = min(pool.size[0], pool.size[1]) / 2
-    # The youBot stands west of the pool, facing it; it drops oranges over the west wall
-    # at three spots along it, and sets the blue down on the platform's near (west) half.
+    # The youBot stands west of the pool, facing it; it drops oranges over the west wall, each
+    # at its own spot (two rows of three, 8-10 cm apart: a cube dropped onto another can tumble
+    # back over the wall), and sets the blue down on the platform's near (west) half.
     stand_x = px - half - 0.38
     pool_stand = (stand_x, py - 0.1, 0.0)
-    drops = [np.array([px - half + 0.08, py - 0.1 + dy, 0.2]) for dy in (0.0, 0.1, -0.1)]
+    drops = [np.array([px - half + dx, py - 0.1 + dy, 0.2]) for dx in (0.08, 0.16)
+             for dy in (0.0, 0.1, -0.1)]
     top = platform.position[2] + platform.size[2] / 2
     place = np.array([platform.position[0] - platform.size[0] / 2 + 0.05, platform.position[1],
                       top])
