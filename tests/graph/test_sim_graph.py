@@ -193,7 +193,7 @@ def test_clock_advances_at_the_paced_rate(sim, probe):
     wait_for(lambda: len(clock) > 10, 10.0, what='/clock')
     time.sleep(1.0)
     received = clock[5:]  # after discovery settled
-    (w0, c0), (w1, c1) = received[0], received[-1]
+    (_, c0), (_, c1) = received[0], received[-1]
     ns = np.array([_ns(c.clock) for _, c in received])
     gaps = np.diff(ns)
     assert (gaps > 0).all()
@@ -201,10 +201,15 @@ def test_clock_advances_at_the_paced_rate(sim, probe):
     # (a reliable queue may drop one when the probe process is starved).
     assert (gaps % DT_NS == 0).all()
     assert np.mean(gaps == DT_NS) > 0.95
-    # Paced: simulated time never runs ahead of the factor. (How close it comes depends on the
-    # machine's load, so only the bound is checked; bench/ measures the rate.)
-    rate = (stamp_s(c1.clock) - stamp_s(c0.clock)) / (w1 - w0)
-    assert 0.0 < rate < 1.15 * RTF, rate
+    # Paced: simulated time never runs ahead of the factor, as the simulator measures it over
+    # its steps (receive times in this process say little when the machine is busy: a starved
+    # probe takes a burst of queued messages at once). How close to the factor it comes
+    # depends on the load, so only the bound is checked; bench/ measures the rate.
+    assert stamp_s(c1.clock) > stamp_s(c0.clock)
+    wait_for(lambda: sim.output().count('real-time factor ') >= 2, 10.0, what='RTF log lines')
+    rtfs = [float(line.split('real-time factor ')[1].split()[0])
+            for line in sim.output().splitlines() if 'real-time factor ' in line]
+    assert all(0.0 < rtf < 1.05 * RTF for rtf in rtfs), rtfs
 
 
 def test_camera_info_matches_the_image(sim, probe):
