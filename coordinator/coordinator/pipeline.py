@@ -1,13 +1,14 @@
 """The pipeline run as an explicit state machine (no ROS): sorting, delivery and transport.
 
-Two machines share one clock. The belt runs at a uniform speed from the start until loading is
-over; at its end a stop holds what reaches it (an accumulating belt, controllers.conveyor). The
-loader (the Zu 12) tracks the materials the vision reports and predicts where each is and will
-be; it picks the orange and blue ones on the move (conveyor tracking: the cup follows the
+Two machines share one clock. The belt runs at a uniform speed from the start until loading
+is over; at its end a stop holds what reaches it (an accumulating belt, controllers.conveyor).
+The loader (the Zu 12) tracks the materials the vision reports and predicts where each is and
+will be; it picks the orange and blue ones on the move (conveyor tracking: the cup follows the
 material while it descends, dwells and lifts) and puts them on the youBot's plate; the purple
-rides to the end of the belt and is taken there, onto the ground target. The transport (the youBot) waits for its
-load, drives along Bezier paths with a PD follower, unloads with its arm (orange into the pool,
-blue onto the platform) and drives home. Both arms end at their start poses.
+rides to the end of the belt and is taken there, onto the ground target. The transport (the
+youBot) waits for its load, drives along Bezier paths with a PD follower, unloads with its arm
+(orange into the pool, blue onto the platform) and drives home. Both arms end at their start
+poses.
 
 The machine acts through ``Ports`` (IK, trajectories, suction, belt, base twist, events) and
 sees the world through ``Observation``; the node implements both over ROS, tests fake them.
