@@ -3,20 +3,11 @@ follows good ones, and configuration errors stop it at start-up."""
 import math
 
 import pytest
-import rclpy
 from rclpy.parameter import Parameter
 from sensor_msgs.msg import JointState
 
 from arm_kinematics.kinematics_node import KinematicsConfigError, KinematicsNode
 from controllers.youbot_arm import JOINT_NAMES
-
-
-@pytest.fixture
-def context():
-    ctx = rclpy.Context()
-    rclpy.init(context=ctx)
-    yield ctx
-    rclpy.try_shutdown(context=ctx)
 
 
 def test_malformed_joint_states_are_ignored(context):

@@ -1,18 +1,9 @@
 """The shared node main(): a shutdown race is a clean exit, a real failure is not hidden."""
 import pytest
-import rclpy
 from rclpy.node import Node
 
 from ros_common import node_main
 from ros_common.node_main import RCLError, run_node, spin
-
-
-@pytest.fixture
-def context():
-    ctx = rclpy.Context()
-    rclpy.init(context=ctx)
-    yield ctx
-    rclpy.try_shutdown(context=ctx)
 
 
 def _raising_spin(shutdown_first):

@@ -1,6 +1,5 @@
 """The recording nodes in-process: parameters, and failures that must end clearly."""
 import pytest
-import rclpy
 from rclpy.parameter import Parameter
 from rclpy.serialization import serialize_message
 from rosbags.highlevel import AnyReader
@@ -10,14 +9,6 @@ from recording.bag_writer import BagError
 from recording.recorder import Recorder
 from recording.replay import Replay
 from test_recording_core import damaged_mid_stream_bag
-
-
-@pytest.fixture
-def context():
-    ctx = rclpy.Context()
-    rclpy.init(context=ctx)
-    yield ctx
-    rclpy.try_shutdown(context=ctx)
 
 
 def make(context, tmp_path, **overrides):

@@ -8,14 +8,6 @@ from sim_bridge.sim_node import SimConfigError, SimNode
 from sim_bridge.world_config import WorldConfigError
 
 
-@pytest.fixture
-def context():
-    ctx = rclpy.Context()
-    rclpy.init(context=ctx)
-    yield ctx
-    rclpy.try_shutdown(context=ctx)
-
-
 def make(context, **overrides):
     return SimNode(context=context, parameter_overrides=[
         Parameter(k, value=v) for k, v in overrides.items()])
