@@ -27,18 +27,31 @@ class Item:
     width: float        # extent across the belt [m]
 
 
+Blocker = Tuple[float, float, float]        # (back face along, centre across, width)
+
+
+def _limit(it: Item, blockers: Sequence[Blocker], stop: float) -> float:
+    """How far the item's front face may go: the stop, or the nearest back face ahead of it
+    among the blockers it overlaps across the belt."""
+    limit = stop
+    for back, across, width in blockers:
+        if abs(across - it.across) < (width + it.width) / 2:
+            limit = min(limit, back)
+    return limit
+
+
+def _downstream_first(items: Sequence[Item]) -> List[int]:
+    return sorted(range(len(items)), key=lambda i: -items[i].along)
+
+
 def held(items: Sequence[Item], stop: float) -> List[bool]:
     """Which items are held, at their present positions, by the stop (the along-coordinate
     of its face; ``math.inf`` for a belt without one) or by a held item ahead of them."""
     out = [False] * len(items)
-    blockers: List[Tuple[float, float, float]] = []     # (back face, across, width) of held
-    for k in sorted(range(len(items)), key=lambda i: -items[i].along):
+    blockers: List[Blocker] = []
+    for k in _downstream_first(items):
         it = items[k]
-        limit = stop
-        for back, across, width in blockers:
-            if abs(across - it.across) < (width + it.width) / 2:
-                limit = min(limit, back)
-        if it.along + it.length / 2 >= limit - CONTACT_TOLERANCE_M:
+        if it.along + it.length / 2 >= _limit(it, blockers, stop) - CONTACT_TOLERANCE_M:
             out[k] = True
             blockers.append((it.along - it.length / 2, it.across, it.width))
     return out
@@ -51,14 +64,10 @@ def advance(items: Sequence[Item], stop: float, travel: float) -> List[float]:
     if travel < 0.0 or not math.isfinite(travel):
         raise ValueError(f'travel must be finite and >= 0, got {travel}')
     out = [0.0] * len(items)
-    blockers: List[Tuple[float, float, float]] = []
-    for k in sorted(range(len(items)), key=lambda i: -items[i].along):
+    blockers: List[Blocker] = []
+    for k in _downstream_first(items):
         it = items[k]
-        limit = stop
-        for back, across, width in blockers:
-            if abs(across - it.across) < (width + it.width) / 2:
-                limit = min(limit, back)
-        target = limit - it.length / 2          # where its blocker will hold it
+        target = _limit(it, blockers, stop) - it.length / 2   # where its blocker holds it
         out[k] = it.along if it.along >= target else min(it.along + travel, target)
         # Every item blocks the ones behind it where it ends up (moving items too: behind a
         # moving item an item moves at the same speed and never reaches it).
