@@ -8,13 +8,11 @@ target surface, releases, and rises again. Times are absolute (simulated) second
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Callable, List, Sequence, Tuple
+from typing import List, Sequence, Tuple
 
 import numpy as np
 
 Waypoint = Tuple[float, np.ndarray]          # (time [s], tool position in the world [m])
-# Where a material's centre is (will be) at a time: its predicted track on the belt.
-Track = Callable[[float], np.ndarray]
 
 
 @dataclass(frozen=True)
@@ -29,27 +27,26 @@ class PickTiming:
     place_gap: float = 0.003     # the material's bottom above the target surface at release
 
 
-def constant_velocity(position: Sequence[float], stamp: float,
-                      velocity: Sequence[float]) -> Track:
-    """The track of a material seen at ``position`` at ``stamp``, moving at ``velocity``."""
-    p0, v = np.asarray(position, float), np.asarray(velocity, float)
-    return lambda t: p0 + v * (t - stamp)
+def predict(position: Sequence[float], stamp: float, velocity: Sequence[float],
+            t: float) -> np.ndarray:
+    return np.asarray(position, float) + np.asarray(velocity, float) * (t - stamp)
 
 
-def pick_waypoints(track: Track, t_contact: float, size: float,
-                   timing: PickTiming = PickTiming()) -> Tuple[List[Waypoint], float]:
-    """Tool waypoints to pick the material whose centre follows ``track`` (moving on the belt,
-    held at its end stop, or at rest), touching it at ``t_contact``: the cup follows it while
-    it descends and dwells. Also returns the time to switch suction on."""
+def pick_waypoints(position: Sequence[float], stamp: float, velocity: Sequence[float],
+                   t_contact: float, size: float, timing: PickTiming = PickTiming()
+                   ) -> Tuple[List[Waypoint], float]:
+    """Tool waypoints to pick the material seen at ``position`` (its centre) at ``stamp``,
+    moving at ``velocity``, touching it at ``t_contact``; and the time to switch suction on."""
     top = size / 2 + timing.contact_gap
 
     def at(t: float, height: float) -> np.ndarray:
-        p = np.array(track(t), float)
+        p = predict(position, stamp, velocity, t)
         p[2] += top + height
         return p
+    t_hover = t_contact - timing.descend
     t_leave = t_contact + timing.dwell
     lifted = at(t_leave, 0.0)
-    lifted[2] = float(track(t_leave)[2]) - size / 2 + timing.lift_height + size
+    lifted[2] = np.asarray(position)[2] - size / 2 + timing.lift_height + size
     # Dense while moving with the belt, so that the joint interpolation stays on the path.
     descend = [(t_contact - timing.descend * f, at(t_contact - timing.descend * f,
                                                    timing.hover * f ** 2))

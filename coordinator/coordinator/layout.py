@@ -30,7 +30,7 @@ class LayoutError(ValueError):
 class CellLayout:
     belt_y: float                       # the belt's centre line (world y) [m]
     belt_top: float                     # its top surface (world z) [m]
-    belt_end_x: float                   # the belt's downstream end (its stop's face) [m]
+    belt_end_x: float                   # where materials fall off [m]
     belt_speed: float                   # nominal carrying speed [m/s]
     material_size: float                # cube edge [m]
     manifest: Dict[str, int]            # materials per colour in the batch
@@ -45,7 +45,6 @@ class CellLayout:
     platform_stand: Pose2D = (0.0, 0.0, 0.0)
     via_out: Tuple[Tuple[float, float], ...] = ()
     via_back: Tuple[Tuple[float, float], ...] = ()
-    end_stop: bool = False              # materials accumulate at the end instead of falling off
 
     @property
     def total(self) -> int:
@@ -113,7 +112,6 @@ def layout_from_world(world) -> CellLayout:
     return CellLayout(
         belt_y=conv.position[1], belt_top=conv.position[2],
         belt_end_x=conv.position[0] + conv.length / 2, belt_speed=conv.belt_speed,
-        end_stop=conv.end_stop,
         material_size=size, manifest=dict(world.materials.counts),
         ground_target=np.array([named['ground_target'].position[0],
                                 named['ground_target'].position[1], 0.0]),

@@ -1,14 +1,10 @@
 """The pipeline run as an explicit state machine (no ROS): sorting, delivery and transport.
 
-Two machines share one clock. The belt runs at a uniform speed from the start until loading
-is over; at its end a stop holds what reaches it (an accumulating belt, controllers.conveyor).
-The loader (the Zu 12) tracks the materials the vision reports and predicts where each is and
-will be; it picks the orange and blue ones on the move (conveyor tracking: the cup follows the
-material while it descends, dwells and lifts) and puts them on the youBot's plate; the purple
-rides to the end of the belt and is taken there, onto the ground target. The transport (the
-youBot) waits for its load, drives along Bezier paths with a PD follower, unloads with its arm
-(orange into the pool, blue onto the platform) and drives home. Both arms end at their start
-poses.
+Two machines share one clock. The loader (the Zu 12) watches the vision's detections, stops the
+belt when the front material reaches the pick point, picks it with the suction cup, puts purple
+on the ground target and the rest on the youBot's plate. The transport (the youBot) waits for its
+load, drives along Bezier paths with a PD follower, unloads with its arm (orange into the pool,
+blue onto the platform) and drives home. Both arms end at their start poses.
 
 The machine acts through ``Ports`` (IK, trajectories, suction, belt, base twist, events) and
 sees the world through ``Observation``; the node implements both over ROS, tests fake them.
@@ -27,7 +23,6 @@ import numpy as np
 
 from controllers.arm_kinematics import motion_duration
 from controllers.bezier import BezierPath, Pose2D, key_poses_between
-from controllers.conveyor import Item, advance, held
 from controllers.path_follower import PathFollower
 from controllers.pick_place import PickTiming, pick_waypoints, place_waypoints
 from controllers.transforms import matrix_to_quaternion
@@ -38,6 +33,10 @@ from coordinator.layout import (PLATE_SLOTS_IN_BASE_M, PLATE_TOP_IN_BASE_M, Cell
                                 slot_in_world, world_to_base)
 
 DOWN = (1.0, 0.0, 0.0, 0.0)                  # tool z pointing down (x, y, z, w)
+# A material seen this recently before the belt stopped is in the camera's view [s]; its pick
+# waits this long after the stop, for frames of it at rest [s].
+VIEW_GAP_S = 0.2
+STOP_FRAME_WAIT_S = 0.4
 Points = List[Tuple[float, np.ndarray]]      # (absolute time [s], joint positions)
 
 
@@ -97,7 +96,7 @@ class Ports(Protocol):
 
 @dataclass(frozen=True)
 class Settings:
-    pick_x: float = -0.2              # the Zu 12 picks materials downstream of this x [m]
+    pick_x: float = 0.0               # the belt stops when the front material reaches this x
     confirm_hits: int = 8             # frames a track needs before it is acted on
     max_retries: int = 1              # extra grasp attempts on a missed grasp
     zu12_scaling: float = 1.0         # fraction of the Zu 12's joint speed limits
@@ -250,6 +249,13 @@ class Loader(Machine):
                          S.PLACE: self._place, S.RETREAT: self._retreat, S.HOME: self._home,
                          S.DONE: lambda obs: None}
 
+    @property
+    def busy_with_belt(self) -> bool:
+        """The cup is on a material still on the belt (it must not move under the cup)."""
+        run = self.run
+        return (self.state is LoaderState.PICK and self.current is not None
+                and not (self.current.picked and run.arrived('zu12', run.q_now, run.now)))
+
     def start(self, obs: Observation) -> None:
         """The first observation: the arms' poses now are their home poses."""
         self.run.home_q = {'zu12': np.array(obs.zu12_q, float),
@@ -270,65 +276,46 @@ class Loader(Machine):
             return
         if run.motions['zu12'] is not None and now < run.motions['zu12'].end:
             return                                   # still rising from the last place
-        m = self._next(waiting)
-        if m is None:
+        front = max(waiting, key=lambda m: run.belt_x(m, now), default=None)
+        if front is None:
             return
-        self.current = m
-        m.status = 'picking'
-        self._plan_pick(obs, m)
-
-    def _next(self, waiting: Sequence[Material]) -> Optional[Material]:
-        """The next material to pick: the most downstream one bound for the youBot's plate
-        (the youBot waits for them); the purple once the end stop holds it."""
-        run = self.run
-        ride = run.layout.end_stop
-        now_ = [m for m in waiting if not (ride and m.color == 'purple')]
-        if not now_:
-            now_ = [m for m in waiting if run.held(m)]
-        return max(now_, key=lambda m: m.position[0], default=None)
+        x = run.belt_x(front, now)
+        if x < run.s.pick_x or run.belt_running:
+            return                  # (picked once the belt rule has stopped it, at a known x)
+        stopped = run.belt_log[-1][0]
+        if stopped - front.last_seen < VIEW_GAP_S and now - stopped < STOP_FRAME_WAIT_S:
+            # Still in the camera's view: use its frames at rest (in real time the belt stops
+            # a little later than decided, by an unknown delay below this wait).
+            return
+        if front.stamp < stopped:
+            front.position = np.array([x, front.position[1], front.position[2]])
+        front.stamp = now
+        self.current = front
+        front.status = 'picking'
+        self._plan_pick(obs, front)
 
     def _plan_pick(self, obs: Observation, m: Material) -> None:
         run, now, t = self.run, obs.now, self.run.s.timing
         size = run.layout.material_size
         # A second attempt presses 4 mm further down.
         timing = PickTiming(**{**t.__dict__, 'contact_gap': t.contact_gap - 0.004 * m.attempts})
-        track = run.track(m)
-        # Contact no earlier than the material passes the pick point, and no earlier than the
-        # arm can be above it: the hover point moves with the contact time, so iterate.
-        t_contact = max(now + timing.descend + 0.5, run.reaches(m, run.s.pick_x))
-        if not math.isfinite(t_contact):
-            m.status = 'seen'                      # it cannot reach the pick point (yet)
-            self.current = None
-            return
         seed = run.home_q['zu12']
-        q_hover = None
-        for _ in range(4):
-            hover = track(t_contact - timing.descend) + np.array(
-                [0.0, 0.0, size / 2 + timing.hover])
-            q_hover = run.solve('zu12', hover, DOWN, 'world', seed)
-            if q_hover is None:
-                return self._pick_failed(obs, m, 'no IK solution for the pick')
-            lead = motion_duration(obs.zu12_q, q_hover, run.limits('zu12'),
-                                   run.s.zu12_scaling, 0.5) + 0.1 + run.s.plan_latency
-            needed = now + lead + timing.descend
-            if needed <= t_contact + 1e-3:
-                break
-            t_contact = needed + 0.02
-        if track(t_contact + timing.dwell)[0] > run.layout.belt_end_x - size / 2:
-            m.status = 'seen'                      # off the end (no stop) before the cup is on it
-            self.current = None
-            return
-        waypoints, _ = pick_waypoints(track, t_contact, size, timing)
+        hover = m.position + np.array([0.0, 0.0, size / 2 + timing.hover])
+        q_hover = run.solve('zu12', hover, DOWN, 'world', seed)
+        if q_hover is None:
+            return self._pick_failed(obs, m, 'no IK solution for the pick')
+        lead = motion_duration(obs.zu12_q, q_hover, run.limits('zu12'), run.s.zu12_scaling,
+                               0.5) + 0.1 + run.s.plan_latency
+        waypoints, t_arm = pick_waypoints(m.position, now, (0.0, 0.0, 0.0),
+                                          now + lead + timing.descend, size, timing)
         points = run.solve_path('zu12', waypoints, q_hover)
         if points is None:
             return self._pick_failed(obs, m, 'no IK solution for the pick path')
+        t_contact = now + lead + timing.descend
         run.send(Motion('zu12', points, {'arm': waypoints[1][0],
                                          'check': t_contact + timing.dwell}))
         m.attempts += 1
         run.count_grasp('zu12')
-        run.event(now, 'tracking', 'zu12', m,
-                  f'contact at {t_contact:.2f} s, x {track(t_contact)[0]:.3f}'
-                  f'{" (held at the stop)" if run.held(m) else ""}')
         self.enter(LoaderState.PICK, now, points[-1][0] - now + run.s.settle_margin)
 
     def _pick_failed(self, obs: Observation, m: Material, why: str) -> None:
@@ -614,7 +601,6 @@ class Pipeline:
         self.motions: Dict[str, Optional[Motion]] = {'zu12': None, 'youbot': None}
         self.belt_running = False
         self.belt_log: List[Tuple[float, bool]] = [(start_time, False)]
-        self._belt_time = start_time             # the belt model's time
         self.now = start_time
         self.q_now = np.zeros(0)
         self.home_q: Dict[str, np.ndarray] = {}
@@ -641,7 +627,6 @@ class Pipeline:
         try:
             if self.loader.state is LoaderState.START:
                 self.loader.start(obs)
-            self._advance_belt(obs.now)
             self._see(obs)
             self.loader.tick(obs)
             self._belt(obs.now, self._belt_wanted(obs.now))
@@ -707,62 +692,12 @@ class Pipeline:
         if not ready:
             self.event(obs.now, 'returning', arm)
 
+    def belt_x(self, m: Material, now: float) -> float:
+        """Where a material on the belt is now: seen at its frame's time, carried since then
+        for as long as the belt ran."""
+        return m.position[0] + self.layout.belt_speed * self._running_time(m.stamp, now)
+
     # --- the belt -----------------------------------------------------------------------------
-    def _on_belt(self) -> List[Material]:
-        """The materials the belt carries (or its stop holds), as the coordinator believes."""
-        return [m for m in self.materials.values()
-                if m.status in ('seen', 'picking', 'failed') and not m.picked]
-
-    def _items(self, mats: Sequence[Material]) -> List[Item]:
-        size = self.layout.material_size
-        return [Item(m.position[0], m.position[1] - self.layout.belt_y, size, size)
-                for m in mats]
-
-    @property
-    def _stop(self) -> float:
-        return self.layout.belt_end_x if self.layout.end_stop else math.inf
-
-    def held(self, m: Material) -> bool:
-        """Whether the end stop (or what it holds) holds the material now."""
-        mats = self._on_belt()
-        return m in mats and held(self._items(mats), self._stop)[mats.index(m)]
-
-    def track(self, m: Material) -> Callable[[float], np.ndarray]:
-        """Where the material's centre will be at a time, while the belt runs: carried on, and
-        held once it reaches the stop or what the stop holds."""
-        mats = self._on_belt()
-        items, k, now = self._items(mats), mats.index(m), self.now
-        speed = self.layout.belt_speed if self.belt_running else 0.0
-        y, z = float(m.position[1]), float(m.position[2])
-
-        def at(t: float) -> np.ndarray:
-            return np.array([advance(items, self._stop, speed * max(0.0, t - now))[k], y, z])
-        return at
-
-    def reaches(self, m: Material, x: float) -> float:
-        """When the material's centre reaches ``x`` (now if it is there already; infinity if it
-        never will: the belt is stopped, or the stop holds it upstream of ``x``)."""
-        if x > self.layout.belt_end_x - self.layout.material_size / 2:
-            return math.inf                         # beyond the belt's end
-        if m.position[0] >= x:
-            return self.now
-        speed = self.layout.belt_speed if self.belt_running else 0.0
-        if speed <= 0.0 or self.held(m):
-            return math.inf
-        t = self.now + (x - m.position[0]) / speed
-        return t if self.track(m)(t)[0] >= x - 1e-6 else math.inf
-
-    def _advance_belt(self, now: float) -> None:
-        """Carry the model of the belt forward to ``now``."""
-        travel = self.layout.belt_speed * self._running_time(self._belt_time, now)
-        self._belt_time = now
-        if travel <= 0.0:
-            return
-        mats = self._on_belt()
-        for m, x in zip(mats, advance(self._items(mats), self._stop, travel)):
-            m.position = np.array([x, m.position[1], m.position[2]])
-            m.stamp = now
-
     def _belt(self, now: float, running: bool) -> None:
         if running != self.belt_running:
             effective = self.ports.belt(self.layout.belt_speed if running else 0.0)
@@ -771,8 +706,14 @@ class Pipeline:
             self.event(now, 'belt_started' if running else 'belt_stopped')
 
     def _belt_wanted(self, now: float) -> bool:
-        """The belt runs at a uniform speed from the start until loading is over."""
-        return self.loader.state not in (LoaderState.HOME, LoaderState.DONE)
+        """The belt runs while loading, except while a material waits at the pick point or the
+        cup is on one still on the belt: nothing passes the pick point unnoticed."""
+        if self.loader.state in (LoaderState.HOME, LoaderState.DONE):
+            return False
+        if self.loader.busy_with_belt:
+            return False
+        return not any(self.belt_x(m, now) >= self.s.pick_x
+                       for m in self.materials.values() if m.status == 'seen')
 
     def _running_time(self, t0: float, t1: float) -> float:
         total = 0.0
@@ -789,23 +730,17 @@ class Pipeline:
             if m is None:
                 if d.hits < self.s.confirm_hits:
                     continue
-                m = self.materials[d.id] = Material(d.id, d.color, self._seen_at(d, obs.now),
-                                                    obs.now, d.hits)
+                m = self.materials[d.id] = Material(d.id, d.color, np.asarray(d.position, float),
+                                                    d.stamp, d.hits)
                 self.event(obs.now, 'seen', 'vision', m,
                            f'at {np.round(m.position, 3).tolist()}')
             elif m.status == 'seen':
-                m.position, m.stamp, m.hits = self._seen_at(d, obs.now), obs.now, d.hits
+                m.position, m.stamp, m.hits = np.asarray(d.position, float), d.stamp, d.hits
             m.last_seen = obs.now
-        # Without an end stop, a material still on the belt past its end was not picked.
+        # A material still on the belt that has gone past its end was not picked.
         for m in self.materials.values():
-            if (m.status == 'seen' and not self.layout.end_stop
-                    and m.position[0] > self.layout.belt_end_x):
+            if m.status == 'seen' and self.belt_x(m, obs.now) > self.layout.belt_end_x:
                 self.fail(obs.now, m, 'missed', 'went off the belt end unpicked', 'zu12')
-
-    def _seen_at(self, d: Detection, now: float) -> np.ndarray:
-        """A detection carried to ``now``: in the camera's view the belt carries it freely."""
-        travel = self.layout.belt_speed * self._running_time(d.stamp, now)
-        return np.asarray(d.position, float) + np.array([travel, 0.0, 0.0])
 
     # --- the end ------------------------------------------------------------------------------
     def _finish(self, now: float, status: str, message: str) -> None:

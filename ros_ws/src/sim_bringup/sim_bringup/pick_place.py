@@ -30,8 +30,7 @@ from std_srvs.srv import SetBool
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
 from controllers.arm_kinematics import motion_duration
-from controllers.pick_place import (PickTiming, constant_velocity, pick_waypoints,
-                                    place_waypoints, plate_slots)
+from controllers.pick_place import PickTiming, pick_waypoints, place_waypoints, plate_slots
 from controllers.zu12_arm import JOINT_NAMES, JOINT_VELOCITY_LIMITS
 
 DOWN = (1.0, 0.0, 0.0, 0.0)          # tool z pointing down (x, y, z, w)
@@ -271,8 +270,7 @@ class PickPlace(Node):
         timing = PickTiming()
         # Leave the arm the time its joints need to reach the hover point.
         for _ in range(3):
-            waypoints, _ = pick_waypoints(constant_velocity(pos, stamp, vel), t_contact,
-                                           self.size, timing)
+            waypoints, _ = pick_waypoints(pos, stamp, vel, t_contact, self.size, timing)
             # Seeded from the start pose over the belt: the solution nearest to where the arm
             # is now can be a flip over the top after a place on the other side.
             q_hover = self.solve(waypoints[0][1], f'material {det.id}', self.home)
