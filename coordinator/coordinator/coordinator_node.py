@@ -98,8 +98,9 @@ class CoordinatorNode(Node):
         self.declare_parameter('idle_timeout', 20.0, rng(
             'Belt running with nothing to pick for this long ends the loading [s]', 1.0, 600.0))
         self.declare_parameter('plan_latency', -1.0, rng(
-            'Start motions this much after the decision [s of sim time]; -1: 0 in lock-step, '
-            '0.5 in real time (the plan and the message take time while the simulator runs)',
+            'Start motions this much after the decision [s of sim time], and in real time at '
+            'least this much after they are sent (the message travels while the simulator '
+            'runs); -1: 0 in lock-step, 1.0 in real time',
             -1.0, 5.0))
         self.declare_parameter('service_timeout', 10.0, rng(
             'A node that does not answer within this many wall seconds has failed', 0.5, 120.0))
@@ -126,7 +127,7 @@ class CoordinatorNode(Node):
         self.layout = layout
         latency = float(get('plan_latency'))
         if latency < 0.0:
-            latency = 0.0 if get('synchronous') else 0.5
+            latency = 0.0 if get('synchronous') else 1.0
         self.settings = Settings(pick_x=float(get('pick_x')), plan_latency=latency,
                                  max_retries=int(get('max_retries')),
                                  drive_speed=float(get('drive_speed')),
@@ -159,9 +160,9 @@ class CoordinatorNode(Node):
         self._seen_truth: List[bool] = []
         self._start_time = 0.0
         # Lock-step: the commands of each decision are announced with the next step request,
-        # and stamped with the decision's own step time, not with a /clock that may lag it.
+        # and stamped with the decision's own step time (the plan's), not with a /clock that
+        # may lag it.
         self._commands = CommandCounter()
-        self._decision_ns: Optional[int] = None
         self._path: List[Tuple[float, float]] = []
         self._peak = {'zu12': PeakJointSpeed(ZU12_VELOCITY_LIMITS),
                       'youbot': PeakJointSpeed([YOUBOT_VELOCITY_LIMIT] * len(YOUBOT_JOINTS))}
@@ -207,7 +208,7 @@ class CoordinatorNode(Node):
 
     def _on_grip(self, arm: str, msg: GripState) -> None:
         with self._lock:
-            self._grip[arm] = (_ns(msg.header.stamp), bool(msg.holding))
+            self._grip[arm] = (_ns(msg.header.stamp), bool(msg.holding), bool(msg.armed))
             self._lock.notify_all()
 
     def _on_odom(self, msg: Odometry) -> None:
@@ -268,23 +269,29 @@ class CoordinatorNode(Node):
         reply = self._call(self.ik[arm], req, 'IK')
         return (np.array(reply.positions), '') if reply.success else (None, reply.message)
 
-    def _command_time_ns(self) -> int:
-        if self.synchronous and self._decision_ns is not None:
-            return self._decision_ns
-        return self.get_clock().now().nanoseconds
-
-    def trajectory(self, arm: str, points: Points) -> None:
-        now_ns = self._command_time_ns()
+    def trajectory(self, arm: str, points: Points, start: float) -> float:
+        """Stamped with its absolute start, so that the simulator runs the plan on its own
+        clock. Lock-step: the decision's step time, exactly. Real time: the plan (IK calls) may
+        have taken longer than its allowance; then the whole motion starts later, by as much,
+        rather than with a first segment too short for the joints (returns that delay)."""
+        delay = 0.0
+        if not self.synchronous:
+            delay = max(0.0, self.now() + self.settings.plan_latency - start)
+        start_ns = round((start + delay) * 1e9)
         msg = JointTrajectory(joint_names=list(ARMS[arm]))
-        # An absolute start: the plan's times are simulated times.
-        msg.header.stamp.sec, msg.header.stamp.nanosec = divmod(now_ns, 1_000_000_000)
+        msg.header.stamp.sec, msg.header.stamp.nanosec = divmod(start_ns, 1_000_000_000)
         for t, q in points:
-            ns = max(1, round(t * 1e9) - now_ns)
+            ns = max(1, round((t + delay) * 1e9) - start_ns)
             msg.points.append(JointTrajectoryPoint(
                 positions=[float(v) for v in q],
                 time_from_start=Duration(sec=ns // 1_000_000_000, nanosec=ns % 1_000_000_000)))
         self.traj_pubs[arm].publish(msg)
         self._commands.sent()
+        if delay > 0.0:
+            self.get_logger().info(f'{arm} motion starts {delay:.2f} s later than planned '
+                                   '(the plan took longer than plan_latency)',
+                                   throttle_duration_sec=10.0)
+        return delay
 
     def grip(self, arm: str, on: bool):
         reply = self._call(self.grips[arm], SetBool.Request(data=on), 'grip')
@@ -421,7 +428,7 @@ class CoordinatorNode(Node):
 
     def _wait_states(self, stamp_ns: int, first: bool = False) -> None:
         def ready() -> bool:
-            stamps = [s for s, _ in self._joints.values()] + [s for s, _ in self._grip.values()]
+            stamps = [s for s, _ in self._joints.values()] + [g[0] for g in self._grip.values()]
             stamps += [self._odom[0]] if self._odom else []
             if len(stamps) < 5:
                 return False
@@ -430,7 +437,7 @@ class CoordinatorNode(Node):
         with self._lock:
             if not self._lock.wait_for(ready, timeout=self.service_timeout):
                 have = {**{f'{a} joints': s for a, (s, _) in self._joints.items()},
-                        **{f'{a} grip': s for a, (s, _) in self._grip.items()},
+                        **{f'{a} grip': g[0] for a, g in self._grip.items()},
                         'odom': self._odom[0] if self._odom else None}
                 raise NodeTimeout(f'no states from the simulator for t = {stamp_ns * 1e-9:.3f} s'
                                   f' (latest stamps [ns]: {have})')
@@ -451,7 +458,6 @@ class CoordinatorNode(Node):
                                    f'{stamp * 1e-9:.3f} s (not matched yet); going on')
 
     def _observe(self, t_ns: int, frames: Optional[Sequence[int]]) -> Observation:
-        self._decision_ns = t_ns
         with self._lock:
             if frames is None:               # real time: whatever arrived since last time
                 frames = sorted(self._detections)
@@ -463,7 +469,8 @@ class CoordinatorNode(Node):
                 now=t_ns * 1e-9, zu12_q=self._joints['zu12'][1],
                 youbot_q=self._joints['youbot'][1], youbot_pose=odom[1],
                 youbot_velocity=odom[2], zu12_holding=self._grip['zu12'][1],
-                youbot_holding=self._grip['youbot'][1], detections=dets)
+                youbot_holding=self._grip['youbot'][1], detections=dets,
+                zu12_armed=self._grip['zu12'][2], youbot_armed=self._grip['youbot'][2])
 
     # --- the end ------------------------------------------------------------------------------
     def _final_truth(self) -> list:

@@ -37,6 +37,11 @@ DOWN = (1.0, 0.0, 0.0, 0.0)                  # tool z pointing down (x, y, z, w)
 # waits this long after the stop, for frames of it at rest [s].
 VIEW_GAP_S = 0.2
 STOP_FRAME_WAIT_S = 0.4
+# A released material falls free of the cup or the fingers before the tool moves on [s].
+RELEASE_HOLD_S = 0.2
+# A motion that ends where the tool grips or lets go holds its goal this long, so that the arm
+# has settled there (not still within the arrival tolerance of it, moving) [s].
+SETTLE_S = 0.15
 Points = List[Tuple[float, np.ndarray]]      # (absolute time [s], joint positions)
 
 
@@ -63,6 +68,8 @@ class Observation:
     zu12_holding: bool = False
     youbot_holding: bool = False
     detections: Sequence[Detection] = ()
+    zu12_armed: bool = False      # the grip tool is switched on (its state, as last published)
+    youbot_armed: bool = False
 
 
 @dataclass(frozen=True)
@@ -80,7 +87,11 @@ class Ports(Protocol):
               frame: str, seed: Sequence[float]) -> Tuple[Optional[np.ndarray], str]:
         """Joint positions for the tool at a pose, or (None, why). Raises NodeTimeout."""
 
-    def trajectory(self, arm: str, points: Points) -> None: ...
+    def trajectory(self, arm: str, points: Points, start: float) -> float:
+        """Send an arm motion whose first segment begins at ``start`` (points: absolute times).
+        Returns how much later than planned the port scheduled the whole motion [s]: 0 in
+        lock-step; in real time, a plan that took longer than its latency allowance starts
+        later, whole, rather than with a first segment too short for the joints' limits."""
 
     def grip(self, arm: str, on: bool) -> Tuple[bool, str]:
         """Arm (on) or release (off) the arm's gripping tool. Raises NodeTimeout."""
@@ -132,11 +143,16 @@ class Material:
 
 @dataclass
 class Motion:
-    """A planned arm motion: its points, and the times of what happens on the way."""
+    """A planned arm motion. Whether it is over is judged from joint feedback (``arrived``):
+    its end time as scheduled, and the measured joints at its goal."""
     arm: str
     points: Points
-    marks: Dict[str, float] = field(default_factory=dict)
-    done: set = field(default_factory=set)
+    start: float = math.nan       # when its first segment begins
+
+    def delay(self, seconds: float) -> None:
+        """Shift the whole motion later (the port scheduled it later than planned)."""
+        self.points = [(t + seconds, q) for t, q in self.points]
+        self.start += seconds
 
     @property
     def end(self) -> float:
@@ -145,13 +161,6 @@ class Motion:
     @property
     def goal(self) -> np.ndarray:
         return self.points[-1][1]
-
-    def due(self, mark: str, now: float) -> bool:
-        """True once when ``now`` reaches the mark's time."""
-        if mark in self.marks and mark not in self.done and now >= self.marks[mark]:
-            self.done.add(mark)
-            return True
-        return False
 
 
 @dataclass
@@ -177,23 +186,29 @@ class RunResult:
 
 
 class LoaderState(Enum):
-    """The Zu 12's states: wait for the front material at the pick point, pick it, place it,
-    retreat after a failure; home and done once loading is over."""
+    """The Zu 12's states: wait for the front material at the pick point; pick it (down onto it
+    with the cup switched on), lift it, take it down to its place, release it and rise; retreat
+    after a failure; home and done once loading is over. Each motion's end is judged from joint
+    feedback, and the next one is planned from there."""
     START = 'start'
     WAIT = 'wait'
     PICK = 'pick'
+    LIFT = 'lift'
     PLACE = 'place'
+    RISE = 'rise'
     RETREAT = 'retreat'
     HOME = 'home'
     DONE = 'done'
 
 
 class TransportState(Enum):
-    """The youBot's states: wait for its load, drive, unload one material at a time, stow the
-    arm, drive home, fold."""
+    """The youBot's states: wait for its load, drive; per material: down onto it and grip,
+    carry it over its destination, let go; then stow the arm, drive home, fold."""
     WAIT_LOAD = 'wait_load'
     DRIVE = 'drive'
-    UNLOAD = 'unload'
+    GRASP = 'grasp'
+    CARRY = 'carry'
+    RELEASE = 'release'
     STOW = 'stow'
     FOLD = 'fold'
     DONE = 'done'
@@ -204,6 +219,7 @@ class Machine:
     Every transition goes through ``enter``, which reports it as a ``state`` event."""
 
     name = ''
+    arm = ''
 
     def __init__(self, run: 'Pipeline', initial: Enum) -> None:
         self.run = run
@@ -216,45 +232,58 @@ class Machine:
         self.deadline = now + budget
         self.run.event(now, 'state', self.name, detail=state.value)
 
+    def move(self, state: Enum, obs: Observation, points: Points) -> None:
+        """Send this machine's arm a motion and enter ``state``, due by the motion's end (as
+        the port scheduled it) plus the settle margin."""
+        self.run.send(Motion(self.arm, points))
+        self.enter(state, obs.now, self.run.motions[self.arm].end - obs.now
+                   + self.run.s.settle_margin)
+
     def late(self, now: float) -> bool:
         return now > self.deadline
 
     def tick(self, obs: Observation) -> None:
         self.handlers[self.state](obs)
 
-    def motion_over(self, arm: str, obs: Observation, what: str) -> bool:
-        """Whether an arm's last motion is over: arrived, or past this state's deadline (then
-        reported as stalled)."""
-        q = obs.zu12_q if arm == 'zu12' else obs.youbot_q
-        arrived = self.run.arrived(arm, q, obs.now)
-        if arrived is None and not self.late(obs.now):
+    def arrival(self, obs: Observation) -> Optional[bool]:
+        """The arm's last motion: True once arrived, None while it may still arrive, False once
+        this state's deadline has passed without it (a stalled arm)."""
+        q = obs.zu12_q if self.arm == 'zu12' else obs.youbot_q
+        arrived = self.run.arrived(self.arm, q, obs.now)
+        if arrived is None and self.late(obs.now):
             return False
-        if not arrived:
-            self.run.event(obs.now, 'arm_stalled', arm, detail=f'{what} not reached')
-        return True
+        return arrived
+
+    def motion_over(self, obs: Observation, what: str) -> bool:
+        """Whether the arm's last motion is over: arrived, or stalled (then reported)."""
+        arrived = self.arrival(obs)
+        if arrived is False:
+            self.run.event(obs.now, 'arm_stalled', self.arm, detail=f'{what} not reached')
+        return arrived is not None
 
 
 class Loader(Machine):
     """The Zu 12: picks the front material off the belt once the belt rule has stopped it at
     the pick point; purple onto the ground target, the rest onto the youBot's plate."""
 
-    name = 'loader'
+    name, arm = 'loader', 'zu12'
 
     def __init__(self, run: 'Pipeline') -> None:
         super().__init__(run, LoaderState.START)
         self.current: Optional[Material] = None     # the material being picked or placed
         self.next_slot = 0
+        self._then: Optional[np.ndarray] = None     # the next motion's goal (lift, rise)
+        self._lift_time = 0.0
         S = LoaderState
-        self.handlers = {S.WAIT: self._wait, S.PICK: self._pick,
-                         S.PLACE: self._place, S.RETREAT: self._retreat, S.HOME: self._home,
-                         S.DONE: lambda obs: None}
+        self.handlers = {S.WAIT: self._wait, S.PICK: self._pick, S.LIFT: self._lift,
+                         S.PLACE: self._place, S.RISE: self._rise, S.RETREAT: self._retreat,
+                         S.HOME: self._home, S.DONE: lambda obs: None}
 
     @property
     def busy_with_belt(self) -> bool:
-        """The cup is on a material still on the belt (it must not move under the cup)."""
-        run = self.run
-        return (self.state is LoaderState.PICK and self.current is not None
-                and not (self.current.picked and run.arrived('zu12', run.q_now, run.now)))
+        """The cup is on a material still on the belt, or lifting it off (it must not move
+        under the cup)."""
+        return self.state in (LoaderState.PICK, LoaderState.LIFT)
 
     def start(self, obs: Observation) -> None:
         """The first observation: the arms' poses now are their home poses."""
@@ -274,8 +303,6 @@ class Loader(Machine):
             self.enter(LoaderState.HOME, now, run.motions['zu12'].end - now
                        + run.s.settle_margin)
             return
-        if run.motions['zu12'] is not None and now < run.motions['zu12'].end:
-            return                                   # still rising from the last place
         front = max(waiting, key=lambda m: run.belt_x(m, now), default=None)
         if front is None:
             return
@@ -295,6 +322,8 @@ class Loader(Machine):
         self._plan_pick(obs, front)
 
     def _plan_pick(self, obs: Observation, m: Material) -> None:
+        """Down onto the material with the cup switched on (an armed cup seals when it touches
+        its part), and stay there for the dwell; the lift is planned once the arm is there."""
         run, now, t = self.run, obs.now, self.run.s.timing
         size = run.layout.material_size
         # A second attempt presses 4 mm further down.
@@ -306,17 +335,19 @@ class Loader(Machine):
             return self._pick_failed(obs, m, 'no IK solution for the pick')
         lead = motion_duration(obs.zu12_q, q_hover, run.limits('zu12'), run.s.zu12_scaling,
                                0.5) + 0.1 + run.s.plan_latency
-        waypoints, t_arm = pick_waypoints(m.position, now, (0.0, 0.0, 0.0),
-                                          now + lead + timing.descend, size, timing)
+        waypoints, _ = pick_waypoints(m.position, now, (0.0, 0.0, 0.0),
+                                      now + lead + timing.descend, size, timing)
         points = run.solve_path('zu12', waypoints, q_hover)
         if points is None:
             return self._pick_failed(obs, m, 'no IK solution for the pick path')
-        t_contact = now + lead + timing.descend
-        run.send(Motion('zu12', points, {'arm': waypoints[1][0],
-                                         'check': t_contact + timing.dwell}))
+        ok, why = run.ports.grip('zu12', True)
+        if not ok:
+            return self._pick_failed(obs, m, f'the suction did not switch on: {why}')
+        *down, (t_lift, self._then) = points
+        self._lift_time = t_lift - down[-1][0]
         m.attempts += 1
         run.count_grasp('zu12')
-        self.enter(LoaderState.PICK, now, points[-1][0] - now + run.s.settle_margin)
+        self.move(LoaderState.PICK, obs, down)
 
     def _pick_failed(self, obs: Observation, m: Material, why: str) -> None:
         run = self.run
@@ -327,92 +358,103 @@ class Loader(Machine):
                    run.motions['zu12'].end - obs.now + run.s.settle_margin)
 
     def _pick(self, obs: Observation) -> None:
-        run, m, motion, now = self.run, self.current, self.run.motions['zu12'], obs.now
-        if motion.due('arm', now):
-            run.ports.grip('zu12', True)
-        if motion.due('check', now):
-            if obs.zu12_holding:
-                run.count_grasp('zu12', success=True)
-                m.picked = True
-                run.event(now, 'picked', 'zu12', m, f'attempt {m.attempts}')
-            else:
-                run.ports.grip('zu12', False)
-                run.event(now, 'grasp_missed', 'zu12', m, f'attempt {m.attempts}')
-                if m.attempts <= run.s.max_retries:
-                    return self._plan_pick(obs, m)
-                return self._pick_failed(obs, m, f'not held after {m.attempts} attempts')
-        if 'check' not in motion.done:
+        run, m, now = self.run, self.current, obs.now
+        arrived = self.arrival(obs)
+        if arrived is None:
             return
+        if not arrived:
+            run.ports.grip('zu12', False)
+            return self._pick_failed(obs, m, 'the arm did not reach the material')
         if not obs.zu12_holding:
             run.ports.grip('zu12', False)
+            run.event(now, 'grasp_missed', 'zu12', m, f'attempt {m.attempts}')
+            if m.attempts <= run.s.max_retries:
+                return self._plan_pick(obs, m)
+            return self._pick_failed(obs, m, f'not held after {m.attempts} attempts')
+        run.count_grasp('zu12', success=True)
+        m.picked = True
+        run.event(now, 'picked', 'zu12', m, f'attempt {m.attempts}')
+        self.move(LoaderState.LIFT, obs, [(now + run.s.plan_latency + self._lift_time,
+                                           self._then)])
+
+    def _lift(self, obs: Observation) -> None:
+        m = self.current
+        if not obs.zu12_holding:
+            self.run.ports.grip('zu12', False)
             return self._pick_failed(obs, m, 'dropped while lifting')
-        arrived = run.arrived('zu12', obs.zu12_q, now)
-        if arrived is False or self.late(now):
-            return self._pick_failed(obs, m, 'the arm did not reach the lift point')
+        arrived = self.arrival(obs)
+        if arrived is False:
+            return self._place_failed(obs, m, 'the arm did not reach the lift point')
         if arrived:
             self._plan_place(obs, m)
 
     def _plan_place(self, obs: Observation, m: Material) -> None:
+        """Above the place, then down until the material is just above it; the release and the
+        rise follow once the arm is there."""
         run, now, size = self.run, obs.now, self.run.layout.material_size
         if m.color == 'purple':
             target = run.layout.ground_target
         else:
             if self.next_slot >= len(PLATE_SLOTS_IN_BASE_M):
-                return self._pick_failed(obs, m, 'the youBot plate is full')
+                return self._place_failed(obs, m, 'the youBot plate is full')
             m.slot = self.next_slot
             self.next_slot += 1
             target = slot_in_world(obs.youbot_pose, PLATE_SLOTS_IN_BASE_M[m.slot],
                                    YOUBOT_BASE_Z_M, size)
         above = np.asarray(target) + np.array(
             [0.0, 0.0, size + run.s.timing.place_gap + run.s.timing.lift_height])
-        seed = run.motions['zu12'].goal
-        q_above = run.solve('zu12', above, DOWN, 'world', seed)
+        q_above = run.solve('zu12', above, DOWN, 'world', run.motions['zu12'].goal)
         if q_above is None:
             return self._place_failed(obs, m, 'no IK solution above the place')
         d = motion_duration(obs.zu12_q, q_above, run.limits('zu12'), run.s.zu12_scaling,
                             0.8) + run.s.plan_latency
-        waypoints, t_release = place_waypoints(now + d, target, size, run.s.timing)
-        points = run.solve_path('zu12', waypoints, q_above)
+        waypoints, _ = place_waypoints(now + d, target, size, run.s.timing)
+        points = run.solve_path('zu12', waypoints[:2], q_above)
         if points is None:
             return self._place_failed(obs, m, 'no IK solution for the place path')
-        run.send(Motion('zu12', points, {'release': t_release}))
-        self.enter(LoaderState.PLACE, now, points[-1][0] - now + run.s.settle_margin)
+        self._then = q_above
+        self.move(LoaderState.PLACE, obs, points + [(points[-1][0] + SETTLE_S,
+                                                     points[-1][1].copy())])
 
     def _place_failed(self, obs: Observation, m: Material, why: str) -> None:
         self.run.ports.grip('zu12', False)
         self._pick_failed(obs, m, why)
 
     def _place(self, obs: Observation) -> None:
-        run, m, motion, now = self.run, self.current, self.run.motions['zu12'], obs.now
-        if 'release' not in motion.done and not obs.zu12_holding:
+        run, m, now = self.run, self.current, obs.now
+        if not obs.zu12_holding:
             return self._place_failed(obs, m, 'dropped on the way to its place')
-        if motion.due('release', now):
-            ok, why = run.ports.grip('zu12', False)
-            if not ok:
-                return self._place_failed(obs, m, f'release failed: {why}')
-            if m.color == 'purple':
-                m.status = 'placed'
-                run.event(now, 'placed', 'zu12', m, 'ground target')
-            else:
-                m.status = 'on_plate'
-                run.loaded += 1
-                run.event(now, 'loaded', 'zu12', m, f'plate slot {m.slot}')
-        arrived = run.arrived('zu12', obs.zu12_q, now)
-        if arrived is False or self.late(now):
-            run.event(now, 'arm_stalled', 'zu12', m, 'did not rise from the place')
-            run.plan_home('zu12', obs, ready=True)
-            self.enter(LoaderState.RETREAT, now,
-                       run.motions['zu12'].end - now + run.s.settle_margin)
-        elif arrived:
+        arrived = self.arrival(obs)
+        if arrived is None:
+            return
+        if not arrived:
+            return self._place_failed(obs, m, 'the arm did not reach the place')
+        ok, why = run.ports.grip('zu12', False)
+        if not ok:
+            return self._place_failed(obs, m, f'release failed: {why}')
+        if m.color == 'purple':
+            m.status = 'placed'
+            run.event(now, 'placed', 'zu12', m, 'ground target')
+        else:
+            m.status = 'on_plate'
+            run.loaded += 1
+            run.event(now, 'loaded', 'zu12', m, f'plate slot {m.slot}')
+        # The cup stays still while the vacuum lets go, then rises.
+        t_rise = now + run.s.plan_latency + RELEASE_HOLD_S
+        self.move(LoaderState.RISE, obs, [(t_rise, run.motions['zu12'].goal.copy()),
+                                          (t_rise + run.s.timing.place_descend, self._then)])
+
+    def _rise(self, obs: Observation) -> None:
+        if self.motion_over(obs, 'the rise from the place'):
             self.current = None
-            self.enter(LoaderState.WAIT, now, run.s.idle_timeout)
+            self.enter(LoaderState.WAIT, obs.now, self.run.s.idle_timeout)
 
     def _retreat(self, obs: Observation) -> None:
-        if self.motion_over('zu12', obs, 'retreat'):
+        if self.motion_over(obs, 'retreat'):
             self.enter(LoaderState.WAIT, obs.now, self.run.s.idle_timeout)
 
     def _home(self, obs: Observation) -> None:
-        if self.motion_over('zu12', obs, 'home'):
+        if self.motion_over(obs, 'home'):
             self.enter(LoaderState.DONE, obs.now, math.inf)
 
 
@@ -420,16 +462,19 @@ class Transport(Machine):
     """The youBot: waits for its load, drives along Bezier paths with a PD follower, unloads
     one material at a time (orange into the pool, blue onto the platform), drives home."""
 
-    name = 'transport'
+    name, arm = 'transport', 'youbot'
 
     def __init__(self, run: 'Pipeline') -> None:
         super().__init__(run, TransportState.WAIT_LOAD)
         self.queue: List[Material] = []              # still to unload, the current one first
         self._follower: Optional[PathFollower] = None
         self._drive_goal = ''
+        self._carry: List[np.ndarray] = []           # the unload's joint positions after the grip
+        self._armed = False
         S = TransportState
         self.handlers = {S.WAIT_LOAD: self._wait_load, S.DRIVE: self._drive,
-                         S.UNLOAD: self._unload, S.STOW: self._stow, S.FOLD: self._fold,
+                         S.GRASP: self._grasp, S.CARRY: self._carry_to_drop,
+                         S.RELEASE: self._release, S.STOW: self._stow, S.FOLD: self._fold,
                          S.DONE: lambda obs: None}
 
     @property
@@ -441,13 +486,20 @@ class Transport(Machine):
         on_plate = [m for m in run.materials.values() if m.status == 'on_plate']
         loaded = len(on_plate) >= run.layout.plate_bound()
         loader = run.loader.state
-        if not (loaded or loader is LoaderState.DONE) or loader is LoaderState.PLACE:
-            return                      # (nor while the cup is still over the plate)
+        if not (loaded or loader is LoaderState.DONE) or loader in (
+                LoaderState.PLACE, LoaderState.RISE, LoaderState.HOME):
+            return      # (nor while the Zu 12's cup is over the plate, or swinging home from it)
         self.queue = sorted(on_plate, key=lambda m: (m.color == 'blue', m.slot))
         if not self.queue:
             self.enter(TransportState.DONE, obs.now, math.inf)
             return
         run.event(obs.now, 'departing', 'youbot', detail=f'{len(self.queue)} materials')
+        # The arm rises to its carry pose while the base drives: folded, it reaches down in
+        # front of the base, and its fingers would scrape the floor as the base pitches.
+        q = np.asarray(obs.youbot_q, float)
+        d = motion_duration(q, YOUBOT_CARRY_Q, run.limits('youbot'), run.s.youbot_scaling,
+                            0.5) + run.s.plan_latency
+        run.send(Motion('youbot', [(obs.now + d, YOUBOT_CARRY_Q.copy())]))
         self._drive_to(obs, self._stand_for(self.queue[0]))
 
     @staticmethod
@@ -495,15 +547,14 @@ class Transport(Machine):
             q = np.asarray(obs.youbot_q, float)
             d = motion_duration(q, YOUBOT_CARRY_Q, run.limits('youbot'),
                                 run.s.youbot_scaling, 0.5) + run.s.plan_latency
-            run.send(Motion('youbot', [(obs.now + d, YOUBOT_CARRY_Q.copy())]))
-            self.enter(TransportState.STOW, obs.now, d + run.s.settle_margin)
-            return
+            return self.move(TransportState.STOW, obs, [(obs.now + d, YOUBOT_CARRY_Q.copy())])
         m = self.queue[0]
         if self._stand_for(m) != self._drive_goal:
             return self._drive_to(obs, self._stand_for(m))
         self._plan_unload(obs, m)
 
     def _plan_unload(self, obs: Observation, m: Material) -> None:
+        """Down onto the material on the plate; the gripper closes once the arm is there."""
         run, now = self.run, obs.now
         size, t = run.layout.material_size, run.s.timing
         slot = PLATE_SLOTS_IN_BASE_M[m.slot]
@@ -527,61 +578,81 @@ class Transport(Machine):
             self.queue.pop(0)
             run.fail(now, m, 'grasp_failed', 'unload: no IK solution', 'youbot')
             return self._next_unload(obs)
-        lim, sc = run.limits('youbot'), run.s.youbot_scaling
-        t0 = now + motion_duration(obs.youbot_q, plan[0], lim, sc, 0.5) + run.s.plan_latency
-        t1 = t0 + t.descend
-        t2 = t1 + t.dwell
-        t3 = t2 + t.lift
-        t4 = t3 + motion_duration(plan[2], plan[3], lim, sc, 0.8)
-        t5 = t4 + t.place_descend
-        points = [(t0, plan[0]), (t1, plan[1]), (t2, plan[1].copy()), (t3, plan[2]),
-                  (t4, plan[3]), (t5, plan[4]), (t5 + 0.3, plan[4].copy())]
-        run.send(Motion('youbot', points, {'arm': (t0 + t1) / 2, 'check': t2,
-                                           'release': t5 + 0.1}))
+        t0 = now + motion_duration(obs.youbot_q, plan[0], run.limits('youbot'),
+                                   run.s.youbot_scaling, 0.5) + run.s.plan_latency
+        self._carry, self._armed = plan[2:], False
         m.unload_attempts += 1
         run.count_grasp('youbot')
-        self.enter(TransportState.UNLOAD, now, t5 + 0.3 - now + run.s.settle_margin)
+        self.move(TransportState.GRASP, obs, [(t0, plan[0]), (t0 + t.descend, plan[1]),
+                                              (t0 + t.descend + SETTLE_S, plan[1].copy())])
 
-    def _unload(self, obs: Observation) -> None:
-        run, m, motion, now = self.run, self.queue[0], self.run.motions['youbot'], obs.now
-        if motion.due('arm', now):
+    def _grasp(self, obs: Observation) -> None:
+        run, m, now = self.run, self.queue[0], obs.now
+        arrived = self.arrival(obs)
+        if arrived is None:
+            return
+        if not arrived:
+            return self._unload_failed(obs, m, 'grasp_failed',
+                                       'unload: the arm did not reach the material')
+        if not self._armed:
+            # Closed only now: its 20 mm reach would take a neighbour on the way down.
             run.ports.grip('youbot', True)
-        if motion.due('check', now):
-            if obs.youbot_holding:
-                run.count_grasp('youbot', success=True)
-                run.event(now, 'unload_grasped', 'youbot', m, f'attempt {m.unload_attempts}')
-            else:
-                run.ports.grip('youbot', False)
-                run.event(now, 'grasp_missed', 'youbot', m, f'attempt {m.unload_attempts}')
-                if m.unload_attempts <= run.s.max_retries:
-                    return self._plan_unload(obs, m)
-                self.queue.pop(0)
-                run.fail(now, m, 'grasp_failed', f'unload: not held after '
-                         f'{m.unload_attempts} attempts', 'youbot')
-                return self._next_unload(obs)
-        if 'check' in motion.done and 'release' not in motion.done and not obs.youbot_holding:
+            self._armed = True
+            return
+        if not obs.youbot_armed:
+            if self.late(now):
+                return self._unload_failed(obs, m, 'grasp_failed',
+                                           'unload: the gripper does not report closing')
+            return                      # (the grip state from before the gripper closed)
+        if not obs.youbot_holding:
             run.ports.grip('youbot', False)
-            self.queue.pop(0)
-            run.fail(now, m, 'failed', 'unload: dropped on the way', 'youbot')
-            return self._next_unload(obs)
-        if motion.due('release', now):
-            run.ports.grip('youbot', False)
-            m.status = 'delivered'
-            run.event(now, 'delivered', 'youbot', m, run.layout.destination(m.color))
-        arrived = run.arrived('youbot', obs.youbot_q, now)
-        if arrived is False or (arrived is None and self.late(now)):
+            run.event(now, 'grasp_missed', 'youbot', m, f'attempt {m.unload_attempts}')
+            if m.unload_attempts <= run.s.max_retries:
+                return self._plan_unload(obs, m)
+            return self._unload_failed(obs, m, 'grasp_failed', f'unload: not held after '
+                                       f'{m.unload_attempts} attempts')
+        run.count_grasp('youbot', success=True)
+        run.event(now, 'unload_grasped', 'youbot', m, f'attempt {m.unload_attempts}')
+        lim, sc, t = run.limits('youbot'), run.s.youbot_scaling, run.s.timing
+        up, over, drop = self._carry
+        t1 = now + run.s.plan_latency + t.lift
+        t2 = t1 + motion_duration(up, over, lim, sc, 0.8)
+        t3 = t2 + t.place_descend
+        self.move(TransportState.CARRY, obs, [(t1, up), (t2, over), (t3, drop),
+                                              (t3 + SETTLE_S, drop.copy())])
+
+    def _unload_failed(self, obs: Observation, m: Material, kind: str, why: str) -> None:
+        self.run.ports.grip('youbot', False)
+        self.queue.pop(0)
+        self.run.fail(obs.now, m, kind, why, 'youbot')
+        self._next_unload(obs)
+
+    def _carry_to_drop(self, obs: Observation) -> None:
+        run, m, now = self.run, self.queue[0], obs.now
+        if not obs.youbot_holding:
+            return self._unload_failed(obs, m, 'failed', 'unload: dropped on the way')
+        arrived = self.arrival(obs)
+        if arrived is None:
+            return
+        if not arrived:
             run.event(now, 'arm_stalled', 'youbot', m, 'unload motion not completed')
-            arrived = True
-        if arrived:
+        run.ports.grip('youbot', False)
+        m.status = 'delivered'
+        run.event(now, 'delivered', 'youbot', m, run.layout.destination(m.color))
+        # The arm stays still while the material falls free of the fingers.
+        self.enter(TransportState.RELEASE, now, RELEASE_HOLD_S)
+
+    def _release(self, obs: Observation) -> None:
+        if self.late(obs.now):
             self.queue.pop(0)
             self._next_unload(obs)
 
     def _stow(self, obs: Observation) -> None:
-        if self.motion_over('youbot', obs, 'carry pose'):
+        if self.motion_over(obs, 'carry pose'):
             self._drive_to(obs, 'home')
 
     def _fold(self, obs: Observation) -> None:
-        if self.motion_over('youbot', obs, 'home pose'):
+        if self.motion_over(obs, 'home pose'):
             self.enter(TransportState.DONE, obs.now, math.inf)
 
 
@@ -666,8 +737,13 @@ class Pipeline:
         self.ports.event(e)
 
     def send(self, motion: Motion) -> None:
+        """Send an arm motion planned now, its first segment starting after the plan latency
+        (the convention of every plan here); the port may schedule it later, whole."""
+        motion.start = self.now + self.s.plan_latency
+        delay = self.ports.trajectory(motion.arm, motion.points, motion.start)
+        if delay:
+            motion.delay(delay)
         self.motions[motion.arm] = motion
-        self.ports.trajectory(motion.arm, motion.points)
 
     def arrived(self, arm: str, q: np.ndarray, now: float) -> Optional[bool]:
         """After a motion's end: True when the arm is at its goal, None while it may still get
