@@ -67,7 +67,8 @@ def trials(count: int, parallel: int, out: Path, domain: int) -> dict:
     return {'trials': count, 'parallel': parallel, 'wall_seconds': wall,
             'trials_per_hour': 3600.0 * count / wall,
             'statuses': [r['status'] for r in results], 'runs': [
-                {k: r.get(k) for k in ('completion_time', 'wall_time', 'cpu_seconds')}
+                {k: r.get(k) for k in ('completion_time', 'wall_time', 'cpu_seconds',
+                                       'peak_joint_speed')}
                 for r in results]}
 
 
@@ -90,7 +91,8 @@ def main() -> int:
     cpu = run['cpu_seconds']
     figures = {
         'single_run': {'sim_seconds': run['completion_time'], 'wall_seconds': run['wall_time'],
-                       'rtf': rtf, 'cpu_seconds_by_node': cpu},
+                       'rtf': rtf, 'cpu_seconds_by_node': cpu,
+                       'peak_joint_speed': run.get('peak_joint_speed')},
         'in_process_baseline': base, 'ratio_rtf_vs_in_process': rtf / base['rtf'],
         'sequential': seq, 'parallel_2': par,
         'parallel_speedup': par['trials_per_hour'] / seq['trials_per_hour'],
@@ -98,6 +100,12 @@ def main() -> int:
     print(f'one lock-step run (seed {SEED}, belt {BELT} m/s, camera 320x240 at 15 Hz): '
           f'{run["completion_time"]:.1f} s simulated in {run["wall_time"]:.1f} s wall '
           f'(real-time factor {rtf:.2f})')
+    # Measured from the simulator's joint states (their velocities), not from the plans.
+    peak = run.get('peak_joint_speed') or {}
+    print('  largest joint speed / its limit, from the recorded joint states: ' + ', '.join(
+        f'{arm} {p["fraction_of_limit"]:.3f} ({p["joint"]})' for arm, p in sorted(peak.items()))
+        + ('' if all(p['fraction_of_limit'] <= 1.0 for p in peak.values()) else
+           '  ABOVE THE LIMIT'))
     print('  CPU seconds by node (the coordinator exits first): ' + ', '.join(
         f'{k} {v:.1f}' for k, v in sorted(cpu.items(), key=lambda kv: -kv[1])
         if not math.isnan(v)))

@@ -199,11 +199,13 @@ class CoordinatorNode(Node):
             self.get_logger().warn(f'/{arm}/joint_states without the arm joints ignored',
                                    throttle_duration_sec=5.0)
             return
+        velocity = (np.array([msg.velocity[index[n]] for n in names])
+                    if len(msg.velocity) == len(msg.name) else None)
         with self._lock:
             self._joints[arm] = (_ns(msg.header.stamp),
-                                 np.array([msg.position[index[n]] for n in names]))
-            if len(msg.velocity) == len(msg.name):
-                self._peak[arm].update([msg.velocity[index[n]] for n in names])
+                                 np.array([msg.position[index[n]] for n in names]), velocity)
+            if velocity is not None:
+                self._peak[arm].update(velocity)
             self._lock.notify_all()
 
     def _on_grip(self, arm: str, msg: GripState) -> None:
@@ -428,7 +430,7 @@ class CoordinatorNode(Node):
 
     def _wait_states(self, stamp_ns: int, first: bool = False) -> None:
         def ready() -> bool:
-            stamps = [s for s, _ in self._joints.values()] + [g[0] for g in self._grip.values()]
+            stamps = [j[0] for j in self._joints.values()] + [g[0] for g in self._grip.values()]
             stamps += [self._odom[0]] if self._odom else []
             if len(stamps) < 5:
                 return False
@@ -436,7 +438,7 @@ class CoordinatorNode(Node):
                 all(s == stamp_ns for s in stamps)
         with self._lock:
             if not self._lock.wait_for(ready, timeout=self.service_timeout):
-                have = {**{f'{a} joints': s for a, (s, _) in self._joints.items()},
+                have = {**{f'{a} joints': j[0] for a, j in self._joints.items()},
                         **{f'{a} grip': g[0] for a, g in self._grip.items()},
                         'odom': self._odom[0] if self._odom else None}
                 raise NodeTimeout(f'no states from the simulator for t = {stamp_ns * 1e-9:.3f} s'
@@ -470,7 +472,8 @@ class CoordinatorNode(Node):
                 youbot_q=self._joints['youbot'][1], youbot_pose=odom[1],
                 youbot_velocity=odom[2], zu12_holding=self._grip['zu12'][1],
                 youbot_holding=self._grip['youbot'][1], detections=dets,
-                zu12_armed=self._grip['zu12'][2], youbot_armed=self._grip['youbot'][2])
+                zu12_armed=self._grip['zu12'][2], youbot_armed=self._grip['youbot'][2],
+                zu12_dq=self._joints['zu12'][2], youbot_dq=self._joints['youbot'][2])
 
     # --- the end ------------------------------------------------------------------------------
     def _final_truth(self) -> list:

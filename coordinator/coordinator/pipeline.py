@@ -70,6 +70,8 @@ class Observation:
     detections: Sequence[Detection] = ()
     zu12_armed: bool = False      # the grip tool is switched on (its state, as last published)
     youbot_armed: bool = False
+    zu12_dq: Optional[np.ndarray] = None       # measured joint velocities, if known
+    youbot_dq: Optional[np.ndarray] = None
 
 
 @dataclass(frozen=True)
@@ -113,6 +115,7 @@ class Settings:
     zu12_scaling: float = 1.0         # fraction of the Zu 12's joint speed limits
     youbot_scaling: float = 1.0
     arrive_tolerance: float = 0.03    # joint error [rad] that counts as arrived
+    rest_speed: float = 0.05          # joint speed [rad/s] below which an arm is at rest
     settle_margin: float = 2.0        # a motion may end this late before it is a failure [s]
     drive_margin: float = 15.0        # a drive may end this late [s]
     idle_timeout: float = 20.0        # belt running, nothing new to pick: loading is over [s]
@@ -248,8 +251,9 @@ class Machine:
     def arrival(self, obs: Observation) -> Optional[bool]:
         """The arm's last motion: True once arrived, None while it may still arrive, False once
         this state's deadline has passed without it (a stalled arm)."""
-        q = obs.zu12_q if self.arm == 'zu12' else obs.youbot_q
-        arrived = self.run.arrived(self.arm, q, obs.now)
+        q, dq = ((obs.zu12_q, obs.zu12_dq) if self.arm == 'zu12' else
+                 (obs.youbot_q, obs.youbot_dq))
+        arrived = self.run.arrived(self.arm, q, obs.now, dq)
         if arrived is None and self.late(obs.now):
             return False
         return arrived
@@ -745,13 +749,17 @@ class Pipeline:
             motion.delay(delay)
         self.motions[motion.arm] = motion
 
-    def arrived(self, arm: str, q: np.ndarray, now: float) -> Optional[bool]:
-        """After a motion's end: True when the arm is at its goal, None while it may still get
-        there, False once it is later than the settle margin (a stalled arm)."""
+    def arrived(self, arm: str, q: np.ndarray, now: float,
+                dq: Optional[np.ndarray] = None) -> Optional[bool]:
+        """After a motion's end: True when the arm is at its goal and at rest (``dq``, the
+        measured joint velocities, if known), None while it may still get there, False once it
+        is later than the settle margin (a stalled arm). At rest matters when the simulator took
+        the motion in late: at its planned end the arm is then still moving, near its goal."""
         motion = self.motions[arm]
         if motion is None or now < motion.end:
             return None
-        if float(np.max(np.abs(q - motion.goal))) <= self.s.arrive_tolerance:
+        if (float(np.max(np.abs(q - motion.goal))) <= self.s.arrive_tolerance
+                and (dq is None or float(np.max(np.abs(dq))) <= self.s.rest_speed)):
             return True
         return False if now > motion.end + self.s.settle_margin else None
 

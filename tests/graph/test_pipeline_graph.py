@@ -40,6 +40,10 @@ def test_a_lock_step_run_delivers_every_material(two_runs):
     assert kinds.index('departing') < kinds.index('delivered')
     assert kinds[-1] == 'finished'
     assert 20.0 < r['completion_time'] < 300.0
+    # Every joint within its velocity limit, as the simulator's joint states report it.
+    peaks = {arm: p['fraction_of_limit'] for arm, p in r['peak_joint_speed'].items()}
+    assert set(peaks) == {'zu12', 'youbot'} and all(0.5 < f <= 1.0 for f in peaks.values()), \
+        r['peak_joint_speed']
     path = r['youbot_path']
     assert max(p[0] for p in path) > 1.6                      # reached the pool
     assert abs(path[-1][0] - 0.6) < 0.03 and abs(path[-1][1] + 0.55) < 0.03

@@ -27,7 +27,8 @@ class FakeCell:
                  grasp_failures: Dict[int, int] = None, unreachable=lambda arm, p: False,
                  stall: bool = False, blind: bool = False, timeout_on: str = '',
                  drop_on_transfer: int = -1, drive_works: bool = True,
-                 belt_latency: float = 0.0, send_lag: float = 0.0) -> None:
+                 belt_latency: float = 0.0, send_lag: float = 0.0,
+                 taken_late: float = 0.0) -> None:
         self.layout = layout
         self.now = 0.0
         self.belt_speed = 0.0
@@ -52,6 +53,11 @@ class FakeCell:
         # The real-time port: the plan took this much longer than its allowance, so every
         # motion starts this much later than planned.
         self.send_lag = send_lag
+        # The simulator took each motion in this late: at the end the port reported, the arm is
+        # near its goal but still moving, for this long.
+        self.taken_late = taken_late
+        self.moving = {'zu12': False, 'youbot': False}
+        self.grips_while_moving: List[tuple] = []
         self.trajectories: List[tuple] = []
         self.final_x: Dict[int, float] = {}          # where each material was when lifted
         self.events = []
@@ -79,6 +85,8 @@ class FakeCell:
     def grip(self, arm, on):
         if self.timeout_on == 'grip':
             raise NodeTimeout('/zu12/suction did not answer')
+        if self.moving[arm]:
+            self.grips_while_moving.append((arm, on, self.now))
         self.armed[arm], self.sealed[arm] = on, False
         if not on:
             self.holding[arm] = False
@@ -110,6 +118,8 @@ class FakeCell:
             t_end, goal = self.goal[arm]
             if self.now >= t_end and not self.stall:
                 self.q[arm] = goal.copy()
+            self.moving[arm] = t_end <= self.now < t_end + self.taken_late
+            t_end += self.taken_late
             # An armed tool seals once the arm is at rest at its goal (on the part).
             if (self.armed[arm] and not self.sealed[arm] and self.now >= t_end
                     and not self.stall):
@@ -141,7 +151,9 @@ class FakeCell:
         return Observation(self.now, self.q['zu12'].copy(), self.q['youbot'].copy(),
                            tuple(self.pose), world_v, self.holding['zu12'],
                            self.holding['youbot'], dets, zu12_armed=self.armed['zu12'],
-                           youbot_armed=self.armed['youbot'])
+                           youbot_armed=self.armed['youbot'],
+                           zu12_dq=np.full(6, 0.5 if self.moving['zu12'] else 0.0),
+                           youbot_dq=np.full(5, 0.5 if self.moving['youbot'] else 0.0))
 
     def _material_for(self, arm):
         p = self.pipeline
@@ -423,3 +435,14 @@ def test_the_youbot_closes_its_gripper_only_at_the_material():
     p = run(cell, Settings(idle_timeout=3.0))
     assert p.result.delivered == 3
     assert len(closes) == 2 and all(at_rest for _, at_rest in closes)
+
+
+def test_an_arm_still_moving_near_its_goal_has_not_arrived():
+    # The simulator took each motion in 0.4 s late: at the end the plan gives, the arm is within
+    # the arrival tolerance of its goal but still moving. Nothing grips or lets go until it is
+    # at rest there (a blue released while the arm still moved slid off the platform).
+    cell = FakeCell(cell_layout(), PAPER, taken_late=0.4)
+    p = run(cell)
+    assert p.result.status == 'completed', p.result
+    assert p.result.grasp_attempts == p.result.grasp_successes == 15
+    assert cell.grips_while_moving == []
