@@ -20,6 +20,10 @@ THETA_SIGN = np.array([1.0, -1.0, -1.0, -1.0, 1.0])
 THETA_OFFSET_RAD = np.radians([0.0, 90.0, 0.0, -90.0, 0.0])
 # Velocity limit of every joint [rad/s].
 JOINT_VELOCITY_LIMIT = math.pi / 2
+# Acceleration and jerk limits: not in the datasheet. Assumed, and what the simulated joints
+# follow without lagging [rad/s^2, rad/s^3].
+JOINT_ACCELERATION_LIMIT = 6.0
+JOINT_JERK_LIMIT = 60.0
 # The robot description's joints use the datasheet angles (zero at the candle, positive as in
 # the datasheet); its names, and where the table's frame 0 sits on base_link [m].
 JOINT_NAMES = tuple(f'arm_joint_{i}' for i in range(1, 6))

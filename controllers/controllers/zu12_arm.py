@@ -17,6 +17,11 @@ JOINT_SPEED_LIMITS_DEG_S = (120.0, 120.0, 120.0, 180.0, 180.0, 180.0)
 JOINT_NAMES = tuple(f'joint_{i}' for i in range(1, 7))
 # The description's joint positions are the table's theta (no offsets, same signs).
 JOINT_VELOCITY_LIMITS = tuple(math.radians(v) for v in JOINT_SPEED_LIMITS_DEG_S)
+# Acceleration and jerk limits: not published by JAKA. Assumed, of the order of other 10-12 kg
+# cobots' (about 4x the speed limit per second; jerk 10x that), and what the simulated joints
+# follow without lagging [rad/s^2, rad/s^3].
+JOINT_ACCELERATION_LIMITS = (8.0, 8.0, 8.0, 12.0, 12.0, 12.0)
+JOINT_JERK_LIMITS = (80.0, 80.0, 80.0, 120.0, 120.0, 120.0)
 # The suction tool's contact point on the flange's z axis [m].
 SUCTION_TCP_OFFSET_M = 0.1
 

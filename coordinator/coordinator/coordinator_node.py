@@ -91,7 +91,7 @@ class CoordinatorNode(Node):
             'The belt stops when the front material reaches this x [m]', -1.0, 1.0))
         self.declare_parameter('max_retries', 1, ro(
             description='Extra grasp attempts after a missed grasp', read_only=True))
-        self.declare_parameter('drive_speed', 0.4, rng("The path dummy's speed [m/s]",
+        self.declare_parameter('drive_speed', 0.6, rng("The path dummy's speed [m/s]",
                                                        0.05, 0.8))
         self.declare_parameter('run_timeout', 300.0, rng('Longest run [s of sim time]',
                                                          10.0, 3600.0))
@@ -282,11 +282,15 @@ class CoordinatorNode(Node):
         start_ns = round((start + delay) * 1e9)
         msg = JointTrajectory(joint_names=list(ARMS[arm]))
         msg.header.stamp.sec, msg.header.stamp.nanosec = divmod(start_ns, 1_000_000_000)
-        for t, q in points:
+        for t, q, *rates in points:
             ns = max(1, round((t + delay) * 1e9) - start_ns)
-            msg.points.append(JointTrajectoryPoint(
+            point = JointTrajectoryPoint(
                 positions=[float(v) for v in q],
-                time_from_start=Duration(sec=ns // 1_000_000_000, nanosec=ns % 1_000_000_000)))
+                time_from_start=Duration(sec=ns // 1_000_000_000, nanosec=ns % 1_000_000_000))
+            if rates:       # the plan's velocities and accelerations: followed exactly
+                point.velocities = [float(v) for v in rates[0]]
+                point.accelerations = [float(v) for v in rates[1]]
+            msg.points.append(point)
         self.traj_pubs[arm].publish(msg)
         self._commands.sent()
         if delay > 0.0:

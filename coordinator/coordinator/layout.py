@@ -27,24 +27,37 @@ class LayoutError(ValueError):
 
 
 @dataclass(frozen=True)
+class UnloadStand:
+    """Where the youBot stands, side-on to the pool, to unload one row of its plate: the arm
+    turns only a quarter of the way round between that row and the pool (the far row would take
+    it the long way round the front, as joint 1 cannot pass straight back)."""
+    name: str
+    pose: Pose2D
+    row: int                            # the plate row unloaded here: +1 left (y > 0), -1 right
+    drops: Tuple[np.ndarray, ...]       # release points of pool materials, one each (world)
+    platform: bool = False              # the platform's place is in reach from here
+
+
+@dataclass(frozen=True)
 class CellLayout:
     belt_y: float                       # the belt's centre line (world y) [m]
     belt_top: float                     # its top surface (world z) [m]
     belt_end_x: float                   # where materials fall off [m]
     belt_speed: float                   # nominal carrying speed [m/s]
+    belt_width: float                   # [m]
     material_size: float                # cube edge [m]
     manifest: Dict[str, int]            # materials per colour in the batch
     ground_target: np.ndarray           # purple materials: a point on the floor (world)
     youbot_home: Pose2D                 # the youBot's start (and loading) pose
     zu12_base: Tuple[float, float, float, float]   # x, y, z, yaw
-    pool_drops: List[np.ndarray] = field(default_factory=list)  # orange: release points (world)
     platform_place: np.ndarray = field(default_factory=lambda: np.zeros(3))  # blue: surface
-    # Where the youBot stands to unload into the pool and onto the platform, and the key
-    # points of its paths there and back.
-    pool_stand: Pose2D = (0.0, 0.0, 0.0)
-    platform_stand: Pose2D = (0.0, 0.0, 0.0)
-    via_out: Tuple[Tuple[float, float], ...] = ()
-    via_back: Tuple[Tuple[float, float], ...] = ()
+    # Where the youBot stands to unload (the right row, then the left row and the platform),
+    # and the key poses of its paths: out, between the stands (it turns about clear of the
+    # pool's wall), and back.
+    stands: Tuple[UnloadStand, ...] = ()
+    via_out: Tuple[Tuple[float, ...], ...] = ()
+    via_turn: Tuple[Tuple[float, ...], ...] = ()
+    via_back: Tuple[Tuple[float, ...], ...] = ()
 
     @property
     def total(self) -> int:
@@ -53,6 +66,26 @@ class CellLayout:
     def plate_bound(self) -> int:
         """Materials the Zu 12 puts on the youBot (all but purple)."""
         return sum(n for color, n in self.manifest.items() if color != 'purple')
+
+    def stand(self, name: str) -> UnloadStand:
+        return next(st for st in self.stands if st.name == name)
+
+    def stand_for(self, color: str, slot: int) -> UnloadStand:
+        """Where a material on plate slot ``slot`` is unloaded: the platform's stand for blue,
+        otherwise the stand of the slot's row."""
+        if self.destination(color) == 'platform':
+            return next(st for st in self.stands if st.platform)
+        row = 1 if PLATE_SLOTS_IN_BASE_M[slot][1] > 0.0 else -1
+        return next(st for st in self.stands if st.row == row)
+
+    def slot_order(self, color: str) -> List[int]:
+        """The plate slots in the order the Zu 12 fills them for a material of ``color``: the
+        row unloaded where it goes first (blue: the platform's row; pool materials: the first
+        stand's row), the near slots first."""
+        first = (next(st for st in self.stands if st.platform).row
+                 if self.destination(color) == 'platform' else self.stands[0].row)
+        return sorted(range(len(PLATE_SLOTS_IN_BASE_M)), key=lambda k: (
+            (1 if PLATE_SLOTS_IN_BASE_M[k][1] > 0.0 else -1) != first, k))
 
     def destination(self, color: str) -> str:
         return {'purple': 'ground_target', 'orange': 'pool', 'blue': 'platform'}.get(
@@ -96,26 +129,36 @@ def layout_from_world(world) -> CellLayout:
     pool, platform = named['pool_floor'], named['pool_platform']
     px, py = pool.position[0], pool.position[1]
     half = min(pool.size[0], pool.size[1]) / 2
-    # The youBot stands west of the pool, facing it; it drops oranges over the west wall, each
-    # at its own spot (two rows of three, 8-10 cm apart: a cube dropped onto another can tumble
-    # back over the wall), and sets the blue down on the platform's near (west) half.
-    stand_x = px - half - 0.38
-    pool_stand = (stand_x, py - 0.1, 0.0)
-    drops = [np.array([px - half + dx, py - 0.1 + dy, 0.2]) for dx in (0.08, 0.16)
-             for dy in (0.0, 0.1, -0.1)]
+    # The youBot unloads from two stands west of the pool, side-on to it (Mecanum: it can stand
+    # any way round): facing south (the pool on its left, the platform ahead on the left) for
+    # the left row of its plate and the platform, then facing north (the pool on its right) for
+    # the right row. Its side (0.18 m from base_link) stays 5 cm off the pool's west wall. Each
+    # orange has its own drop spot, 7-15 cm inside the wall and 10 cm from the next: a cube
+    # dropped onto another can tumble back over the wall.
+    wall_x = px - half
+    side_x = wall_x - 0.25
     top = platform.position[2] + platform.size[2] / 2
     place = np.array([platform.position[0] - platform.size[0] / 2 + 0.05, platform.position[1],
                       top])
-    # Its front (0.285 m ahead of base_link) stays west of the pool's west wall on the way.
-    platform_stand = (place[0] - 0.475, platform.position[1], 0.0)
+    right = UnloadStand('pool_right', (side_x, py + 0.05, math.pi / 2), -1, tuple(
+        np.array([wall_x + dx, py + dy, 0.2]) for dx, dy in
+        ((0.07, 0.18), (0.07, 0.08), (0.15, 0.13), (0.07, -0.02))))
+    left = UnloadStand('pool_left', (side_x, py - 0.3, -math.pi / 2), 1, tuple(
+        np.array([wall_x + dx, py + dy, 0.2]) for dx, dy in
+        ((0.07, -0.22), (0.07, -0.15), (0.15, -0.2), (0.15, -0.12))), platform=True)
     home = (yb.x, yb.y, yb.yaw)
     return CellLayout(
         belt_y=conv.position[1], belt_top=conv.position[2],
         belt_end_x=conv.position[0] + conv.length / 2, belt_speed=conv.belt_speed,
+        belt_width=conv.width,
         material_size=size, manifest=dict(world.materials.counts),
         ground_target=np.array([named['ground_target'].position[0],
                                 named['ground_target'].position[1], 0.0]),
-        youbot_home=home, zu12_base=(zu.x, zu.y, zu.z, zu.yaw), pool_drops=drops,
-        platform_place=place, pool_stand=pool_stand, platform_stand=platform_stand,
-        via_out=((0.5 * (home[0] + stand_x), 0.5 * (home[1] + pool_stand[1]) + 0.1),),
-        via_back=((0.5 * (home[0] + stand_x), 0.5 * (home[1] + platform_stand[1])),))
+        youbot_home=home, zu12_base=(zu.x, zu.y, zu.z, zu.yaw), platform_place=place,
+        stands=(left, right),
+        # Out: down to the first stand from the north, facing south as it parks; between the
+        # stands it turns about 0.2 m off the wall (its corners sweep 0.34 m about base_link);
+        # back home it turns round on the way.
+        via_out=((side_x - 0.05, py + 0.55, -math.pi / 2),),
+        via_turn=((side_x - 0.2, py - 0.12, 0.0),),
+        via_back=((0.5 * (home[0] + side_x), 0.5 * (home[1] + right.pose[1]), 0.0),))

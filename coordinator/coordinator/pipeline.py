@@ -21,14 +21,13 @@ from typing import Callable, Dict, List, Optional, Protocol, Sequence, Tuple
 
 import numpy as np
 
-from controllers.arm_kinematics import motion_duration
-from controllers.bezier import BezierPath, Pose2D, key_poses_between
-from controllers.path_follower import PathFollower
-from controllers.pick_place import PickTiming, pick_waypoints, place_waypoints
+from controllers.bezier import BezierPath, Pose2D, key_poses_between, wrap_angle
+from controllers.path_follower import PDGains, PathFollower
+from controllers.pick_place import PickTiming
+from controllers.time_optimal import SAMPLE_PERIOD_S, JointLimits, Waypoint, plan
 from controllers.transforms import matrix_to_quaternion
 from controllers.youbot_arm import ARM_BASE_IN_BASE_LINK_M
-from controllers.youbot_arm import JOINT_VELOCITY_LIMIT as YOUBOT_JOINT_VELOCITY_LIMIT
-from controllers.zu12_arm import JOINT_VELOCITY_LIMITS as ZU12_VELOCITY_LIMITS
+from controllers import youbot_arm, zu12_arm
 from coordinator.layout import (PLATE_SLOTS_IN_BASE_M, PLATE_TOP_IN_BASE_M, CellLayout,
                                 slot_in_world, world_to_base)
 
@@ -42,7 +41,8 @@ RELEASE_HOLD_S = 0.2
 # A motion that ends where the tool grips or lets go holds its goal this long, so that the arm
 # has settled there (not still within the arrival tolerance of it, moving) [s].
 SETTLE_S = 0.15
-Points = List[Tuple[float, np.ndarray]]      # (absolute time [s], joint positions)
+# (absolute time [s], joint positions[, velocities, accelerations])
+Points = List[Tuple[float, np.ndarray]]
 
 
 class NodeTimeout(RuntimeError):
@@ -120,12 +120,19 @@ class Settings:
     drive_margin: float = 15.0        # a drive may end this late [s]
     idle_timeout: float = 20.0        # belt running, nothing new to pick: loading is over [s]
     run_timeout: float = 300.0        # the whole run [s]
-    drive_speed: float = 0.4          # the dummy's speed along a path [m/s]
+    drive_speed: float = 0.6          # the dummy's speed along a path [m/s]
+    drive_turn: float = 1.0           # its heading's average turn rate, at most [rad/s]
+    # The follower's command limits, within the youBot's (0.8 m/s each of vx, vy; 1.5 rad/s).
+    base_max_speed: float = 0.75
+    base_max_turn: float = 1.4
     # A motion starts this much later than planned-for "now" (real time: the plan's IK calls
     # and the message's trip; a late first segment would be too fast and rejected) [s].
     plan_latency: float = 0.0
-    drive_accel: float = 0.4
-    timing: PickTiming = PickTiming()
+    drive_accel: float = 0.6
+    # The shortest times of the moves near a material (the time-optimal plan may take longer):
+    # gentle enough that the cup and the fingers do not knock it.
+    timing: PickTiming = PickTiming(hover=0.06, descend=0.3, dwell=0.15, lift=0.3,
+                                    lift_height=0.12, place_descend=0.3)
 
 
 @dataclass
@@ -154,7 +161,7 @@ class Motion:
 
     def delay(self, seconds: float) -> None:
         """Shift the whole motion later (the port scheduled it later than planned)."""
-        self.points = [(t + seconds, q) for t, q in self.points]
+        self.points = [(t + seconds, *rest) for t, *rest in self.points]
         self.start += seconds
 
     @property
@@ -196,7 +203,6 @@ class LoaderState(Enum):
     START = 'start'
     WAIT = 'wait'
     PICK = 'pick'
-    LIFT = 'lift'
     PLACE = 'place'
     RISE = 'rise'
     RETREAT = 'retreat'
@@ -275,25 +281,31 @@ class Loader(Machine):
     def __init__(self, run: 'Pipeline') -> None:
         super().__init__(run, LoaderState.START)
         self.current: Optional[Material] = None     # the material being picked or placed
-        self.next_slot = 0
         self._then: Optional[np.ndarray] = None     # the next motion's goal (lift, rise)
-        self._lift_time = 0.0
+        self._clear_at = math.inf                   # when the held material is off the belt
+        self._ready: Optional[np.ndarray] = None    # the cup over the pick point
         S = LoaderState
-        self.handlers = {S.WAIT: self._wait, S.PICK: self._pick, S.LIFT: self._lift,
-                         S.PLACE: self._place, S.RISE: self._rise, S.RETREAT: self._retreat,
+        self.handlers = {S.WAIT: self._wait, S.PICK: self._pick, S.PLACE: self._place, S.RISE: self._rise, S.RETREAT: self._retreat,
                          S.HOME: self._home, S.DONE: lambda obs: None}
 
-    @property
-    def busy_with_belt(self) -> bool:
+    def busy_with_belt(self, now: float) -> bool:
         """The cup is on a material still on the belt, or lifting it off (it must not move
         under the cup)."""
-        return self.state in (LoaderState.PICK, LoaderState.LIFT)
+        return self.state is LoaderState.PICK or (self.state is LoaderState.PLACE
+                                                  and now < self._clear_at)
 
     def start(self, obs: Observation) -> None:
         """The first observation: the arms' poses now are their home poses."""
-        self.run.home_q = {'zu12': np.array(obs.zu12_q, float),
-                           'youbot': np.array(obs.youbot_q, float)}
-        self.enter(LoaderState.WAIT, obs.now, self.run.s.idle_timeout)
+        run = self.run
+        run.home_q = {'zu12': np.array(obs.zu12_q, float),
+                      'youbot': np.array(obs.youbot_q, float)}
+        # Where the cup waits after each place: over the pick point, the hover height above a
+        # material's top face, so that the next pick only goes down.
+        lay, t = run.layout, run.s.timing
+        self._ready = run.solve('zu12', (run.s.pick_x, lay.belt_y, lay.belt_top
+                                         + lay.material_size + t.hover), DOWN, 'world',
+                                run.home_q['zu12'])
+        self.enter(LoaderState.WAIT, obs.now, run.s.idle_timeout)
 
     def _wait(self, obs: Observation) -> None:
         run, now = self.run, obs.now
@@ -326,32 +338,28 @@ class Loader(Machine):
         self._plan_pick(obs, front)
 
     def _plan_pick(self, obs: Observation, m: Material) -> None:
-        """Down onto the material with the cup switched on (an armed cup seals when it touches
-        its part), and stay there for the dwell; the lift is planned once the arm is there."""
-        run, now, t = self.run, obs.now, self.run.s.timing
+        """Through the hover point down onto the material with the cup switched on (an armed
+        cup seals when it touches its part), and stay there for the dwell; once the arm is there
+        and holds it, one motion lifts it and takes it to its place."""
+        run, t = self.run, self.run.s.timing
         size = run.layout.material_size
         # A second attempt presses 4 mm further down.
         timing = PickTiming(**{**t.__dict__, 'contact_gap': t.contact_gap - 0.004 * m.attempts})
-        seed = run.home_q['zu12']
-        hover = m.position + np.array([0.0, 0.0, size / 2 + timing.hover])
-        q_hover = run.solve('zu12', hover, DOWN, 'world', seed)
-        if q_hover is None:
-            return self._pick_failed(obs, m, 'no IK solution for the pick')
-        lead = motion_duration(obs.zu12_q, q_hover, run.limits('zu12'), run.s.zu12_scaling,
-                               0.5) + 0.1 + run.s.plan_latency
-        waypoints, _ = pick_waypoints(m.position, now, (0.0, 0.0, 0.0),
-                                      now + lead + timing.descend, size, timing)
-        points = run.solve_path('zu12', waypoints, q_hover)
-        if points is None:
+        top = m.position + np.array([0.0, 0.0, size / 2 + timing.contact_gap])
+        path = [top + np.array([0.0, 0.0, timing.hover]), top,
+                top + np.array([0.0, 0.0, timing.lift_height])]
+        qs = run.solve_path('zu12', path, run.home_q['zu12'])
+        if qs is None:
             return self._pick_failed(obs, m, 'no IK solution for the pick path')
         ok, why = run.ports.grip('zu12', True)
         if not ok:
             return self._pick_failed(obs, m, f'the suction did not switch on: {why}')
-        *down, (t_lift, self._then) = points
-        self._lift_time = t_lift - down[-1][0]
+        q_hover, q_contact, self._then = qs
         m.attempts += 1
         run.count_grasp('zu12')
-        self.move(LoaderState.PICK, obs, down)
+        self.move(LoaderState.PICK, obs, run.plan('zu12', obs.zu12_q, [
+            Waypoint(q_hover, stop=False),
+            Waypoint(q_contact, hold=timing.dwell, min_time=timing.descend)]))
 
     def _pick_failed(self, obs: Observation, m: Material, why: str) -> None:
         run = self.run
@@ -378,47 +386,43 @@ class Loader(Machine):
         run.count_grasp('zu12', success=True)
         m.picked = True
         run.event(now, 'picked', 'zu12', m, f'attempt {m.attempts}')
-        self.move(LoaderState.LIFT, obs, [(now + run.s.plan_latency + self._lift_time,
-                                           self._then)])
-
-    def _lift(self, obs: Observation) -> None:
-        m = self.current
-        if not obs.zu12_holding:
-            self.run.ports.grip('zu12', False)
-            return self._pick_failed(obs, m, 'dropped while lifting')
-        arrived = self.arrival(obs)
-        if arrived is False:
-            return self._place_failed(obs, m, 'the arm did not reach the lift point')
-        if arrived:
-            self._plan_place(obs, m)
+        self._plan_place(obs, m)
 
     def _plan_place(self, obs: Observation, m: Material) -> None:
-        """Above the place, then down until the material is just above it; the release and the
-        rise follow once the arm is there."""
-        run, now, size = self.run, obs.now, self.run.layout.material_size
+        """Straight up off the belt, over to above the place and down until the material is
+        just above it, in one motion that passes through the lift and the above points; the
+        release and the rise follow once the arm is there. The material is off the belt once
+        the lift point is passed (``busy_with_belt``)."""
+        run, size = self.run, self.run.layout.material_size
         if m.color == 'purple':
             target = run.layout.ground_target
         else:
-            if self.next_slot >= len(PLATE_SLOTS_IN_BASE_M):
+            taken = {x.slot for x in run.materials.values() if x.slot >= 0}
+            free = [k for k in run.layout.slot_order(m.color) if k not in taken]
+            if not free:
                 return self._place_failed(obs, m, 'the youBot plate is full')
-            m.slot = self.next_slot
-            self.next_slot += 1
+            m.slot = free[0]
             target = slot_in_world(obs.youbot_pose, PLATE_SLOTS_IN_BASE_M[m.slot],
                                    YOUBOT_BASE_Z_M, size)
-        above = np.asarray(target) + np.array(
-            [0.0, 0.0, size + run.s.timing.place_gap + run.s.timing.lift_height])
-        q_above = run.solve('zu12', above, DOWN, 'world', run.motions['zu12'].goal)
-        if q_above is None:
-            return self._place_failed(obs, m, 'no IK solution above the place')
-        d = motion_duration(obs.zu12_q, q_above, run.limits('zu12'), run.s.zu12_scaling,
-                            0.8) + run.s.plan_latency
-        waypoints, _ = place_waypoints(now + d, target, size, run.s.timing)
-        points = run.solve_path('zu12', waypoints[:2], q_above)
-        if points is None:
+        t = run.s.timing
+        release = np.asarray(target, float) + np.array([0.0, 0.0, size + t.place_gap])
+        above = release + np.array([0.0, 0.0, t.lift_height])
+        # Over to the place at the lift's height, clear of the belt (a joint-space move straight
+        # from the lift down to a place lower than the belt would sweep the held material
+        # through the belt's side), then down.
+        transfer = release.copy()
+        transfer[2] = max(above[2], run.layout.belt_top + 2 * size + t.lift_height)
+        qs = run.solve_path('zu12', [transfer, above, release], run.motions['zu12'].goal)
+        if qs is None:
             return self._place_failed(obs, m, 'no IK solution for the place path')
-        self._then = q_above
-        self.move(LoaderState.PLACE, obs, points + [(points[-1][0] + SETTLE_S,
-                                                     points[-1][1].copy())])
+        q_lift, (q_transfer, q_above, q_release) = self._then, qs
+        self._then = q_transfer       # where it rises to after the release
+        points = run.plan('zu12', obs.zu12_q, [
+            Waypoint(q_lift, stop=False, min_time=t.lift), Waypoint(q_transfer, stop=False),
+            Waypoint(q_above, stop=False),
+            Waypoint(q_release, hold=SETTLE_S, min_time=t.place_descend)])
+        self.move(LoaderState.PLACE, obs, points)
+        self._clear_at = run.arrival_time('zu12', q_lift)
 
     def _place_failed(self, obs: Observation, m: Material, why: str) -> None:
         self.run.ports.grip('zu12', False)
@@ -443,10 +447,12 @@ class Loader(Machine):
             m.status = 'on_plate'
             run.loaded += 1
             run.event(now, 'loaded', 'zu12', m, f'plate slot {m.slot}')
-        # The cup stays still while the vacuum lets go, then rises.
-        t_rise = now + run.s.plan_latency + RELEASE_HOLD_S
-        self.move(LoaderState.RISE, obs, [(t_rise, run.motions['zu12'].goal.copy()),
-                                          (t_rise + run.s.timing.place_descend, self._then)])
+        # The cup stays still while the vacuum lets go, rises and waits over the pick point.
+        rise = [Waypoint(self._then, stop=self._ready is None,
+                         min_time=run.s.timing.place_descend)]
+        if self._ready is not None:
+            rise.append(Waypoint(self._ready))
+        self.move(LoaderState.RISE, obs, run.plan('zu12', obs.zu12_q, rise, RELEASE_HOLD_S))
 
     def _rise(self, obs: Observation) -> None:
         if self.motion_over(obs, 'the rise from the place'):
@@ -475,6 +481,7 @@ class Transport(Machine):
         self._drive_goal = ''
         self._carry: List[np.ndarray] = []           # the unload's joint positions after the grip
         self._armed = False
+        self._dropped: Dict[str, int] = {}             # pool drops made, per stand
         S = TransportState
         self.handlers = {S.WAIT_LOAD: self._wait_load, S.DRIVE: self._drive,
                          S.GRASP: self._grasp, S.CARRY: self._carry_to_drop,
@@ -493,34 +500,43 @@ class Transport(Machine):
         if not (loaded or loader is LoaderState.DONE) or loader in (
                 LoaderState.PLACE, LoaderState.RISE, LoaderState.HOME):
             return      # (nor while the Zu 12's cup is over the plate, or swinging home from it)
-        self.queue = sorted(on_plate, key=lambda m: (m.color == 'blue', m.slot))
+        order = [st.name for st in run.layout.stands]
+        self.queue = sorted(on_plate, key=lambda m: (
+            order.index(self._stand_for(m)), m.color == 'blue', m.slot))
         if not self.queue:
             self.enter(TransportState.DONE, obs.now, math.inf)
             return
         run.event(obs.now, 'departing', 'youbot', detail=f'{len(self.queue)} materials')
         # The arm rises to its carry pose while the base drives: folded, it reaches down in
         # front of the base, and its fingers would scrape the floor as the base pitches.
-        q = np.asarray(obs.youbot_q, float)
-        d = motion_duration(q, YOUBOT_CARRY_Q, run.limits('youbot'), run.s.youbot_scaling,
-                            0.5) + run.s.plan_latency
-        run.send(Motion('youbot', [(obs.now + d, YOUBOT_CARRY_Q.copy())]))
+        run.send(Motion('youbot', run.plan('youbot', obs.youbot_q,
+                                           [Waypoint(YOUBOT_CARRY_Q.copy())])))
         self._drive_to(obs, self._stand_for(self.queue[0]))
 
-    @staticmethod
-    def _stand_for(m: Material) -> str:
-        return 'platform_stand' if m.color == 'blue' else 'pool_stand'
+    def _stand_for(self, m: Material) -> str:
+        return self.run.layout.stand_for(m.color, m.slot).name
 
     def _drive_to(self, obs: Observation, goal: str) -> None:
         run, lay = self.run, self.run.layout
-        target = lay.youbot_home if goal == 'home' else getattr(lay, goal)
+        target = lay.youbot_home if goal == 'home' else lay.stand(goal).pose
         start = tuple(obs.youbot_pose)
         via: Sequence = ()
-        if goal == 'pool_stand' and np.hypot(start[0] - target[0], start[1] - target[1]) > 1.0:
-            via = lay.via_out
-        elif goal == 'home':
+        if goal == 'home':
             via = lay.via_back
+        elif self._drive_goal in ('', 'home'):
+            via = lay.via_out
+        elif self._drive_goal != goal:
+            via = lay.via_turn
         path = BezierPath(key_poses_between(start, target, via))
-        self._follower = PathFollower(path, obs.now, run.s.drive_speed, run.s.drive_accel)
+        # Slow enough along a short path with a large turn that the heading keeps up (the
+        # heading blends smoothly between key poses: its peak rate is 1.5x the average).
+        turn = sum(abs(wrap_angle(b[2] - a[2])) for a, b in zip(path.key_poses,
+                                                                 path.key_poses[1:]))
+        speed = run.s.drive_speed
+        if turn > 0.0:
+            speed = min(speed, run.s.drive_turn * path.length / (1.5 * turn))
+        self._follower = PathFollower(path, obs.now, speed, run.s.drive_accel, PDGains(
+            max_speed=run.s.base_max_speed, max_turn=run.s.base_max_turn))
         self._drive_goal = goal
         run.event(obs.now, 'driving', 'youbot', detail=f'to {goal}, {path.length:.2f} m')
         self.enter(TransportState.DRIVE, obs.now,
@@ -548,10 +564,8 @@ class Transport(Machine):
     def _next_unload(self, obs: Observation) -> None:
         run = self.run
         if not self.queue:
-            q = np.asarray(obs.youbot_q, float)
-            d = motion_duration(q, YOUBOT_CARRY_Q, run.limits('youbot'),
-                                run.s.youbot_scaling, 0.5) + run.s.plan_latency
-            return self.move(TransportState.STOW, obs, [(obs.now + d, YOUBOT_CARRY_Q.copy())])
+            return self.move(TransportState.STOW, obs, run.plan(
+                'youbot', obs.youbot_q, [Waypoint(YOUBOT_CARRY_Q.copy())]))
         m = self.queue[0]
         if self._stand_for(m) != self._drive_goal:
             return self._drive_to(obs, self._stand_for(m))
@@ -570,10 +584,8 @@ class Transport(Machine):
             drop_world = run.layout.platform_place + np.array(
                 [0.0, 0.0, size + t.place_gap + YOUBOT_GRASP_STANDOFF_M])
         else:
-            drops = run.layout.pool_drops
-            drop_world = drops[sum(1 for x in run.materials.values()
-                                   if x.status == 'delivered' and x.color != 'blue')
-                               % len(drops)]
+            drops = run.layout.stand(self._drive_goal).drops
+            drop_world = drops[self._dropped.get(self._drive_goal, 0) % len(drops)]
         drop = world_to_base(obs.youbot_pose, drop_world)
         drop[2] -= YOUBOT_BASE_Z_M
         plan = run.solve_tilted([hover, contact, hover, drop + np.array([0.0, 0.0, 0.05]),
@@ -582,13 +594,12 @@ class Transport(Machine):
             self.queue.pop(0)
             run.fail(now, m, 'grasp_failed', 'unload: no IK solution', 'youbot')
             return self._next_unload(obs)
-        t0 = now + motion_duration(obs.youbot_q, plan[0], run.limits('youbot'),
-                                   run.s.youbot_scaling, 0.5) + run.s.plan_latency
         self._carry, self._armed = plan[2:], False
         m.unload_attempts += 1
         run.count_grasp('youbot')
-        self.move(TransportState.GRASP, obs, [(t0, plan[0]), (t0 + t.descend, plan[1]),
-                                              (t0 + t.descend + SETTLE_S, plan[1].copy())])
+        self.move(TransportState.GRASP, obs, run.plan('youbot', obs.youbot_q, [
+            Waypoint(plan[0], stop=False),
+            Waypoint(plan[1], hold=SETTLE_S, min_time=t.descend)]))
 
     def _grasp(self, obs: Observation) -> None:
         run, m, now = self.run, self.queue[0], obs.now
@@ -617,13 +628,11 @@ class Transport(Machine):
                                        f'{m.unload_attempts} attempts')
         run.count_grasp('youbot', success=True)
         run.event(now, 'unload_grasped', 'youbot', m, f'attempt {m.unload_attempts}')
-        lim, sc, t = run.limits('youbot'), run.s.youbot_scaling, run.s.timing
         up, over, drop = self._carry
-        t1 = now + run.s.plan_latency + t.lift
-        t2 = t1 + motion_duration(up, over, lim, sc, 0.8)
-        t3 = t2 + t.place_descend
-        self.move(TransportState.CARRY, obs, [(t1, up), (t2, over), (t3, drop),
-                                              (t3 + SETTLE_S, drop.copy())])
+        t = run.s.timing
+        self.move(TransportState.CARRY, obs, run.plan('youbot', obs.youbot_q, [
+            Waypoint(up, stop=False, min_time=t.lift), Waypoint(over, stop=False),
+            Waypoint(drop, hold=SETTLE_S, min_time=t.place_descend)]))
 
     def _unload_failed(self, obs: Observation, m: Material, kind: str, why: str) -> None:
         self.run.ports.grip('youbot', False)
@@ -642,6 +651,8 @@ class Transport(Machine):
             run.event(now, 'arm_stalled', 'youbot', m, 'unload motion not completed')
         run.ports.grip('youbot', False)
         m.status = 'delivered'
+        if m.color != 'blue':
+            self._dropped[self._drive_goal] = self._dropped.get(self._drive_goal, 0) + 1
         run.event(now, 'delivered', 'youbot', m, run.layout.destination(m.color))
         # The arm stays still while the material falls free of the fingers.
         self.enter(TransportState.RELEASE, now, RELEASE_HOLD_S)
@@ -769,10 +780,7 @@ class Pipeline:
 
     def plan_home(self, arm: str, obs: Observation, ready: bool = False) -> None:
         q = obs.zu12_q if arm == 'zu12' else obs.youbot_q
-        goal = self.home_q[arm]
-        d = motion_duration(q, goal, self.limits(arm), self._scaling(arm),
-                            0.5) + self.s.plan_latency
-        self.send(Motion(arm, [(obs.now + d, goal.copy())]))
+        self.send(Motion(arm, self.plan(arm, q, [Waypoint(self.home_q[arm].copy())])))
         if not ready:
             self.event(obs.now, 'returning', arm)
 
@@ -794,7 +802,7 @@ class Pipeline:
         cup is on one still on the belt: nothing passes the pick point unnoticed."""
         if self.loader.state in (LoaderState.HOME, LoaderState.DONE):
             return False
-        if self.loader.busy_with_belt:
+        if self.loader.busy_with_belt(now):
             return False
         return not any(self.belt_x(m, now) >= self.s.pick_x
                        for m in self.materials.values() if m.status == 'seen')
@@ -812,7 +820,7 @@ class Pipeline:
         for d in obs.detections:
             m = self.materials.get(d.id)
             if m is None:
-                if d.hits < self.s.confirm_hits:
+                if d.hits < self.s.confirm_hits or not self._on_belt(d.position):
                     continue
                 m = self.materials[d.id] = Material(d.id, d.color, np.asarray(d.position, float),
                                                     d.stamp, d.hits)
@@ -825,6 +833,11 @@ class Pipeline:
         for m in self.materials.values():
             if m.status == 'seen' and self.belt_x(m, obs.now) > self.layout.belt_end_x:
                 self.fail(obs.now, m, 'missed', 'went off the belt end unpicked', 'zu12')
+
+    def _on_belt(self, position: Sequence[float]) -> bool:
+        """Whether a detection lies on the belt: the camera also sees beside it, where the Zu 12
+        carries materials to their places (a held material is not a new one)."""
+        return abs(position[1] - self.layout.belt_y) <= self.layout.belt_width / 2
 
     # --- the end ------------------------------------------------------------------------------
     def _finish(self, now: float, status: str, message: str) -> None:
@@ -860,15 +873,17 @@ class Pipeline:
                        detail=f'{np.round(position, 3).tolist()}: {why}')
         return q
 
-    def solve_path(self, arm: str, waypoints, seed) -> Optional[Points]:
-        points = []
-        for t, p in waypoints:
+    def solve_path(self, arm: str, positions, seed) -> Optional[List[np.ndarray]]:
+        """Joint positions for the tool pointing down at each of ``positions`` (world), each
+        seeded with the one before; None if any has no solution."""
+        qs = []
+        for p in positions:
             q = self.solve(arm, p, DOWN, 'world', seed)
             if q is None:
                 return None
-            points.append((t, q))
+            qs.append(q)
             seed = q
-        return points
+        return qs
 
     def solve_tilted(self, points: Sequence[np.ndarray], seed: np.ndarray
                      ) -> Optional[List[np.ndarray]]:
@@ -890,11 +905,34 @@ class Pipeline:
                           f'{np.round(points[-1], 3).tolist()} at any one tilt up to 80 deg')
         return None
 
-    def limits(self, arm: str) -> np.ndarray:
-        return np.asarray(ZU12_VELOCITY_LIMITS if arm == 'zu12' else YOUBOT_VELOCITY_LIMITS)
+    def limits(self, arm: str) -> JointLimits:
+        """The arm's joint limits, the velocity scaled by its setting."""
+        if arm == 'zu12':
+            limits = JointLimits(np.asarray(zu12_arm.JOINT_VELOCITY_LIMITS),
+                                 np.asarray(zu12_arm.JOINT_ACCELERATION_LIMITS),
+                                 np.asarray(zu12_arm.JOINT_JERK_LIMITS))
+            return limits.scaled(self.s.zu12_scaling)
+        return JointLimits(np.full(5, youbot_arm.JOINT_VELOCITY_LIMIT),
+                           np.full(5, youbot_arm.JOINT_ACCELERATION_LIMIT),
+                           np.full(5, youbot_arm.JOINT_JERK_LIMIT)).scaled(self.s.youbot_scaling)
 
-    def _scaling(self, arm: str) -> float:
-        return self.s.zu12_scaling if arm == 'zu12' else self.s.youbot_scaling
+    def plan(self, arm: str, q: Sequence[float], waypoints: Sequence[Waypoint],
+             wait: float = 0.0) -> Points:
+        """A time-optimal motion of ``arm`` from rest at ``q`` through ``waypoints``, starting
+        ``wait`` after the plan latency from now (the convention of every plan here)."""
+        motion = plan(q, waypoints, self.limits(arm), self.now + self.s.plan_latency + wait)
+        # The controller starts from where the arm is: the start sample is sent only as the end
+        # of a wait (a hold at the current position).
+        points = motion.points()
+        if len(points) == 1:            # already there: hold it, a sample period on
+            t, q, v, a = points[0]
+            return [(t + SAMPLE_PERIOD_S, q, v, a)]
+        return points[0 if wait > 0.0 else 1:]
+
+    def arrival_time(self, arm: str, q: np.ndarray) -> float:
+        """When the arm's current motion passes closest to ``q`` (as the port scheduled it)."""
+        points = self.motions[arm].points
+        return min(points, key=lambda p: float(np.max(np.abs(p[1] - q))))[0]
 
 
 # base_link's height above the floor when the youBot stands on its wheels [m].
@@ -904,7 +942,6 @@ YOUBOT_CARRY_Q = np.zeros(5)
 # The youBot's fingertips reach 10.4 mm beyond gripper_tcp: it grasps a material's top face with
 # the TCP this far above it, so that the fingertips do not push the material away.
 YOUBOT_GRASP_STANDOFF_M = 0.0104 + 0.002
-YOUBOT_VELOCITY_LIMITS = np.full(5, YOUBOT_JOINT_VELOCITY_LIMIT)
 
 
 def youbot_tool_quaternion(p: Sequence[float], tilt: float) -> Tuple[float, float, float, float]:

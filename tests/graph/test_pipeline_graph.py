@@ -46,7 +46,7 @@ def test_a_lock_step_run_delivers_every_material(two_runs):
         r['peak_joint_speed']
     path = r['youbot_path']
     assert max(p[0] for p in path) > 1.6                      # reached the pool
-    assert abs(path[-1][0] - 0.6) < 0.03 and abs(path[-1][1] + 0.55) < 0.03
+    assert abs(path[-1][0] - 0.8) < 0.03 and abs(path[-1][1] - 0.05) < 0.03
 
 
 def test_the_same_seed_gives_the_same_events_and_final_state(two_runs):

@@ -20,8 +20,8 @@ def regions():
 
 
 def test_destinations_by_colour(regions):
-    assert at_destination('purple', (-0.45, -0.6, 0.025), regions)
-    assert not at_destination('purple', (-0.45, -0.9, 0.025), regions)     # beside the target
+    assert at_destination('purple', (-0.5, 0.3, 0.025), regions)
+    assert not at_destination('purple', (-0.5, 0.0, 0.025), regions)     # beside the target
     assert at_destination('orange', (2.2, -1.7, 0.075), regions)            # in the pool, stacked
     assert not at_destination('orange', (2.2, -1.7, 0.125), regions)        # on the wall top
     assert at_destination('blue', (2.3, -2.15, 0.175), regions)             # on the platform
@@ -45,7 +45,7 @@ def _result(**kw):
 
 def test_score_takes_handling_from_ground_truth_not_from_the_coordinator(regions):
     truth = [('orange', np.array([2.2, -1.7, 0.025]))] * 6 + [
-        ('purple', np.array([-0.45, -0.6, 0.025])), ('blue', np.array([2.21, -1.95, 0.025]))]
+        ('purple', np.array([-0.5, 0.3, 0.025])), ('blue', np.array([2.21, -1.95, 0.025]))]
     out = score(_result(), truth, [True] * 7 + [False], regions)
     assert out['delivered'] == 8                       # what the coordinator believed
     assert out['handled_verified'] == 7 and out['handling_success_rate'] == 7 / 8
@@ -58,7 +58,7 @@ def test_the_rates_split_as_the_paper_splits_them(regions):
     # its plate one orange ended outside the pool.
     r = _result(zu12_grasp_attempts=9, zu12_grasp_successes=8, youbot_grasp_attempts=8,
                 youbot_grasp_successes=7, loaded=7)
-    truth = ([('purple', np.array([-0.45, -0.6, 0.025])), ('blue', np.array([2.3, -2.15, 0.175]))]
+    truth = ([('purple', np.array([-0.5, 0.3, 0.025])), ('blue', np.array([2.3, -2.15, 0.175]))]
              + [('orange', np.array([2.2, -1.7, 0.075]))] * 5
              + [('orange', np.array([1.0, 0.0, 0.025]))])
     out = score(r, truth, [True] * 8, regions)

@@ -1,0 +1,164 @@
+"""Time-optimal joint motions through waypoints, jerk-limited, with ruckig (no ROS).
+
+A motion starts at rest and goes through a list of waypoints. At a waypoint the arm either comes
+to rest (and may hold there) or passes through it without stopping. Each segment between two
+waypoints is ruckig's time-optimal, time-synchronised profile from the state at one waypoint to
+the state at the next, within the joints' velocity, acceleration and jerk limits.
+
+Ruckig's community edition plans state to state only (its own through-waypoint planning is a
+paid or cloud feature), so the velocity at a pass-through waypoint is chosen here: per joint,
+the smaller of the average speeds of the rest-to-rest segments into and out of it when the joint
+keeps its direction there, and zero when it turns back. The result is sampled densely with
+positions, velocities and accelerations, which a joint trajectory controller interpolates
+exactly (quintic per sample interval).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import List, Optional, Sequence, Tuple
+
+import numpy as np
+from ruckig import InputParameter, Result, Ruckig, Trajectory
+
+SAMPLE_PERIOD_S = 0.05
+# Plans stay this far inside the limits: the position motors add a small correction to the
+# planned speed while they follow it, and the measured speed must stay within the limit.
+LIMIT_MARGIN = 0.98
+
+
+class PlanError(ValueError):
+    """The waypoints or limits cannot be planned (not finite, wrong size, no profile)."""
+
+
+@dataclass(frozen=True)
+class JointLimits:
+    velocity: np.ndarray          # [rad/s] per joint
+    acceleration: np.ndarray      # [rad/s^2]
+    jerk: np.ndarray              # [rad/s^3]
+
+    def scaled(self, fraction: float) -> 'JointLimits':
+        """The same limits with the velocity scaled (acceleration and jerk kept)."""
+        if not 0.0 < fraction <= 1.0:
+            raise PlanError(f'velocity scaling must be within (0, 1], got {fraction}')
+        return JointLimits(np.asarray(self.velocity) * fraction, self.acceleration, self.jerk)
+
+
+@dataclass(frozen=True)
+class Waypoint:
+    q: np.ndarray
+    stop: bool = True             # the arm comes to rest here
+    hold: float = 0.0             # and stays this long [s] (stop only)
+    min_time: float = 0.0         # the segment into it takes at least this long [s]
+
+
+@dataclass(frozen=True)
+class Sample:
+    t: float
+    q: np.ndarray
+    v: np.ndarray
+    a: np.ndarray
+
+
+@dataclass(frozen=True)
+class Plan:
+    samples: List[Sample]         # from the start (t0, at rest) to the end (at rest)
+    arrivals: List[float]         # when each waypoint is reached (before its hold) [s]
+
+    @property
+    def end(self) -> float:
+        return self.samples[-1].t
+
+    def points(self) -> List[Tuple[float, np.ndarray, np.ndarray, np.ndarray]]:
+        return [(s.t, s.q, s.v, s.a) for s in self.samples]
+
+
+def _profile(q0, v0, q1, v1, limits: JointLimits, min_time: float) -> Optional[Trajectory]:
+    n = len(q0)
+    otg = Ruckig(n)
+    inp = InputParameter(n)
+    inp.current_position, inp.current_velocity = list(q0), list(v0)
+    inp.current_acceleration = [0.0] * n
+    inp.target_position, inp.target_velocity = list(q1), list(v1)
+    inp.target_acceleration = [0.0] * n
+    inp.max_velocity = list(np.asarray(limits.velocity) * LIMIT_MARGIN)
+    inp.max_acceleration = list(np.asarray(limits.acceleration) * LIMIT_MARGIN)
+    inp.max_jerk = list(np.asarray(limits.jerk) * LIMIT_MARGIN)
+    if min_time > 0.0:
+        inp.minimum_duration = float(min_time)
+    trajectory = Trajectory(n)
+    try:
+        result = otg.calculate(inp, trajectory)
+    except RuntimeError:
+        return None
+    return trajectory if result == Result.Working else None
+
+
+def rest_to_rest_time(q0: Sequence[float], q1: Sequence[float], limits: JointLimits) -> float:
+    """The shortest time from rest at ``q0`` to rest at ``q1``."""
+    n = len(q0)
+    profile = _profile(np.asarray(q0, float), np.zeros(n), np.asarray(q1, float), np.zeros(n),
+                       limits, 0.0)
+    if profile is None:
+        raise PlanError('no profile between the two positions')
+    return float(profile.duration)
+
+
+def _via_velocity(q_prev, q, q_next, limits: JointLimits) -> np.ndarray:
+    d_in, d_out = q - q_prev, q_next - q
+    t_in = max(rest_to_rest_time(q_prev, q, limits), 1e-6)
+    t_out = max(rest_to_rest_time(q, q_next, limits), 1e-6)
+    v = np.minimum(np.abs(d_in) / t_in, np.abs(d_out) / t_out) * np.sign(d_in)
+    v[np.sign(d_in) != np.sign(d_out)] = 0.0
+    return np.clip(v, -0.9 * limits.velocity, 0.9 * limits.velocity)
+
+
+def plan(q0: Sequence[float], waypoints: Sequence[Waypoint], limits: JointLimits,
+         t0: float = 0.0, period: float = SAMPLE_PERIOD_S) -> Plan:
+    """The motion from rest at ``q0`` through ``waypoints`` (the last one is a stop), starting
+    at ``t0``, sampled every ``period`` and at every waypoint."""
+    q_prev = np.asarray(q0, float)
+    n = len(q_prev)
+    if not waypoints:
+        raise PlanError('a motion needs at least one waypoint')
+    for name in ('velocity', 'acceleration', 'jerk'):
+        value = np.asarray(getattr(limits, name), float)
+        if value.shape != (n,) or not np.all(np.isfinite(value)) or np.any(value <= 0.0):
+            raise PlanError(f'{name} limits must be {n} positive finite values')
+    qs = [np.asarray(w.q, float) for w in waypoints]
+    if any(q.shape != (n,) or not np.all(np.isfinite(q)) for q in qs) or not np.all(
+            np.isfinite(q_prev)):
+        raise PlanError(f'every waypoint must be {n} finite joint positions')
+    stops = [w.stop for w in waypoints]
+    stops[-1] = True
+    velocities = []
+    for i, q in enumerate(qs):
+        if stops[i]:
+            velocities.append(np.zeros(n))
+        else:
+            velocities.append(_via_velocity(qs[i - 1] if i else q_prev, q, qs[i + 1], limits))
+    samples = [Sample(t0, q_prev.copy(), np.zeros(n), np.zeros(n))]
+    arrivals = []
+    t, v_prev = t0, np.zeros(n)
+    for i, w in enumerate(waypoints):
+        profile = _profile(q_prev, v_prev, qs[i], velocities[i], limits, w.min_time)
+        if profile is None and np.any(velocities[i]):
+            velocities[i] = np.zeros(n)      # pass-through not reachable from here: stop there
+            profile = _profile(q_prev, v_prev, qs[i], velocities[i], limits, w.min_time)
+        if profile is None:
+            raise PlanError(f'no profile to waypoint {i}')
+        duration = float(profile.duration)
+        if duration > 1e-9:         # (a waypoint where the arm already is adds no samples)
+            steps = max(1, int(np.ceil(duration / period - 1e-9)))
+            for k in range(1, steps + 1):
+                tau = duration * k / steps
+                p, v, a = profile.at_time(tau)
+                samples.append(Sample(t + tau, np.asarray(p, float), np.asarray(v, float),
+                                      np.asarray(a, float)))
+            t += duration
+            samples[-1] = Sample(t, qs[i].copy(), velocities[i].copy(), np.zeros(n))
+        arrivals.append(t)
+        if stops[i] and w.hold > 0.0:
+            t += w.hold
+            samples.append(Sample(t, qs[i].copy(), np.zeros(n), np.zeros(n)))
+        q_prev, v_prev = qs[i], velocities[i]
+    return Plan(samples, arrivals)
