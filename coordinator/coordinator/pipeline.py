@@ -283,7 +283,6 @@ class Loader(Machine):
         self.current: Optional[Material] = None     # the material being picked or placed
         self._then: Optional[np.ndarray] = None     # the next motion's goal (lift, rise)
         self._clear_at = math.inf                   # when the held material is off the belt
-        self._ready: Optional[np.ndarray] = None    # the cup over the pick point
         S = LoaderState
         self.handlers = {S.WAIT: self._wait, S.PICK: self._pick, S.PLACE: self._place, S.RISE: self._rise, S.RETREAT: self._retreat,
                          S.HOME: self._home, S.DONE: lambda obs: None}
@@ -296,16 +295,9 @@ class Loader(Machine):
 
     def start(self, obs: Observation) -> None:
         """The first observation: the arms' poses now are their home poses."""
-        run = self.run
-        run.home_q = {'zu12': np.array(obs.zu12_q, float),
-                      'youbot': np.array(obs.youbot_q, float)}
-        # Where the cup waits after each place: over the pick point, the hover height above a
-        # material's top face, so that the next pick only goes down.
-        lay, t = run.layout, run.s.timing
-        self._ready = run.solve('zu12', (run.s.pick_x, lay.belt_y, lay.belt_top
-                                         + lay.material_size + t.hover), DOWN, 'world',
-                                run.home_q['zu12'])
-        self.enter(LoaderState.WAIT, obs.now, run.s.idle_timeout)
+        self.run.home_q = {'zu12': np.array(obs.zu12_q, float),
+                           'youbot': np.array(obs.youbot_q, float)}
+        self.enter(LoaderState.WAIT, obs.now, self.run.s.idle_timeout)
 
     def _wait(self, obs: Observation) -> None:
         run, now = self.run, obs.now
@@ -447,12 +439,9 @@ class Loader(Machine):
             m.status = 'on_plate'
             run.loaded += 1
             run.event(now, 'loaded', 'zu12', m, f'plate slot {m.slot}')
-        # The cup stays still while the vacuum lets go, rises and waits over the pick point.
-        rise = [Waypoint(self._then, stop=self._ready is None,
-                         min_time=run.s.timing.place_descend)]
-        if self._ready is not None:
-            rise.append(Waypoint(self._ready))
-        self.move(LoaderState.RISE, obs, run.plan('zu12', obs.zu12_q, rise, RELEASE_HOLD_S))
+        # The cup stays still while the vacuum lets go, then rises.
+        self.move(LoaderState.RISE, obs, run.plan('zu12', obs.zu12_q, [
+            Waypoint(self._then, min_time=run.s.timing.place_descend)], RELEASE_HOLD_S))
 
     def _rise(self, obs: Observation) -> None:
         if self.motion_over(obs, 'the rise from the place'):
@@ -509,8 +498,6 @@ class Transport(Machine):
         run.event(obs.now, 'departing', 'youbot', detail=f'{len(self.queue)} materials')
         # The arm rises to its carry pose while the base drives: folded, it reaches down in
         # front of the base, and its fingers would scrape the floor as the base pitches.
-        run.send(Motion('youbot', run.plan('youbot', obs.youbot_q,
-                                           [Waypoint(YOUBOT_CARRY_Q.copy())])))
         self._drive_to(obs, self._stand_for(self.queue[0]))
 
     def _stand_for(self, m: Material) -> str:
@@ -538,6 +525,8 @@ class Transport(Machine):
         self._follower = PathFollower(path, obs.now, speed, run.s.drive_accel, PDGains(
             max_speed=run.s.base_max_speed, max_turn=run.s.base_max_turn))
         self._drive_goal = goal
+        if goal != 'home' and self.queue:
+            self._ready_arm(obs, lay.stand(goal).pose)
         run.event(obs.now, 'driving', 'youbot', detail=f'to {goal}, {path.length:.2f} m')
         self.enter(TransportState.DRIVE, obs.now,
                    self._follower.profile.duration + run.s.drive_margin)
@@ -571,25 +560,45 @@ class Transport(Machine):
             return self._drive_to(obs, self._stand_for(m))
         self._plan_unload(obs, m)
 
-    def _plan_unload(self, obs: Observation, m: Material) -> None:
-        """Down onto the material on the plate; the gripper closes once the arm is there."""
-        run, now = self.run, obs.now
+    def _ready_arm(self, obs: Observation, stand: Pose2D) -> None:
+        """While the base drives to a stand: the arm up through the carry pose (folded, it
+        reaches down in front of the base, and its fingers would scrape the floor as the base
+        pitches) to high over the first material it unloads there, so that the unload there
+        starts by going down."""
+        run, m = self.run, self.queue[0]
+        path = self._unload_path(m, stand, YOUBOT_CARRY_Q, high=True)
+        waypoints = [Waypoint(YOUBOT_CARRY_Q.copy(), stop=path is None)]
+        if path is not None:
+            waypoints.append(Waypoint(path[0]))
+        run.send(Motion('youbot', run.plan('youbot', obs.youbot_q, waypoints)))
+
+    def _unload_path(self, m: Material, pose: Pose2D, seed: np.ndarray,
+                     high: bool = False) -> Optional[List[np.ndarray]]:
+        """Joint positions over the material on the plate (twice as high with ``high``), on it,
+        over it again, above its drop and at its drop, for the base standing at ``pose``."""
+        run = self.run
         size, t = run.layout.material_size, run.s.timing
         slot = PLATE_SLOTS_IN_BASE_M[m.slot]
         top = (PLATE_TOP_IN_BASE_M + size + YOUBOT_GRASP_STANDOFF_M
                - 0.004 * m.unload_attempts)
         contact = np.array([slot[0], slot[1], top])
-        hover = contact + np.array([0.0, 0.0, 0.06])
+        hover = contact + np.array([0.0, 0.0, 0.12 if high else 0.06])
+        stand = self._stand_for(m)
         if m.color == 'blue':
             drop_world = run.layout.platform_place + np.array(
                 [0.0, 0.0, size + t.place_gap + YOUBOT_GRASP_STANDOFF_M])
         else:
-            drops = run.layout.stand(self._drive_goal).drops
-            drop_world = drops[self._dropped.get(self._drive_goal, 0) % len(drops)]
-        drop = world_to_base(obs.youbot_pose, drop_world)
+            drops = run.layout.stand(stand).drops
+            drop_world = drops[self._dropped.get(stand, 0) % len(drops)]
+        drop = world_to_base(pose, drop_world)
         drop[2] -= YOUBOT_BASE_Z_M
-        plan = run.solve_tilted([hover, contact, hover, drop + np.array([0.0, 0.0, 0.05]),
-                                 drop], np.array(obs.youbot_q, float))
+        return run.solve_tilted([hover, contact, hover, drop + np.array([0.0, 0.0, 0.05]),
+                                 drop], np.array(seed, float))
+
+    def _plan_unload(self, obs: Observation, m: Material) -> None:
+        """Down onto the material on the plate; the gripper closes once the arm is there."""
+        run, now, t = self.run, obs.now, self.run.s.timing
+        plan = self._unload_path(m, obs.youbot_pose, obs.youbot_q)
         if plan is None:
             self.queue.pop(0)
             run.fail(now, m, 'grasp_failed', 'unload: no IK solution', 'youbot')
