@@ -284,8 +284,9 @@ class Loader(Machine):
         self._then: Optional[np.ndarray] = None     # the next motion's goal (lift, rise)
         self._clear_at = math.inf                   # when the held material is off the belt
         S = LoaderState
-        self.handlers = {S.WAIT: self._wait, S.PICK: self._pick, S.PLACE: self._place, S.RISE: self._rise, S.RETREAT: self._retreat,
-                         S.HOME: self._home, S.DONE: lambda obs: None}
+        self.handlers = {S.WAIT: self._wait, S.PICK: self._pick, S.PLACE: self._place,
+                         S.RISE: self._rise, S.RETREAT: self._retreat, S.HOME: self._home,
+                         S.DONE: lambda obs: None}
 
     def busy_with_belt(self, now: float) -> bool:
         """The cup is on a material still on the belt, or lifting it off (it must not move
