@@ -8,11 +8,13 @@ target surface, releases, and rises again. Times are absolute (simulated) second
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import List, Sequence, Tuple
+from typing import Callable, List, Sequence, Tuple
 
 import numpy as np
 
 Waypoint = Tuple[float, np.ndarray]          # (time [s], tool position in the world [m])
+# Where a material's centre is (will be) at a time: its predicted track on the belt.
+Track = Callable[[float], np.ndarray]
 
 
 @dataclass(frozen=True)
@@ -55,6 +57,44 @@ def pick_waypoints(position: Sequence[float], stamp: float, velocity: Sequence[f
              for f in (0.0, 0.5, 1.0)]
     waypoints = descend + dwell + [(t_leave + timing.lift, lifted)]
     return waypoints, t_contact + timing.dwell / 4
+
+
+def follow_pick(track: Track, t_contact: float, size: float, timing: PickTiming = PickTiming(),
+                period: float = 0.05) -> Tuple[List[Waypoint], np.ndarray]:
+    """The tool's path onto the material whose centre follows ``track`` (carried by the belt,
+    held at its end stop, or still), sampled every ``period`` or less: from the hover point,
+    ``timing.hover`` over the top face, down onto it by ``t_contact`` while moving with it,
+    and on it for the dwell. Also returns the lift point: ``timing.lift_height`` over the
+    contact, ahead by half the material's travel over the lift (the tool slows from its speed
+    to rest meanwhile).
+
+    The descent is smooth to the second derivative: its height over the top face is
+    ``hover (2 f^3 - f^4)`` with ``f`` running from 1 to 0, so it starts at a vertical speed of
+    ``2 hover / descend`` without acceleration, and touches at zero speed and acceleration.
+    """
+    if not (timing.descend > 0.0 and timing.dwell >= 0.0 and period > 0.0):
+        raise ValueError('the descent and the period must take time')
+    top = size / 2 + timing.contact_gap
+    t_leave = t_contact + timing.dwell
+    h = 1e-3
+    v_leave = (np.array(track(t_leave), float) - np.array(track(t_leave - h), float)) / h
+    v_leave[2] = 0.0
+
+    def on(t: float) -> np.ndarray:
+        return np.array(track(t), float) + np.array([0.0, 0.0, top])
+
+    def times(t0: float, t1: float) -> List[float]:
+        k = max(1, int(np.ceil((t1 - t0) / period - 1e-9)))
+        return [t0 + (t1 - t0) * j / k for j in range(k + 1)]
+
+    out: List[Waypoint] = []
+    for t in times(t_contact - timing.descend, t_contact):
+        f = (t_contact - t) / timing.descend
+        out.append((t, on(t) + np.array([0.0, 0.0, timing.hover * (2 * f ** 3 - f ** 4)])))
+    if timing.dwell > 0.0:
+        out += [(t, on(t)) for t in times(t_contact, t_leave)[1:]]
+    lift = on(t_leave) + v_leave * timing.lift / 2 + np.array([0.0, 0.0, timing.lift_height])
+    return out, lift
 
 
 def place_waypoints(t_above: float, target: Sequence[float], size: float,

@@ -11,6 +11,11 @@ the smaller of the average speeds of the rest-to-rest segments into and out of i
 keeps its direction there, and zero when it turns back. The result is sampled densely with
 positions, velocities and accelerations, which a joint trajectory controller interpolates
 exactly (quintic per sample interval).
+
+A waypoint may also be a state at a time: reached at exactly ``at`` (absolute), with a given
+velocity and acceleration (``TooLate`` when the arm cannot be there by then). That is how an arm
+meets something moving, such as a material on a running belt; a run of ``direct`` waypoints then
+follows a path timed by the caller (each one sent as it is, with no profile into it).
 """
 from __future__ import annotations
 
@@ -28,6 +33,10 @@ LIMIT_MARGIN = 0.98
 
 class PlanError(ValueError):
     """The waypoints or limits cannot be planned (not finite, wrong size, no profile)."""
+
+
+class TooLate(PlanError):
+    """A waypoint's time comes before the arm can be there."""
 
 
 @dataclass(frozen=True)
@@ -49,6 +58,12 @@ class Waypoint:
     stop: bool = True             # the arm comes to rest here
     hold: float = 0.0             # and stays this long [s] (stop only)
     min_time: float = 0.0         # the segment into it takes at least this long [s]
+    # A state to pass through: this velocity and acceleration here (not a stop) ...
+    velocity: Optional[np.ndarray] = None
+    acceleration: Optional[np.ndarray] = None
+    at: Optional[float] = None    # ... reached at exactly this (absolute) time [s]
+    direct: bool = False          # sent as it is: a sample of a path the caller timed (needs
+    #                               ``at`` and ``velocity``), with no profile into it
 
 
 @dataclass(frozen=True)
@@ -72,14 +87,15 @@ class Plan:
         return [(s.t, s.q, s.v, s.a) for s in self.samples]
 
 
-def _profile(q0, v0, q1, v1, limits: JointLimits, min_time: float) -> Optional[Trajectory]:
+def _profile(q0, v0, q1, v1, limits: JointLimits, min_time: float,
+             a0=None, a1=None) -> Optional[Trajectory]:
     n = len(q0)
     otg = Ruckig(n)
     inp = InputParameter(n)
     inp.current_position, inp.current_velocity = list(q0), list(v0)
-    inp.current_acceleration = [0.0] * n
+    inp.current_acceleration = [0.0] * n if a0 is None else list(a0)
     inp.target_position, inp.target_velocity = list(q1), list(v1)
-    inp.target_acceleration = [0.0] * n
+    inp.target_acceleration = [0.0] * n if a1 is None else list(a1)
     inp.max_velocity = list(np.asarray(limits.velocity) * LIMIT_MARGIN)
     inp.max_acceleration = list(np.asarray(limits.acceleration) * LIMIT_MARGIN)
     inp.max_jerk = list(np.asarray(limits.jerk) * LIMIT_MARGIN)
@@ -88,7 +104,7 @@ def _profile(q0, v0, q1, v1, limits: JointLimits, min_time: float) -> Optional[T
     trajectory = Trajectory(n)
     try:
         result = otg.calculate(inp, trajectory)
-    except RuntimeError:
+    except Exception:               # ruckig.RuckigError: a state outside the limits
         return None
     return trajectory if result == Result.Working else None
 
@@ -128,25 +144,61 @@ def plan(q0: Sequence[float], waypoints: Sequence[Waypoint], limits: JointLimits
     if any(q.shape != (n,) or not np.all(np.isfinite(q)) for q in qs) or not np.all(
             np.isfinite(q_prev)):
         raise PlanError(f'every waypoint must be {n} finite joint positions')
-    stops = [w.stop for w in waypoints]
+    given_v = [_state(w.velocity, n, 'velocity') for w in waypoints]
+    given_a = [_state(w.acceleration, n, 'acceleration') for w in waypoints]
+    for i, w in enumerate(waypoints):
+        if w.at is not None and not np.isfinite(w.at):
+            raise PlanError(f'waypoint {i}: its time must be finite')
+        if w.direct and (w.at is None or given_v[i] is None):
+            raise PlanError(f'waypoint {i}: a direct waypoint needs a time and a velocity')
+        for name, value, limit in (('velocity', given_v[i], limits.velocity),
+                                   ('acceleration', given_a[i], limits.acceleration)):
+            if value is not None and np.any(np.abs(value) > np.asarray(limit) * LIMIT_MARGIN):
+                j = int(np.argmax(np.abs(value) / np.asarray(limit)))
+                raise PlanError(f'waypoint {i}: joint {j + 1} {name} {value[j]:.3f} is beyond '
+                                f'its limit {limit[j] * LIMIT_MARGIN:.3f}')
+    if given_v[-1] is not None and np.any(given_v[-1]) or given_a[-1] is not None and np.any(
+            given_a[-1]):
+        raise PlanError('a motion ends at rest: the last waypoint cannot have a velocity')
+    stops = [w.stop and given_v[i] is None for i, w in enumerate(waypoints)]
     stops[-1] = True
     velocities = []
     for i, q in enumerate(qs):
-        if stops[i]:
+        if given_v[i] is not None:
+            velocities.append(given_v[i])
+        elif stops[i]:
             velocities.append(np.zeros(n))
         else:
             velocities.append(_via_velocity(qs[i - 1] if i else q_prev, q, qs[i + 1], limits))
     samples = [Sample(t0, q_prev.copy(), np.zeros(n), np.zeros(n))]
     arrivals = []
-    t, v_prev = t0, np.zeros(n)
+    t, v_prev, a_prev = t0, np.zeros(n), np.zeros(n)
     for i, w in enumerate(waypoints):
-        profile = _profile(q_prev, v_prev, qs[i], velocities[i], limits, w.min_time)
-        if profile is None and np.any(velocities[i]):
+        a_here = given_a[i] if given_a[i] is not None else np.zeros(n)
+        if w.direct:
+            if w.at <= t + 1e-9:
+                raise PlanError(f'waypoint {i}: a direct waypoint must come after the one '
+                                f'before it ({w.at:.3f} s <= {t:.3f} s)')
+            t = float(w.at)
+            samples.append(Sample(t, qs[i].copy(), velocities[i].copy(), a_here.copy()))
+            arrivals.append(t)
+            q_prev, v_prev, a_prev = qs[i], velocities[i], a_here
+            continue
+        min_time = w.min_time if w.at is None else max(w.min_time, w.at - t)
+        if w.at is not None and w.at - t < -1e-9:
+            raise TooLate(f'waypoint {i} is due at {w.at:.3f} s, before the motion gets to '
+                          f'it ({t:.3f} s)')
+        profile = _profile(q_prev, v_prev, qs[i], velocities[i], limits, min_time, a_prev,
+                           a_here)
+        if profile is None and np.any(velocities[i]) and given_v[i] is None:
             velocities[i] = np.zeros(n)      # pass-through not reachable from here: stop there
-            profile = _profile(q_prev, v_prev, qs[i], velocities[i], limits, w.min_time)
+            profile = _profile(q_prev, v_prev, qs[i], velocities[i], limits, min_time, a_prev)
         if profile is None:
             raise PlanError(f'no profile to waypoint {i}')
         duration = float(profile.duration)
+        if w.at is not None and duration > w.at - t + 1e-6:
+            raise TooLate(f'waypoint {i} is due at {w.at:.3f} s; the arm can be there at '
+                          f'{t + duration:.3f} s at the earliest')
         if duration > 1e-9:         # (a waypoint where the arm already is adds no samples)
             steps = max(1, int(np.ceil(duration / period - 1e-9)))
             for k in range(1, steps + 1):
@@ -155,10 +207,19 @@ def plan(q0: Sequence[float], waypoints: Sequence[Waypoint], limits: JointLimits
                 samples.append(Sample(t + tau, np.asarray(p, float), np.asarray(v, float),
                                       np.asarray(a, float)))
             t += duration
-            samples[-1] = Sample(t, qs[i].copy(), velocities[i].copy(), np.zeros(n))
+            samples[-1] = Sample(t, qs[i].copy(), velocities[i].copy(), a_here.copy())
         arrivals.append(t)
         if stops[i] and w.hold > 0.0:
             t += w.hold
             samples.append(Sample(t, qs[i].copy(), np.zeros(n), np.zeros(n)))
-        q_prev, v_prev = qs[i], velocities[i]
+        q_prev, v_prev, a_prev = qs[i], velocities[i], a_here
     return Plan(samples, arrivals)
+
+
+def _state(value, n: int, what: str) -> Optional[np.ndarray]:
+    if value is None:
+        return None
+    out = np.asarray(value, float)
+    if out.shape != (n,) or not np.all(np.isfinite(out)):
+        raise PlanError(f'a waypoint {what} must be {n} finite values')
+    return out

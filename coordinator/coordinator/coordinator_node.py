@@ -87,8 +87,8 @@ class CoordinatorNode(Node):
             1.0, 1000.0))
         self.declare_parameter('belt_speed', -1.0, rng(
             'Belt speed while running [m/s]; -1 takes the world file\'s', -1.0, 1.0))
-        self.declare_parameter('pick_x', 0.0, rng(
-            'The belt stops when the front material reaches this x [m]', -1.0, 1.0))
+        self.declare_parameter('pick_x', -0.6, rng(
+            'The Zu 12 picks materials on the belt downstream of this x [m]', -1.0, 1.0))
         self.declare_parameter('max_retries', 1, ro(
             description='Extra grasp attempts after a missed grasp', read_only=True))
         self.declare_parameter('drive_speed', 0.6, rng("The path dummy's speed [m/s]",
@@ -190,7 +190,7 @@ class CoordinatorNode(Node):
         self.get_logger().info(
             f'{"lock-step" if self.synchronous else "real-time"} at {self.rate:g} Hz '
             f'({self.steps_per_tick} steps per decision); belt {layout.belt_speed:.3f} m/s, '
-            f'{layout.total} materials {layout.manifest}; pick at x = {self.settings.pick_x} m')
+            f'{layout.total} materials {layout.manifest}; picks from x = {self.settings.pick_x} m')
 
     # --- inputs -------------------------------------------------------------------------------
     def _on_joints(self, arm: str, names: Sequence[str], msg: JointState) -> None:

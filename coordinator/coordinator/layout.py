@@ -42,7 +42,7 @@ class UnloadStand:
 class CellLayout:
     belt_y: float                       # the belt's centre line (world y) [m]
     belt_top: float                     # its top surface (world z) [m]
-    belt_end_x: float                   # where materials fall off [m]
+    belt_end_x: float                   # the belt's downstream end (its stop's face) [m]
     belt_speed: float                   # nominal carrying speed [m/s]
     belt_width: float                   # [m]
     material_size: float                # cube edge [m]
@@ -58,6 +58,7 @@ class CellLayout:
     via_out: Tuple[Tuple[float, ...], ...] = ()
     via_turn: Tuple[Tuple[float, ...], ...] = ()
     via_back: Tuple[Tuple[float, ...], ...] = ()
+    end_stop: bool = False              # materials accumulate at the end instead of falling off
 
     @property
     def total(self) -> int:
@@ -151,6 +152,7 @@ def layout_from_world(world) -> CellLayout:
         belt_y=conv.position[1], belt_top=conv.position[2],
         belt_end_x=conv.position[0] + conv.length / 2, belt_speed=conv.belt_speed,
         belt_width=conv.width,
+        end_stop=conv.end_stop,
         material_size=size, manifest=dict(world.materials.counts),
         ground_target=np.array([named['ground_target'].position[0],
                                 named['ground_target'].position[1], 0.0]),

@@ -23,8 +23,10 @@ import numpy as np
 
 from controllers.bezier import BezierPath, Pose2D, key_poses_between, wrap_angle
 from controllers.path_follower import PDGains, PathFollower
-from controllers.pick_place import PickTiming
-from controllers.time_optimal import SAMPLE_PERIOD_S, JointLimits, Waypoint, plan
+from controllers.conveyor import Item, advance, held
+from controllers.pick_place import PickTiming, follow_pick
+from controllers.time_optimal import (SAMPLE_PERIOD_S, JointLimits, PlanError, TooLate,
+                                      Waypoint, plan, rest_to_rest_time)
 from controllers.transforms import matrix_to_quaternion
 from controllers.youbot_arm import ARM_BASE_IN_BASE_LINK_M
 from controllers import youbot_arm, zu12_arm
@@ -32,10 +34,12 @@ from coordinator.layout import (PLATE_SLOTS_IN_BASE_M, PLATE_TOP_IN_BASE_M, Cell
                                 slot_in_world, world_to_base)
 
 DOWN = (1.0, 0.0, 0.0, 0.0)                  # tool z pointing down (x, y, z, w)
-# A material seen this recently before the belt stopped is in the camera's view [s]; its pick
-# waits this long after the stop, for frames of it at rest [s].
-VIEW_GAP_S = 0.2
-STOP_FRAME_WAIT_S = 0.4
+# A pick's contact is planned at least this long after the arm could be over the material, and
+# moved this much later while the arm cannot make it [s].
+PICK_LEAD_S = 0.1
+PICK_TRIES = 6
+# A pick the port starts late is planned again this many times at most.
+MAX_REPLANS = 2
 # A released material falls free of the cup or the fingers before the tool moves on [s].
 RELEASE_HOLD_S = 0.2
 # A motion that ends where the tool grips or lets go holds its goal this long, so that the arm
@@ -109,7 +113,7 @@ class Ports(Protocol):
 
 @dataclass(frozen=True)
 class Settings:
-    pick_x: float = 0.0               # the belt stops when the front material reaches this x
+    pick_x: float = -0.6              # the Zu 12 picks materials downstream of this x [m]
     confirm_hits: int = 8             # frames a track needs before it is acted on
     max_retries: int = 1              # extra grasp attempts on a missed grasp
     zu12_scaling: float = 1.0         # fraction of the Zu 12's joint speed limits
@@ -241,10 +245,11 @@ class Machine:
         self.deadline = now + budget
         self.run.event(now, 'state', self.name, detail=state.value)
 
-    def move(self, state: Enum, obs: Observation, points: Points) -> None:
+    def move(self, state: Enum, obs: Observation, points: Points,
+             start: Optional[float] = None) -> None:
         """Send this machine's arm a motion and enter ``state``, due by the motion's end (as
         the port scheduled it) plus the settle margin."""
-        self.run.send(Motion(self.arm, points))
+        self.run.send(Motion(self.arm, points), start)
         self.enter(state, obs.now, self.run.motions[self.arm].end - obs.now
                    + self.run.s.settle_margin)
 
@@ -273,26 +278,22 @@ class Machine:
 
 
 class Loader(Machine):
-    """The Zu 12: picks the front material off the belt once the belt rule has stopped it at
-    the pick point; purple onto the ground target, the rest onto the youBot's plate."""
+    """The Zu 12: picks materials off the running belt (meeting each where it will be, and
+    moving with it while the cup is on it); purple onto the ground target once it has ridden
+    to the end stop, the rest onto the youBot's plate."""
 
     name, arm = 'loader', 'zu12'
 
     def __init__(self, run: 'Pipeline') -> None:
         super().__init__(run, LoaderState.START)
         self.current: Optional[Material] = None     # the material being picked or placed
-        self._then: Optional[np.ndarray] = None     # the next motion's goal (lift, rise)
-        self._clear_at = math.inf                   # when the held material is off the belt
+        self._then: Optional[np.ndarray] = None     # the next motion's goal (the rise)
+        self._leave = math.inf                      # when the cup lifts the material
+        self._replans = 0                           # pick plans the port started late
         S = LoaderState
         self.handlers = {S.WAIT: self._wait, S.PICK: self._pick, S.PLACE: self._place,
                          S.RISE: self._rise, S.RETREAT: self._retreat, S.HOME: self._home,
                          S.DONE: lambda obs: None}
-
-    def busy_with_belt(self, now: float) -> bool:
-        """The cup is on a material still on the belt, or lifting it off (it must not move
-        under the cup)."""
-        return self.state is LoaderState.PICK or (self.state is LoaderState.PLACE
-                                                  and now < self._clear_at)
 
     def start(self, obs: Observation) -> None:
         """The first observation: the arms' poses now are their home poses."""
@@ -312,47 +313,104 @@ class Loader(Machine):
             self.enter(LoaderState.HOME, now, run.motions['zu12'].end - now
                        + run.s.settle_margin)
             return
-        front = max(waiting, key=lambda m: run.belt_x(m, now), default=None)
-        if front is None:
-            return
-        x = run.belt_x(front, now)
-        if x < run.s.pick_x or run.belt_running:
-            return                  # (picked once the belt rule has stopped it, at a known x)
-        stopped = run.belt_log[-1][0]
-        if stopped - front.last_seen < VIEW_GAP_S and now - stopped < STOP_FRAME_WAIT_S:
-            # Still in the camera's view: use its frames at rest (in real time the belt stops
-            # a little later than decided, by an unknown delay below this wait).
-            return
-        if front.stamp < stopped:
-            front.position = np.array([x, front.position[1], front.position[2]])
-        front.stamp = now
-        self.current = front
-        front.status = 'picking'
-        self._plan_pick(obs, front)
+        m = self._next(waiting)
+        if m is not None:
+            self._plan_pick(obs, m)
+
+    def _next(self, waiting: Sequence[Material]) -> Optional[Material]:
+        """The next material to pick: the most downstream one bound for the youBot's plate (the
+        youBot waits for them); the purple once the end stop holds it (it rides to the end)."""
+        run = self.run
+        ride = run.layout.end_stop
+        now_ = [m for m in waiting if not (ride and m.color == 'purple')]
+        if not now_:
+            now_ = [m for m in waiting if run.held(m)]
+        return max(now_, key=lambda m: m.position[0], default=None)
 
     def _plan_pick(self, obs: Observation, m: Material) -> None:
-        """Through the hover point down onto the material with the cup switched on (an armed
-        cup seals when it touches its part), and stay there for the dwell; once the arm is there
-        and holds it, one motion lifts it and takes it to its place."""
-        run, t = self.run, self.run.s.timing
+        """Meet the material where it will be: the earliest contact the arm can make from
+        where it is, past the pick point. One motion: to the hover point, arriving there with
+        the path's velocity at its time, then down onto the material and on it while the cup
+        seals, moving with it, and up to the lift height, at rest. The cup is switched on
+        first (an armed cup seals when it touches its part)."""
+        run, now, t = self.run, obs.now, self.run.s.timing
         size = run.layout.material_size
         # A second attempt presses 4 mm further down.
         timing = PickTiming(**{**t.__dict__, 'contact_gap': t.contact_gap - 0.004 * m.attempts})
-        top = m.position + np.array([0.0, 0.0, size / 2 + timing.contact_gap])
-        path = [top + np.array([0.0, 0.0, timing.hover]), top,
-                top + np.array([0.0, 0.0, timing.lift_height])]
-        qs = run.solve_path('zu12', path, run.home_q['zu12'])
-        if qs is None:
-            return self._pick_failed(obs, m, 'no IK solution for the pick path')
+        track = run.track(m)
+        # Real time: allow for as long as the port has seen planning overrun its allowance (a
+        # motion it starts later would come too late to a moving material).
+        start = now + run.s.plan_latency + run.lag
+        t_contact = max(start + timing.descend + PICK_LEAD_S, run.reaches(m, run.s.pick_x))
+        if not math.isfinite(t_contact):
+            return self._leave_it(obs, m)   # it does not reach the pick point (belt off)
+        seed = run.motions['zu12'].goal if run.motions['zu12'] is not None else obs.zu12_q
+        # The hover point moves with the contact time: a first guess from a rest-to-rest move
+        # there, then later by a little until the arm makes it.
+        hover = follow_pick(track, t_contact, size, timing)[0][0][1]
+        q_hover = run.solve('zu12', hover, DOWN, 'world', seed)
+        if q_hover is None:
+            return self._pick_failed(obs, m, 'no IK solution for the pick')
+        reach = rest_to_rest_time(obs.zu12_q, q_hover, run.limits('zu12'))
+        t_contact = max(t_contact, start + reach + timing.descend + PICK_LEAD_S)
+        for _ in range(PICK_TRIES):
+            if track(t_contact)[0] < run.s.pick_x - 1e-6:
+                t_contact = run.reaches(m, run.s.pick_x)
+            if track(t_contact + timing.dwell)[0] > (run.layout.belt_end_x
+                                                     - run.layout.material_size / 2 + 1e-6):
+                return self._leave_it(obs, m)      # off the end (no stop) before the cup is on it
+            path, lift = follow_pick(track, t_contact, size, timing, SAMPLE_PERIOD_S)
+            qs = run.solve_path('zu12', [p for _, p in path] + [lift], q_hover)
+            if qs is None:
+                return self._pick_failed(obs, m, 'no IK solution for the pick path')
+            times = np.array([t for t, _ in path])
+            q_path = np.array(qs[:-1])
+            v = np.gradient(q_path, times, axis=0, edge_order=2)
+            a = np.gradient(v, times, axis=0, edge_order=2)
+            # To the hover point at its time, with the path's velocity; along the path (sent as
+            # it is); then up to the lift point, at rest, as fast as the joints allow.
+            waypoints = [Waypoint(q_path[0], velocity=v[0], acceleration=a[0], at=times[0])]
+            waypoints += [Waypoint(q, velocity=vk, acceleration=ak, at=tk, direct=True)
+                          for q, vk, ak, tk in zip(q_path[1:], v[1:], a[1:], times[1:])]
+            waypoints.append(Waypoint(qs[-1], min_time=timing.lift))
+            try:
+                points = run.plan('zu12', obs.zu12_q, waypoints, start=start)
+                break
+            except TooLate:
+                t_contact += PICK_LEAD_S
+            except PlanError as exc:
+                return self._pick_failed(obs, m, f'no motion for the pick: {exc}')
+        else:
+            return self._pick_failed(obs, m, 'the arm cannot meet the material in time')
         ok, why = run.ports.grip('zu12', True)
         if not ok:
             return self._pick_failed(obs, m, f'the suction did not switch on: {why}')
-        q_hover, q_contact, self._then = qs
+        self.current, m.status = m, 'picking'
+        self._then = qs[-1]
+        self.move(LoaderState.PICK, obs, points, start=start)
+        late = run.motions['zu12'].start - start
+        if late > 1e-9:
+            # The port started it later than planned: it would miss the material. Plan again
+            # now, allowing for that much (the new motion replaces this one before it starts).
+            run.lag = max(run.lag, late)
+            run.event(now, 'replanned', 'zu12', m, f'the pick would start {late:.2f} s late')
+            if self._replans < MAX_REPLANS:
+                self._replans += 1
+                return self._plan_pick(obs, m)
+        self._replans = 0
+        self._leave = t_contact + timing.dwell + late
         m.attempts += 1
         run.count_grasp('zu12')
-        self.move(LoaderState.PICK, obs, run.plan('zu12', obs.zu12_q, [
-            Waypoint(q_hover, stop=False),
-            Waypoint(q_contact, hold=timing.dwell, min_time=timing.descend)]))
+        held = ' (held at the stop)' if run.held(m) else ''
+        run.event(now, 'tracking', 'zu12', m,
+                  f'contact at {t_contact:.2f} s, x {track(t_contact)[0]:.3f}{held}')
+
+    def _leave_it(self, obs: Observation, m: Material) -> None:
+        """The material cannot be picked before it leaves the belt."""
+        m.status = 'seen'
+        self.current = None
+        if self.state is not LoaderState.WAIT:
+            self.enter(LoaderState.WAIT, obs.now, self.run.s.idle_timeout)
 
     def _pick_failed(self, obs: Observation, m: Material, why: str) -> None:
         run = self.run
@@ -364,28 +422,37 @@ class Loader(Machine):
 
     def _pick(self, obs: Observation) -> None:
         run, m, now = self.run, self.current, obs.now
+        if not m.picked and now >= self._leave and obs.zu12_holding:
+            # Off the belt from here: what the belt queued behind it moves on.
+            run.off_belt(m, now)
+            run.count_grasp('zu12', success=True)
+            run.event(now, 'picked', 'zu12', m, f'attempt {m.attempts}')
         arrived = self.arrival(obs)
         if arrived is None:
             return
         if not arrived:
             run.ports.grip('zu12', False)
+            if m.picked:
+                return self._place_failed(obs, m, 'the arm did not reach the lift point')
             return self._pick_failed(obs, m, 'the arm did not reach the material')
         if not obs.zu12_holding:
             run.ports.grip('zu12', False)
+            if m.picked:
+                return self._place_failed(obs, m, 'dropped while lifting it')
             run.event(now, 'grasp_missed', 'zu12', m, f'attempt {m.attempts}')
             if m.attempts <= run.s.max_retries:
                 return self._plan_pick(obs, m)
             return self._pick_failed(obs, m, f'not held after {m.attempts} attempts')
-        run.count_grasp('zu12', success=True)
-        m.picked = True
-        run.event(now, 'picked', 'zu12', m, f'attempt {m.attempts}')
+        if not m.picked:                     # (held, but only sealed after the lift began)
+            run.off_belt(m, now)
+            run.count_grasp('zu12', success=True)
+            run.event(now, 'picked', 'zu12', m, f'attempt {m.attempts}')
         self._plan_place(obs, m)
 
     def _plan_place(self, obs: Observation, m: Material) -> None:
-        """Straight up off the belt, over to above the place and down until the material is
-        just above it, in one motion that passes through the lift and the above points; the
-        release and the rise follow once the arm is there. The material is off the belt once
-        the lift point is passed (``busy_with_belt``)."""
+        """From the lift point over to above the place at the lift's height and down until the
+        material is just above it, in one motion; the release and the rise follow once the arm
+        is there."""
         run, size = self.run, self.run.layout.material_size
         if m.color == 'purple':
             target = run.layout.ground_target
@@ -408,14 +475,12 @@ class Loader(Machine):
         qs = run.solve_path('zu12', [transfer, above, release], run.motions['zu12'].goal)
         if qs is None:
             return self._place_failed(obs, m, 'no IK solution for the place path')
-        q_lift, (q_transfer, q_above, q_release) = self._then, qs
+        q_transfer, q_above, q_release = qs
         self._then = q_transfer       # where it rises to after the release
         points = run.plan('zu12', obs.zu12_q, [
-            Waypoint(q_lift, stop=False, min_time=t.lift), Waypoint(q_transfer, stop=False),
-            Waypoint(q_above, stop=False),
+            Waypoint(q_transfer, stop=False), Waypoint(q_above, stop=False),
             Waypoint(q_release, hold=SETTLE_S, min_time=t.place_descend)])
         self.move(LoaderState.PLACE, obs, points)
-        self._clear_at = run.arrival_time('zu12', q_lift)
 
     def _place_failed(self, obs: Observation, m: Material, why: str) -> None:
         self.run.ports.grip('zu12', False)
@@ -697,6 +762,8 @@ class Pipeline:
         self.motions: Dict[str, Optional[Motion]] = {'zu12': None, 'youbot': None}
         self.belt_running = False
         self.belt_log: List[Tuple[float, bool]] = [(start_time, False)]
+        self._belt_time = start_time      # the belt model's time (``_advance_belt``)
+        self.lag = 0.0                    # the most the port has started a motion late [s]
         self.now = start_time
         self.q_now = np.zeros(0)
         self.home_q: Dict[str, np.ndarray] = {}
@@ -761,10 +828,11 @@ class Pipeline:
         self.events.append(e)
         self.ports.event(e)
 
-    def send(self, motion: Motion) -> None:
+    def send(self, motion: Motion, start: Optional[float] = None) -> None:
         """Send an arm motion planned now, its first segment starting after the plan latency
-        (the convention of every plan here); the port may schedule it later, whole."""
-        motion.start = self.now + self.s.plan_latency
+        (the convention of every plan here) or at ``start``; the port may schedule it later,
+        whole."""
+        motion.start = self.now + self.s.plan_latency if start is None else start
         delay = self.ports.trajectory(motion.arm, motion.points, motion.start)
         if delay:
             motion.delay(delay)
@@ -794,28 +862,80 @@ class Pipeline:
         if not ready:
             self.event(obs.now, 'returning', arm)
 
-    def belt_x(self, m: Material, now: float) -> float:
-        """Where a material on the belt is now: seen at its frame's time, carried since then
-        for as long as the belt ran."""
-        return m.position[0] + self.layout.belt_speed * self._running_time(m.stamp, now)
-
     # --- the belt -----------------------------------------------------------------------------
+    def _on_belt(self) -> List[Material]:
+        """The materials the belt carries (or its stop holds), as the coordinator believes."""
+        return [m for m in self.materials.values()
+                if m.status in ('seen', 'picking') and not m.picked]
+
+    def _items(self, mats: Sequence[Material]) -> List[Item]:
+        size = self.layout.material_size
+        # Along the belt as world x (the belt runs along +x; only differences matter).
+        return [Item(m.position[0], m.position[1] - self.layout.belt_y, size, size)
+                for m in mats]
+
+    @property
+    def _stop(self) -> float:
+        """The stop's face (world x; infinity without one)."""
+        return self.layout.belt_end_x if self.layout.end_stop else math.inf
+
+    def held(self, m: Material) -> bool:
+        """Whether the end stop (or what it holds) holds the material now."""
+        mats = self._on_belt()
+        return m in mats and held(self._items(mats), self._stop)[mats.index(m)]
+
+    def track(self, m: Material) -> Callable[[float], np.ndarray]:
+        """Where the material's centre will be at a time, while the belt runs as it does now:
+        carried on, and held once it reaches the stop or what the stop holds."""
+        mats = self._on_belt()
+        items, k, now = self._items(mats), mats.index(m), self.now
+        speed = self.layout.belt_speed if self.belt_running else 0.0
+        y, z = float(m.position[1]), float(m.position[2])
+
+        def at(t: float) -> np.ndarray:
+            return np.array([advance(items, self._stop, speed * max(0.0, t - now))[k], y, z])
+        return at
+
+    def reaches(self, m: Material, x: float) -> float:
+        """When the material's centre reaches ``x`` (now if it is there already; infinity if it
+        never will: the belt is stopped, or the stop holds it upstream of ``x``)."""
+        if x > self.layout.belt_end_x - self.layout.material_size / 2:
+            return math.inf                         # beyond the belt's end
+        if m.position[0] >= x:
+            return self.now
+        speed = self.layout.belt_speed if self.belt_running else 0.0
+        if speed <= 0.0 or self.held(m):
+            return math.inf
+        t = self.now + (x - m.position[0]) / speed
+        return t if self.track(m)(t)[0] >= x - 1e-6 else math.inf
+
+    def off_belt(self, m: Material, now: float) -> None:
+        """The cup has lifted the material off the belt (what queued behind it moves on)."""
+        self._advance_belt(now)
+        m.picked = True
+
+    def _advance_belt(self, now: float) -> None:
+        """Carry the model of the belt forward to ``now``."""
+        travel = self.layout.belt_speed * self._running_time(self._belt_time, now)
+        self._belt_time = max(self._belt_time, now)
+        if travel <= 0.0:
+            return
+        mats = self._on_belt()
+        for m, x in zip(mats, advance(self._items(mats), self._stop, travel)):
+            m.position = np.array([x, m.position[1], m.position[2]])
+            m.stamp = now
+
     def _belt(self, now: float, running: bool) -> None:
         if running != self.belt_running:
             effective = self.ports.belt(self.layout.belt_speed if running else 0.0)
+            self._advance_belt(now)
             self.belt_running = running
             self.belt_log.append((max(now, effective or now), running))
             self.event(now, 'belt_started' if running else 'belt_stopped')
 
     def _belt_wanted(self, now: float) -> bool:
-        """The belt runs while loading, except while a material waits at the pick point or the
-        cup is on one still on the belt: nothing passes the pick point unnoticed."""
-        if self.loader.state in (LoaderState.HOME, LoaderState.DONE):
-            return False
-        if self.loader.busy_with_belt(now):
-            return False
-        return not any(self.belt_x(m, now) >= self.s.pick_x
-                       for m in self.materials.values() if m.status == 'seen')
+        """The belt runs at a uniform speed from the start until loading is over."""
+        return self.loader.state not in (LoaderState.HOME, LoaderState.DONE)
 
     def _running_time(self, t0: float, t1: float) -> float:
         total = 0.0
@@ -827,26 +947,36 @@ class Pipeline:
 
     # --- perception ---------------------------------------------------------------------------
     def _see(self, obs: Observation) -> None:
+        self._advance_belt(obs.now)
         for d in obs.detections:
             m = self.materials.get(d.id)
             if m is None:
-                if d.hits < self.s.confirm_hits or not self._on_belt(d.position):
+                if (d.hits < self.s.confirm_hits or not self._on_belt_area(d.position)
+                        or d.position[0] >= self.s.pick_x):
                     continue
-                m = self.materials[d.id] = Material(d.id, d.color, np.asarray(d.position, float),
-                                                    d.stamp, d.hits)
+                m = self.materials[d.id] = Material(d.id, d.color, self._seen_at(d, obs.now),
+                                                    obs.now, d.hits)
                 self.event(obs.now, 'seen', 'vision', m,
                            f'at {np.round(m.position, 3).tolist()}')
             elif m.status == 'seen':
-                m.position, m.stamp, m.hits = np.asarray(d.position, float), d.stamp, d.hits
+                m.position, m.stamp, m.hits = self._seen_at(d, obs.now), obs.now, d.hits
             m.last_seen = obs.now
-        # A material still on the belt that has gone past its end was not picked.
+        # Without an end stop, a material still on the belt past its end was not picked.
         for m in self.materials.values():
-            if m.status == 'seen' and self.belt_x(m, obs.now) > self.layout.belt_end_x:
+            if (m.status == 'seen' and not self.layout.end_stop
+                    and m.position[0] > self.layout.belt_end_x):
                 self.fail(obs.now, m, 'missed', 'went off the belt end unpicked', 'zu12')
 
-    def _on_belt(self, position: Sequence[float]) -> bool:
-        """Whether a detection lies on the belt: the camera also sees beside it, where the Zu 12
-        carries materials to their places (a held material is not a new one)."""
+    def _seen_at(self, d: Detection, now: float) -> np.ndarray:
+        """A detection carried to ``now``: in the camera's view the belt carries it freely."""
+        travel = self.layout.belt_speed * self._running_time(d.stamp, now)
+        return np.asarray(d.position, float) + np.array([travel, 0.0, 0.0])
+
+    def _on_belt_area(self, position: Sequence[float]) -> bool:
+        """Whether a detection lies on the belt. The camera also sees beside it, and downstream
+        of the pick point, where the Zu 12 lifts materials and carries them to their places: a
+        material in the cup is not a new one. A new material is confirmed where it enters the
+        view, upstream of the pick point (``_see``)."""
         return abs(position[1] - self.layout.belt_y) <= self.layout.belt_width / 2
 
     # --- the end ------------------------------------------------------------------------------
@@ -927,10 +1057,12 @@ class Pipeline:
                            np.full(5, youbot_arm.JOINT_JERK_LIMIT)).scaled(self.s.youbot_scaling)
 
     def plan(self, arm: str, q: Sequence[float], waypoints: Sequence[Waypoint],
-             wait: float = 0.0) -> Points:
+             wait: float = 0.0, start: Optional[float] = None) -> Points:
         """A time-optimal motion of ``arm`` from rest at ``q`` through ``waypoints``, starting
-        ``wait`` after the plan latency from now (the convention of every plan here)."""
-        motion = plan(q, waypoints, self.limits(arm), self.now + self.s.plan_latency + wait)
+        ``wait`` after the plan latency from now (the convention of every plan here), or at
+        ``start``."""
+        t0 = self.now + self.s.plan_latency if start is None else start
+        motion = plan(q, waypoints, self.limits(arm), t0 + wait)
         # The controller starts from where the arm is: the start sample is sent only as the end
         # of a wait (a hold at the current position).
         points = motion.points()

@@ -1,7 +1,9 @@
 """The pipeline cell's props in PyBullet: the conveyor, the material source and the suction tool.
 
 The belt is a static box; each physics step, whatever rests on its top surface is given the belt's
-velocity along the belt (no slip: the belt carries it; lifting it breaks the contact). The source
+velocity along the belt (no slip: the belt carries it; lifting it breaks the contact). With an end
+stop, what reaches the stop, or a material held there, stays put while the belt runs on beneath
+it (controllers.conveyor's accumulation rule, which the coordinator predicts with). The source
 drops the scenario's materials, in a seeded random order, at the belt's upstream end, one each
 time the belt has travelled a seeded random gap. The suction tool holds a material with a fixed
 constraint while it is on and the material was within reach when it was switched on.
@@ -17,11 +19,15 @@ import numpy as np
 import pybullet
 from pybullet_utils.bullet_client import BulletClient
 
+from controllers.conveyor import Item, held
 from controllers.transforms import matrix_to_quaternion
 from sim_bridge.world_config import ConveyorConfig, MaterialsConfig
 
 BELT_THICKNESS_M = 0.04
 BELT_COLOR = (0.15, 0.15, 0.17, 1.0)
+END_STOP_THICKNESS_M = 0.02
+END_STOP_HEIGHT_M = 0.06            # above the belt's top
+END_STOP_COLOR = (0.8, 0.7, 0.1, 1.0)
 STAND_COLOR = (0.45, 0.47, 0.5, 1.0)
 
 
@@ -53,6 +59,18 @@ class Conveyor:
         # friction against a static box would brake it within the step.
         client.changeDynamics(self.body, -1, lateralFriction=0.0, rollingFriction=0.0,
                               spinningFriction=0.0)
+        # The stop's face is the belt's downstream end: the whole belt stays usable.
+        self.stop_along = config.length if config.end_stop else math.inf
+        if config.end_stop:
+            stop_half = (END_STOP_THICKNESS_M / 2, config.width / 2,
+                         (END_STOP_HEIGHT_M + BELT_THICKNESS_M) / 2)
+            stop_centre = (self.point(config.length + END_STOP_THICKNESS_M / 2)
+                           + np.array([0.0, 0.0, (END_STOP_HEIGHT_M - BELT_THICKNESS_M) / 2]))
+            self.stop_body = client.createMultiBody(
+                0.0, client.createCollisionShape(pybullet.GEOM_BOX, halfExtents=stop_half),
+                client.createVisualShape(pybullet.GEOM_BOX, halfExtents=stop_half,
+                                         rgbaColor=END_STOP_COLOR),
+                basePosition=stop_centre, baseOrientation=orn)
         stand_h = centre[2] - BELT_THICKNESS_M / 2
         if stand_h > 0.01:
             stand_half = (config.length / 2 * 0.95, config.width / 2 * 0.8, stand_h / 2)
@@ -85,15 +103,27 @@ class Conveyor:
                 return True
         return False
 
+    def item(self, body: int) -> Item:
+        """A body as the accumulation rule sees it: its centre and extents along and across."""
+        lo, hi = (np.asarray(c, float) for c in self._p.getAABB(body))
+        centre, extent = (lo + hi) / 2, hi - lo
+        rel = centre - self.top
+        return Item(along=float(rel @ self.direction) + self.config.length / 2,
+                    across=float(rel @ self.lateral),
+                    length=float(np.abs(self.direction) @ extent),
+                    width=float(np.abs(self.lateral) @ extent))
+
     def carry(self, bodies: List[int], dt: float) -> None:
-        """Give what rests on the belt the belt's velocity; advance the belt's travel."""
+        """Give what rests on the belt the belt's velocity, except what the end stop (or what
+        it holds) holds; advance the belt's travel."""
         self.travel += self._speed * dt
         belt_v = self._speed * self.direction
-        for body in bodies:
-            if self.on_belt(body):
-                v, _ = self._p.getBaseVelocity(body)
-                self._p.resetBaseVelocity(body, (belt_v[0], belt_v[1], min(v[2], 0.0)),
-                                          (0.0, 0.0, 0.0))
+        resting = [body for body in bodies if self.on_belt(body)]
+        stopped = held([self.item(b) for b in resting], self.stop_along)
+        for body, still in zip(resting, stopped):
+            v, _ = self._p.getBaseVelocity(body)
+            vx, vy = (0.0, 0.0) if still else (belt_v[0], belt_v[1])
+            self._p.resetBaseVelocity(body, (vx, vy, min(v[2], 0.0)), (0.0, 0.0, 0.0))
 
 
 class MaterialSource:

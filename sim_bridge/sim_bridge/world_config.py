@@ -131,6 +131,9 @@ class ConveyorConfig:
     width: float
     yaw: float = 0.0
     belt_speed: float = 0.05       # m/s along the belt's x axis
+    # A wall across the belt's downstream end: what reaches it stays on the belt (accumulates)
+    # while the belt runs on beneath it, instead of falling off.
+    end_stop: bool = False
 
 
 @dataclass(frozen=True)
@@ -334,13 +337,16 @@ def _obstacle(r: '_Reader', item: Any, i: int) -> ObstacleConfig:
 
 def _conveyor(r: '_Reader', item: Any) -> ConveyorConfig:
     where = 'conveyor'
-    r.only(item, where, {'position', 'length', 'width', 'yaw', 'belt_speed'})
+    r.only(item, where, {'position', 'length', 'width', 'yaw', 'belt_speed', 'end_stop'})
+    end_stop = item.get('end_stop', False)
+    if not isinstance(end_stop, bool):
+        raise r.fail(where, 'end_stop', f'must be true or false, got {end_stop!r}')
     return ConveyorConfig(position=r.vector(item, 'position', where, 3),
                           length=r.number(item, 'length', where, lo=0.1, hi=50.0),
                           width=r.number(item, 'width', where, lo=0.02, hi=5.0),
                           yaw=r.number(item, 'yaw', where, default=0.0),
                           belt_speed=r.number(item, 'belt_speed', where, default=0.05, lo=0.0,
-                                              hi=2.0))
+                                              hi=2.0), end_stop=end_stop)
 
 
 def _materials(r: '_Reader', item: Any) -> MaterialsConfig:

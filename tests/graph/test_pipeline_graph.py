@@ -35,6 +35,12 @@ def test_a_lock_step_run_delivers_every_material(two_runs):
     assert r['grasp_successes'] == 15 and r['grasp_attempts'] >= 15
     kinds = [e[1] for e in r['events']]
     assert kinds.count('loaded') == 7 and kinds.count('placed') == 1
+    # The belt ran from the start until loading was over, and never stopped for a pick; the
+    # purple rode to the end stop and was taken there.
+    assert kinds.count('belt_started') == 1 and kinds.count('belt_stopped') == 1
+    assert kinds.index('belt_stopped') > max(i for i, k in enumerate(kinds) if k == 'picked')
+    purple = [e for e in r['events'] if e[1] == 'tracking' and e[4] == 'purple']
+    assert len(purple) == 1 and 'held at the stop' in purple[0][5]
     assert kinds.count('delivered') == 7
     # The youBot left, came back, and the run ended after both robots were home.
     assert kinds.index('departing') < kinds.index('delivered')

@@ -1,10 +1,12 @@
 """The cell's props in the world core: the conveyor carries at belt speed, the material source
 is seeded and reproducible, the suction cup grips on contact and releases."""
+import dataclasses
 import math
 
 import numpy as np
 import pytest
 
+from controllers.conveyor import held
 from sim_bridge.runner import DriveLimits, SimRunner
 from sim_bridge.world import SimWorld, resolve_resource
 from sim_bridge.world_config import WorldConfigError, load_world, parse_world
@@ -77,15 +79,35 @@ def test_the_belt_carries_materials_at_its_speed(world):
         world.conveyor.speed = math.nan
 
 
-def test_materials_fall_off_the_end_and_restart_on_reset(world):
+def test_materials_queue_at_the_end_stop_and_restart_on_reset(world):
     world.conveyor.speed = 1.0
-    _run(world, 6.0)
+    _run(world, 6.0)                 # every material dropped, and carried far past the end
     assert len(world.materials) == 8
-    assert all(not world.conveyor.on_belt(m.body) for m in world.materials[:2])
+    assert all(world.conveyor.on_belt(m.body) for m in world.materials)
+    items = [world.conveyor.item(m.body) for m in world.materials]
+    stop = world.conveyor.stop_along
+    # Held in a queue at the stop, as the coordinator's model predicts: each against the stop
+    # or against one held before it, none past the stop, none tumbled.
+    assert held(items, stop) == [True] * 8
+    assert max(i.along + i.length / 2 for i in items) <= stop + 1e-3
+    assert all(i.length == pytest.approx(0.05, abs=2e-3) for i in items)
     world.reset()
     assert world.materials == []
     _run(world, 0.1)
     assert len(world.materials) == 1
+
+
+def test_without_an_end_stop_materials_fall_off_the_end():
+    config = dataclasses.replace(WORLD, conveyor=dataclasses.replace(WORLD.conveyor,
+                                                                     end_stop=False))
+    world = SimWorld(config)
+    try:
+        world.conveyor.speed = 1.0
+        _run(world, 6.0)
+        assert len(world.materials) == 8
+        assert all(not world.conveyor.on_belt(m.body) for m in world.materials[:2])
+    finally:
+        world.close()
 
 
 def _tcp_to(world, point):
@@ -132,7 +154,10 @@ def test_the_armed_cup_grips_on_contact_and_releases(world):
 def test_cell_sections_are_validated():
     base = {'conveyor': {'position': [0, 0, 0.4], 'length': 2.0, 'width': 0.3}}
     assert parse_world(base).conveyor.belt_speed == 0.05
+    assert parse_world(base).conveyor.end_stop is False
     bad = [
+        ({'conveyor': {'position': [0, 0, 0.4], 'length': 2.0, 'width': 0.3,
+                       'end_stop': 'yes'}}, 'end_stop must be true or false'),
         ({'materials': {'counts': {'a': 1}, 'colors': {'a': [1, 0, 0, 1]}}}, 'need a conveyor'),
         (dict(base, materials={'counts': {'a': 1}, 'colors': {}}), 'has no colour for'),
         (dict(base, materials={'counts': {'a': 1}, 'colors': {'a': [1, 0, 0, 1]},
