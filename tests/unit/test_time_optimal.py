@@ -2,7 +2,8 @@
 import numpy as np
 import pytest
 
-from controllers.time_optimal import (JointLimits, PlanError, Waypoint, plan,
+from controllers.pick_place import PickTiming, follow_pick
+from controllers.time_optimal import (JointLimits, PlanError, TooLate, Waypoint, plan,
                                       rest_to_rest_time)
 
 LIMITS = JointLimits(np.array([2.0, 2.0, 3.0]), np.array([8.0, 8.0, 12.0]),
@@ -90,3 +91,64 @@ def test_a_velocity_scaling_outside_0_1_is_refused():
     with pytest.raises(PlanError):
         LIMITS.scaled(1.5)
     assert np.allclose(LIMITS.scaled(0.5).velocity, LIMITS.velocity / 2)
+
+
+def test_a_timed_waypoint_is_met_at_its_time_with_its_velocity_then_a_path_is_followed():
+    # Meeting something moving: at t = 3 s at q1 moving at v1, then along samples as given.
+    q1, v1 = np.array([1.0, -0.5, 0.3]), np.array([0.2, 0.0, -0.1])
+    follow = [Waypoint(q1 + v1 * dt, velocity=v1, at=3.0 + dt, direct=True)
+              for dt in (0.05, 0.1, 0.15)]
+    motion = plan(np.zeros(3), [Waypoint(q1, velocity=v1, at=3.0)] + follow
+                  + [Waypoint(q1 + v1 * 0.15 + np.array([0.0, 0.3, 0.0]))], LIMITS, t0=1.0)
+    met = [s for s in motion.samples if s.t == pytest.approx(3.0)]
+    assert met and np.allclose(met[0].q, q1) and np.allclose(met[0].v, v1)
+    for w in follow:
+        s, = [s for s in motion.samples if s.t == pytest.approx(w.at)]
+        assert np.allclose(s.q, w.q) and np.allclose(s.v, w.velocity)
+    assert motion.arrivals[:4] == pytest.approx([3.0, 3.05, 3.1, 3.15])
+    assert not np.any(motion.samples[-1].v)
+    _check_within_limits(motion, LIMITS)
+
+
+def test_a_timed_waypoint_the_arm_cannot_make_is_too_late():
+    far = np.array([3.0, 0.0, 0.0])          # 1.5 s at least at 2 rad/s
+    with pytest.raises(TooLate):
+        plan(np.zeros(3), [Waypoint(far, velocity=np.zeros(3), at=1.0), Waypoint(far)],
+             LIMITS, t0=0.0)
+
+
+@pytest.mark.parametrize('bad', [
+    dict(velocity=np.array([5.0, 0.0, 0.0])),                  # beyond the velocity limit
+    dict(velocity=np.zeros(3), acceleration=np.array([0.0, 20.0, 0.0])),
+    dict(velocity=np.array([np.nan, 0.0, 0.0])),
+])
+def test_a_given_state_beyond_the_limits_is_refused(bad):
+    with pytest.raises(PlanError):
+        plan(np.zeros(3), [Waypoint(np.ones(3), at=2.0, **bad), Waypoint(np.ones(3) * 1.2)],
+             LIMITS)
+
+
+def test_a_motion_cannot_end_moving_and_a_direct_waypoint_needs_its_time():
+    with pytest.raises(PlanError, match='ends at rest'):
+        plan(np.zeros(3), [Waypoint(np.ones(3), velocity=np.full(3, 0.1))], LIMITS)
+    with pytest.raises(PlanError, match='direct'):
+        plan(np.zeros(3), [Waypoint(np.ones(3), direct=True), Waypoint(np.ones(3))], LIMITS)
+
+
+def test_the_pick_path_moves_with_the_material_while_on_it():
+    speed = np.array([0.12, 0.0, 0.0])
+    track = lambda t: np.array([-0.5, 0.75, 0.425]) + speed * t      # noqa: E731
+    timing = PickTiming(hover=0.06, descend=0.3, dwell=0.15, lift=0.3, lift_height=0.12)
+    path, lift = follow_pick(track, 5.0, 0.05, timing, period=0.05)
+    times = [t for t, _ in path]
+    assert times[0] == pytest.approx(4.7) and times[-1] == pytest.approx(5.15)
+    assert np.all(np.diff(times) <= 0.05 + 1e-12)
+    top = 0.425 + 0.025
+    heights = [p[2] - top for _, p in path]
+    assert heights[0] == pytest.approx(0.06) and np.all(np.diff(heights) <= 1e-12)
+    for t, p in path:
+        assert p[:2] == pytest.approx(track(t)[:2])          # right over it, all along
+        if t >= 5.0:
+            assert p[2] == pytest.approx(top)                # on its top face from contact
+    # The lift point: the lift's height over the contact, ahead by half the travel of the lift.
+    assert lift == pytest.approx(track(5.15) + np.array([0.12 * 0.15, 0.0, 0.025 + 0.12]))
