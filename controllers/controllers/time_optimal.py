@@ -36,7 +36,11 @@ class PlanError(ValueError):
 
 
 class TooLate(PlanError):
-    """A waypoint's time comes before the arm can be there."""
+    """A waypoint's time comes before the arm can be there (``by``: how much too early [s])."""
+
+    def __init__(self, message: str, by: float) -> None:
+        super().__init__(message)
+        self.by = by
 
 
 @dataclass(frozen=True)
@@ -187,7 +191,7 @@ def plan(q0: Sequence[float], waypoints: Sequence[Waypoint], limits: JointLimits
         min_time = w.min_time if w.at is None else max(w.min_time, w.at - t)
         if w.at is not None and w.at - t < -1e-9:
             raise TooLate(f'waypoint {i} is due at {w.at:.3f} s, before the motion gets to '
-                          f'it ({t:.3f} s)')
+                          f'it ({t:.3f} s)', t - w.at)
         profile = _profile(q_prev, v_prev, qs[i], velocities[i], limits, min_time, a_prev,
                            a_here)
         if profile is None and np.any(velocities[i]) and given_v[i] is None:
@@ -198,7 +202,7 @@ def plan(q0: Sequence[float], waypoints: Sequence[Waypoint], limits: JointLimits
         duration = float(profile.duration)
         if w.at is not None and duration > w.at - t + 1e-6:
             raise TooLate(f'waypoint {i} is due at {w.at:.3f} s; the arm can be there at '
-                          f'{t + duration:.3f} s at the earliest')
+                          f'{t + duration:.3f} s at the earliest', t + duration - w.at)
         if duration > 1e-9:         # (a waypoint where the arm already is adds no samples)
             steps = max(1, int(np.ceil(duration / period - 1e-9)))
             for k in range(1, steps + 1):

@@ -287,9 +287,14 @@ class Loader(Machine):
     def __init__(self, run: 'Pipeline') -> None:
         super().__init__(run, LoaderState.START)
         self.current: Optional[Material] = None     # the material being picked or placed
-        self._then: Optional[np.ndarray] = None     # the next motion's goal (the rise)
+        self._then: Optional[np.ndarray] = None     # where the cup rises to from its place
         self._leave = math.inf                      # when the cup lifts the material
         self._replans = 0                           # pick plans the port started late
+        # The cup has just let go on the plate or the ground target: the next motion rises
+        # first (straight up, after the release hold), whatever it is.
+        self._at_release = False
+        self._clear_at = -math.inf                  # when the cup is clear of the place
+        self._arm_pending = False                   # the cup goes on once it is clear
         S = LoaderState
         self.handlers = {S.WAIT: self._wait, S.PICK: self._pick, S.PLACE: self._place,
                          S.RISE: self._rise, S.RETREAT: self._retreat, S.HOME: self._home,
@@ -309,13 +314,44 @@ class Loader(Machine):
             why = ('every material handled' if accounted >= run.layout.total else
                    f'nothing new for {run.s.idle_timeout:.0f} s')
             run.event(now, 'loading_over', 'zu12', detail=why)
-            run.plan_home('zu12', obs)
-            self.enter(LoaderState.HOME, now, run.motions['zu12'].end - now
-                       + run.s.settle_margin)
-            return
+            run.event(now, 'returning', 'zu12')
+            return self._move(LoaderState.HOME, obs, [Waypoint(run.home_q['zu12'].copy())])
         m = self._next(waiting)
         if m is not None:
             self._plan_pick(obs, m)
+        if self.state is LoaderState.WAIT and self._at_release:
+            # Nothing to pick yet: up from the place, to wait there.
+            self._move(LoaderState.RISE, obs, [])
+
+    def _move(self, state: LoaderState, obs: Observation, waypoints: List[Waypoint],
+              start: Optional[float] = None) -> None:
+        """Send a motion through ``waypoints`` (planned from rest where the arm is); from a
+        place the cup has just let go at, it first stays still while the material falls free
+        and rises straight up."""
+        points = self._plan(obs, waypoints, start)
+        self.move(state, obs, points, start)
+        self._after_send()
+
+    def _plan(self, obs: Observation, waypoints: List[Waypoint],
+              start: Optional[float] = None) -> Points:
+        run = self.run
+        wait = 0.0
+        if self._at_release:
+            waypoints = [Waypoint(self._then, stop=not waypoints,
+                                  min_time=run.s.timing.place_descend)] + list(waypoints)
+            wait = RELEASE_HOLD_S
+        return run.plan('zu12', obs.zu12_q, waypoints, wait, start)
+
+    def _after_send(self) -> None:
+        if self._at_release:
+            self._at_release = False
+            self._clear_at = self.run.arrival_time('zu12', self._then)
+
+    def clear_of_the_plate(self, now: float) -> bool:
+        """Whether the cup is away from the youBot's plate: not placing there, nor rising from
+        it, nor swinging home (over it)."""
+        return (self.state not in (LoaderState.PLACE, LoaderState.RISE, LoaderState.HOME)
+                and not self._at_release and now >= self._clear_at)
 
     def _next(self, waiting: Sequence[Material]) -> Optional[Material]:
         """The next material to pick: the most downstream one bound for the youBot's plate (the
@@ -351,8 +387,11 @@ class Loader(Machine):
         q_hover = run.solve('zu12', hover, DOWN, 'world', seed)
         if q_hover is None:
             return self._pick_failed(obs, m, 'no IK solution for the pick')
+        # (An optimistic first guess; a plan that cannot make it says by how much.)
         reach = rest_to_rest_time(obs.zu12_q, q_hover, run.limits('zu12'))
-        t_contact = max(t_contact, start + reach + timing.descend + PICK_LEAD_S)
+        if self._at_release:
+            reach += RELEASE_HOLD_S
+        t_contact = max(t_contact, start + reach + timing.descend)
         for _ in range(PICK_TRIES):
             if track(t_contact)[0] < run.s.pick_x - 1e-6:
                 t_contact = run.reaches(m, run.s.pick_x)
@@ -374,19 +413,23 @@ class Loader(Machine):
                           for q, vk, ak, tk in zip(q_path[1:], v[1:], a[1:], times[1:])]
             waypoints.append(Waypoint(qs[-1], min_time=timing.lift))
             try:
-                points = run.plan('zu12', obs.zu12_q, waypoints, start=start)
+                points = self._plan(obs, waypoints, start)
                 break
-            except TooLate:
-                t_contact += PICK_LEAD_S
+            except TooLate as late:
+                t_contact += max(late.by, 0.0) + PICK_LEAD_S / 2
             except PlanError as exc:
                 return self._pick_failed(obs, m, f'no motion for the pick: {exc}')
         else:
             return self._pick_failed(obs, m, 'the arm cannot meet the material in time')
-        ok, why = run.ports.grip('zu12', True)
-        if not ok:
-            return self._pick_failed(obs, m, f'the suction did not switch on: {why}')
+        # The cup is switched on (an armed cup seals on what it touches) now, or from a place
+        # once it has risen from there: switched on where it let go, it would take the same
+        # material again.
+        self._arm_pending = self._at_release
+        if not self._arm_pending:
+            ok, why = run.ports.grip('zu12', True)
+            if not ok:
+                return self._pick_failed(obs, m, f'the suction did not switch on: {why}')
         self.current, m.status = m, 'picking'
-        self._then = qs[-1]
         self.move(LoaderState.PICK, obs, points, start=start)
         late = run.motions['zu12'].start - start
         if late > 1e-9:
@@ -398,6 +441,7 @@ class Loader(Machine):
                 self._replans += 1
                 return self._plan_pick(obs, m)
         self._replans = 0
+        self._after_send()
         self._leave = t_contact + timing.dwell + late
         m.attempts += 1
         run.count_grasp('zu12')
@@ -409,19 +453,24 @@ class Loader(Machine):
         """The material cannot be picked before it leaves the belt."""
         m.status = 'seen'
         self.current = None
-        if self.state is not LoaderState.WAIT:
+        if self.state is not LoaderState.WAIT and not self._at_release:
             self.enter(LoaderState.WAIT, obs.now, self.run.s.idle_timeout)
 
     def _pick_failed(self, obs: Observation, m: Material, why: str) -> None:
         run = self.run
         run.fail(obs.now, m, 'grasp_failed', why, 'zu12')
         self.current = None
-        run.plan_home('zu12', obs, ready=True)
-        self.enter(LoaderState.RETREAT, obs.now,
-                   run.motions['zu12'].end - obs.now + run.s.settle_margin)
+        self._move(LoaderState.RETREAT, obs, [Waypoint(run.home_q['zu12'].copy())])
 
     def _pick(self, obs: Observation) -> None:
         run, m, now = self.run, self.current, obs.now
+        if self._arm_pending:
+            if now < self._clear_at:
+                return
+            self._arm_pending = False
+            ok, why = run.ports.grip('zu12', True)
+            if not ok:
+                return self._pick_failed(obs, m, f'the suction did not switch on: {why}')
         if not m.picked and now >= self._leave and obs.zu12_holding:
             # Off the belt from here: what the belt queued behind it moves on.
             run.off_belt(m, now)
@@ -505,13 +554,14 @@ class Loader(Machine):
             m.status = 'on_plate'
             run.loaded += 1
             run.event(now, 'loaded', 'zu12', m, f'plate slot {m.slot}')
-        # The cup stays still while the vacuum lets go, then rises.
-        self.move(LoaderState.RISE, obs, run.plan('zu12', obs.zu12_q, [
-            Waypoint(self._then, min_time=run.s.timing.place_descend)], RELEASE_HOLD_S))
+        # The cup stays still while the vacuum lets go, then rises: as the start of the next
+        # motion, planned now.
+        self.current, self._at_release = None, True
+        self.enter(LoaderState.WAIT, now, run.s.idle_timeout)
+        self._wait(obs)
 
     def _rise(self, obs: Observation) -> None:
         if self.motion_over(obs, 'the rise from the place'):
-            self.current = None
             self.enter(LoaderState.WAIT, obs.now, self.run.s.idle_timeout)
 
     def _retreat(self, obs: Observation) -> None:
@@ -552,8 +602,8 @@ class Transport(Machine):
         on_plate = [m for m in run.materials.values() if m.status == 'on_plate']
         loaded = len(on_plate) >= run.layout.plate_bound()
         loader = run.loader.state
-        if not (loaded or loader is LoaderState.DONE) or loader in (
-                LoaderState.PLACE, LoaderState.RISE, LoaderState.HOME):
+        if not (loaded or loader is LoaderState.DONE) or not run.loader.clear_of_the_plate(
+                obs.now):
             return      # (nor while the Zu 12's cup is over the plate, or swinging home from it)
         order = [st.name for st in run.layout.stands]
         self.queue = sorted(on_plate, key=lambda m: (
@@ -705,9 +755,14 @@ class Transport(Machine):
         run.event(now, 'unload_grasped', 'youbot', m, f'attempt {m.unload_attempts}')
         up, over, drop = self._carry
         t = run.s.timing
-        self.move(TransportState.CARRY, obs, run.plan('youbot', obs.youbot_q, [
-            Waypoint(up, stop=False, min_time=t.lift), Waypoint(over, stop=False),
-            Waypoint(drop, hold=SETTLE_S, min_time=t.place_descend)]))
+        if m.color == 'blue':
+            # Set down on the platform gently, from above, and still before letting go.
+            carry = [Waypoint(up, stop=False, min_time=t.lift), Waypoint(over, stop=False),
+                     Waypoint(drop, hold=SETTLE_S, min_time=t.place_descend)]
+        else:
+            # Let go over the pool, 14 cm up (4 cm over its walls): straight there.
+            carry = [Waypoint(up, stop=False, min_time=t.lift), Waypoint(drop)]
+        self.move(TransportState.CARRY, obs, run.plan('youbot', obs.youbot_q, carry))
 
     def _unload_failed(self, obs: Observation, m: Material, kind: str, why: str) -> None:
         self.run.ports.grip('youbot', False)

@@ -66,6 +66,8 @@ class FakeCell:
         self.moving = {'zu12': False, 'youbot': False}
         self.held_in_view = held_in_view
         self.grips_while_moving: List[tuple] = []
+        self.let_go_at = np.full(3, np.inf)           # where the Zu 12's cup last let go
+        self.regrips: List[float] = []
         self.trajectories: List[tuple] = []
         self.final_x: Dict[int, float] = {}          # where each material was when lifted
         self.events = []
@@ -102,7 +104,13 @@ class FakeCell:
             self.grips_while_moving.append((arm, on, self.now))
         self.armed[arm], self.sealed[arm] = on, False
         if not on:
+            if arm == 'zu12' and self.holding[arm]:
+                self.let_go_at = self.q[arm][:3].copy()
             self.holding[arm] = False
+        elif arm == 'zu12' and np.linalg.norm(self.q[arm][:3] - self.let_go_at) < 0.01:
+            # Switched on again where it let go: it seals on what it just set down.
+            self.sealed[arm], self.holding[arm] = True, True
+            self.regrips.append(self.now)
         return True, 'ok'
 
     def belt(self, speed):
@@ -255,6 +263,8 @@ def test_the_whole_run_delivers_every_material_and_both_robots_return():
     assert cell.belt_calls[-1] == 0.0 and cell.drive_calls[-1] == (0.0, 0.0, 0.0)
     assert np.allclose(cell.q['zu12'], 0.0) and np.allclose(cell.q['youbot'], 0.0)
     assert r.completion_time == pytest.approx(cell.now - DT, abs=1e-9)
+    # The cup is switched on for the next pick only once it has risen from the last place.
+    assert cell.regrips == []
     # The youBot's arm drives home upright and folds only there (folded, it reaches down in
     # front of the base, where the platform is).
     transport = [e.detail for e in cell.events if e.kind == 'state' and e.robot == 'transport']
