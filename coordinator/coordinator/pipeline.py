@@ -38,6 +38,9 @@ DOWN = (1.0, 0.0, 0.0, 0.0)                  # tool z pointing down (x, y, z, w)
 # moved this much later while the arm cannot make it [s].
 PICK_LEAD_S = 0.1
 PICK_TRIES = 6
+# Real time: a pick allows for this much more than the longest plan of one has taken (the next
+# may need a few more IK calls).
+PLAN_MARGIN = 1.25
 # A pick the port starts late is planned again this many times at most.
 MAX_REPLANS = 2
 # A released material falls free of the cup or the fingers before the tool moves on [s].
@@ -363,20 +366,24 @@ class Loader(Machine):
             now_ = [m for m in waiting if run.held(m)]
         return max(now_, key=lambda m: m.position[0], default=None)
 
-    def _plan_pick(self, obs: Observation, m: Material) -> None:
+    def _plan_pick(self, obs: Observation, m: Material, spent: float = 0.0) -> None:
         """Meet the material where it will be: the earliest contact the arm can make from
         where it is, past the pick point. One motion: to the hover point, arriving there with
         the path's velocity at its time, then down onto the material and on it while the cup
         seals, moving with it, and up to the lift height, at rest. The cup is switched on
-        first (an armed cup seals when it touches its part)."""
+        once the motion is sent (an armed cup seals when it touches its part).
+
+        Real time: ``spent`` is how long earlier plans of this pick took since ``obs.now``
+        (the port started them late, so they were replaced before they began)."""
         run, now, t = self.run, obs.now, self.run.s.timing
         size = run.layout.material_size
         # A second attempt presses 4 mm further down.
         timing = PickTiming(**{**t.__dict__, 'contact_gap': t.contact_gap - 0.004 * m.attempts})
         track = run.track(m)
-        # Real time: allow for as long as the port has seen planning overrun its allowance (a
-        # motion it starts later would come too late to a moving material).
-        start = now + run.s.plan_latency + run.lag
+        # Real time: allow for the longest a pick's plan has taken (a motion the port starts
+        # later would come too late to a moving material), after what this one has spent.
+        lag = run.lag
+        start = now + run.s.plan_latency + lag + spent
         t_contact = max(start + timing.descend + PICK_LEAD_S, run.reaches(m, run.s.pick_x))
         if not math.isfinite(t_contact):
             return self._leave_it(obs, m)   # it does not reach the pick point (belt off)
@@ -421,6 +428,25 @@ class Loader(Machine):
                 return self._pick_failed(obs, m, f'no motion for the pick: {exc}')
         else:
             return self._pick_failed(obs, m, 'the arm cannot meet the material in time')
+        self.current, m.status = m, 'picking'
+        self.move(LoaderState.PICK, obs, points, start=start)
+        late = run.motions['zu12'].start - start
+        if late > 1e-9:
+            # The port started it later than planned: it would miss the material. This plan
+            # took as long as was allowed for it and then ``late``; plan again at once, allowing
+            # for that much after this one (the new motion replaces it before it starts).
+            took = lag + late
+            run.lag = max(run.lag, PLAN_MARGIN * took)
+            run.event(now, 'replanned', 'zu12', m, f'the pick would start {late:.2f} s late')
+            if self._replans < MAX_REPLANS:
+                self._replans += 1
+                return self._plan_pick(obs, m, spent + took)
+            # Still late: hold the arm where it is (replacing the late motion before it
+            # starts) and plan afresh on the next observation.
+            self._replans = 0
+            run.send(Motion('zu12', [(run.now + run.s.plan_latency, obs.zu12_q.copy())]))
+            return self._leave_it(obs, m)
+        self._replans = 0
         # The cup is switched on (an armed cup seals on what it touches) now, or from a place
         # once it has risen from there: switched on where it let go, it would take the same
         # material again.
@@ -429,18 +455,6 @@ class Loader(Machine):
             ok, why = run.ports.grip('zu12', True)
             if not ok:
                 return self._pick_failed(obs, m, f'the suction did not switch on: {why}')
-        self.current, m.status = m, 'picking'
-        self.move(LoaderState.PICK, obs, points, start=start)
-        late = run.motions['zu12'].start - start
-        if late > 1e-9:
-            # The port started it later than planned: it would miss the material. Plan again
-            # now, allowing for that much (the new motion replaces this one before it starts).
-            run.lag = max(run.lag, late)
-            run.event(now, 'replanned', 'zu12', m, f'the pick would start {late:.2f} s late')
-            if self._replans < MAX_REPLANS:
-                self._replans += 1
-                return self._plan_pick(obs, m)
-        self._replans = 0
         self._after_send()
         self._leave = t_contact + timing.dwell + late
         m.attempts += 1
@@ -453,7 +467,7 @@ class Loader(Machine):
         """The material cannot be picked before it leaves the belt."""
         m.status = 'seen'
         self.current = None
-        if self.state is not LoaderState.WAIT and not self._at_release:
+        if self.state is not LoaderState.WAIT:
             self.enter(LoaderState.WAIT, obs.now, self.run.s.idle_timeout)
 
     def _pick_failed(self, obs: Observation, m: Material, why: str) -> None:
@@ -483,6 +497,11 @@ class Loader(Machine):
             run.ports.grip('zu12', False)
             if m.picked:
                 return self._place_failed(obs, m, 'the arm did not reach the lift point')
+            # (Real time: the simulator took the motion in too late and refused it.) The
+            # material rides on, untouched: another attempt, like a missed grasp.
+            run.event(now, 'arm_stalled', 'zu12', m, f'pick attempt {m.attempts} not completed')
+            if m.attempts <= run.s.max_retries:
+                return self._plan_pick(obs, m)
             return self._pick_failed(obs, m, 'the arm did not reach the material')
         if not obs.zu12_holding:
             run.ports.grip('zu12', False)
@@ -818,7 +837,7 @@ class Pipeline:
         self.belt_running = False
         self.belt_log: List[Tuple[float, bool]] = [(start_time, False)]
         self._belt_time = start_time      # the belt model's time (``_advance_belt``)
-        self.lag = 0.0                    # the most the port has started a motion late [s]
+        self.lag = 0.0                    # the longest a pick's plan has taken (real time) [s]
         self.now = start_time
         self.q_now = np.zeros(0)
         self.home_q: Dict[str, np.ndarray] = {}
@@ -919,9 +938,10 @@ class Pipeline:
 
     # --- the belt -----------------------------------------------------------------------------
     def _on_belt(self) -> List[Material]:
-        """The materials the belt carries (or its stop holds), as the coordinator believes."""
+        """The materials the belt carries (or its stop holds), as the coordinator believes:
+        those a failed pick left there too (they ride on, and queue at the stop)."""
         return [m for m in self.materials.values()
-                if m.status in ('seen', 'picking') and not m.picked]
+                if m.status in ('seen', 'picking', 'failed') and not m.picked]
 
     def _items(self, mats: Sequence[Material]) -> List[Item]:
         size = self.layout.material_size
