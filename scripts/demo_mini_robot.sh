@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # The main job: the simulator and a scripted teleop, headless. The mini robot drives a 0.5 m
 # square; drive_check prints the final odometry pose against the pose that the kinematics
-# predicts for the script's commands, and the exit code says whether they agree.
+# predicts for the commands as the simulator applied them, and the exit code says whether they
+# agree.
 set -euo pipefail
 ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 # shellcheck disable=SC1091
@@ -41,7 +42,8 @@ if [ "${DEMO_RECORD:-1}" != 0 ]; then
   done
 fi
 drive_check --ros-args -p use_sim_time:=true -p wall_timeout:=600.0 -p script:="$SCRIPT" \
-  -r cmd_vel:=/mini_robot/cmd_vel -r odom:=/mini_robot/odom 2>&1 | tee "$RUN_DIR/drive_check.log" &
+  -r cmd_vel:=/mini_robot/cmd_vel -r odom:=/mini_robot/odom -r cmd_vel_out:=/mini_robot/cmd_vel_out \
+  2>&1 | tee "$RUN_DIR/drive_check.log" &
 check_pid=$!
 pids+=("$check_pid")
 teleop --ros-args -p use_sim_time:=true -p script:="$SCRIPT" -p wait_for_subscriber:=30.0 \

@@ -76,6 +76,10 @@ class SimRunner:
             max(dt_ns, round(1e9 / cam.config.rate)) for cam in world.cameras]
         self._camera_next_ns: List[int] = [0 for _ in world.cameras]
 
+    def applied(self, robot: str) -> tuple:
+        """The command a driven robot's wheels follow now: (vx, wz) or (vx, vy, wz)."""
+        return self._applied[robot]
+
     def holonomic(self, robot: str) -> bool:
         return len(self.guards[robot].limits) == 3
 

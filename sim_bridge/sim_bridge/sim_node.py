@@ -13,7 +13,7 @@ from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
 from rclpy.clock import Clock, ClockType
 from rclpy.task import Future
 from rclpy.node import Node
-from rclpy.qos import QoSProfile, qos_profile_sensor_data
+from rclpy.qos import DurabilityPolicy, QoSProfile, qos_profile_sensor_data
 from ros_common.node_main import run_node
 from rosgraph_msgs.msg import Clock as ClockMsg
 from sensor_msgs.msg import CameraInfo, Image, JointState
@@ -131,6 +131,7 @@ class SimNode(Node):
         self._joint_pubs, self._odom_pubs, self._odom_frames = {}, {}, {}
         self._state_pubs = {}
         self._holding_pubs = {}
+        self._cmd_out_pubs = {}
         for name, robot in self._world.robots.items():
             ns = robot.config.namespace
             prefix = robot.config.frame_prefix
@@ -149,6 +150,13 @@ class SimNode(Node):
                     self.create_publisher(GripState, f'{service}/state', history))
             self._odom_frames[name] = (prefix + 'odom', prefix + 'base_link')
             if name in self._runner.guards:
+                # The command as applied (clamped, zeroed on bad input or by the timeout), when
+                # it changes and stamped when it took effect: diff_drive_controller's
+                # cmd_vel_out. What a base really did can be judged against it. Transient local:
+                # a checker that joins late still gets the first changes.
+                self._cmd_out_pubs[name] = self.create_publisher(
+                    TwistStamped, _topic(ns, 'cmd_vel_out'),
+                    QoSProfile(depth=100, durability=DurabilityPolicy.TRANSIENT_LOCAL))
                 msg_type = TwistStamped if p['use_stamped_vel'] else Twist
                 self.create_subscription(msg_type, _topic(ns, 'cmd_vel'),
                                          lambda msg, n=name: self._on_cmd_vel(n, msg), reliable)
@@ -320,6 +328,16 @@ class SimNode(Node):
     def on_command_timeout(self, robot: str) -> None:
         self.get_logger().info(f'{robot}: no cmd_vel for {self._runner.guards[robot].timeout} s;'
                                ' stopping', throttle_duration_sec=5.0)
+        self._publish_applied(robot)
+
+    def _publish_applied(self, robot: str) -> None:
+        command = self._runner.applied(robot)
+        vx, vy, wz = command if len(command) == 3 else (command[0], 0.0, command[1])
+        msg = TwistStamped()
+        msg.header.stamp = _stamp(self._world.sim_time_ns)
+        msg.header.frame_id = self._odom_frames[robot][1]
+        msg.twist.linear.x, msg.twist.linear.y, msg.twist.angular.z = vx, vy, wz
+        self._cmd_out_pubs[robot].publish(msg)
 
     def _publish_clock(self, time_ns: int) -> None:
         self._clock_msg.clock = _stamp(time_ns)
@@ -334,7 +352,10 @@ class SimNode(Node):
             self.get_logger().warn(f'{robot}/cmd_vel: linear.y {twist.linear.y:.3f} ignored: a '
                                    'differential drive cannot move sideways',
                                    throttle_duration_sec=5.0)
+        before = self._runner.applied(robot)
         result = self._runner.command(robot, twist.linear.x, twist.linear.y, twist.angular.z)
+        if self._runner.applied(robot) != before:
+            self._publish_applied(robot)
         if not result.accepted:
             self.get_logger().warn(f'{robot}/cmd_vel: {result.reason}', throttle_duration_sec=1.0)
         elif result.clamped:
@@ -380,6 +401,8 @@ class SimNode(Node):
 
     def _on_reset(self, _request, response):
         self._runner.reset()
+        for robot in self._cmd_out_pubs:
+            self._publish_applied(robot)
         for name in self._world.robots:
             self.on_state(name, self._world.sim_time_ns)
         response.success, response.message = True, 'robots returned to their start poses'

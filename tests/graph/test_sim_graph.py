@@ -39,25 +39,31 @@ class Driver:
     def now(self):
         return stamp_s(self.clock[-1][1].clock)
 
-    def send(self, v, w):
+    def send(self, v, w, vy=0.0):
         twist = Twist()
-        twist.linear.x, twist.angular.z = v, w
+        twist.linear.x, twist.linear.y, twist.angular.z = v, vy, w
         self.pub.publish(TwistStamped(twist=twist) if self.stamped else twist)
 
-    def drive(self, v, w, duration, period=0.05):
+    def drive(self, v, w, duration, vy=0.0, period=0.05, ramp=0.3):
         """Hold (v, w) for ``duration`` seconds of simulated time, then send zero.
 
-        Returns the twist of the last odometry stamped inside the commanded interval, read
-        before the zero goes out, so it shows the steady motion and not the stop.
+        Returns the odometry twists stamped in the commanded interval after ``ramp``, once
+        odometry from past its end has arrived. Judge their peak (``peak``), not one sample: on
+        a busy machine this process may fall silent for longer than the simulator's command
+        timeout (0.5 s simulated is 125 ms of wall time at 4x), and the robot rightly stops
+        until the next command.
         """
-        t_end = self.now() + duration
+        t_start = self.now()
+        t_end = t_start + duration
         while self.now() < t_end:
-            self.send(v, w)
+            self.send(v, w, vy)
             time.sleep(period / RTF)
-        steady = self.odom[-1][1].twist.twist
         self.send(0.0, 0.0)
         self.stop_sent = self.now()
-        return steady
+        wait_for(lambda: stamp_s(self.odom[-1][1].header.stamp) >= t_end, 10.0,
+                 what='odometry from past the commanded interval')
+        return [m.twist.twist for _, m in list(self.odom)
+                if t_start + ramp <= stamp_s(m.header.stamp) <= t_end]
 
     def wait_at_rest(self, timeout=10.0):
         """Wait for odometry, stamped after the stop was sent, that shows the robot at rest."""
@@ -76,6 +82,14 @@ class Driver:
     def settle(self, seconds=0.3):
         t_end = self.now() + seconds
         wait_for(lambda: self.now() >= t_end, 10.0, what='simulated time')
+
+
+def peak(twists, component):
+    """The largest magnitude of ``component`` (e.g. 'linear.x') over the twists, signed."""
+    group, axis = component.split('.')
+    values = [getattr(getattr(t, group), axis) for t in twists]
+    assert values, 'no odometry inside the commanded interval'
+    return max(values, key=abs)
 
 
 def _ns(stamp):
@@ -135,8 +149,8 @@ def test_turn_in_place_for_pi_over_0p2_s_gives_pi(lockstep):
 
 def test_commands_above_the_limits_are_clamped(sim, probe):
     d = Driver(probe)
-    v = d.drive(1.0, 0.0, 1.0).linear.x
-    w = d.drive(0.0, -3.0, 1.0).angular.z
+    v = peak(d.drive(1.0, 0.0, 1.0), 'linear.x')
+    w = peak(d.drive(0.0, -3.0, 1.0), 'angular.z')
     assert v == pytest.approx(0.2, rel=0.03)
     assert w == pytest.approx(-0.2, rel=0.03)
     wait_for(lambda: 'clamped to (0.200, 0.000)' in sim.output(), 5.0, what='clamp warning')
@@ -144,6 +158,7 @@ def test_commands_above_the_limits_are_clamped(sim, probe):
 
 def test_silence_past_the_timeout_stops_the_robot(start_node, probe):
     sim = start_node('sim_node', '-p', 'synchronous:=true', '-p', 'state_publish_rate:=240.0')
+    applied = probe.collect(TwistStamped, '/mini_robot/cmd_vel_out')
     lockstep = LockStepDriver(probe)
     last = lockstep.hold(0.1, 0.0, 240)
     # The last command arrived before the last batch of 24 steps ran.
@@ -157,6 +172,13 @@ def test_silence_past_the_timeout_stops_the_robot(start_node, probe):
                       and abs(m.twist.twist.linear.x) < 0.01)
     assert t_command + 0.5 < stopped_at < t_command + 0.6
     wait_for(lambda: 'stopping' in sim.output(), 5.0, what='timeout log line')
+    # cmd_vel_out says what the wheels followed, and when: 0.1 m/s from the first command,
+    # zero once the timeout passed (published on change only).
+    wait_for(lambda: len(applied) >= 2, 5.0, what='cmd_vel_out')
+    (_, go), (_, stop) = applied[-2:]
+    assert go.twist.linear.x == pytest.approx(0.1) and stop.twist.linear.x == 0.0
+    assert stamp_s(stop.header.stamp) - t_command == pytest.approx(0.5, abs=2 * DT)
+    assert stop.header.frame_id == 'base_link'
 
 
 def test_nan_is_rejected_the_robot_stops_and_the_node_lives(start_node, probe):
@@ -178,14 +200,9 @@ def test_nan_is_rejected_the_robot_stops_and_the_node_lives(start_node, probe):
 
 def test_sideways_velocity_on_a_diff_drive_is_ignored_with_a_warning(sim, probe):
     d = Driver(probe)
-    twist = Twist()
-    twist.linear.x, twist.linear.y = 0.1, 0.1
-    end = d.now() + 0.5
-    while d.now() < end:
-        d.pub.publish(twist)
-        time.sleep(0.05 / RTF)
-    steady = d.odom[-1][1].twist.twist
-    assert steady.linear.x == pytest.approx(0.1, rel=0.05) and abs(steady.linear.y) < 0.005
+    twists = d.drive(0.1, 0.0, 0.5, vy=0.1)
+    assert peak(twists, 'linear.x') == pytest.approx(0.1, rel=0.05)
+    assert abs(peak(twists, 'linear.y')) < 0.005
     wait_for(lambda: 'cannot move sideways' in sim.output(), 5.0, what='the warning')
 
 
@@ -246,9 +263,16 @@ def test_reset_returns_the_robot_to_its_start_pose(sim, probe):
     assert math.hypot(*d.pose()[:2]) > 0.1
     reply = probe.call(Trigger, '/sim_node/reset', Trigger.Request())
     assert reply.success
-    d.settle(0.3)
-    x, y, yaw = d.pose()
-    assert math.hypot(x, y) < 0.002 and abs(yaw) < 0.01
+    # (The odometry from before the reset may still be on its way.)
+    def at_start():
+        x, y, yaw = d.pose()
+        return math.hypot(x, y) < 0.002 and abs(yaw) < 0.01
+    wait_for(at_start, 10.0, what='odometry at the start pose')
+    back = stamp_s(d.odom[-1][1].header.stamp)
+    d.settle(0.3)                                   # and it stays there
+    wait_for(lambda: stamp_s(d.odom[-1][1].header.stamp) > back + 0.3, 10.0,
+             what='odometry 0.3 s after the reset')
+    assert at_start()
 
 
 def test_pause_resume_and_step_while_paused(sim, probe):
@@ -272,7 +296,7 @@ def test_pause_resume_and_step_while_paused(sim, probe):
 def test_stamped_velocity_commands(start_node, probe):
     start_node('sim_node', '-p', f'real_time_factor:={RTF}', '-p', 'use_stamped_vel:=true')
     d = Driver(probe, stamped=True)
-    assert d.drive(0.1, 0.0, 0.5).linear.x == pytest.approx(0.1, rel=0.05)
+    assert peak(d.drive(0.1, 0.0, 0.5), 'linear.x') == pytest.approx(0.1, rel=0.05)
 
 
 def test_lock_step_advances_exactly_n_steps_per_request(start_node, probe):

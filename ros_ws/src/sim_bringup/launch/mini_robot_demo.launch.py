@@ -22,7 +22,8 @@ def generate_launch_description():
     params = PathJoinSubstitution([FindPackageShare('sim_bringup'), 'config', 'sim.yaml'])
     check = Node(package='sim_bringup', executable='drive_check', output='screen',
                  parameters=[{'use_sim_time': True, 'script': SQUARE}],
-                 remappings=[('cmd_vel', '/mini_robot/cmd_vel'), ('odom', '/mini_robot/odom')])
+                 remappings=[('cmd_vel', '/mini_robot/cmd_vel'), ('odom', '/mini_robot/odom'),
+                             ('cmd_vel_out', '/mini_robot/cmd_vel_out')])
     return LaunchDescription([
         DeclareLaunchArgument('real_time_factor', default_value='1.0'),
         DeclareLaunchArgument('gui', default_value='false'),

@@ -1,4 +1,11 @@
-"""Compare a base's final odometry with the pose the kinematics predicts for a teleop script."""
+"""Compare a base's final odometry with the pose the kinematics predicts for a teleop script.
+
+The teleop runs its script open loop, and on a busy machine its commands take effect a little
+late: the simulator, catching up with the wall clock, runs a few steps before it reads a new
+command. The check therefore predicts from the commands as the simulator applied them, stamped
+when each took effect (its ``cmd_vel_out``, like diff_drive_controller's), and prints the
+script's own prediction beside it.
+"""
 from __future__ import annotations
 
 import math
@@ -6,12 +13,12 @@ import sys
 import time
 
 import rclpy
-from geometry_msgs.msg import Twist
+from geometry_msgs.msg import Twist, TwistStamped
 from nav_msgs.msg import Odometry
 from rcl_interfaces.msg import ParameterDescriptor
 from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
-from rclpy.qos import QoSProfile
+from rclpy.qos import DurabilityPolicy, QoSProfile
 
 from controllers.diff_drive import Pose2D, predict_pose, wrap_angle
 from controllers.params import float_range
@@ -24,8 +31,9 @@ class DriveCheck(Node):
     """Knows the script the teleop runs; listens to ``cmd_vel`` and ``odom``.
 
     Once commands have ended (the last one zero, none for ``settle_time``) and the base is at
-    rest, it reports the final odometry pose against the pose that integrating the script's
-    twists, clamped to the simulator's limits, predicts.
+    rest, it reports the final odometry pose against the pose that integrating the commands the
+    simulator applied (``cmd_vel_out``) predicts; and the script's own prediction (its twists,
+    clamped to the simulator's limits, for exactly their durations).
     """
 
     def __init__(self, **kwargs) -> None:
@@ -53,6 +61,7 @@ class DriveCheck(Node):
         segments = [(max(-max_speed, min(max_speed, s.v)), max(-max_turn, min(max_turn, s.w)),
                      s.duration) for s in script.steps]
         self.predicted = predict_pose(Pose2D(), segments)
+        self._applied = []      # (simulated time it took effect, v, w), as the simulator says
         self.wall_timeout = get('wall_timeout')
         self._tol = (get('position_tolerance'), get('yaw_tolerance'))
         self._settle = get('settle_time')
@@ -63,10 +72,16 @@ class DriveCheck(Node):
         reliable = QoSProfile(depth=10)
         self.create_subscription(Twist, 'cmd_vel', self._on_cmd, reliable)
         self.create_subscription(Odometry, 'odom', self._on_odom, reliable)
+        self.create_subscription(TwistStamped, 'cmd_vel_out', self._on_applied, QoSProfile(
+            depth=100, durability=DurabilityPolicy.TRANSIENT_LOCAL))
         self.get_logger().info(
             f'waiting for commands on cmd_vel and odometry on odom; the script of '
             f'{len(segments)} steps should end at x={self.predicted.x:+.4f} m '
             f'y={self.predicted.y:+.4f} m yaw={math.degrees(self.predicted.yaw):+.2f} deg')
+
+    def _on_applied(self, msg: TwistStamped) -> None:
+        t = msg.header.stamp.sec + msg.header.stamp.nanosec * 1e-9
+        self._applied.append((t, msg.twist.linear.x, msg.twist.angular.z))
 
     def _on_cmd(self, msg: Twist) -> None:
         is_zero = msg.linear.x == 0.0 and msg.angular.z == 0.0
@@ -83,11 +98,32 @@ class DriveCheck(Node):
                 and abs(twist.angular.z) < 1e-3):
             self.result = self._report()
 
+    def as_applied(self, until: float) -> Pose2D:
+        """The pose the applied commands predict, each from when it took effect until the
+        next (the last until ``until``)."""
+        applied = sorted(self._applied)
+        ends = [t for t, _, _ in applied[1:]] + [until]
+        return predict_pose(Pose2D(), [(v, w, max(0.0, end - t))
+                                       for (t, v, w), end in zip(applied, ends)])
+
     def _report(self) -> bool:
         p = self._odom.pose.pose
         actual = Pose2D(p.position.x, p.position.y, yaw_from_quaternion(
             (p.orientation.x, p.orientation.y, p.orientation.z, p.orientation.w)))
-        predicted = self.predicted
+        script = self.predicted
+        self.get_logger().info(
+            f'the script predicted:  x={script.x:+.4f} m  y={script.y:+.4f} m  '
+            f'yaw={math.degrees(script.yaw):+7.2f} deg (as timed, had the teleop switched '
+            'exactly on time)')
+        if self._applied:
+            stamp = self._odom.header.stamp
+            predicted = self.as_applied(stamp.sec + stamp.nanosec * 1e-9)
+            basis = f'for the {len(self._applied)} commands as the simulator applied them'
+        else:
+            self.get_logger().warn('nothing on cmd_vel_out (a simulator without it?): '
+                                   'judging by the script alone')
+            predicted, basis = script, 'for the script'
+
         dpos = math.hypot(actual.x - predicted.x, actual.y - predicted.y)
         dyaw = wrap_angle(actual.yaw - predicted.yaw)
         ok = dpos <= self._tol[0] and abs(dyaw) <= self._tol[1]
@@ -95,7 +131,7 @@ class DriveCheck(Node):
         log(f'final pose from odom:  x={actual.x:+.4f} m  y={actual.y:+.4f} m  '
             f'yaw={math.degrees(actual.yaw):+7.2f} deg')
         log(f'kinematics predicted:  x={predicted.x:+.4f} m  y={predicted.y:+.4f} m  '
-            f'yaw={math.degrees(predicted.yaw):+7.2f} deg')
+            f'yaw={math.degrees(predicted.yaw):+7.2f} deg ({basis})')
         log(f'error: position {dpos * 1000:.1f} mm (limit {self._tol[0] * 1000:.0f}), '
             f'yaw {math.degrees(dyaw):+.2f} deg (limit {math.degrees(self._tol[1]):.1f}) -> '
             + ('PASS' if ok else 'FAIL'))
