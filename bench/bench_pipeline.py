@@ -16,7 +16,7 @@ from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
 from coordinator.trials import run_trial
-from sim_bridge.runner import DriveLimits, SimRunner
+from sim_bridge.runner import DriveLimits, NullSink, SimRunner
 from sim_bridge.world import SimWorld, resolve_resource
 from sim_bridge.world_config import load_world
 
@@ -25,23 +25,11 @@ DT = 1.0 / 240.0
 SEED, BELT = 5, 0.12
 
 
-class _RenderSink:
+class _RenderSink(NullSink):
     """Renders every due camera frame (as the simulator does for a vision subscriber)."""
-
-    def on_clock(self, t):
-        pass
-
-    def on_state(self, robot, t):
-        pass
 
     def on_camera_due(self, i, t, render):
         render()
-
-    def on_command_timeout(self, robot):
-        pass
-
-    def on_world_state(self, t):
-        pass
 
 
 def in_process_baseline(sim_seconds: float) -> dict:

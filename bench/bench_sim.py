@@ -35,29 +35,23 @@ from rclpy.qos import qos_profile_sensor_data  # noqa: E402
 from rosgraph_msgs.msg import Clock  # noqa: E402
 from sensor_msgs.msg import Image  # noqa: E402
 
-from sim_bridge.runner import DriveLimits, SimRunner  # noqa: E402
+from sim_bridge.runner import DriveLimits, NullSink, SimRunner  # noqa: E402
 from sim_bridge.world import SimWorld, resolve_resource  # noqa: E402
 from sim_bridge.world_config import load_world  # noqa: E402
 
 WORLD = 'package://sim_bridge/worlds/mini_robot.yaml'
 
 
-class _CameraSink:
+class _CameraSink(NullSink):
     """A StepSink that wants every camera frame and discards it (the raw baseline)."""
 
     def __init__(self, camera: bool) -> None:
         self.camera, self.frames = camera, 0
 
-    def on_clock(self, t): pass
-
-    def on_state(self, robot, t): pass
-
     def on_camera_due(self, i, t, render):
         if self.camera:
             render()
             self.frames += 1
-
-    def on_command_timeout(self, robot): pass
 
 
 def raw_pybullet(seconds: float, camera: bool) -> dict:

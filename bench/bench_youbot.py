@@ -20,7 +20,7 @@ from controllers.joint_trajectory import TrajectoryPoint, TrajectoryRequest
 from controllers.youbot_arm import theta_from_datasheet
 from controllers.youbot_kinematics import REFERENCE_FRAMES, YoubotKinematics, motion_duration
 from robot_description import urdf_path
-from sim_bridge.runner import DriveLimits, SimRunner
+from sim_bridge.runner import DriveLimits, NullSink, SimRunner
 from sim_bridge.world import URDF_FLAGS, SimWorld, resolve_resource, yaw_from_quaternion
 from sim_bridge.world_config import load_world
 
@@ -31,20 +31,6 @@ CASES = [('vx', (0.2, 0.0, 0.0)), ('vy', (0.0, 0.2, 0.0)), ('wz', (0.0, 0.0, 0.5
          ('combined', (0.15, -0.1, 0.3)), ('vx fast', (0.8, 0.0, 0.0)),
          ('vy fast', (0.0, 0.8, 0.0)), ('wz fast', (0.0, 0.0, 1.5)),
          ('combined fast', (0.5, 0.5, 1.0))]
-
-
-class _Sink:
-    def on_clock(self, t):
-        pass
-
-    def on_state(self, robot, t):
-        pass
-
-    def on_camera_due(self, i, t, render):
-        pass
-
-    def on_command_timeout(self, robot):
-        pass
 
 
 def _world():
@@ -60,7 +46,7 @@ def _pose(robot):
 
 def base_fidelity():
     world, runner = _world()
-    robot, sink = world.robots['youbot'], _Sink()
+    robot, sink = world.robots['youbot'], NullSink()
     rows = {}
     for label, command in CASES:
         runner.reset()
@@ -86,7 +72,7 @@ def base_fidelity():
 
 def arm_tracking(trials: int):
     world, runner = _world()
-    robot, sink = world.robots['youbot'], _Sink()
+    robot, sink = world.robots['youbot'], NullSink()
     arm = robot.controllers['arm_controller']
     kin = YoubotKinematics()
     rng = np.random.default_rng(7)
@@ -147,7 +133,7 @@ def stepping_cost(seconds: float):
     p.disconnect()
     world, runner = _world()
     kin = YoubotKinematics()
-    sink = _Sink()
+    sink = NullSink()
     runner.set_trajectory('youbot', 'arm_controller', TrajectoryRequest(
         kin.joint_names, (TrajectoryPoint(seconds, (0.5, 0.5, 0.5, 0.5, 0.5)),)))
     t0 = time.perf_counter()

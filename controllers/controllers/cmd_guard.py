@@ -66,3 +66,11 @@ class CommandGuard:
     def stop(self) -> None:
         self._command = tuple(0.0 for _ in self._limits)
         self._stamp = None
+
+
+def rate_limited(current: Sequence[float], target: Sequence[float],
+                 max_steps: Sequence[float]) -> Tuple[float, ...]:
+    """``target``, reached from ``current`` by at most ``max_steps`` per component (an
+    acceleration limit times the time step), as ros2_controllers' speed limiter does."""
+    return tuple(float(t) if abs(t - c) <= m else c + math.copysign(m, t - c)
+                 for c, t, m in zip(current, target, max_steps))

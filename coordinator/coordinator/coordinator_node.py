@@ -44,6 +44,7 @@ from visualization_msgs.msg import MarkerArray
 
 from controllers.lockstep import CommandCounter, DueGrid
 from controllers.params import float_range
+from controllers.path_follower import PathFollower
 from controllers.youbot_arm import JOINT_NAMES as YOUBOT_JOINTS
 from controllers.youbot_arm import JOINT_VELOCITY_LIMIT as YOUBOT_VELOCITY_LIMIT
 from controllers.zu12_arm import JOINT_NAMES as ZU12_JOINTS
@@ -155,6 +156,7 @@ class CoordinatorNode(Node):
         self._joints: Dict[str, Tuple[int, np.ndarray]] = {}
         self._grip: Dict[str, Tuple[int, bool]] = {}
         self._odom: Optional[Tuple[int, Tuple, Tuple]] = None
+        self._follower: Optional[PathFollower] = None      # real time: the base's drive
         self._detections: Dict[int, List[Detection]] = {}
         self._markers: List[Tuple[int, list]] = []
         self._seen_truth: List[bool] = []
@@ -205,7 +207,7 @@ class CoordinatorNode(Node):
             self._joints[arm] = (_ns(msg.header.stamp),
                                  np.array([msg.position[index[n]] for n in names]), velocity)
             if velocity is not None:
-                self._peak[arm].update(velocity)
+                self._peak[arm].update(velocity, _ns(msg.header.stamp) * 1e-9)
             self._lock.notify_all()
 
     def _on_grip(self, arm: str, msg: GripState) -> None:
@@ -227,6 +229,12 @@ class CoordinatorNode(Node):
         with self._lock:
             self._odom = (_ns(msg.header.stamp), pose, world)
             self._lock.notify_all()
+            if self._follower is not None:
+                # Real time: the base controller, on every odometry message. A decision held
+                # up by IK calls must not leave the base running on its last command.
+                status = self._follower.update(_ns(msg.header.stamp) * 1e-9, pose, world[:2],
+                                               world[2])
+                self.drive(*status.command)
 
     def _on_detections(self, msg: MaterialDetectionArray) -> None:
         stamp = _ns(msg.header.stamp)
@@ -319,6 +327,13 @@ class CoordinatorNode(Node):
         msg.linear.x, msg.linear.y, msg.angular.z = float(vx), float(vy), float(wz)
         self.cmd_pub.publish(msg)
         self._commands.sent()
+
+    def follow(self, follower: Optional[PathFollower]) -> bool:
+        """Real time: run ``follower`` on every odometry message (the drive's decisions only
+        judge it). Lock-step: no; every decision sees every state, and sends the commands."""
+        with self._lock:
+            self._follower = None if self.synchronous else follower
+            return self._follower is not None
 
     def event(self, e: Event) -> None:
         msg = PipelineEvent(kind=e.kind, robot=e.robot, material_id=e.material, color=e.color,
@@ -506,9 +521,12 @@ class CoordinatorNode(Node):
             {'color': color, 'position': [round(float(v), 4) for v in p],
              'at_destination': at_destination(color, p, self.regions)} for color, p in truth]
         with self._lock:
-            out['peak_joint_speed'] = {arm: {'fraction_of_limit': round(p.fraction, 4),
-                                             'joint': ARMS[arm][p.joint] if p.joint >= 0 else ''}
-                                       for arm, p in self._peak.items()}
+            out['peak_joint_speed'] = {
+                arm: {'fraction_of_limit': round(p.fraction, 4),
+                      'joint': ARMS[arm][p.joint] if p.joint >= 0 else '',
+                      'time': (round(p.time - self.pipeline.start_time, 4)
+                               if math.isfinite(p.time) else None)}
+                for arm, p in self._peak.items()}
         out.update({'scenario_seed': self.seed, 'belt_speed': self.layout.belt_speed,
                     'mode': 'lock-step' if self.synchronous else 'real-time',
                     'youbot_path': [[round(x, 4), round(y, 4)] for x, y in self._path[::3]],
@@ -588,6 +606,7 @@ def main(args=None) -> int:
         pass
     finally:
         try:
+            node.follow(None)
             node.drive(0.0, 0.0, 0.0)
         except Exception:   # noqa: BLE001 - shutting down: the context may be gone already
             pass

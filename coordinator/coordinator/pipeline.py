@@ -111,6 +111,13 @@ class Ports(Protocol):
 
     def drive(self, vx: float, vy: float, wz: float) -> None: ...
 
+    def follow(self, follower: Optional[PathFollower]) -> bool:
+        """Have the base controller run ``follower`` on every odometry message (None: stop
+        that). True if the port does so (real time: a decision held up by IK calls for the
+        other arm must not leave the base running on a stale command), and the pipeline's
+        ticks only judge the drive; False if the ticks send its commands (lock-step, where a
+        decision sees every state)."""
+
     def event(self, event: Event) -> None: ...
 
 
@@ -601,7 +608,8 @@ class Transport(Machine):
     def __init__(self, run: 'Pipeline') -> None:
         super().__init__(run, TransportState.WAIT_LOAD)
         self.queue: List[Material] = []              # still to unload, the current one first
-        self._follower: Optional[PathFollower] = None
+        self._follower: Optional[PathFollower] = None   # while the base drives
+        self._followed = False                           # the port runs the follower
         self._drive_goal = ''
         self._carry: List[np.ndarray] = []           # the unload's joint positions after the grip
         self._armed = False
@@ -659,6 +667,7 @@ class Transport(Machine):
             speed = min(speed, run.s.drive_turn * path.length / (1.5 * turn))
         self._follower = PathFollower(path, obs.now, speed, run.s.drive_accel, PDGains(
             max_speed=run.s.base_max_speed, max_turn=run.s.base_max_turn))
+        self._followed = run.ports.follow(self._follower)
         self._drive_goal = goal
         if goal != 'home' and self.queue:
             self._ready_arm(obs, lay.stand(goal).pose)
@@ -668,10 +677,15 @@ class Transport(Machine):
 
     def _drive(self, obs: Observation) -> None:
         run = self.run
-        status = self._follower.update(obs.now, obs.youbot_pose, obs.youbot_velocity[:2],
-                                       obs.youbot_velocity[2])
-        run.ports.drive(*status.command)
-        if status.finished or self.late(obs.now):
+        if self._follower is not None:
+            status = self._follower.update(obs.now, obs.youbot_pose, obs.youbot_velocity[:2],
+                                           obs.youbot_velocity[2])
+            if not self._followed:
+                run.ports.drive(*status.command)
+            if not (status.finished or self.late(obs.now)):
+                return
+            self._follower = None
+            run.ports.follow(None)
             run.ports.drive(0.0, 0.0, 0.0)
             if not status.finished:
                 run.event(obs.now, 'drive_stalled', 'youbot', detail=(
@@ -683,7 +697,11 @@ class Transport(Machine):
                 run.plan_home('youbot', obs)
                 return self.enter(TransportState.FOLD, obs.now, run.motions['youbot'].end
                                   - obs.now + run.s.settle_margin)
-            self._next_unload(obs)
+        # The arm rose to its first unload here while the base drove; after a short drive it
+        # may still be on its way, and the unload is planned from where it comes to rest.
+        if self.queue and not self.motion_over(obs, 'ready pose'):
+            return
+        self._next_unload(obs)
 
     def _next_unload(self, obs: Observation) -> None:
         run = self.run
@@ -1057,7 +1075,8 @@ class Pipeline:
     # --- the end ------------------------------------------------------------------------------
     def _finish(self, now: float, status: str, message: str) -> None:
         # Leave nothing moving.
-        for call in (lambda: self.ports.drive(0.0, 0.0, 0.0), lambda: self.ports.belt(0.0)):
+        for call in (lambda: self.ports.follow(None), lambda: self.ports.drive(0.0, 0.0, 0.0),
+                     lambda: self.ports.belt(0.0)):
             try:
                 call()
             except NodeTimeout:

@@ -18,6 +18,7 @@ Definitions (the README repeats them):
 """
 from __future__ import annotations
 
+import math
 from dataclasses import asdict
 from typing import Dict, List, Optional, Sequence, Tuple
 
@@ -98,15 +99,16 @@ class PeakJointSpeed:
         self.limits = np.asarray(limits, float)
         self.fraction = 0.0
         self.joint = -1
+        self.time = math.nan          # the sample's stamp [s]
 
-    def update(self, velocities: Sequence[float]) -> None:
+    def update(self, velocities: Sequence[float], time: float = math.nan) -> None:
         v = np.abs(np.asarray(velocities, float))
         if v.shape != self.limits.shape or not np.all(np.isfinite(v)):
             return
         ratios = v / self.limits
         k = int(np.argmax(ratios))
         if ratios[k] > self.fraction:
-            self.fraction, self.joint = float(ratios[k]), k
+            self.fraction, self.joint, self.time = float(ratios[k]), k, float(time)
 
 
 def _rate(part: int, whole: int) -> float:

@@ -7,7 +7,7 @@ from typing import Callable, Dict, List, Protocol
 
 import numpy as np
 
-from controllers.cmd_guard import CommandGuard, GuardResult
+from controllers.cmd_guard import CommandGuard, GuardResult, rate_limited
 from controllers.joint_trajectory import TrajectoryRequest, TrajectoryResult
 from controllers.lockstep import next_on_grid
 from sim_bridge.world import SimWorld
@@ -26,8 +26,34 @@ class StepSink(Protocol):
 
     def on_command_timeout(self, robot: str) -> None: ...
 
+    def on_command_applied(self, robot: str, time_ns: int) -> None:
+        """The command a driven robot's wheels follow changed at ``time_ns`` (``applied``)."""
+
     def on_world_state(self, time_ns: int) -> None:
         """The world's props (materials) are due; called only for worlds that have them."""
+
+
+class NullSink:
+    """A StepSink that wants nothing: subclass it and override what you need."""
+
+    def on_clock(self, time_ns: int) -> None:
+        pass
+
+    def on_state(self, robot: str, time_ns: int) -> None:
+        pass
+
+    def on_camera_due(self, index: int, time_ns: int,
+                      render: Callable[[], np.ndarray]) -> None:
+        pass
+
+    def on_command_timeout(self, robot: str) -> None:
+        pass
+
+    def on_command_applied(self, robot: str, time_ns: int) -> None:
+        pass
+
+    def on_world_state(self, time_ns: int) -> None:
+        pass
 
 
 @dataclass(frozen=True)
@@ -41,7 +67,8 @@ class SimRunner:
     """Advances a SimWorld step by step.
 
     Each step: the command of every driven robot is taken from its guard (which zeroes it once
-    it is older than the timeout, in simulated time), physics advances one fixed step, then
+    it is older than the timeout, in simulated time) and, for a robot with acceleration limits,
+    approached at no more than those; physics advances one fixed step, then
     /clock is due, robot states are due at ``state_rate`` and each camera at its own rate (each on
     its own grid of simulated time); the sink renders a camera only if someone wants the image.
     """
@@ -59,6 +86,7 @@ class SimRunner:
         self.world_state_period_ns = max(dt_ns, round(1e9 / world_state_rate))
         self._world_state_next_ns = 0
         self.guards: Dict[str, CommandGuard] = {}
+        self._max_change: Dict[str, tuple] = {}      # per step, for robots with accel limits
         for name, robot in world.robots.items():
             if robot.drive is None:
                 continue
@@ -68,6 +96,12 @@ class SimRunner:
             # Guarded components: (vx, wz) for a differential drive, (vx, vy, wz) for Mecanum.
             bounds = (speed, turn) if len(robot.drive.components) == 2 else (speed, speed, turn)
             self.guards[name] = CommandGuard(bounds, limits.cmd_vel_timeout)
+            if own.max_accel is not None or own.max_turn_accel is not None:
+                accel = own.max_accel if own.max_accel is not None else math.inf
+                turn_accel = own.max_turn_accel if own.max_turn_accel is not None else math.inf
+                per_step = ((accel, turn_accel) if len(bounds) == 2
+                            else (accel, accel, turn_accel))
+                self._max_change[name] = tuple(a * world.time_step for a in per_step)
         self._applied: Dict[str, tuple] = {name: tuple(0.0 for _ in guard.limits)
                                            for name, guard in self.guards.items()}
         self._timed_out: Dict[str, bool] = {name: False for name in self.guards}
@@ -84,13 +118,13 @@ class SimRunner:
         return len(self.guards[robot].limits) == 3
 
     def command(self, robot: str, vx: float, vy: float, wz: float) -> GuardResult:
-        """Take a body twist for a driven robot and apply it at once (or stop on bad input).
+        """Take a body twist for a driven robot (or stop on bad input), applied from the next
+        step on (``on_command_applied`` reports when the wheels' command changes).
 
         The result's command is (vx, wz) for a differential drive, (vx, vy, wz) for Mecanum.
         """
         command = (vx, vy, wz) if self.holonomic(robot) else (vx, wz)
         result = self.guards[robot].submit(command, self.world.sim_time)
-        self._apply(robot, result.command)
         self._timed_out[robot] = False
         return result
 
@@ -109,11 +143,15 @@ class SimRunner:
                 robot.apply_controllers(now + world.time_step)
             for name, guard in self.guards.items():
                 command = guard.active_command(now)
-                if command != self._applied[name]:
-                    self._apply(name, command)
+                if name in self._max_change:
+                    command = rate_limited(self._applied[name], command,
+                                           self._max_change[name])
                 if guard.timed_out(now) and not self._timed_out[name]:
                     self._timed_out[name] = True
                     sink.on_command_timeout(name)
+                if command != self._applied[name]:
+                    self._apply(name, command)
+                    sink.on_command_applied(name, world.sim_time_ns)
             world.step()
             t_ns = world.sim_time_ns
             sink.on_clock(t_ns)

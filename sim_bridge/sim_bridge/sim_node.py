@@ -1,6 +1,7 @@
 """ROS 2 node around SimRunner: parameters, topics, services and real-time pacing."""
 from __future__ import annotations
 
+import math
 import sys
 import time
 from typing import List, Optional, Tuple
@@ -13,7 +14,7 @@ from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
 from rclpy.clock import Clock, ClockType
 from rclpy.task import Future
 from rclpy.node import Node
-from rclpy.qos import DurabilityPolicy, QoSProfile, qos_profile_sensor_data
+from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from ros_common.node_main import run_node
 from rosgraph_msgs.msg import Clock as ClockMsg
 from sensor_msgs.msg import CameraInfo, Image, JointState
@@ -174,10 +175,16 @@ class SimNode(Node):
         for cam in self._world.cameras:
             c = cam.config
             ns = self._world.robots[c.robot].config.namespace if c.robot else ''
+            # Reliable, keeping a second of frames: best-effort readers (the sensor-data
+            # profile, as the vision node reads) match it too, and reliable ones (a recorder,
+            # RViz's and rqt's defaults) get every frame after a stall of up to a second.
+            # Best-effort frames were lost under load (a recorder starved for 0.35 s).
+            camera_qos = QoSProfile(depth=max(5, math.ceil(c.rate)),
+                                    reliability=ReliabilityPolicy.RELIABLE)
             self._image_pubs.append(self.create_publisher(
-                Image, _topic(ns, f'{c.name}/image_raw'), qos_profile_sensor_data))
+                Image, _topic(ns, f'{c.name}/image_raw'), camera_qos))
             self._info_pubs.append(self.create_publisher(
-                CameraInfo, _topic(ns, f'{c.name}/camera_info'), qos_profile_sensor_data))
+                CameraInfo, _topic(ns, f'{c.name}/camera_info'), camera_qos))
             image = Image(height=c.height, width=c.width, encoding='rgb8', is_bigendian=0,
                           step=3 * c.width, data=bytes(3 * c.width * c.height))
             # Frames are written into the message's own byte array (see ImageBuffer).
@@ -328,13 +335,15 @@ class SimNode(Node):
     def on_command_timeout(self, robot: str) -> None:
         self.get_logger().info(f'{robot}: no cmd_vel for {self._runner.guards[robot].timeout} s;'
                                ' stopping', throttle_duration_sec=5.0)
-        self._publish_applied(robot)
 
-    def _publish_applied(self, robot: str) -> None:
+    def on_command_applied(self, robot: str, time_ns: int) -> None:
+        self._publish_applied(robot, time_ns)
+
+    def _publish_applied(self, robot: str, time_ns: int) -> None:
         command = self._runner.applied(robot)
         vx, vy, wz = command if len(command) == 3 else (command[0], 0.0, command[1])
         msg = TwistStamped()
-        msg.header.stamp = _stamp(self._world.sim_time_ns)
+        msg.header.stamp = _stamp(time_ns)
         msg.header.frame_id = self._odom_frames[robot][1]
         msg.twist.linear.x, msg.twist.linear.y, msg.twist.angular.z = vx, vy, wz
         self._cmd_out_pubs[robot].publish(msg)
@@ -352,10 +361,7 @@ class SimNode(Node):
             self.get_logger().warn(f'{robot}/cmd_vel: linear.y {twist.linear.y:.3f} ignored: a '
                                    'differential drive cannot move sideways',
                                    throttle_duration_sec=5.0)
-        before = self._runner.applied(robot)
         result = self._runner.command(robot, twist.linear.x, twist.linear.y, twist.angular.z)
-        if self._runner.applied(robot) != before:
-            self._publish_applied(robot)
         if not result.accepted:
             self.get_logger().warn(f'{robot}/cmd_vel: {result.reason}', throttle_duration_sec=1.0)
         elif result.clamped:
@@ -402,7 +408,7 @@ class SimNode(Node):
     def _on_reset(self, _request, response):
         self._runner.reset()
         for robot in self._cmd_out_pubs:
-            self._publish_applied(robot)
+            self._publish_applied(robot, self._world.sim_time_ns)
         for name in self._world.robots:
             self.on_state(name, self._world.sim_time_ns)
         response.success, response.message = True, 'robots returned to their start poses'

@@ -48,10 +48,15 @@ class MecanumConfig:
 
 @dataclass(frozen=True)
 class DriveLimitsConfig:
-    """Per-robot command limits; None falls back to the simulator's parameters."""
+    """Per-robot command limits; None falls back to the simulator's parameters (speeds) or
+    means no limit (accelerations)."""
 
     max_speed: Optional[float] = None
     max_turn: Optional[float] = None
+    # How fast the applied command may change, as diff_drive_controller's max_acceleration:
+    # [m/s^2] for each of linear.x and linear.y, [rad/s^2] for angular.z.
+    max_accel: Optional[float] = None
+    max_turn_accel: Optional[float] = None
 
 
 @dataclass(frozen=True)
@@ -272,7 +277,8 @@ def _robot(r: '_Reader', item: Any, i: int) -> RobotConfig:
 
 
 def _drive(r: '_Reader', d: Any, dw: str):
-    common = {'type', 'wheel_radius', 'wheel_effort', 'max_speed', 'max_turn'}
+    common = {'type', 'wheel_radius', 'wheel_effort', 'max_speed', 'max_turn', 'max_accel',
+              'max_turn_accel'}
     kind = d.get('type') if isinstance(d, dict) else None
     if kind == 'diff_drive':
         r.only(d, dw, common | {'left_wheel_joint', 'right_wheel_joint', 'wheel_separation'})
@@ -298,9 +304,12 @@ def _drive(r: '_Reader', d: Any, dw: str):
     else:
         raise WorldConfigError(f'{r.source}: {dw}.type must be "diff_drive" or "mecanum", '
                                f'got {kind!r}')
-    limits = DriveLimitsConfig(
-        max_speed=r.number(d, 'max_speed', dw, lo=1e-3, hi=10.0) if 'max_speed' in d else None,
-        max_turn=r.number(d, 'max_turn', dw, lo=1e-3, hi=20.0) if 'max_turn' in d else None)
+    def optional(key, hi):
+        return r.number(d, key, dw, lo=1e-3, hi=hi) if key in d else None
+    limits = DriveLimitsConfig(max_speed=optional('max_speed', 10.0),
+                               max_turn=optional('max_turn', 20.0),
+                               max_accel=optional('max_accel', 100.0),
+                               max_turn_accel=optional('max_turn_accel', 200.0))
     return drive, limits
 
 

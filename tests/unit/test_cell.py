@@ -7,35 +7,18 @@ import numpy as np
 import pytest
 
 from controllers.conveyor import held
-from sim_bridge.runner import DriveLimits, SimRunner
+from sim_bridge.runner import DriveLimits, NullSink, SimRunner
 from sim_bridge.world import SimWorld, resolve_resource
 from sim_bridge.world_config import WorldConfigError, load_world, parse_world
 
 WORLD = load_world(resolve_resource('package://sim_bridge/worlds/pipeline_cell.yaml'))
 
 
-class _Sink:
-    def on_clock(self, t):
-        pass
-
-    def on_state(self, robot, t):
-        pass
-
-    def on_camera_due(self, i, t, render):
-        pass
-
-    def on_command_timeout(self, robot):
-        pass
-
-    def on_world_state(self, t):
-        pass
-
-
 def _run(world, seconds):
     """Step through a runner, which also drives the arms' position motors."""
     if not hasattr(world, 'runner'):
         world.runner = SimRunner(world, DriveLimits(), 100.0)
-    world.runner.advance(round(seconds / world.time_step), _Sink())
+    world.runner.advance(round(seconds / world.time_step), NullSink())
 
 
 @pytest.fixture

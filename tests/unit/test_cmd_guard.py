@@ -3,7 +3,7 @@ import math
 
 import pytest
 
-from controllers.cmd_guard import CommandGuard
+from controllers.cmd_guard import CommandGuard, rate_limited
 
 
 def make():
@@ -59,3 +59,10 @@ def test_bad_configuration_raises():
         CommandGuard((0.2, 0.2), 0.0)
     with pytest.raises(ValueError):
         make().submit((0.1,), now=0.0)
+
+
+def test_rate_limited_moves_each_component_by_at_most_its_step_and_lands_exactly():
+    assert rate_limited((0.0, 0.0, 0.0), (0.8, -0.01, 1.0), (0.1, 0.1, 0.2)) == \
+        (0.1, -0.01, 0.2)
+    # Within a step of the target: exactly the target (no float residue to chase forever).
+    assert rate_limited((0.1, 0.7), (0.3, 0.3), (0.25, 0.5)) == (0.3, 0.3)

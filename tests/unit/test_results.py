@@ -77,8 +77,8 @@ def test_the_peak_joint_speed_is_the_largest_fraction_of_any_joints_limit():
     peak.update([0.1, 0.1, float('nan')])              # a bad sample is ignored
     peak.update([0.5, 0.5])                            # so is one of the wrong size
     assert peak.fraction == pytest.approx(0.9) and peak.joint == 1
-    peak.update([0.0, 0.0, -1.02])                     # over the limit: shown, not hidden
-    assert peak.fraction == pytest.approx(1.02) and peak.joint == 2
+    peak.update([0.0, 0.0, -1.02], 12.5)               # over the limit: shown, not hidden
+    assert peak.fraction == pytest.approx(1.02) and peak.joint == 2 and peak.time == 12.5
 
 
 def test_summary_and_report(tmp_path):

@@ -4,19 +4,19 @@ import math
 import numpy as np
 import pytest
 
-from sim_bridge.runner import DriveLimits, SimRunner
+from sim_bridge.runner import DriveLimits, NullSink, SimRunner
 from sim_bridge.world import SimWorld, WorldError, resolve_resource, yaw_from_quaternion
 from sim_bridge.world_config import load_world, parse_world
 
 DEFAULT = resolve_resource('package://sim_bridge/worlds/mini_robot.yaml')
 
 
-class Recorder:
+class Recorder(NullSink):
     """A StepSink that records what the runner asked to publish."""
 
     def __init__(self, want_camera=False):
         self.clock, self.states, self.frames, self.timeouts = [], [], [], []
-        self.due = []
+        self.due, self.applied = [], []
         self.want_camera = want_camera
 
     def on_clock(self, t):
@@ -32,6 +32,9 @@ class Recorder:
 
     def on_command_timeout(self, robot):
         self.timeouts.append(robot)
+
+    def on_command_applied(self, robot, t):
+        self.applied.append((robot, t))
 
 
 @pytest.fixture
@@ -90,15 +93,22 @@ def test_command_times_out_in_simulated_time(world):
 def test_nan_command_stops_the_robot(world):
     runner, sink = SimRunner(world, DriveLimits(), 100.0), Recorder()
     runner.command('mini_robot', 0.1, 0.0, 0.0)
+    runner.advance(1, sink)                    # a command takes effect at the next step
+    assert world.robots['mini_robot'].wheel_targets[0] > 0.0
     result = runner.command('mini_robot', math.nan, 0.0, 0.0)
     assert not result.accepted
+    runner.advance(1, sink)
     assert world.robots['mini_robot'].wheel_targets == (0.0, 0.0)
+    # Each change of the wheels' command is reported, stamped when it took effect.
+    step = round(world.time_step * 1e9)
+    assert sink.applied == [('mini_robot', 0), ('mini_robot', step)]
 
 
 def test_clamped_command_drives_at_the_limit(world):
     runner, sink = SimRunner(world, DriveLimits(max_speed=0.2), 100.0), Recorder()
     result = runner.command('mini_robot', 5.0, 0.0, 0.0)
     assert result.clamped and result.command == (0.2, 0.0)
+    runner.advance(1, sink)
     assert world.robots['mini_robot'].wheel_targets == pytest.approx((0.2 / 0.03,) * 2)
 
 

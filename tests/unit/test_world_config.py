@@ -38,6 +38,10 @@ def test_defaults_and_frame_prefix():
     ({'robots': [dict(ROBOT, drive={'type': 'mecanum', 'wheel_joints': ['a', 'b', 'c', 'd'],
                                     'wheel_radius': 0.05, 'wheel_effort': 5})]},
      'sum_of_robot_center_projection_on_X_Y_axis is required'),
+    ({'robots': [dict(ROBOT, drive={'type': 'mecanum', 'wheel_joints': ['a', 'b', 'c', 'd'],
+                                    'wheel_radius': 0.05, 'wheel_effort': 5,
+                                    'sum_of_robot_center_projection_on_X_Y_axis': 0.4,
+                                    'max_accel': -1.0})]}, 'max_accel'),
     ({'robots': [dict(ROBOT, controllers=[{'name': 'arm', 'joints': []}])]},
      'joints must be a non-empty list'),
     ({'robots': [dict(ROBOT, controllers=[{'name': 'arm', 'joints': ['a', 'a']}])]},
@@ -70,3 +74,12 @@ def test_missing_and_malformed_files(tmp_path):
     bad.write_text('robots: [unclosed')
     with pytest.raises(WorldConfigError, match='not valid YAML'):
         load_world(bad)
+
+
+def test_the_youbot_has_acceleration_limits_and_the_mini_robot_none():
+    for world in ('youbot', 'pipeline_cell'):
+        cfg = load_world(resolve_resource(f'package://sim_bridge/worlds/{world}.yaml'))
+        limits = cfg.robot('youbot').limits
+        assert (limits.max_accel, limits.max_turn_accel) == (1.0, 2.0)
+    mini = load_world(resolve_resource('package://sim_bridge/worlds/mini_robot.yaml'))
+    assert mini.robot('mini_robot').limits.max_accel is None

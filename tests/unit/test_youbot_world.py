@@ -10,7 +10,7 @@ from controllers.diff_drive import Pose2D
 from controllers.joint_trajectory import TrajectoryPoint, TrajectoryRequest
 from controllers.mecanum import MecanumGeometry, wheel_speeds
 from controllers.youbot_arm import JOINT_NAMES
-from sim_bridge.runner import DriveLimits, SimRunner
+from sim_bridge.runner import DriveLimits, NullSink, SimRunner
 from sim_bridge.world import SimWorld, resolve_resource, yaw_from_quaternion
 from sim_bridge.world_config import load_world
 
@@ -18,18 +18,9 @@ HZ = 240
 K = 0.386
 
 
-class Sink:
+class Sink(NullSink):
     def __init__(self):
         self.timeouts = []
-
-    def on_clock(self, t):
-        pass
-
-    def on_state(self, robot, t):
-        pass
-
-    def on_camera_due(self, i, t, render):
-        pass
 
     def on_command_timeout(self, robot):
         self.timeouts.append(robot)
@@ -75,6 +66,7 @@ def _drive(robot, runner, command, seconds):
                          ids=['vx', 'vy', 'wz', 'combined'])
 def test_odometry_follows_the_commanded_twist(youbot, command):
     robot, runner = youbot
+    _drive(robot, runner, command, 0.5)     # up to speed (the command ramps at 1 m/s^2)
     start = _pose(robot)
     measured = _drive(robot, runner, command, 2.0)
     e = tracking_errors(command, 2.0, start, _pose(robot), measured, K)
@@ -106,6 +98,44 @@ def test_commands_are_clamped_to_the_youbots_own_limits(youbot):
     result = runner.command('youbot', 2.0, -3.0, 4.0)
     assert result.clamped and result.command == (0.8, -0.8, 1.5)
     assert runner.guards['youbot'].limits == (0.8, 0.8, 1.5)
+
+
+def test_a_step_to_full_speed_is_taken_at_the_acceleration_limits(youbot):
+    # A command jumping from rest to full speed (a controller catching up after a stall)
+    # reaches the wheels at 1 m/s^2 and 2 rad/s^2. Unlimited, the base accelerates at 6 m/s^2
+    # here; in the cell it reached 0.75 m/s in 0.2 s and flung the raised arm (arm_joint_4 at
+    # 1.8x its speed limit).
+    robot, runner = youbot
+    arm = robot.controllers['arm_controller']
+
+    class Applied(Sink):
+        def __init__(self):
+            super().__init__()
+            self.commands = []
+
+        def on_command_applied(self, name, t):
+            self.commands.append((t, runner.applied(name)))
+
+    sink, speeds, worst_joint = Applied(), [], 0.0
+    t0 = runner.world.sim_time_ns
+    for k in range(int(1.2 * HZ)):
+        if k % (HZ // 10) == 0:
+            runner.command('youbot', 0.8, 0.0, 1.5)
+        runner.advance(1, sink)
+        s = robot.base_state()
+        speeds.append(np.hypot(*s.linear[:2]))
+        worst_joint = max(worst_joint, float(np.abs(arm.actual()[1]).max()))
+    dt = runner.world.time_step
+    times = (np.array([t for t, _ in sink.commands]) - t0) * 1e-9
+    commands = np.array([c for _, c in sink.commands])
+    assert commands[-1] == pytest.approx((0.8, 0.0, 1.5))
+    assert times[-1] == pytest.approx(0.8, abs=2 * dt)        # vx's ramp: 0.8 s at 1 m/s^2
+    rates = np.abs(np.diff(commands, axis=0)) / np.diff(times)[:, None]
+    assert rates[:, 0].max() <= 1.0 + 1e-6 and rates[:, 2].max() <= 2.0 + 1e-6
+    # The base follows the ramp (its motors are far stronger than the ramp needs).
+    accel = np.diff(speeds) / dt
+    assert np.convolve(accel, np.ones(12) / 12, 'valid').max() < 1.3
+    assert worst_joint <= math.pi / 2
 
 
 def test_nan_stops_the_base_and_a_stale_command_times_out(youbot):
