@@ -738,15 +738,22 @@ class Transport(Machine):
         hover = contact + np.array([0.0, 0.0, 0.12 if high else 0.06])
         stand = self._stand_for(m)
         if m.color == 'blue':
-            drop_world = run.layout.platform_place + np.array(
-                [0.0, 0.0, size + t.place_gap + YOUBOT_GRASP_STANDOFF_M])
+            candidates = [run.layout.platform_place + np.array(
+                [0.0, 0.0, size + t.place_gap + YOUBOT_GRASP_STANDOFF_M])]
         else:
+            # The stand's next free drop first; if the arm cannot reach it from this slot as
+            # the base stands (a far slot, a base a centimetre off), the others in turn.
             drops = run.layout.stand(stand).drops
-            drop_world = drops[self._dropped.get(stand, 0) % len(drops)]
-        drop = world_to_base(pose, drop_world)
-        drop[2] -= YOUBOT_BASE_Z_M
-        return run.solve_tilted([hover, contact, hover, drop + np.array([0.0, 0.0, 0.05]),
-                                 drop], np.array(seed, float))
+            first = self._dropped.get(stand, 0)
+            candidates = [drops[(first + k) % len(drops)] for k in range(len(drops))]
+        for drop_world in candidates:
+            drop = world_to_base(pose, drop_world)
+            drop[2] -= YOUBOT_BASE_Z_M
+            path = run.solve_tilted([hover, contact, hover, drop + np.array([0.0, 0.0, 0.05]),
+                                     drop], np.array(seed, float))
+            if path is not None:
+                return path
+        return None
 
     def _plan_unload(self, obs: Observation, m: Material) -> None:
         """Down onto the material on the plate; the gripper closes once the arm is there."""

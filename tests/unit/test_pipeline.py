@@ -476,6 +476,29 @@ def test_an_unreachable_pick_is_reported_not_attempted():
     assert kinds(cell, 'ik_failed') and p.result.grasp_attempts == 0
 
 
+def test_a_pool_drop_out_of_reach_is_swapped_for_another():
+    # The arm cannot reach the first drop of either pool stand (seed 0 on a loaded machine:
+    # from the far slot, as the base stood, no tilt reached its drop): the material goes to
+    # the stand's next drop instead of failing.
+    layout = cell_layout()
+    from coordinator.layout import world_to_base
+    from coordinator.pipeline import YOUBOT_BASE_Z_M
+    blocked = []
+    for stand in layout.stands:
+        if stand.drops:
+            b = world_to_base(stand.pose, stand.drops[0])
+            b[2] -= YOUBOT_BASE_Z_M
+            blocked.append(b)
+
+    def unreachable(arm, p):
+        return arm == 'youbot' and any(np.linalg.norm(np.asarray(p) - b) < 0.02
+                                       for b in blocked)
+    cell = FakeCell(layout, PAPER, unreachable=unreachable)
+    p = run(cell)
+    assert p.result.status == 'completed', p.result
+    assert p.result.delivered == 8
+
+
 def test_a_base_that_does_not_move_ends_with_a_result():
     cell = FakeCell(cell_layout(), PAPER[:2], drive_works=False)
     p = run(cell, Settings(run_timeout=200.0, drive_margin=5.0))
