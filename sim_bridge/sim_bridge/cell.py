@@ -13,13 +13,13 @@ from __future__ import annotations
 import math
 import random
 from dataclasses import dataclass
-from typing import List, Optional, Tuple
+from typing import List, Optional, Sequence, Tuple
 
 import numpy as np
 import pybullet
 from pybullet_utils.bullet_client import BulletClient
 
-from controllers.conveyor import Item, held
+from controllers.conveyor import Item, advance
 from controllers.transforms import matrix_to_quaternion
 from sim_bridge.world_config import ConveyorConfig, MaterialsConfig
 
@@ -113,16 +113,28 @@ class Conveyor:
                     length=float(np.abs(self.direction) @ extent),
                     width=float(np.abs(self.lateral) @ extent))
 
-    def carry(self, bodies: List[int], dt: float) -> None:
-        """Give what rests on the belt the belt's velocity, except what the end stop (or what
-        it holds) holds; advance the belt's travel."""
-        self.travel += self._speed * dt
-        belt_v = self._speed * self.direction
+    def in_lane(self, body: int) -> bool:
+        """Whether ``body`` (off the belt: being lifted from it) is still low enough over the
+        belt to block what the belt carries: its bottom below one of its own heights up."""
+        lo, hi = (np.asarray(c, float) for c in self._p.getAABB(body))
+        it = self.item(body)
+        return (lo[2] < self.top[2] + (hi[2] - lo[2]) and 0.0 <= it.along <= self.stop_along
+                and abs(it.across) <= self.config.width / 2)
+
+    def carry(self, bodies: List[int], dt: float, lifted: Sequence[int] = ()) -> None:
+        """Move what rests on the belt this step as the accumulation rule says (the model the
+        coordinator predicts with): at the belt's speed, or up to where the end stop, an item
+        held ahead, or one being lifted off ahead (``lifted``: bodies off the belt, carried by
+        a gripper) holds it, and no further; advance the belt's travel."""
+        travel = self._speed * dt
+        self.travel += travel
         resting = [body for body in bodies if self.on_belt(body)]
-        stopped = held([self.item(b) for b in resting], self.stop_along)
-        for body, still in zip(resting, stopped):
+        items = [self.item(b) for b in resting]
+        obstacles = [self.item(b) for b in lifted if self.in_lane(b)]
+        ahead = advance(items, self.stop_along, travel, obstacles)
+        for body, it, along in zip(resting, items, ahead):
             v, _ = self._p.getBaseVelocity(body)
-            vx, vy = (0.0, 0.0) if still else (belt_v[0], belt_v[1])
+            vx, vy, _ = (along - it.along) / dt * self.direction
             self._p.resetBaseVelocity(body, (vx, vy, min(v[2], 0.0)), (0.0, 0.0, 0.0))
 
 

@@ -424,7 +424,7 @@ class SimWorld:
         if self.conveyor is not None:
             held = {s.held.body for s in self.suctions.values() if s.held is not None}
             self.conveyor.carry([m.body for m in self.materials if m.body not in held],
-                                self.time_step)
+                                self.time_step, sorted(held))
             if self.source is not None:
                 self.source.update(self.sim_time)
         self._p.stepSimulation()

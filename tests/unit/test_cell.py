@@ -6,7 +6,7 @@ import math
 import numpy as np
 import pytest
 
-from controllers.conveyor import held
+from controllers.conveyor import QUEUE_GAP_M, held
 from sim_bridge.runner import DriveLimits, NullSink, SimRunner
 from sim_bridge.world import SimWorld, resolve_resource
 from sim_bridge.world_config import WorldConfigError, load_world, parse_world
@@ -64,16 +64,26 @@ def test_the_belt_carries_materials_at_its_speed(world):
 
 def test_materials_queue_at_the_end_stop_and_restart_on_reset(world):
     world.conveyor.speed = 1.0
-    _run(world, 6.0)                 # every material dropped, and carried far past the end
+    _run(world, 1.5)
+    across = {m.index: world.conveyor.item(m.body).across for m in world.materials}
+    _run(world, 4.5)                 # every material dropped, and carried far past the end
     assert len(world.materials) == 8
     assert all(world.conveyor.on_belt(m.body) for m in world.materials)
     items = [world.conveyor.item(m.body) for m in world.materials]
     stop = world.conveyor.stop_along
-    # Held in a queue at the stop, as the coordinator's model predicts: each against the stop
-    # or against one held before it, none past the stop, none tumbled.
+    # Held in a queue at the stop, as the coordinator's model predicts: the first against the
+    # stop, each other one a gap short of the one ahead (they overlap across the belt), none
+    # past the stop, none tumbled, and none pushed aside by the one ahead.
     assert held(items, stop) == [True] * 8
     assert max(i.along + i.length / 2 for i in items) <= stop + 1e-3
     assert all(i.length == pytest.approx(0.05, abs=2e-3) for i in items)
+    line = sorted(items, key=lambda i: i.along)
+    gaps = [(ahead.along - ahead.length / 2) - (behind.along + behind.length / 2)
+            for behind, ahead in zip(line, line[1:])]
+    assert min(gaps) >= QUEUE_GAP_M - 1e-4, gaps
+    for m in world.materials:
+        if m.index in across:
+            assert world.conveyor.item(m.body).across == pytest.approx(across[m.index], abs=1e-4)
     world.reset()
     assert world.materials == []
     _run(world, 0.1)
@@ -154,3 +164,32 @@ def test_cell_sections_are_validated():
     for data, fragment in bad:
         with pytest.raises(WorldConfigError, match=fragment):
             parse_world(data, 'test.yaml')
+
+
+def test_the_queue_moves_up_only_once_the_lifted_front_material_is_clear(world):
+    """Lifted off the front of the queue, a material still blocks the lane until its bottom
+    is above the others' tops: the next one neither runs into its back face (which would push
+    it aside) nor moves until then."""
+    world.conveyor.speed = 1.0
+    _run(world, 6.0)
+    conveyor = world.conveyor
+    front, second = sorted(world.materials, key=lambda m: -conveyor.item(m.body).along)[:2]
+    start = conveyor.item(second.body)
+    centre = world.source.pose(front)[0]
+    suction = world.suctions['zu12']
+    _tcp_to(world, centre + (0.0, 0.0, 0.1))
+    assert suction.switch_on(world.source)[0]
+    _tcp_to(world, centre + (0.0, 0.0, 0.025))
+    _run(world, world.time_step)
+    assert suction.held is front
+    for rise in np.arange(0.005, 0.045, 0.005):       # still in the lane: the queue waits
+        _tcp_to(world, centre + (0.0, 0.0, 0.025 + rise))
+        _run(world, 0.05)
+        assert not conveyor.on_belt(front.body)
+        now = conveyor.item(second.body)
+        assert now.along == pytest.approx(start.along, abs=1e-4), rise
+    _tcp_to(world, centre + (0.0, 0.0, 0.2))          # clear: the next one moves up to the stop
+    _run(world, 0.5)
+    now = conveyor.item(second.body)
+    assert now.along + now.length / 2 == pytest.approx(conveyor.stop_along, abs=1e-3)
+    assert now.across == pytest.approx(start.across, abs=1e-4)
