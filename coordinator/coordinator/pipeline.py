@@ -226,13 +226,13 @@ class LoaderState(Enum):
 
 class TransportState(Enum):
     """The youBot's states: wait for its load, drive; per material: down onto it and grip,
-    carry it over its destination, let go; then stow the arm, drive home, fold."""
+    carry it over its destination, let go; then drive home (the arm rising to its carry pose
+    as the base sets off), fold."""
     WAIT_LOAD = 'wait_load'
     DRIVE = 'drive'
     GRASP = 'grasp'
     CARRY = 'carry'
     RELEASE = 'release'
-    STOW = 'stow'
     FOLD = 'fold'
     DONE = 'done'
 
@@ -617,7 +617,7 @@ class Transport(Machine):
         S = TransportState
         self.handlers = {S.WAIT_LOAD: self._wait_load, S.DRIVE: self._drive,
                          S.GRASP: self._grasp, S.CARRY: self._carry_to_drop,
-                         S.RELEASE: self._release, S.STOW: self._stow, S.FOLD: self._fold,
+                         S.RELEASE: self._release, S.FOLD: self._fold,
                          S.DONE: lambda obs: None}
 
     @property
@@ -691,12 +691,14 @@ class Transport(Machine):
                 run.event(obs.now, 'drive_stalled', 'youbot', detail=(
                     f'{status.position_error * 1000:.0f} mm from {self._drive_goal}'))
             run.event(obs.now, 'arrived', 'youbot', detail=self._drive_goal)
-            if self._drive_goal == 'home':
-                # Folded only at home: the folded arm reaches down in front of the base, where
-                # the platform and what was just set on it are.
-                run.plan_home('youbot', obs)
-                return self.enter(TransportState.FOLD, obs.now, run.motions['youbot'].end
-                                  - obs.now + run.s.settle_margin)
+        if self._drive_goal == 'home':
+            # Folded only at home (folded, the arm reaches down in front of the base, and its
+            # fingers would catch the floor as the base pitches), from the carry pose.
+            if not self.motion_over(obs, 'carry pose'):
+                return
+            run.plan_home('youbot', obs)
+            return self.enter(TransportState.FOLD, obs.now, run.motions['youbot'].end
+                              - obs.now + run.s.settle_margin)
         # The arm rose to its first unload here while the base drove; after a short drive it
         # may still be on its way, and the unload is planned from where it comes to rest.
         if self.queue and not self.motion_over(obs, 'ready pose'):
@@ -706,8 +708,12 @@ class Transport(Machine):
     def _next_unload(self, obs: Observation) -> None:
         run = self.run
         if not self.queue:
-            return self.move(TransportState.STOW, obs, run.plan(
-                'youbot', obs.youbot_q, [Waypoint(YOUBOT_CARRY_Q.copy())]))
+            # Home: the arm rises from the drop (its fingers 4 cm over the pool's wall) to the
+            # upright carry pose as the base sets off (slowly: in the first 0.3 s it moves 3 cm,
+            # the fingers rise further).
+            run.send(Motion('youbot', run.plan('youbot', obs.youbot_q,
+                                               [Waypoint(YOUBOT_CARRY_Q.copy())])))
+            return self._drive_to(obs, 'home')
         m = self.queue[0]
         if self._stand_for(m) != self._drive_goal:
             return self._drive_to(obs, self._stand_for(m))
@@ -835,10 +841,6 @@ class Transport(Machine):
         if self.late(obs.now):
             self.queue.pop(0)
             self._next_unload(obs)
-
-    def _stow(self, obs: Observation) -> None:
-        if self.motion_over(obs, 'carry pose'):
-            self._drive_to(obs, 'home')
 
     def _fold(self, obs: Observation) -> None:
         if self.motion_over(obs, 'home pose'):

@@ -306,10 +306,14 @@ def test_the_whole_run_delivers_every_material_and_both_robots_return():
     assert r.completion_time == pytest.approx(cell.now - DT, abs=1e-9)
     # The cup is switched on for the next pick only once it has risen from the last place.
     assert cell.regrips == []
-    # The youBot's arm drives home upright and folds only there (folded, it reaches down in
-    # front of the base, where the platform is).
+    # The youBot's arm rises to its carry pose as the base sets off home, and folds only there
+    # (folded, it reaches down in front of the base).
     transport = [e.detail for e in cell.events if e.kind == 'state' and e.robot == 'transport']
-    assert transport[-4:] == ['stow', 'drive', 'fold', 'done']
+    assert transport[-3:] == ['drive', 'fold', 'done']
+    home = max(e.time for e in kinds(cell, 'driving'))
+    after = [t for arm, t, _ in cell.trajectories if arm == 'youbot' and t >= home - 1e-9]
+    assert after[0] == pytest.approx(home, abs=DT)           # up, as the base sets off
+    assert after[1] >= max(e.time for e in kinds(cell, 'arrived')) - 1e-9     # folded at home
 
 
 def _watch_materials(cell: FakeCell) -> Dict[int, List[tuple]]:
