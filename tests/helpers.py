@@ -134,13 +134,15 @@ class LockStepDriver:
     is published, then announced in the next step request, so the simulator waits for it and
     every step runs with exactly the commands meant for it, whatever the machine's load."""
 
-    def __init__(self, probe: Probe, robot: str = 'mini_robot') -> None:
-        from geometry_msgs.msg import Twist
+    def __init__(self, probe: Probe, robot: str = 'mini_robot', stamped: bool = False) -> None:
+        from geometry_msgs.msg import Twist, TwistStamped
         from nav_msgs.msg import Odometry
         from sim_interfaces.srv import StepSimulation
         self._twist, self._request = Twist, StepSimulation.Request
+        self._stamped = TwistStamped if stamped else None
         self.odom = probe.collect(Odometry, f'/{robot}/odom')
-        self.pub = probe.node.create_publisher(Twist, f'/{robot}/cmd_vel', 10)
+        self.pub = probe.node.create_publisher(TwistStamped if stamped else Twist,
+                                               f'/{robot}/cmd_vel', 10)
         self.client = probe.node.create_client(StepSimulation, '/sim_node/step')
         assert self.client.wait_for_service(timeout_sec=15.0), 'no /sim_node/step'
         wait_for(lambda: self.pub.get_subscription_count() > 0, 15.0, what='cmd_vel matched')
@@ -153,10 +155,10 @@ class LockStepDriver:
         wait_for(future.done, 20.0, what='the step reply')
         return future.result()
 
-    def send(self, vx: float, wz: float = 0.0) -> None:
+    def send(self, vx: float, wz: float = 0.0, vy: float = 0.0) -> None:
         msg = self._twist()
-        msg.linear.x, msg.angular.z = vx, wz
-        self.pub.publish(msg)
+        msg.linear.x, msg.linear.y, msg.angular.z = vx, vy, wz
+        self.pub.publish(self._stamped(twist=msg) if self._stamped else msg)
 
     def odom_at(self, stamp):
         """The odometry published at ``stamp`` (a step's sim_time)."""
@@ -165,13 +167,13 @@ class LockStepDriver:
         wait_for(found, 10.0, what='the odometry of the step')
         return next(m for _, m in self.odom if m.header.stamp == stamp)
 
-    def hold(self, vx: float, wz: float, steps: int, batch: int = 24):
-        """Command (vx, wz) for ``steps`` physics steps, re-sent every ``batch`` steps (well
-        inside the command timeout); returns the last reply."""
+    def hold(self, vx: float, wz: float, steps: int, batch: int = 24, vy: float = 0.0):
+        """Command (vx, wz) (and ``vy``) for ``steps`` physics steps, re-sent every ``batch``
+        steps (well inside the command timeout); returns the last reply."""
         reply = None
         while steps > 0:
             n = min(batch, steps)
-            self.send(vx, wz)
+            self.send(vx, wz, vy)
             reply = self.reply(self.step(n, commands=1))
             assert reply.success, reply.message
             steps -= n

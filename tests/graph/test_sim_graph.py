@@ -5,7 +5,7 @@ import time
 
 import numpy as np
 import pytest
-from geometry_msgs.msg import Twist, TwistStamped
+from geometry_msgs.msg import TwistStamped
 from nav_msgs.msg import Odometry
 from rclpy.qos import qos_profile_sensor_data
 from rosgraph_msgs.msg import Clock
@@ -21,75 +21,18 @@ DT = 1.0 / 240.0
 DT_NS = round(DT * 1e9)  # simulated time advances in whole nanoseconds per step
 
 
-class Driver:
-    """Publishes cmd_vel and follows /clock and odom, as a user's controller would."""
+class ClockWatch:
+    """Follows /clock, as a user's node would. (Tests of a robot's response to commands drive
+    the simulator in lock-step, with ``LockStepDriver``: paced at 4x, a second of simulated
+    time is 0.25 s of wall time, and a busy machine let whole commanded intervals pass with no
+    command delivered.)"""
 
-    def __init__(self, probe, stamped=False):
-        self.probe = probe
+    def __init__(self, probe):
         self.clock = probe.collect(Clock, '/clock')
-        self.odom = probe.collect(Odometry, '/mini_robot/odom')
-        self.joints = probe.collect(JointState, '/mini_robot/joint_states')
-        self.stamped = stamped
-        self.stop_sent = 0.0
-        self.pub = probe.node.create_publisher(TwistStamped if stamped else Twist,
-                                               '/mini_robot/cmd_vel', 10)
-        wait_for(lambda: self.clock and self.odom and self.pub.get_subscription_count() > 0,
-                 15.0, what='simulator topics')
+        wait_for(lambda: self.clock, 15.0, what='/clock')
 
     def now(self):
         return stamp_s(self.clock[-1][1].clock)
-
-    def send(self, v, w, vy=0.0):
-        twist = Twist()
-        twist.linear.x, twist.linear.y, twist.angular.z = v, vy, w
-        self.pub.publish(TwistStamped(twist=twist) if self.stamped else twist)
-
-    def drive(self, v, w, duration, vy=0.0, period=0.05, ramp=0.3):
-        """Hold (v, w) for ``duration`` seconds of simulated time, then send zero.
-
-        Returns the odometry twists stamped in the commanded interval after ``ramp``, once
-        odometry from past its end has arrived. Judge their peak (``peak``), not one sample: on
-        a busy machine this process may fall silent for longer than the simulator's command
-        timeout (0.5 s simulated is 125 ms of wall time at 4x), and the robot rightly stops
-        until the next command.
-        """
-        t_start = self.now()
-        t_end = t_start + duration
-        while self.now() < t_end:
-            self.send(v, w, vy)
-            time.sleep(period / RTF)
-        self.send(0.0, 0.0)
-        self.stop_sent = self.now()
-        wait_for(lambda: stamp_s(self.odom[-1][1].header.stamp) >= t_end, 10.0,
-                 what='odometry from past the commanded interval')
-        return [m.twist.twist for _, m in list(self.odom)
-                if t_start + ramp <= stamp_s(m.header.stamp) <= t_end]
-
-    def wait_at_rest(self, timeout=10.0):
-        """Wait for odometry, stamped after the stop was sent, that shows the robot at rest."""
-        def at_rest():
-            msg = self.odom[-1][1]
-            t = msg.twist.twist
-            return (stamp_s(msg.header.stamp) > self.stop_sent and abs(t.linear.x) < 1e-3
-                    and abs(t.angular.z) < 1e-3)
-        wait_for(at_rest, timeout, what='the robot at rest')
-
-    def pose(self):
-        p = self.odom[-1][1].pose.pose
-        return p.position.x, p.position.y, yaw_from_quaternion(
-            (p.orientation.x, p.orientation.y, p.orientation.z, p.orientation.w))
-
-    def settle(self, seconds=0.3):
-        t_end = self.now() + seconds
-        wait_for(lambda: self.now() >= t_end, 10.0, what='simulated time')
-
-
-def peak(twists, component):
-    """The largest magnitude of ``component`` (e.g. 'linear.x') over the twists, signed."""
-    group, axis = component.split('.')
-    values = [getattr(getattr(t, group), axis) for t in twists]
-    assert values, 'no odometry inside the commanded interval'
-    return max(values, key=abs)
 
 
 def _ns(stamp):
@@ -147,12 +90,25 @@ def test_turn_in_place_for_pi_over_0p2_s_gives_pi(lockstep):
     assert math.hypot(x, y) < 0.01
 
 
-def test_commands_above_the_limits_are_clamped(sim, probe):
-    d = Driver(probe)
-    v = peak(d.drive(1.0, 0.0, 1.0), 'linear.x')
-    w = peak(d.drive(0.0, -3.0, 1.0), 'angular.z')
-    assert v == pytest.approx(0.2, rel=0.03)
-    assert w == pytest.approx(-0.2, rel=0.03)
+def _lock_step_sim(start_node, *params):
+    return start_node('sim_node', '-p', 'synchronous:=true', '-p', 'state_publish_rate:=240.0',
+                      *params)
+
+
+def _twist_after(driver, vx, wz, seconds=1.0, vy=0.0):
+    """The odometry twist after ``seconds`` of (vx, vy, wz), in lock-step: the commands apply
+    to exactly those steps, however starved this process is (paced at 4x, a second of
+    simulated time is 0.25 s of wall time, and a busy machine let it pass with no command)."""
+    return driver.odom_at(driver.hold(vx, wz, round(seconds / DT), vy=vy).sim_time).twist.twist
+
+
+def test_commands_above_the_limits_are_clamped(start_node, probe):
+    sim = _lock_step_sim(start_node)
+    d = LockStepDriver(probe)
+    d.hold(0.0, 0.0, 72)
+    assert _twist_after(d, 1.0, 0.0).linear.x == pytest.approx(0.2, rel=0.03)
+    d.hold(0.0, 0.0, 240)
+    assert _twist_after(d, 0.0, -3.0).angular.z == pytest.approx(-0.2, rel=0.03)
     wait_for(lambda: 'clamped to (0.200, 0.000)' in sim.output(), 5.0, what='clamp warning')
 
 
@@ -198,11 +154,13 @@ def test_nan_is_rejected_the_robot_stops_and_the_node_lives(start_node, probe):
     assert lockstep.odom_at(again.sim_time).twist.twist.linear.x == pytest.approx(0.1, rel=0.05)
 
 
-def test_sideways_velocity_on_a_diff_drive_is_ignored_with_a_warning(sim, probe):
-    d = Driver(probe)
-    twists = d.drive(0.1, 0.0, 0.5, vy=0.1)
-    assert peak(twists, 'linear.x') == pytest.approx(0.1, rel=0.05)
-    assert abs(peak(twists, 'linear.y')) < 0.005
+def test_sideways_velocity_on_a_diff_drive_is_ignored_with_a_warning(start_node, probe):
+    sim = _lock_step_sim(start_node)
+    d = LockStepDriver(probe)
+    d.hold(0.0, 0.0, 72)
+    twist = _twist_after(d, 0.1, 0.0, 0.5, vy=0.1)
+    assert twist.linear.x == pytest.approx(0.1, rel=0.05)
+    assert abs(twist.linear.y) < 0.005
     wait_for(lambda: 'cannot move sideways' in sim.output(), 5.0, what='the warning')
 
 
@@ -256,27 +214,23 @@ def test_camera_info_alone_is_published_without_rendering(sim, probe):
     assert (infos[-1][1].width, infos[-1][1].height) == (320, 240)
 
 
-def test_reset_returns_the_robot_to_its_start_pose(sim, probe):
-    d = Driver(probe)
-    d.drive(0.2, 0.2, 1.5)
-    d.wait_at_rest()
-    assert math.hypot(*d.pose()[:2]) > 0.1
+def test_reset_returns_the_robot_to_its_start_pose(start_node, probe):
+    _lock_step_sim(start_node)
+    d = LockStepDriver(probe)
+    moved = d.odom_at(d.hold(0.2, 0.2, 360).sim_time).pose.pose.position
+    assert math.hypot(moved.x, moved.y) > 0.1
     reply = probe.call(Trigger, '/sim_node/reset', Trigger.Request())
     assert reply.success
-    # (The odometry from before the reset may still be on its way.)
-    def at_start():
-        x, y, yaw = d.pose()
-        return math.hypot(x, y) < 0.002 and abs(yaw) < 0.01
-    wait_for(at_start, 10.0, what='odometry at the start pose')
-    back = stamp_s(d.odom[-1][1].header.stamp)
-    d.settle(0.3)                                   # and it stays there
-    wait_for(lambda: stamp_s(d.odom[-1][1].header.stamp) > back + 0.3, 10.0,
-             what='odometry 0.3 s after the reset')
-    assert at_start()
+    # At the start pose on the next step, and it stays there.
+    for steps in (1, 72):
+        odom = d.odom_at(d.hold(0.0, 0.0, steps).sim_time)
+        p, q = odom.pose.pose.position, odom.pose.pose.orientation
+        assert math.hypot(p.x, p.y) < 0.002, steps
+        assert abs(yaw_from_quaternion((q.x, q.y, q.z, q.w))) < 0.01, steps
 
 
 def test_pause_resume_and_step_while_paused(sim, probe):
-    d = Driver(probe)
+    d = ClockWatch(probe)
     refused = probe.call(StepSimulation, '/sim_node/step', StepSimulation.Request(steps=5))
     assert not refused.success and 'paused' in refused.message
     assert probe.call(Trigger, '/sim_node/pause', Trigger.Request()).success
@@ -294,9 +248,10 @@ def test_pause_resume_and_step_while_paused(sim, probe):
 
 
 def test_stamped_velocity_commands(start_node, probe):
-    start_node('sim_node', '-p', f'real_time_factor:={RTF}', '-p', 'use_stamped_vel:=true')
-    d = Driver(probe, stamped=True)
-    assert peak(d.drive(0.1, 0.0, 0.5), 'linear.x') == pytest.approx(0.1, rel=0.05)
+    _lock_step_sim(start_node, '-p', 'use_stamped_vel:=true')
+    d = LockStepDriver(probe, stamped=True)
+    d.hold(0.0, 0.0, 72)
+    assert _twist_after(d, 0.1, 0.0, 0.5).linear.x == pytest.approx(0.1, rel=0.05)
 
 
 def test_lock_step_advances_exactly_n_steps_per_request(start_node, probe):
