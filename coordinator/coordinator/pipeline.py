@@ -37,6 +37,9 @@ DOWN = (1.0, 0.0, 0.0, 0.0)                  # tool z pointing down (x, y, z, w)
 # A pick's contact is planned at least this long after the arm could be over the material, and
 # moved this much later while the arm cannot make it [s].
 PICK_LEAD_S = 0.1
+# The Zu 12 crosses the belt's near edge this far outside it, with what it carries (or its
+# empty cup) at least this far above the belt's top [m].
+EDGE_CLEARANCE_M = 0.05
 PICK_TRIES = 6
 # Real time: a pick allows for this much more than the longest plan of one has taken (the next
 # may need a few more IK calls).
@@ -298,6 +301,10 @@ class Loader(Machine):
         super().__init__(run, LoaderState.START)
         self.current: Optional[Material] = None     # the material being picked or placed
         self._then: Optional[np.ndarray] = None     # where the cup rises to from its place
+        self._above: Optional[np.ndarray] = None    # above the place (x, y, z), joints
+        self._above_q: Optional[np.ndarray] = None
+        self._lift: Optional[np.ndarray] = None     # the last pick's lift point (x, y, z)
+        self._clear: Optional[np.ndarray] = None    # clear of the place once here (joints)
         self._leave = math.inf                      # when the cup lifts the material
         self._replans = 0                           # pick plans the port started late
         # The cup has just let go on the plate or the ground target: the next motion rises
@@ -343,19 +350,38 @@ class Loader(Machine):
         self._after_send()
 
     def _plan(self, obs: Observation, waypoints: List[Waypoint],
-              start: Optional[float] = None) -> Points:
+              start: Optional[float] = None, edge: Optional[np.ndarray] = None) -> Points:
+        """From a release: the hold, then straight up to above the place and over the belt's
+        edge at ``edge`` (joints; towards a pick), or without it up to the carry height."""
         run = self.run
         wait = 0.0
         if self._at_release:
-            waypoints = [Waypoint(self._then, stop=not waypoints,
-                                  min_time=run.s.timing.place_descend)] + list(waypoints)
+            rise = run.s.timing.place_descend
+            if edge is not None:
+                first = [Waypoint(self._above_q, stop=False, min_time=rise),
+                         Waypoint(edge, stop=False)]
+            else:
+                first = [Waypoint(self._then, stop=not waypoints, min_time=rise)]
+            waypoints = first + list(waypoints)
             wait = RELEASE_HOLD_S
+            self._clear = edge if edge is not None else self._then
         return run.plan('zu12', obs.zu12_q, waypoints, wait, start)
 
     def _after_send(self) -> None:
         if self._at_release:
             self._at_release = False
-            self._clear_at = self.run.arrival_time('zu12', self._then)
+            self._clear_at = self.run.arrival_time('zu12', self._clear)
+
+    def _edge(self, a: np.ndarray, b: np.ndarray, low: float) -> np.ndarray:
+        """Where the straight line from ``a`` (over the belt) to ``b`` (beside it) crosses the
+        belt's near edge, EDGE_CLEARANCE_M outside it, and at least ``low`` above its top."""
+        lay = self.run.layout
+        y = lay.belt_y - math.copysign(lay.belt_width / 2 + EDGE_CLEARANCE_M,
+                                       lay.belt_y - b[1])
+        f = (a[1] - y) / (a[1] - b[1]) if abs(a[1] - b[1]) > 1e-9 else 0.0
+        p = np.asarray(a, float) + min(max(f, 0.0), 1.0) * (np.asarray(b, float) - a)
+        p[1], p[2] = y, max(p[2], lay.belt_top + low)
+        return p
 
     def clear_of_the_plate(self, now: float) -> bool:
         """Whether the cup is away from the youBot's plate: not placing there, nor rising from
@@ -401,6 +427,11 @@ class Loader(Machine):
         q_hover = run.solve('zu12', hover, DOWN, 'world', seed)
         if q_hover is None:
             return self._pick_failed(obs, m, 'no IK solution for the pick')
+        # From a place: back over the belt's edge on the way to the hover point.
+        q_edge = None
+        if self._at_release and self._above is not None:
+            q_edge = run.solve('zu12', self._edge(hover, self._above, EDGE_CLEARANCE_M),
+                               DOWN, 'world', self._above_q)
         # (An optimistic first guess; a plan that cannot make it says by how much.)
         reach = rest_to_rest_time(obs.zu12_q, q_hover, run.limits('zu12'))
         if self._at_release:
@@ -413,6 +444,7 @@ class Loader(Machine):
                                                      - run.layout.material_size / 2 + 1e-6):
                 return self._leave_it(obs, m)      # off the end (no stop) before the cup is on it
             path, lift = follow_pick(track, t_contact, size, timing, SAMPLE_PERIOD_S)
+            self._lift = np.asarray(lift, float)
             qs = run.solve_path('zu12', [p for _, p in path] + [lift], q_hover)
             if qs is None:
                 return self._pick_failed(obs, m, 'no IK solution for the pick path')
@@ -427,7 +459,7 @@ class Loader(Machine):
                           for q, vk, ak, tk in zip(q_path[1:], v[1:], a[1:], times[1:])]
             waypoints.append(Waypoint(qs[-1], min_time=timing.lift))
             try:
-                points = self._plan(obs, waypoints, start)
+                points = self._plan(obs, waypoints, start, q_edge)
                 break
             except TooLate as late:
                 t_contact += max(late.by, 0.0) + PICK_LEAD_S / 2
@@ -547,13 +579,19 @@ class Loader(Machine):
         # through the belt's side), then down.
         transfer = release.copy()
         transfer[2] = max(above[2], run.layout.belt_top + 2 * size + t.lift_height)
-        qs = run.solve_path('zu12', [transfer, above, release], run.motions['zu12'].goal)
+        # Over the belt's near edge on the straight line from the lift point to above the place
+        # (the material's bottom 5 cm over the belt's top), rather than up to the carry height
+        # over the place and down again.
+        edge = (self._edge(self._lift, above, size + EDGE_CLEARANCE_M)
+                if self._lift is not None else transfer)
+        qs = run.solve_path('zu12', [transfer, above, release, edge], run.motions['zu12'].goal)
         if qs is None:
             return self._place_failed(obs, m, 'no IK solution for the place path')
-        q_transfer, q_above, q_release = qs
-        self._then = q_transfer       # where it rises to after the release
+        q_transfer, q_above, q_release, q_edge = qs
+        self._then = q_transfer       # where it rises to after the release (not to a pick)
+        self._above, self._above_q = above, q_above
         points = run.plan('zu12', obs.zu12_q, [
-            Waypoint(q_transfer, stop=False), Waypoint(q_above, stop=False),
+            Waypoint(q_edge, stop=False), Waypoint(q_above, stop=False),
             Waypoint(q_release, hold=SETTLE_S, min_time=t.place_descend)])
         self.move(LoaderState.PLACE, obs, points)
 

@@ -690,3 +690,36 @@ def test_a_material_the_camera_sees_in_the_cup_beside_the_belt_is_not_a_new_one(
     p = run(cell)
     assert any(i > 100 for i in cell.hits), 'the fake camera never saw a held material'
     assert p.result.status == 'completed' and p.result.identified == len(PAPER)
+
+
+def test_the_zu12_crosses_the_belts_edge_low_and_clear_instead_of_rising_to_carry_height():
+    """Between the belt and the plate the cup goes over the belt's near edge on the straight
+    line between the two (the fake cell's joints are the cup's position), with what it holds
+    5 cm over the belt's top, and does not rise to the carry height over the place and come
+    down again."""
+    layout = cell_layout()
+    cell = FakeCell(layout, PAPER)
+    track: List[tuple] = []
+    step = cell.step
+
+    def watching_step():
+        obs = step()
+        track.append((cell.now, cell.q['zu12'][:3].copy(), cell.holding['zu12']))
+        return obs
+    cell.step = watching_step
+    assert run(cell).result.status == 'completed'
+    size, top = layout.material_size, layout.belt_top
+    transfer = top + 2 * size + Settings().timing.lift_height
+    edge = layout.belt_y - layout.belt_width / 2
+    crossing = [p for _, p, held in track if held and edge - size / 2 <= p[1] <= edge + size]
+    assert crossing and min(p[2] - size for p in crossing) >= top + 0.045
+    # Beside the belt (the plate's side): carrying, and from a place straight on to a pick
+    # (when nothing is there to pick yet, the cup waits up at the carry height).
+    beside = lambda p: p[1] < edge - size                      # noqa: E731
+    assert max(p[2] for _, p, held in track if held and beside(p)) < transfer - 0.05
+    picks = {e.time for e in kinds(cell, 'tracking')}
+    onward = [e.time for e in kinds(cell, 'loaded') if e.time in picks]
+    assert len(onward) >= 3
+    back = [p[2] for t, p, held in track if not held and beside(p)
+            and any(t0 < t < t0 + 2.0 for t0 in onward)]
+    assert back and max(back) < transfer - 0.05, (max(back), transfer)
