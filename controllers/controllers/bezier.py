@@ -4,7 +4,8 @@ As CoppeliaSim's Path (the pipeline paper, its section 4.2): key points (x, y) j
 Bezier segments whose control points follow the Catmull-Rom tangents, so the curve passes
 through every key point with a continuous tangent. Headings are given per key point and blend
 smoothly along each segment. A profile moves a target ("dummy") along the path with bounded
-speed and acceleration.
+speed and acceleration; the same profile shape times a heading change (``MotionProfile.lasting``
+stretches one to a given duration).
 """
 from __future__ import annotations
 
@@ -64,6 +65,12 @@ class BezierPath:
             yaws[i] = yaws[i - 1] + wrap_angle(yaws[i] - yaws[i - 1])
         self._yaws = yaws
 
+    @property
+    def heading_sweep(self) -> float:
+        """How far the heading turns from the first key pose to the last, the way round the
+        key poses go (signed, counter-clockwise positive) [rad]."""
+        return float(self._yaws[-1] - self._yaws[0])
+
     def _parameter(self, s: float) -> float:
         s = min(max(s, 0.0), self.length)
         return float(np.interp(s, self._s, self._param))
@@ -103,6 +110,20 @@ class MotionProfile:
     def __post_init__(self) -> None:
         if not (self.max_speed > 0.0 and self.max_accel > 0.0 and self.length >= 0.0):
             raise PathError('a profile needs a length >= 0 and positive speed and acceleration')
+
+    @classmethod
+    def lasting(cls, length: float, duration: float, max_speed: float,
+                max_accel: float) -> 'MotionProfile':
+        """The profile over ``length`` at ``max_accel`` that takes ``duration``, its cruise speed
+        lowered to stretch it (the fastest one if that takes longer than ``duration``)."""
+        fastest = cls(length, max_speed, max_accel)
+        if length <= 0.0 or duration <= fastest.duration:
+            return fastest
+        # A trapezoid at speed v lasts length / v + v / a: the lower root for the duration.
+        a = max_accel
+        speed = 0.5 * (a * duration - math.sqrt(max(0.0, (a * duration) ** 2
+                                                    - 4.0 * a * length)))
+        return cls(length, min(max_speed, speed), max_accel)
 
     @property
     def _ramp(self) -> Tuple[float, float]:

@@ -36,17 +36,40 @@ class FollowStatus:
     finished: bool                          # dummy at the end and the robot settled on it
 
 
+@dataclass(frozen=True)
+class TurnLimits:
+    """The dummy's heading profile in time, for a holonomic base: its rate and acceleration."""
+    rate: float = 1.2            # [rad/s]
+    accel: float = 1.5           # [rad/s^2]
+
+
 class PathFollower:
-    """Follows one path, started at ``start_time``; call ``update`` every control period."""
+    """Follows one path, started at ``start_time``; call ``update`` every control period.
+
+    Without ``turn`` the dummy's heading is the path's (the key poses' headings, blended along
+    each segment), and a turn as fast as the travel along the path. With ``turn`` (a holonomic
+    base: its heading is free of its direction of travel) the heading goes from the first key
+    pose's to the last's (the way round the key poses turn) on a profile in time of its own,
+    within the limits; the travel and the turn then take the same time, the slower one's, the
+    other stretched to match, so that both start and end together, and the turn is slowest at
+    both ends, where the base stands close to things."""
 
     def __init__(self, path: BezierPath, start_time: float, max_speed: float = 0.35,
                  max_accel: float = 0.4, gains: PDGains = PDGains(),
-                 position_tolerance: float = 0.01, yaw_tolerance: float = 0.02) -> None:
+                 position_tolerance: float = 0.01, yaw_tolerance: float = 0.02,
+                 turn: Optional[TurnLimits] = None) -> None:
         self.path, self.start_time, self.gains = path, start_time, gains
         self.profile = MotionProfile(path.length, max_speed, max_accel)
         self.position_tolerance, self.yaw_tolerance = position_tolerance, yaw_tolerance
-        # The heading rate of the dummy from successive updates (feed-forward for the yaw).
-        self._last: Optional[Tuple[float, float]] = None
+        self._turn: Optional[MotionProfile] = None
+        self._yaw0, self._sweep = float(path.key_poses[0][2]), 0.0
+        if turn is not None:
+            self._sweep = path.heading_sweep
+            spin = MotionProfile(abs(self._sweep), turn.rate, turn.accel)
+            duration = max(spin.duration, self.profile.duration)
+            self.profile = MotionProfile.lasting(path.length, duration, max_speed, max_accel)
+            self._turn = MotionProfile.lasting(abs(self._sweep), duration, turn.rate,
+                                               turn.accel)
 
     @property
     def end_time(self) -> float:
@@ -57,6 +80,11 @@ class PathFollower:
         s, speed = self.profile.at(t - self.start_time)
         pose = self.path.pose(s)
         velocity = self.path.tangent(s) * speed
+        if self._turn is not None:
+            turned, rate = self._turn.at(t - self.start_time)
+            sign = 1.0 if self._sweep >= 0.0 else -1.0
+            return ((pose[0], pose[1], wrap_angle(self._yaw0 + sign * turned)), velocity,
+                    sign * rate)
         ds = 1e-3
         yaw_rate = 0.0
         if speed > 0.0:

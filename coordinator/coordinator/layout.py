@@ -158,9 +158,10 @@ def layout_from_world(world) -> CellLayout:
                                 named['ground_target'].position[1], 0.0]),
         youbot_home=home, zu12_base=(zu.x, zu.y, zu.z, zu.yaw), platform_place=place,
         stands=(left, right),
-        # Out: down to the first stand from the north, facing south as it parks; between the
-        # stands it turns about 0.2 m off the wall (its corners sweep 0.34 m about base_link);
-        # back home it turns round on the way.
-        via_out=((side_x - 0.05, py + 0.55, -math.pi / 2),),
-        via_turn=((side_x - 0.2, py - 0.12, 0.0),),
+        # Out: down to the first stand from the north-west (never east of it, so never
+        # nearer the wall), facing south as it parks; between the stands it turns about 0.3 m
+        # off the wall (its corners sweep 0.34 m about base_link); back home it turns round on
+        # the way.
+        via_out=((side_x - 0.1, py + 0.55, -math.pi / 2),),
+        via_turn=((side_x - 0.3, py - 0.12, 0.0),),
         via_back=((0.5 * (home[0] + side_x), 0.5 * (home[1] + right.pose[1]), 0.0),))

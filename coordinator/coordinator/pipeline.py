@@ -21,8 +21,8 @@ from typing import Callable, Dict, List, Optional, Protocol, Sequence, Tuple
 
 import numpy as np
 
-from controllers.bezier import BezierPath, Pose2D, key_poses_between, wrap_angle
-from controllers.path_follower import PDGains, PathFollower
+from controllers.bezier import BezierPath, Pose2D, key_poses_between
+from controllers.path_follower import PDGains, PathFollower, TurnLimits
 from controllers.conveyor import Item, advance, held
 from controllers.pick_place import PickTiming, follow_pick
 from controllers.time_optimal import (SAMPLE_PERIOD_S, JointLimits, PlanError, TooLate,
@@ -138,7 +138,8 @@ class Settings:
     idle_timeout: float = 20.0        # belt running, nothing new to pick: loading is over [s]
     run_timeout: float = 300.0        # the whole run [s]
     drive_speed: float = 0.6          # the dummy's speed along a path [m/s]
-    drive_turn: float = 1.0           # its heading's average turn rate, at most [rad/s]
+    drive_turn: float = 1.2           # its heading's turn rate, at most [rad/s]
+    drive_turn_accel: float = 1.5     # [rad/s^2]
     # The follower's command limits, within the youBot's (0.8 m/s each of vx, vy; 1.5 rad/s).
     base_max_speed: float = 0.75
     base_max_turn: float = 1.4
@@ -696,15 +697,12 @@ class Transport(Machine):
         elif self._drive_goal != goal:
             via = lay.via_turn
         path = BezierPath(key_poses_between(start, target, via))
-        # Slow enough along a short path with a large turn that the heading keeps up (the
-        # heading blends smoothly between key poses: its peak rate is 1.5x the average).
-        turn = sum(abs(wrap_angle(b[2] - a[2])) for a, b in zip(path.key_poses,
-                                                                 path.key_poses[1:]))
-        speed = run.s.drive_speed
-        if turn > 0.0:
-            speed = min(speed, run.s.drive_turn * path.length / (1.5 * turn))
-        self._follower = PathFollower(path, obs.now, speed, run.s.drive_accel, PDGains(
-            max_speed=run.s.base_max_speed, max_turn=run.s.base_max_turn))
+        # Mecanum: the heading turns on its own profile in time while the base travels the
+        # path, both over the same time (a short path with a large turn takes the turn's).
+        self._follower = PathFollower(
+            path, obs.now, run.s.drive_speed, run.s.drive_accel,
+            PDGains(max_speed=run.s.base_max_speed, max_turn=run.s.base_max_turn),
+            turn=TurnLimits(run.s.drive_turn, run.s.drive_turn_accel))
         self._followed = run.ports.follow(self._follower)
         self._drive_goal = goal
         if goal != 'home' and self.queue:

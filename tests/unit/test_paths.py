@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 from controllers.bezier import BezierPath, MotionProfile, PathError, key_poses_between
-from controllers.path_follower import PathFollower, PDGains, simulate_kinematic
+from controllers.path_follower import PathFollower, PDGains, TurnLimits, simulate_kinematic
 
 KEYS = [(0.6, -0.55, 0.0), (1.2, -1.0, 0.3), (1.72, -1.75, 0.0), (1.78, -2.15, -0.5)]
 
@@ -62,6 +62,47 @@ def test_the_profile_respects_speed_and_acceleration():
     assert p.duration == pytest.approx(2.0 / 0.4 + 0.4 / 0.4)
     short = MotionProfile(0.1, 0.4, 0.4)       # triangular: never reaches 0.4 m/s
     assert max(short.at(x)[1] for x in np.linspace(0, short.duration, 500)) < 0.4
+
+
+def test_a_profile_stretched_to_a_duration_takes_exactly_that_long():
+    fastest = MotionProfile(0.7, 0.6, 0.6)
+    for duration in (fastest.duration + 0.01, 3.0, 10.0):
+        p = MotionProfile.lasting(0.7, duration, 0.6, 0.6)
+        assert p.duration == pytest.approx(duration, abs=1e-9)
+        assert p.at(duration)[0] == pytest.approx(0.7)
+        assert p.max_speed < 0.6
+    # Asked for less than the fastest: the fastest (the limits always hold).
+    assert MotionProfile.lasting(0.7, 0.5, 0.6, 0.6).duration == fastest.duration
+
+
+def test_a_holonomic_turn_runs_on_its_own_profile_and_ends_with_the_travel():
+    """Half a turn over 0.7 m (between the youBot's stands): the heading profile sets the
+    time, the travel is stretched to it; both start and end together, the turn within its
+    rate and acceleration, the way round the key poses go (through yaw 0 here, clockwise)."""
+    keys = [(0.0, 0.0, -math.pi / 2), (-0.3, 0.2, 0.0), (0.0, 0.35, math.pi / 2)]
+    limits = TurnLimits(rate=1.2, accel=1.5)
+    follower = PathFollower(BezierPath(keys), 0.0, max_speed=0.6, max_accel=0.6, turn=limits,
+                            gains=PDGains(max_speed=0.75, max_turn=1.4))
+    spin = MotionProfile(math.pi, 1.2, 1.5)
+    assert follower.profile.duration == pytest.approx(spin.duration)
+    t = np.linspace(0.0, follower.end_time, 3001)
+    dummies = [follower.dummy(x) for x in t]
+    yaw = np.unwrap([d[0][2] for d in dummies])
+    assert yaw[0] == pytest.approx(-math.pi / 2) and yaw[-1] == pytest.approx(math.pi / 2)
+    assert np.all(np.diff(yaw) >= -1e-12)                # counter-clockwise throughout
+    rate = np.array([d[2] for d in dummies])
+    assert rate.max() <= 1.2 + 1e-9 and np.abs(np.diff(rate) / np.diff(t)).max() <= 1.5 + 1e-6
+    assert np.diff(yaw) / np.diff(t) == pytest.approx(0.5 * (rate[1:] + rate[:-1]), abs=1e-2)
+    speed = np.array([np.linalg.norm(d[1]) for d in dummies])
+    assert speed[0] == 0.0 and speed[-1] == 0.0 and speed.max() < 0.6
+    poses, statuses = simulate_kinematic(follower, keys[0])
+    assert statuses[-1].finished
+    assert max(s.yaw_error for s in statuses) < 0.05
+    # Without it, the heading follows the path's key poses: through yaw 0 at the via point.
+    plain = PathFollower(BezierPath(keys), 0.0, max_speed=0.6, max_accel=0.6)
+    via = min(np.linspace(0.0, plain.end_time, 2001),
+              key=lambda x: np.hypot(plain.dummy(x)[0][0] + 0.3, plain.dummy(x)[0][1] - 0.2))
+    assert plain.dummy(via)[0][2] == pytest.approx(0.0, abs=1e-3)
 
 
 def test_the_follower_tracks_the_dummy_and_settles_on_the_goal():

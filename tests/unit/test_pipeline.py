@@ -51,6 +51,7 @@ class FakeCell:
         self.sealed = {'zu12': False, 'youbot': False}     # a seal was tried since arming
         self.holding = {'zu12': False, 'youbot': False}
         self.pose = np.array(layout.youbot_home, float)
+        self.path: List[np.ndarray] = []          # the youBot's pose at every step
         self.twist = np.zeros(3)
         self.grasp_failures = dict(grasp_failures or {})
         self.unreachable, self.stall, self.blind = unreachable, stall, blind
@@ -221,6 +222,7 @@ class FakeCell:
                 vx, vy, wz = self.twist
                 world_v = (c * vx - s * vy, s * vx + c * vy, wz)
         self.pose += np.array(world_v) * DT
+        self.path.append(self.pose.copy())
         dets = []
         if not self.blind:
             for i, (x, y, color, on_belt) in self.materials.items():
@@ -314,6 +316,49 @@ def test_the_whole_run_delivers_every_material_and_both_robots_return():
     after = [t for arm, t, _ in cell.trajectories if arm == 'youbot' and t >= home - 1e-9]
     assert after[0] == pytest.approx(home, abs=DT)           # up, as the base sets off
     assert after[1] >= max(e.time for e in kinds(cell, 'arrived')) - 1e-9     # folded at home
+
+
+def _footprint_clearance(pose, box_center, box_size, half=(0.285, 0.18)) -> float:
+    """How far the youBot's base box (its half length and width, at ``pose``) is from an
+    upright box on the floor (centre x, y; size x, y), sampled every 5 mm along its outline
+    (negative: inside it)."""
+    x, y, yaw = pose
+    c, s = math.cos(yaw), math.sin(yaw)
+    out = []
+    for u in np.linspace(-1.0, 1.0, int(2 * half[0] / 0.005) + 1):
+        for v in (-1.0, 1.0):
+            out.append((u * half[0], v * half[1]))
+    for v in np.linspace(-1.0, 1.0, int(2 * half[1] / 0.005) + 1):
+        for u in (-1.0, 1.0):
+            out.append((u * half[0], v * half[1]))
+    worst = math.inf
+    for bx, by in out:
+        px, py = x + c * bx - s * by, y + s * bx + c * by
+        dx = abs(px - box_center[0]) - box_size[0] / 2
+        dy = abs(py - box_center[1]) - box_size[1] / 2
+        gap = math.hypot(max(dx, 0.0), max(dy, 0.0)) if max(dx, dy) > 0.0 else max(dx, dy)
+        worst = min(worst, gap)
+    return worst
+
+
+def test_the_youbot_turns_between_its_stands_and_home_clear_of_the_pool():
+    """The heading turns on a profile of its own while the base travels (Mecanum); turning
+    fast near a stand must not swing a corner of the base into the pool's walls or platform
+    (its corners reach 0.34 m from its centre, its sides 0.18 m)."""
+    layout = cell_layout()
+    cell = FakeCell(layout, PAPER)
+    assert run(cell).result.status == 'completed'
+    world = load_world(resolve_resource('package://sim_bridge/worlds/pipeline_cell.yaml'))
+    boxes = [(o.name, o.position, o.size) for o in world.obstacles
+             if o.name.startswith('pool_wall') or o.name == 'pool_platform']
+    assert len(boxes) == 5
+    path = cell.path[::3]
+    turned = max(abs(math.remainder(b[2] - a[2], 2 * math.pi)) / (3 * DT)
+                 for a, b in zip(path, path[1:]))
+    assert 0.5 < turned <= Settings().base_max_turn + 1e-6
+    worst = min((_footprint_clearance(pose, center, size), name, tuple(np.round(pose, 3)))
+                for pose in path for name, center, size in boxes)
+    assert worst[0] >= 0.03, worst
 
 
 def _watch_materials(cell: FakeCell) -> Dict[int, List[tuple]]:
