@@ -92,8 +92,8 @@ class CoordinatorNode(Node):
             'The Zu 12 picks materials on the belt downstream of this x [m]', -1.0, 1.0))
         self.declare_parameter('max_retries', 1, ro(
             description='Extra grasp attempts after a missed grasp', read_only=True))
-        self.declare_parameter('drive_speed', 0.6, rng("The path dummy's speed [m/s]",
-                                                       0.05, 0.8))
+        self.declare_parameter('drive_speed', Settings.drive_speed, rng(
+            "The path dummy's speed [m/s]", 0.05, 0.8))
         self.declare_parameter('run_timeout', 300.0, rng('Longest run [s of sim time]',
                                                          10.0, 3600.0))
         self.declare_parameter('idle_timeout', 20.0, rng(

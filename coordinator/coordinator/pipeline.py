@@ -137,7 +137,7 @@ class Settings:
     drive_margin: float = 15.0        # a drive may end this late [s]
     idle_timeout: float = 20.0        # belt running, nothing new to pick: loading is over [s]
     run_timeout: float = 300.0        # the whole run [s]
-    drive_speed: float = 0.6          # the dummy's speed along a path [m/s]
+    drive_speed: float = 0.7          # the dummy's speed along a path [m/s]
     drive_turn: float = 1.2           # its heading's turn rate, at most [rad/s]
     drive_turn_accel: float = 1.5     # [rad/s^2]
     # The follower's command limits, within the youBot's (0.8 m/s each of vx, vy; 1.5 rad/s).
@@ -146,7 +146,7 @@ class Settings:
     # A motion starts this much later than planned-for "now" (real time: the plan's IK calls
     # and the message's trip; a late first segment would be too fast and rejected) [s].
     plan_latency: float = 0.0
-    drive_accel: float = 0.6
+    drive_accel: float = 0.8          # [m/s^2]
     # The shortest times of the moves near a material (the time-optimal plan may take longer):
     # gentle enough that the cup and the fingers do not knock it.
     timing: PickTiming = PickTiming(hover=0.06, descend=0.3, dwell=0.15, lift=0.3,
@@ -769,15 +769,18 @@ class Transport(Machine):
 
     def _unload_path(self, m: Material, pose: Pose2D, seed: np.ndarray,
                      high: bool = False) -> Optional[List[np.ndarray]]:
-        """Joint positions over the material on the plate (twice as high with ``high``), on it,
-        over it again, above its drop and at its drop, for the base standing at ``pose``."""
+        """Joint positions over the material on the plate (4 times as high with ``high``), on
+        it, lifted clear of its neighbours, above its drop and at its drop, for the base standing
+        at ``pose``. The fingers come down from 3 cm over its top face (the neighbours' tops are
+        level with it); the material rises 6 cm before it swings out (over their 5 cm)."""
         run = self.run
         size, t = run.layout.material_size, run.s.timing
         slot = PLATE_SLOTS_IN_BASE_M[m.slot]
         top = (PLATE_TOP_IN_BASE_M + size + YOUBOT_GRASP_STANDOFF_M
                - 0.004 * m.unload_attempts)
         contact = np.array([slot[0], slot[1], top])
-        hover = contact + np.array([0.0, 0.0, 0.12 if high else 0.06])
+        hover = contact + np.array([0.0, 0.0, 0.12 if high else 0.03])
+        up = contact + np.array([0.0, 0.0, 0.06])
         stand = self._stand_for(m)
         if m.color == 'blue':
             candidates = [run.layout.platform_place + np.array(
@@ -791,7 +794,7 @@ class Transport(Machine):
         for drop_world in candidates:
             drop = world_to_base(pose, drop_world)
             drop[2] -= YOUBOT_BASE_Z_M
-            path = run.solve_tilted([hover, contact, hover, drop + np.array([0.0, 0.0, 0.05]),
+            path = run.solve_tilted([hover, contact, up, drop + np.array([0.0, 0.0, 0.05]),
                                      drop], np.array(seed, float))
             if path is not None:
                 return path
