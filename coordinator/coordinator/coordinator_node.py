@@ -532,7 +532,10 @@ class CoordinatorNode(Node):
                     'youbot_path': [[round(x, 4), round(y, 4)] for x, y in self._path[::3]],
                     'events': [[round(e.time - self.pipeline.start_time, 4), e.kind, e.robot,
                                 e.material, e.color, e.detail]
-                               for e in self.pipeline.events if e.kind != 'state']})
+                               for e in self.pipeline.events if e.kind != 'state'],
+                    # Each machine's state changes: the report's timeline.
+                    'states': [[round(e.time - self.pipeline.start_time, 4), e.robot, e.detail]
+                               for e in self.pipeline.events if e.kind == 'state']})
         self._publish_state(self.now(), json.dumps(out))
         if self.result_file:
             path = Path(self.result_file)

@@ -75,6 +75,67 @@ def bars(rows: Sequence[Tuple[str, float, float]], out: Path, title: str) -> Non
     _write(img, out)
 
 
+# The timeline's colours per state (BGR) of the two machines (pipeline.LoaderState and
+# TransportState), and the belt's.
+STATE_COLORS = {
+    'start': (220, 220, 220), 'wait': (200, 200, 200), 'wait_load': (200, 200, 200),
+    'pick': (14, 127, 255), 'grasp': (14, 127, 255),
+    'place': (180, 119, 31), 'carry': (180, 119, 31),
+    'rise': (232, 199, 174), 'release': (232, 199, 174),
+    'retreat': (40, 39, 214), 'drive': (44, 160, 44),
+    'home': (189, 103, 148), 'fold': (189, 103, 148), 'running': (120, 120, 120)}
+TIMELINE_LANES = (('belt', 'belt'), ('Zu 12', 'loader'), ('youBot', 'transport'))
+
+
+def activity(trial: Dict) -> Dict[str, List[Tuple[float, float, str]]]:
+    """Per lane of the timeline (the belt, the Zu 12, the youBot): (start, end, state) from a
+    trial's state changes and belt events, up to its completion time."""
+    end = float(trial['completion_time'])
+    lanes: Dict[str, List[Tuple[float, float, str]]] = {}
+    for label, machine in TIMELINE_LANES[1:]:
+        changes = [(float(t), state) for t, who, state in trial.get('states', ())
+                   if who == machine]
+        lanes[label] = [(t0, t1, state) for (t0, state), (t1, _) in
+                        zip(changes, changes[1:] + [(end, '')]) if t1 > t0 and state != 'done']
+    belt = [float(e[0]) for e in trial.get('events', ()) if e[1] == 'belt_started']
+    stop = [float(e[0]) for e in trial.get('events', ()) if e[1] == 'belt_stopped']
+    lanes['belt'] = [(t0, min([t for t in stop if t >= t0] + [end]), 'running') for t0 in belt]
+    return lanes
+
+
+def timeline(trial: Dict, out: Path) -> None:
+    """Each robot's activity over one run: a lane per robot (and the belt), a bar per state."""
+    img = _canvas(f'Activity over trial {trial["trial"]} (seed {trial["scenario_seed"]}, belt '
+                  f'{trial["belt_speed"]:.3f} m/s): completed in '
+                  f'{trial["completion_time"]:.1f} s', (900, 330))
+    left, top, w, lane_h = 90, 50, 780, 50
+    end = max(1.0, float(trial['completion_time']))
+    lanes = activity(trial)
+    for i, (label, _) in enumerate(TIMELINE_LANES):
+        y0 = top + i * (lane_h + 10)
+        cv2.putText(img, label, (10, y0 + 30), FONT, 0.5, (0, 0, 0), 1)
+        for t0, t1, state in lanes[label]:
+            x0, x1 = (int(left + w * t / end) for t in (t0, t1))
+            cv2.rectangle(img, (x0, y0), (max(x0, x1 - 1), y0 + lane_h),
+                          STATE_COLORS.get(state, (0, 0, 0)), -1)
+        cv2.rectangle(img, (left, y0), (left + w, y0 + lane_h), (0, 0, 0), 1)
+    axis = top + len(TIMELINE_LANES) * (lane_h + 10)
+    for t in range(0, int(end) + 1, 10):
+        x = int(left + w * t / end)
+        cv2.line(img, (x, axis - 5), (x, axis), (0, 0, 0), 1)
+        cv2.putText(img, f'{t}', (x - 8, axis + 15), FONT, 0.4, (0, 0, 0), 1)
+    cv2.putText(img, 'simulated time [s]', (left + w // 2 - 70, axis + 35), FONT, 0.5,
+                (0, 0, 0), 1)
+    legend = (('wait', 'wait'), ('pick / grasp', 'pick'), ('place / carry', 'place'),
+              ('rise / release', 'rise'), ('drive', 'drive'), ('home / fold', 'home'),
+              ('retreat', 'retreat'))
+    for k, (name, state) in enumerate(legend):
+        x = left + k * 112
+        cv2.rectangle(img, (x, axis + 50), (x + 14, axis + 64), STATE_COLORS[state], -1)
+        cv2.putText(img, name, (x + 18, axis + 62), FONT, 0.38, (0, 0, 0), 1)
+    _write(img, out)
+
+
 def _write(img: np.ndarray, out: Path) -> None:
     out.parent.mkdir(parents=True, exist_ok=True)
     if not cv2.imwrite(str(out), img):
@@ -96,6 +157,9 @@ def write_report(trials: List[Dict], out_dir: Path, setup: Dict) -> Path:
              for t in sorted(ok, key=lambda t: t['trial'])[:5]}
     if paths:
         plot_paths(paths, out_dir / 'youbot_paths.png', "The youBot's paths over the cell")
+    shown = sorted((t for t in ok if t.get('states')), key=lambda t: t['completion_time'])
+    if shown:        # the trial of median completion time
+        timeline(shown[len(shown) // 2], out_dir / 'timeline.png')
     lines = ['# Pipeline trials', '', setup['note'] if 'note' in setup else (
         f'{len(trials)} trials (lock-step), plan seed {setup.get("seed0")}, belt speed '
         f'{setup.get("belt_speed")} m/s, {setup.get("parallel")} in parallel, wall time '
@@ -138,6 +202,9 @@ def write_report(trials: List[Dict], out_dir: Path, setup: Dict) -> Path:
               "paper's last row prints 10 % handling (a typo for 100 %, by the rows before it).",
               '', '![completion times](completion_times.png) ![success rates](success_rates.png)'
               ' ![youBot paths](youbot_paths.png)', '']
+    if shown:
+        lines += ['The trial of median completion time, each robot\'s activity over it:', '',
+                  '![timeline](timeline.png)', '']
     path = out_dir / 'report.md'
     path.write_text('\n'.join(lines))
     return path

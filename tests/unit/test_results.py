@@ -1,11 +1,12 @@
 """Scoring a run against ground truth, the trials' summary, CSV and report."""
 import csv
 
+import cv2
 import numpy as np
 import pytest
 
 from coordinator.pipeline import RunResult
-from coordinator.report import write_report
+from coordinator.report import STATE_COLORS, activity, write_report
 from coordinator.results import (at_destination, match_identification, regions_from_world,
                                  score, summary_rows)
 from coordinator.trials import trial_plan, write_csv
@@ -104,6 +105,41 @@ def test_summary_and_report(tmp_path):
     write_csv(trials, tmp_path / 'trials.csv')
     rows = list(csv.DictReader(open(tmp_path / 'trials.csv')))
     assert [r['trial'] for r in rows] == ['0', '1', '2'] and rows[1]['status'] == 'incomplete'
+
+
+def test_the_report_draws_each_robots_activity_over_the_median_trial(tmp_path):
+    """The timeline: a lane for the belt, the Zu 12 and the youBot, a bar per state, drawn for
+    the trial of median completion time, from the state changes its result lists."""
+    trials = []
+    for k, end in enumerate((70.0, 60.0, 80.0)):
+        trials.append({
+            'trial': k, 'scenario_seed': k, 'belt_speed': 0.12, 'status': 'completed',
+            'completion_time': end, 'identification_rate': 1.0, 'grasp_success_rate': 1.0,
+            'handling_success_rate': 1.0, 'youbot_path': [], 'materials': [],
+            'events': [[0.0, 'belt_started', '', -1, '', ''],
+                       [30.0, 'belt_stopped', '', -1, '', '']],
+            'states': [[0.0, 'loader', 'wait'], [2.0, 'loader', 'pick'],
+                       [5.0, 'loader', 'place'], [30.0, 'loader', 'home'],
+                       [33.0, 'loader', 'done'], [0.0, 'transport', 'wait_load'],
+                       [31.0, 'transport', 'drive'], [40.0, 'transport', 'grasp'],
+                       [end - 5.0, 'transport', 'drive'], [end - 1.0, 'transport', 'fold'],
+                       [end, 'transport', 'done']]})
+    lanes = activity(trials[0])
+    assert lanes['belt'] == [(0.0, 30.0, 'running')]
+    assert lanes['Zu 12'][-1] == (30.0, 33.0, 'home')         # nothing drawn once done
+    assert lanes['youBot'][1] == (31.0, 40.0, 'drive')
+    report = write_report(trials, tmp_path, {'note': 'three trials'}).read_text()
+    assert '![timeline](timeline.png)' in report
+    img = cv2.imread(str(tmp_path / 'timeline.png'))
+    assert img is not None
+
+    def at(lane: int, t: float, end: float = 70.0):      # the median trial: 70 s
+        return tuple(int(v) for v in img[50 + lane * 60 + 25, int(90 + 780 * t / end)])
+    assert at(0, 10.0) == STATE_COLORS['running'] and at(0, 50.0) == (255, 255, 255)
+    assert at(1, 3.0) == STATE_COLORS['pick'] and at(1, 20.0) == STATE_COLORS['place']
+    assert at(1, 50.0) == (255, 255, 255)
+    assert at(2, 35.0) == STATE_COLORS['drive'] and at(2, 50.0) == STATE_COLORS['grasp']
+    assert at(2, 67.0) == STATE_COLORS['drive']
 
 
 def test_a_trial_plan_is_reproducible_and_splits_over_machines():
