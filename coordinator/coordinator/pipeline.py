@@ -231,7 +231,9 @@ class LoaderState(Enum):
 class TransportState(Enum):
     """The youBot's states: wait for its load, drive; per material: down onto it and grip,
     carry it over its destination, let go; then drive home (the arm rising to its carry pose
-    as the base sets off), fold."""
+    as the base sets off), fold. The base's drive goes on whatever the arm does: on the way to
+    a stand the arm takes the first material it unloads there (it rides on the base's plate),
+    and holds it up until the base stands."""
     WAIT_LOAD = 'wait_load'
     DRIVE = 'drive'
     GRASP = 'grasp'
@@ -653,6 +655,9 @@ class Transport(Machine):
         self._carry: List[np.ndarray] = []           # the unload's joint positions after the grip
         self._armed = False
         self._dropped: Dict[str, int] = {}             # pool drops made, per stand
+        self._drive_deadline = math.inf
+        # The arm holds a material up, over the plate, until the base stands at its stand.
+        self._drop_pending = False
         S = TransportState
         self.handlers = {S.WAIT_LOAD: self._wait_load, S.DRIVE: self._drive,
                          S.GRASP: self._grasp, S.CARRY: self._carry_to_drop,
@@ -662,6 +667,32 @@ class Transport(Machine):
     @property
     def current(self) -> Optional[Material]:
         return self.queue[0] if self.queue else None
+
+    @property
+    def driving(self) -> bool:
+        return self._follower is not None
+
+    def tick(self, obs: Observation) -> None:
+        if self._follower is not None:
+            self._steer(obs)
+        super().tick(obs)
+
+    def _steer(self, obs: Observation) -> None:
+        """The base along its path, with its follower, until it is there or out of time."""
+        run = self.run
+        status = self._follower.update(obs.now, obs.youbot_pose, obs.youbot_velocity[:2],
+                                       obs.youbot_velocity[2])
+        if not self._followed:
+            run.ports.drive(*status.command)
+        if not (status.finished or obs.now > self._drive_deadline):
+            return
+        self._follower = None
+        run.ports.follow(None)
+        run.ports.drive(0.0, 0.0, 0.0)
+        if not status.finished:
+            run.event(obs.now, 'drive_stalled', 'youbot', detail=(
+                f'{status.position_error * 1000:.0f} mm from {self._drive_goal}'))
+        run.event(obs.now, 'arrived', 'youbot', detail=self._drive_goal)
 
     def _wait_load(self, obs: Observation) -> None:
         run = self.run
@@ -708,26 +739,15 @@ class Transport(Machine):
         if goal != 'home' and self.queue:
             self._ready_arm(obs, lay.stand(goal).pose)
         run.event(obs.now, 'driving', 'youbot', detail=f'to {goal}, {path.length:.2f} m')
-        self.enter(TransportState.DRIVE, obs.now,
-                   self._follower.profile.duration + run.s.drive_margin)
+        budget = self._follower.profile.duration + run.s.drive_margin
+        self._drive_deadline = obs.now + budget
+        self.enter(TransportState.DRIVE, obs.now, budget)
 
     def _drive(self, obs: Observation) -> None:
         run = self.run
-        if self._follower is not None:
-            status = self._follower.update(obs.now, obs.youbot_pose, obs.youbot_velocity[:2],
-                                           obs.youbot_velocity[2])
-            if not self._followed:
-                run.ports.drive(*status.command)
-            if not (status.finished or self.late(obs.now)):
-                return
-            self._follower = None
-            run.ports.follow(None)
-            run.ports.drive(0.0, 0.0, 0.0)
-            if not status.finished:
-                run.event(obs.now, 'drive_stalled', 'youbot', detail=(
-                    f'{status.position_error * 1000:.0f} mm from {self._drive_goal}'))
-            run.event(obs.now, 'arrived', 'youbot', detail=self._drive_goal)
         if self._drive_goal == 'home':
+            if self.driving:
+                return
             # Folded only at home (folded, the arm reaches down in front of the base, and its
             # fingers would catch the floor as the base pitches), from the carry pose.
             if not self.motion_over(obs, 'carry pose'):
@@ -735,11 +755,13 @@ class Transport(Machine):
             run.plan_home('youbot', obs)
             return self.enter(TransportState.FOLD, obs.now, run.motions['youbot'].end
                               - obs.now + run.s.settle_margin)
-        # The arm rose to its first unload here while the base drove; after a short drive it
-        # may still be on its way, and the unload is planned from where it comes to rest.
+        # The arm rises over the first material it unloads here while the base drives, and
+        # takes it from there, the base still on its way or not (the unload is planned from
+        # where the arm comes to rest).
         if self.queue and not self.motion_over(obs, 'ready pose'):
             return
-        self._next_unload(obs)
+        if self.queue or not self.driving:
+            self._next_unload(obs)
 
     def _next_unload(self, obs: Observation) -> None:
         run = self.run
@@ -800,10 +822,16 @@ class Transport(Machine):
                 return path
         return None
 
+    def _stand_pose(self, obs: Observation) -> Pose2D:
+        """Where the base stands for its unloads: its drive's goal while it is on its way."""
+        if self.driving:
+            return self.run.layout.stand(self._drive_goal).pose
+        return obs.youbot_pose
+
     def _plan_unload(self, obs: Observation, m: Material) -> None:
         """Down onto the material on the plate; the gripper closes once the arm is there."""
         run, now, t = self.run, obs.now, self.run.s.timing
-        plan = self._unload_path(m, obs.youbot_pose, obs.youbot_q)
+        plan = self._unload_path(m, self._stand_pose(obs), obs.youbot_q)
         if plan is None:
             self.queue.pop(0)
             run.fail(now, m, 'grasp_failed', 'unload: no IK solution', 'youbot')
@@ -844,16 +872,29 @@ class Transport(Machine):
         run.event(now, 'unload_grasped', 'youbot', m, f'attempt {m.unload_attempts}')
         up, over, drop = self._carry
         t = run.s.timing
+        if self.driving:
+            # Up clear of its neighbours, and held there until the base stands.
+            self._drop_pending = True
+            return self.move(TransportState.CARRY, obs, run.plan(
+                'youbot', obs.youbot_q, [Waypoint(up, min_time=t.lift)]))
+        self._carry_out(obs, m, [Waypoint(up, stop=False, min_time=t.lift)], over, drop)
+
+    def _carry_out(self, obs: Observation, m: Material, first: List[Waypoint],
+                   over: np.ndarray, drop: np.ndarray) -> None:
+        """From the grip (through ``first``) over to the material's drop."""
+        run, t = self.run, self.run.s.timing
+        self._drop_pending = False
         if m.color == 'blue':
             # Set down on the platform gently, from above, and still before letting go.
-            carry = [Waypoint(up, stop=False, min_time=t.lift), Waypoint(over, stop=False),
-                     Waypoint(drop, hold=SETTLE_S, min_time=t.place_descend)]
+            carry = first + [Waypoint(over, stop=False),
+                             Waypoint(drop, hold=SETTLE_S, min_time=t.place_descend)]
         else:
             # Let go over the pool, 14 cm up (4 cm over its walls): straight there.
-            carry = [Waypoint(up, stop=False, min_time=t.lift), Waypoint(drop)]
+            carry = first + [Waypoint(drop)]
         self.move(TransportState.CARRY, obs, run.plan('youbot', obs.youbot_q, carry))
 
     def _unload_failed(self, obs: Observation, m: Material, kind: str, why: str) -> None:
+        self._drop_pending = False
         self.run.ports.grip('youbot', False)
         self.queue.pop(0)
         self.run.fail(obs.now, m, kind, why, 'youbot')
@@ -866,6 +907,15 @@ class Transport(Machine):
         arrived = self.arrival(obs)
         if arrived is None:
             return
+        if self._drop_pending:
+            if self.driving:
+                return              # (held up over the plate until the base stands)
+            if not arrived:
+                run.event(now, 'arm_stalled', 'youbot', m, 'the lift off the plate not completed')
+            # Over to its drop as the base stands now (the drive ends a little off its goal).
+            path = self._unload_path(m, obs.youbot_pose, obs.youbot_q)
+            over, drop = path[3:] if path is not None else self._carry[1:]
+            return self._carry_out(obs, m, [], over, drop)
         if not arrived:
             run.event(now, 'arm_stalled', 'youbot', m, 'unload motion not completed')
         run.ports.grip('youbot', False)

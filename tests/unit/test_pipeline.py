@@ -361,6 +361,35 @@ def test_the_youbot_turns_between_its_stands_and_home_clear_of_the_pool():
     assert worst[0] >= 0.03, worst
 
 
+def test_the_youbot_takes_a_stands_first_material_on_the_way_and_drops_it_there():
+    """The material rides on the base's plate, so the arm can take it while the base drives;
+    it lets go only once the base stands at the stand (over the pool or the platform)."""
+    layout = cell_layout()
+    cell = FakeCell(layout, PAPER)
+    assert run(cell).result.status == 'completed'
+    events = sorted(cell.events, key=lambda e: e.time)
+    drives = [e for e in events if e.kind == 'driving' and not e.detail.startswith('to home')]
+    assert [e.detail.split(',')[0] for e in drives] == [f'to {st.name}' for st in layout.stands]
+
+    def first(kind, after):
+        return next(e for e in events if e.kind == kind and e.time >= after.time)
+    for drive in drives:
+        arrived, grasped = first('arrived', drive), first('unload_grasped', drive)
+        delivered = first('delivered', drive)
+        assert grasped.time < arrived.time <= delivered.time, (drive, grasped, arrived)
+        assert grasped.material == delivered.material
+        stand = layout.stand(arrived.detail).pose
+        at_drop = cell.path[round(delivered.time / DT) - 1]
+        assert np.hypot(*(at_drop[:2] - np.asarray(stand[:2]))) < 0.02
+    # Every other unload starts with the base standing.
+    standing = [e for e in kinds(cell, 'unload_grasped')
+                if not any(e.material == first('unload_grasped', d).material for d in drives)]
+    assert len(standing) == 5
+    assert all(np.linalg.norm(cell.path[round(e.time / DT) - 1][:2]
+                              - cell.path[round(e.time / DT) - 2][:2]) < 1e-9
+               for e in standing)
+
+
 def _watch_materials(cell: FakeCell) -> Dict[int, List[tuple]]:
     """Record each material's (time, x) while the belt carries it."""
     history: Dict[int, List[tuple]] = {}
