@@ -46,11 +46,14 @@ PICK_TRIES = 6
 PLAN_MARGIN = 1.25
 # A pick the port starts late is planned again this many times at most.
 MAX_REPLANS = 2
-# A released material falls free of the cup or the fingers before the tool moves on [s].
-RELEASE_HOLD_S = 0.2
+# A released material falls free of the cup or the fingers before the tool moves on [s]: it has
+# dropped 5 cm by then, and the tool's next motion starts from rest (0.2 s cost 0.1 s a cycle).
+RELEASE_HOLD_S = 0.1
 # A motion that ends where the tool grips or lets go holds its goal this long, so that the arm
-# has settled there (not still within the arrival tolerance of it, moving) [s].
-SETTLE_S = 0.15
+# has settled there [s]. Its arrival is judged on joint feedback as well (within
+# ``arrive_tolerance`` and at rest), so the hold need only cover a control period or so
+# (0.15 s cost about a second per run over the 15 grasps and releases).
+SETTLE_S = 0.05
 # (absolute time [s], joint positions[, velocities, accelerations])
 Points = List[Tuple[float, np.ndarray]]
 
@@ -748,8 +751,9 @@ class Transport(Machine):
         if self._drive_goal == 'home':
             if self.driving:
                 return
-            # Folded only at home (folded, the arm reaches down in front of the base, and its
-            # fingers would catch the floor as the base pitches), from the carry pose.
+            # Back to its start pose only at home, from the carry pose (a folded arm reaches
+            # down in front of the base, and its fingers would catch the floor as the base
+            # pitches). The cell's youBot starts in the carry pose: nothing is left to do.
             if not self.motion_over(obs, 'carry pose'):
                 return
             run.plan_home('youbot', obs)

@@ -10,7 +10,7 @@ import pytest
 from controllers.conveyor import Item, advance
 from coordinator.layout import CellLayout, LayoutError, layout_from_world
 from coordinator.pipeline import (Detection, LoaderState, NodeTimeout, Observation, Pipeline,
-                                  Settings, youbot_tool_quaternion)
+                                  Settings, YOUBOT_CARRY_Q, youbot_tool_quaternion)
 from sim_bridge.world import resolve_resource
 from sim_bridge.world_config import load_world
 
@@ -308,14 +308,23 @@ def test_the_whole_run_delivers_every_material_and_both_robots_return():
     assert r.completion_time == pytest.approx(cell.now - DT, abs=1e-9)
     # The cup is switched on for the next pick only once it has risen from the last place.
     assert cell.regrips == []
-    # The youBot's arm rises to its carry pose as the base sets off home, and folds only there
-    # (folded, it reaches down in front of the base).
+    # The youBot's arm rises to its carry pose as the base sets off home, and goes back to its
+    # start pose only there (a folded arm reaches down in front of the base).
     transport = [e.detail for e in cell.events if e.kind == 'state' and e.robot == 'transport']
     assert transport[-3:] == ['drive', 'fold', 'done']
     home = max(e.time for e in kinds(cell, 'driving'))
     after = [t for arm, t, _ in cell.trajectories if arm == 'youbot' and t >= home - 1e-9]
     assert after[0] == pytest.approx(home, abs=DT)           # up, as the base sets off
-    assert after[1] >= max(e.time for e in kinds(cell, 'arrived')) - 1e-9     # folded at home
+    assert after[1] >= max(e.time for e in kinds(cell, 'arrived')) - 1e-9     # at home
+
+
+def test_the_cells_youbot_waits_with_its_arm_in_the_carry_pose():
+    # It starts (and so ends) the run as it drives: no unfolding on the way out, no folding at
+    # home. Upright, the arm stands in front of the load plate, clear of the Zu 12's places.
+    world = load_world(resolve_resource('package://sim_bridge/worlds/pipeline_cell.yaml'))
+    start = dict(world.robot('youbot').initial_joint_positions)
+    arm = [start.get(f'arm_joint_{k}', 0.0) for k in range(1, 6)]
+    assert np.allclose(arm, YOUBOT_CARRY_Q)
 
 
 def _footprint_clearance(pose, box_center, box_size, half=(0.285, 0.18)) -> float:
