@@ -76,21 +76,43 @@ class CellLayout:
         otherwise the stand of the slot's row."""
         if self.destination(color) == 'platform':
             return next(st for st in self.stands if st.platform)
-        row = 1 if PLATE_SLOTS_IN_BASE_M[slot][1] > 0.0 else -1
-        return next(st for st in self.stands if st.row == row)
+        return next(st for st in self.stands if st.row == slot_row(slot))
 
     def slot_order(self, color: str) -> List[int]:
         """The plate slots in the order the Zu 12 fills them for a material of ``color``: the
         row unloaded where it goes first (blue: the platform's row; pool materials: the first
         stand's row), the near slots first."""
-        first = (next(st for st in self.stands if st.platform).row
-                 if self.destination(color) == 'platform' else self.stands[0].row)
-        return sorted(range(len(PLATE_SLOTS_IN_BASE_M)), key=lambda k: (
-            (1 if PLATE_SLOTS_IN_BASE_M[k][1] > 0.0 else -1) != first, k))
+        first = (self._platform_row() if self.destination(color) == 'platform'
+                 else self.stands[0].row)
+        return sorted(range(len(PLATE_SLOTS_IN_BASE_M)), key=lambda k: (slot_row(k) != first, k))
+
+    def free_slots(self, color: str, taken: Dict[int, str]) -> List[int]:
+        """The free plate slots for a material of ``color``, in the order they are filled
+        (``slot_order``), with the slots ``taken`` (slot: colour of what is on it). A pool
+        material leaves the platform row's last free slots to the manifest's platform
+        materials not on the plate yet: with four oranges ahead of the blue, the blue went
+        into the other row, and was unloaded there from the platform's stand, the arm going the
+        long way round (a trial took 72.4 s against 65 s)."""
+        free = [k for k in self.slot_order(color) if k not in taken]
+        if self.destination(color) == 'platform' or not self.stands:
+            return free
+        platform = sum(n for c, n in self.manifest.items() if self.destination(c) == 'platform')
+        to_come = platform - sum(1 for c in taken.values() if self.destination(c) == 'platform')
+        in_row = [k for k in free if slot_row(k) == self._platform_row()]
+        kept = set(in_row[max(0, len(in_row) - to_come):]) if to_come > 0 else set()
+        return [k for k in free if k not in kept]
+
+    def _platform_row(self) -> int:
+        return next(st for st in self.stands if st.platform).row
 
     def destination(self, color: str) -> str:
         return {'purple': 'ground_target', 'orange': 'pool', 'blue': 'platform'}.get(
             color, 'pool')
+
+
+def slot_row(slot: int) -> int:
+    """The plate row of a slot: +1 left (y > 0), -1 right."""
+    return 1 if PLATE_SLOTS_IN_BASE_M[slot][1] > 0.0 else -1
 
 
 def slot_in_world(pose: Pose2D, slot: Tuple[float, float], base_z: float,

@@ -570,8 +570,8 @@ class Loader(Machine):
         if m.color == 'purple':
             target = run.layout.ground_target
         else:
-            taken = {x.slot for x in run.materials.values() if x.slot >= 0}
-            free = [k for k in run.layout.slot_order(m.color) if k not in taken]
+            taken = {x.slot: x.color for x in run.materials.values() if x.slot >= 0}
+            free = run.layout.free_slots(m.color, taken)
             if not free:
                 return self._place_failed(obs, m, 'the youBot plate is full')
             m.slot = free[0]

@@ -318,6 +318,27 @@ def test_the_whole_run_delivers_every_material_and_both_robots_return():
     assert after[1] >= max(e.time for e in kinds(cell, 'arrived')) - 1e-9     # at home
 
 
+def test_oranges_leave_a_slot_of_the_platforms_row_for_the_blue_still_to_come():
+    layout = cell_layout()
+    platform = layout.stand_for('blue', 0)
+    row = [k for k in layout.slot_order('blue') if layout.stand_for('orange', k) is platform]
+    assert len(row) == 4 and platform.platform
+    # Three oranges in the platform's row: a fourth goes to the other row, the blue still to
+    # come gets the last slot of the platform's row (four oranges ahead of it took the whole
+    # row, and the blue had to be unloaded from the other row, the long way round).
+    taken = {k: 'orange' for k in row[:3]}
+    assert row[3] not in layout.free_slots('orange', taken)
+    assert layout.stand_for('orange', layout.free_slots('orange', taken)[0]) is not platform
+    assert layout.free_slots('blue', taken)[0] == row[3]
+    # The blue on the plate (anywhere): nothing is kept back any more.
+    assert layout.free_slots('orange', {**taken, 7: 'blue'})[0] == row[3]
+    # Before that, oranges fill the platform's row first, as before.
+    assert layout.free_slots('orange', {})[:3] == row[:3]
+    # A batch without blue keeps nothing back.
+    no_blue = dataclasses.replace(layout, manifest={'purple': 1, 'orange': 7})
+    assert no_blue.free_slots('orange', taken)[0] == row[3]
+
+
 def test_the_cells_youbot_waits_with_its_arm_in_the_carry_pose():
     # It starts (and so ends) the run as it drives: no unfolding on the way out, no folding at
     # home. Upright, the arm stands in front of the load plate, clear of the Zu 12's places.
