@@ -53,7 +53,7 @@ from coordinator.layout import LayoutError, layout_from_world
 from coordinator.pipeline import (Detection, Event, NodeTimeout, Observation, Pipeline,
                                   Points, Settings)
 from coordinator.progress import write_progress
-from coordinator.results import (PeakJointSpeed, at_destination, match_identification,
+from coordinator.results import (IdentificationCheck, PeakJointSpeed, at_destination,
                                  regions_from_world, score)
 
 ARMS = {'zu12': ZU12_JOINTS, 'youbot': YOUBOT_JOINTS}
@@ -159,7 +159,7 @@ class CoordinatorNode(Node):
         self._follower: Optional[PathFollower] = None      # real time: the base's drive
         self._detections: Dict[int, List[Detection]] = {}
         self._markers: List[Tuple[int, list]] = []
-        self._seen_truth: List[bool] = []
+        self._identifications = IdentificationCheck()
         self._start_time = 0.0
         # Lock-step: the commands of each decision are announced with the next step request,
         # and stamped with the decision's own step time (the plan's), not with a /clock that
@@ -252,6 +252,7 @@ class CoordinatorNode(Node):
         with self._lock:
             self._markers.append((_ns(msg.markers[0].header.stamp), truth))
             del self._markers[:-50]
+            self._identifications.truth(self._markers[-1][0], truth)
 
     # --- the ports the state machine acts through --------------------------------------------
     def now(self) -> float:
@@ -341,20 +342,19 @@ class CoordinatorNode(Node):
         msg.header.stamp = _stamp(e.time)
         self.event_pub.publish(msg)
         if e.kind == 'seen':
-            self._seen_truth.append(self._identified_correctly(e))
+            self._check_identification(e)
         if e.kind != 'state':
             what = f' {e.color} material {e.material}' if e.material >= 0 else ''
             self.get_logger().info(f'[{e.time:7.2f} s] {e.robot or "pipeline"}: {e.kind}{what}'
                                    f'{" - " + e.detail if e.detail else ""}')
 
-    def _identified_correctly(self, e: Event) -> bool:
+    def _check_identification(self, e: Event) -> None:
         m = self.pipeline.materials.get(e.material)
         with self._lock:
-            if m is None or not self._markers:
-                return False
-            stamp_ns = round(m.stamp * 1e9)
-            _, truth = min(self._markers, key=lambda item: abs(item[0] - stamp_ns))
-        return match_identification(m.position, truth) == m.color
+            if m is None:
+                self._identifications.unknown()
+            else:
+                self._identifications.seen(round(m.stamp * 1e9), m.position, m.color)
 
     # --- the loop -----------------------------------------------------------------------------
     def run(self) -> Dict:
@@ -516,7 +516,9 @@ class CoordinatorNode(Node):
     def _report(self) -> Dict:
         result = self.pipeline.result
         truth = self._final_truth()
-        out = score(result, truth, self._seen_truth, self.regions)
+        with self._lock:
+            identified = self._identifications.finish()
+        out = score(result, truth, identified, self.regions)
         out['final_materials'] = [
             {'color': color, 'position': [round(float(v), 4) for v in p],
              'at_destination': at_destination(color, p, self.regions)} for color, p in truth]

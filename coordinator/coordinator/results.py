@@ -65,6 +65,58 @@ def match_identification(position: Sequence[float], truth: Sequence[TruePose],
     return best
 
 
+class IdentificationCheck:
+    """Each identification checked against the ground truth of its own moment: the true
+    colour of the material at the detection's position, in the ground-truth snapshot nearest
+    the detection's stamp. A check waits until a snapshot at or after that stamp has come in
+    (or the run ends): decided at once, under load it took an older snapshot, the material had
+    ridden on 4 cm from where the truth showed it, and a correct identification counted as
+    wrong. Which snapshot decides does not depend on when the messages arrive."""
+
+    def __init__(self, keep: int = 50) -> None:
+        self._snapshots: List[Tuple[int, Sequence[TruePose]]] = []
+        self._pending: List[Tuple[int, np.ndarray, str]] = []
+        self._keep = keep
+        self.results: List[bool] = []
+
+    def truth(self, stamp_ns: int, truth: Sequence[TruePose]) -> None:
+        """A ground-truth snapshot, stamped."""
+        self._snapshots.append((stamp_ns, truth))
+        self._snapshots.sort(key=lambda item: item[0])
+        del self._snapshots[:-self._keep]
+        self._decide(final=False)
+
+    def seen(self, stamp_ns: int, position: Sequence[float], color: str) -> None:
+        """An identification: ``color`` for the material at ``position`` at ``stamp_ns``."""
+        self._pending.append((stamp_ns, np.asarray(position, float).copy(), color))
+        self._decide(final=False)
+
+    def unknown(self) -> None:
+        """An identification with nothing to check it on counts as wrong."""
+        self.results.append(False)
+
+    def finish(self) -> List[bool]:
+        """Decide what is still pending with the snapshots there are; the results."""
+        self._decide(final=True)
+        return self.results
+
+    def _decide(self, final: bool) -> None:
+        waiting = []
+        for stamp_ns, position, color in self._pending:
+            if not self._snapshots:
+                if final:
+                    self.results.append(False)
+                else:
+                    waiting.append((stamp_ns, position, color))
+                continue
+            if not final and self._snapshots[-1][0] < stamp_ns:
+                waiting.append((stamp_ns, position, color))
+                continue
+            _, truth = min(self._snapshots, key=lambda item: abs(item[0] - stamp_ns))
+            self.results.append(match_identification(position, truth) == color)
+        self._pending = waiting
+
+
 def score(result: RunResult, final_truth: Sequence[TruePose], identifications: Sequence[bool],
           regions: Dict[str, Tuple]) -> Dict:
     """The run's figures: counts, the three rates and the completion time, as a dict."""

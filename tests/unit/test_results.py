@@ -7,8 +7,8 @@ import pytest
 
 from coordinator.pipeline import RunResult
 from coordinator.report import STATE_COLORS, activity, write_report
-from coordinator.results import (at_destination, match_identification, regions_from_world,
-                                 score, summary_rows)
+from coordinator.results import (IdentificationCheck, at_destination, match_identification,
+                                 regions_from_world, score, summary_rows)
 from coordinator.trials import trial_plan, write_csv
 from sim_bridge.world import resolve_resource
 from sim_bridge.world_config import load_world
@@ -148,3 +148,71 @@ def test_a_trial_plan_is_reproducible_and_splits_over_machines():
     assert trial_plan(4, 6, 2026, (0.1, 0.16)) == whole[6:]
     assert all(0.1 <= t['belt_speed'] <= 0.16 for t in whole)
     assert len({t['seed'] for t in whole}) == 10
+
+
+def _belt_truth(t: float, speed: float = 0.12) -> list:
+    """Ground truth at time ``t``: an orange riding the belt (at x -0.5 at t = 10 s) and a
+    purple 0.3 m behind it."""
+    x = -0.5 + speed * (t - 10.0)
+    return [('orange', np.array([x, 0.75, 0.425])), ('purple', np.array([x - 0.3, 0.75, 0.425]))]
+
+
+def test_an_identification_waits_for_the_truth_of_its_own_moment():
+    ns = 1_000_000_000
+    check = IdentificationCheck()
+    # Only an older snapshot is in (under load the truth came late): the orange rode 6 cm on
+    # since, more than the match's 4 cm. Decided on it, a correct identification was wrong.
+    check.truth(int(9.5 * ns), _belt_truth(9.5))
+    check.seen(10 * ns, [-0.5, 0.75, 0.425], 'orange')
+    assert check.results == []
+    check.truth(10 * ns, _belt_truth(10.0))
+    assert check.results == [True]
+    # A wrong colour is wrong; one on nothing is wrong.
+    check.seen(10 * ns, [-0.8, 0.75, 0.425], 'orange')
+    check.truth(int(10.1 * ns), _belt_truth(10.1))
+    check.unknown()
+    assert check.results == [True, False, False]
+
+
+def test_the_identifications_do_not_depend_on_when_the_truth_arrives():
+    ns = 1_000_000_000
+    stamps = [int(t * ns) for t in np.arange(9.0, 11.01, 0.1)]
+    seen = [(int(9.73 * ns), [-0.5 + 0.12 * (9.73 - 10.0), 0.75, 0.425], 'orange'),
+            (int(10.42 * ns), [-0.8 + 0.12 * 0.42, 0.75, 0.425], 'purple'),
+            (int(10.42 * ns), [-0.5 + 0.12 * 0.42, 0.75, 0.425], 'purple')]
+    outcomes = []
+    for order in ('truth first', 'seen first', 'interleaved', 'shuffled'):
+        check = IdentificationCheck()
+        snaps = [(s, _belt_truth(s / ns)) for s in stamps]
+        if order == 'shuffled':
+            snaps = snaps[::2] + snaps[1::2]
+        if order == 'truth first':
+            for s in snaps:
+                check.truth(*s)
+            for d in seen:
+                check.seen(*d)
+        elif order == 'seen first':
+            for d in seen:
+                check.seen(*d)
+            for s in snaps:
+                check.truth(*s)
+        else:
+            pending = list(seen)
+            for s in snaps:
+                check.truth(*s)
+                if pending and pending[0][0] <= s[0] + 0.3 * ns:
+                    check.seen(*pending.pop(0))
+            for d in pending:
+                check.seen(*d)
+        outcomes.append(check.finish())
+    assert outcomes == [[True, True, False]] * 4
+
+
+def test_identifications_left_at_the_end_are_decided_with_what_there_is():
+    check = IdentificationCheck()
+    check.seen(5, [0.0, 0.0, 0.0], 'orange')
+    assert check.finish() == [False]                         # no truth at all
+    check = IdentificationCheck()
+    check.truth(1, [('orange', np.array([0.0, 0.0, 0.0]))])
+    check.seen(5, [0.0, 0.0, 0.0], 'orange')
+    assert check.finish() == [True]
