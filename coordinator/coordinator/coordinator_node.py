@@ -30,7 +30,7 @@ from builtin_interfaces.msg import Duration
 from geometry_msgs.msg import Twist
 from nav_msgs.msg import Odometry
 from rcl_interfaces.msg import Parameter, ParameterDescriptor, ParameterType, ParameterValue
-from rcl_interfaces.srv import SetParameters
+from rcl_interfaces.srv import GetParameters, SetParameters
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile
@@ -189,6 +189,7 @@ class CoordinatorNode(Node):
         sim = get('sim_node').rstrip('/')
         self.step_client = self.create_client(StepSimulation, f'{sim}/step')
         self.param_client = self.create_client(SetParameters, f'{sim}/set_parameters')
+        self.param_get_client = self.create_client(GetParameters, f'{sim}/get_parameters')
         self.get_logger().info(
             f'{"lock-step" if self.synchronous else "real-time"} at {self.rate:g} Hz '
             f'({self.steps_per_tick} steps per decision); belt {layout.belt_speed:.3f} m/s, '
@@ -351,10 +352,13 @@ class CoordinatorNode(Node):
     def _check_identification(self, e: Event) -> None:
         m = self.pipeline.materials.get(e.material)
         with self._lock:
-            if m is None:
+            if m is None or m.detection is None:
                 self._identifications.unknown()
             else:
-                self._identifications.seen(round(m.stamp * 1e9), m.position, m.color)
+                # The vision's own report, at its frame's time: not where the belt model has
+                # carried it since (in real time the coordinator may see a frame late).
+                d = m.detection
+                self._identifications.seen(round(d.stamp * 1e9), d.position, d.color)
 
     # --- the loop -----------------------------------------------------------------------------
     def run(self) -> Dict:
@@ -364,7 +368,13 @@ class CoordinatorNode(Node):
             self.pipeline = Pipeline(self.layout, self, self.settings, self.now())
             self.pipeline.abort(self.now(), 'node_timeout', str(exc))
             return self._report()
-        self.pipeline = Pipeline(self.layout, self, self.settings, obs.now)
+        try:
+            belt_ran_before = self._belt_runs_at_layout_speed()
+        except NodeTimeout as exc:
+            self.pipeline = Pipeline(self.layout, self, self.settings, obs.now)
+            self.pipeline.abort(self.now(), 'node_timeout', str(exc))
+            return self._report()
+        self.pipeline = Pipeline(self.layout, self, self.settings, obs.now, belt_ran_before)
         ticks = 0
         try:
             while not self.pipeline.finished and rclpy.ok():
@@ -382,6 +392,17 @@ class CoordinatorNode(Node):
             self.pipeline.abort(self.now(), 'interrupted', 'shut down before the end')
         return self._report()
 
+    def _belt_runs_at_layout_speed(self) -> bool:
+        """Whether the simulator's belt already runs at the run's speed: started with its belt
+        on, a real-time simulator carried the materials on before this node began, and the
+        pipeline's belt model must count that ride."""
+        reply = self._call(self.param_get_client, GetParameters.Request(names=['belt_speed']),
+                           'belt speed')
+        if not reply.values or reply.values[0].type != ParameterType.PARAMETER_DOUBLE:
+            raise NodeTimeout('the simulator has no belt_speed parameter')
+        speed = reply.values[0].double_value
+        return speed > 0.0 and abs(speed - self.layout.belt_speed) < 1e-9
+
     def _step(self, steps: int) -> Tuple[int, int]:
         """Lock-step: advance; returns (step count before, after)."""
         reply = self._call(self.step_client, StepSimulation.Request(
@@ -393,7 +414,8 @@ class CoordinatorNode(Node):
 
     def _wait_for_graph(self) -> None:
         """Until the nodes the run needs are up: services, the vision node on the camera."""
-        clients = list(self.ik.values()) + list(self.grips.values()) + [self.param_client]
+        clients = list(self.ik.values()) + list(self.grips.values()) + [
+            self.param_client, self.param_get_client]
         if self.synchronous:
             clients.append(self.step_client)
         end = time.monotonic() + self.service_timeout
@@ -518,7 +540,9 @@ class CoordinatorNode(Node):
         truth = self._final_truth()
         with self._lock:
             identified = self._identifications.finish()
+            details = list(self._identifications.details)
         out = score(result, truth, identified, self.regions)
+        out['identifications'] = details
         out['final_materials'] = [
             {'color': color, 'position': [round(float(v), 4) for v in p],
              'at_destination': at_destination(color, p, self.regions)} for color, p in truth]

@@ -170,6 +170,9 @@ class Material:
     picked: bool = False          # lifted off the belt by the Zu 12
     last_seen: float = -math.inf  # when a frame last showed it
     unload_attempts: int = 0
+    # The vision's detection that confirmed it, as reported: its colour and where the frame
+    # showed it, at the frame's stamp (``position`` is carried on by the belt model).
+    detection: Optional[Detection] = None
 
 
 @dataclass
@@ -945,7 +948,10 @@ class Pipeline:
     events, the ports). Call ``tick(observation)`` every control period until ``finished``."""
 
     def __init__(self, layout: CellLayout, ports: Ports, settings: Settings = Settings(),
-                 start_time: float = 0.0) -> None:
+                 start_time: float = 0.0, belt_ran_before: bool = False) -> None:
+        """``belt_ran_before``: the belt was already running at the layout's speed when the
+        run started (a real-time simulator started with its belt on, the coordinator later):
+        what a frame showed before the start has ridden on since."""
         self.layout, self.ports, self.s = layout, ports, settings
         self.start_time = start_time
         self.events: List[Event] = []
@@ -955,7 +961,8 @@ class Pipeline:
         self.loaded = 0
         self.motions: Dict[str, Optional[Motion]] = {'zu12': None, 'youbot': None}
         self.belt_running = False
-        self.belt_log: List[Tuple[float, bool]] = [(start_time, False)]
+        self.belt_log: List[Tuple[float, bool]] = [
+            (-math.inf, True) if belt_ran_before else (start_time, False)]
         self._belt_time = start_time      # the belt model's time (``_advance_belt``)
         self.lag = 0.0                    # the longest a pick's plan has taken (real time) [s]
         self.now = start_time
@@ -1150,7 +1157,7 @@ class Pipeline:
                         or d.position[0] >= self.s.pick_x):
                     continue
                 m = self.materials[d.id] = Material(d.id, d.color, self._seen_at(d, obs.now),
-                                                    obs.now, d.hits)
+                                                    obs.now, d.hits, detection=d)
                 self.event(obs.now, 'seen', 'vision', m,
                            f'at {np.round(m.position, 3).tolist()}')
             elif m.status == 'seen':

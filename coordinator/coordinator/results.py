@@ -54,15 +54,22 @@ def regions_from_world(world, size: float) -> Dict[str, Tuple]:
             'platform': box('pool_platform', top, top + size)}
 
 
+def nearest_material(position: Sequence[float],
+                     truth: Sequence[TruePose]) -> Tuple[Optional[str], float]:
+    """The true colour of the material nearest ``position``, and its distance [m]."""
+    best, best_d = None, math.inf
+    for color, p in truth:
+        d = float(np.linalg.norm(np.asarray(p, float) - np.asarray(position, float)))
+        if d < best_d:
+            best, best_d = color, d
+    return best, best_d
+
+
 def match_identification(position: Sequence[float], truth: Sequence[TruePose],
                          tolerance: float = 0.04) -> Optional[str]:
     """The true colour of the material nearest ``position`` (within ``tolerance``), or None."""
-    best, best_d = None, tolerance
-    for color, p in truth:
-        d = float(np.linalg.norm(np.asarray(p, float) - np.asarray(position, float)))
-        if d <= best_d:
-            best, best_d = color, d
-    return best
+    color, distance = nearest_material(position, truth)
+    return color if distance <= tolerance else None
 
 
 class IdentificationCheck:
@@ -78,6 +85,9 @@ class IdentificationCheck:
         self._pending: List[Tuple[int, np.ndarray, str]] = []
         self._keep = keep
         self.results: List[bool] = []
+        # Per identification: its stamp [s], colour, the nearest true material's colour and
+        # distance [m] in the snapshot that decided it (None where there was none).
+        self.details: List[Dict] = []
 
     def truth(self, stamp_ns: int, truth: Sequence[TruePose]) -> None:
         """A ground-truth snapshot, stamped."""
@@ -94,6 +104,8 @@ class IdentificationCheck:
     def unknown(self) -> None:
         """An identification with nothing to check it on counts as wrong."""
         self.results.append(False)
+        self.details.append({'stamp': None, 'color': None, 'true_color': None,
+                             'distance': None})
 
     def finish(self) -> List[bool]:
         """Decide what is still pending with the snapshots there are; the results."""
@@ -105,7 +117,7 @@ class IdentificationCheck:
         for stamp_ns, position, color in self._pending:
             if not self._snapshots:
                 if final:
-                    self.results.append(False)
+                    self._record(stamp_ns, color, [], position)
                 else:
                     waiting.append((stamp_ns, position, color))
                 continue
@@ -113,8 +125,16 @@ class IdentificationCheck:
                 waiting.append((stamp_ns, position, color))
                 continue
             _, truth = min(self._snapshots, key=lambda item: abs(item[0] - stamp_ns))
-            self.results.append(match_identification(position, truth) == color)
+            self._record(stamp_ns, color, truth, position)
         self._pending = waiting
+
+    def _record(self, stamp_ns: int, color: str, truth: Sequence[TruePose],
+                position: np.ndarray) -> None:
+        self.results.append(match_identification(position, truth) == color)
+        true_color, distance = nearest_material(position, truth)
+        self.details.append({'stamp': round(stamp_ns * 1e-9, 4), 'color': color,
+                             'true_color': true_color,
+                             'distance': round(distance, 4) if true_color else None})
 
 
 def score(result: RunResult, final_truth: Sequence[TruePose], identifications: Sequence[bool],

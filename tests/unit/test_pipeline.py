@@ -318,6 +318,39 @@ def test_the_whole_run_delivers_every_material_and_both_robots_return():
     assert after[1] >= max(e.time for e in kinds(cell, 'arrived')) - 1e-9     # at home
 
 
+def test_each_material_keeps_the_detection_that_confirmed_it_as_the_vision_reported_it():
+    """Identification is the vision's: the colour and the position of the frame that confirmed
+    a material, at that frame's stamp. The material's ``position`` is carried on by the belt
+    model, which in real time can be off (a belt that ran before the coordinator started); the
+    score must not depend on it."""
+    cell = FakeCell(cell_layout(), PAPER)
+    p = run(cell)
+    seen = {e.material: e.time for e in kinds(cell, 'seen')}
+    assert set(seen) == set(p.materials) and len(seen) == 8
+    for m in p.materials.values():
+        d = m.detection
+        assert d is not None and d.id == m.id and d.color == m.color
+        assert d.hits >= Settings().confirm_hits and d.stamp <= seen[m.id]
+        assert CAMERA_X[0] <= d.position[0] <= CAMERA_X[1]
+
+
+@pytest.mark.parametrize('ran_before', [False, True])
+def test_a_belt_running_before_the_start_carries_what_was_seen_before_it(ran_before):
+    """A real-time simulator started with its belt on runs it before the coordinator begins.
+    A frame from before the start shows a material that has ridden on since, and the belt model
+    must say so (it assumed a stopped belt: the material was placed short of where it was)."""
+    layout = cell_layout()
+    cell = FakeCell(layout, PAPER, blind=True)
+    pipeline = Pipeline(layout, cell, Settings(), 5.0, belt_ran_before=ran_before)
+    cell.pipeline, cell.now = pipeline, 5.0
+    obs = dataclasses.replace(cell.step(), detections=[
+        Detection(1, 'orange', np.array([-0.8, layout.belt_y, 0.425]), 4.0, 9)])
+    pipeline.tick(obs)
+    ridden = layout.belt_speed * (obs.now - 4.0) if ran_before else 0.0
+    assert pipeline.materials[1].position[0] == pytest.approx(-0.8 + ridden)
+    assert pipeline.materials[1].detection.position[0] == -0.8
+
+
 def test_oranges_leave_a_slot_of_the_platforms_row_for_the_blue_still_to_come():
     layout = cell_layout()
     platform = layout.stand_for('blue', 0)

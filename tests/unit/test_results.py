@@ -172,6 +172,10 @@ def test_an_identification_waits_for_the_truth_of_its_own_moment():
     check.truth(int(10.1 * ns), _belt_truth(10.1))
     check.unknown()
     assert check.results == [True, False, False]
+    # What decided each one is kept, to read in the result.
+    assert check.details[0] == {'stamp': 10.0, 'color': 'orange', 'true_color': 'orange',
+                                'distance': 0.0}
+    assert check.details[1]['true_color'] == 'purple' and check.details[2]['color'] is None
 
 
 def test_the_identifications_do_not_depend_on_when_the_truth_arrives():
