@@ -26,6 +26,7 @@ class PickTiming:
     lift: float = 0.8            # contact -> lift height [s]
     lift_height: float = 0.15    # above the belt's top face after the pick [m]
     place_descend: float = 0.8   # above the target -> release [s]
+    place_height: float = 0.15   # the straight descent onto a place starts this high [m]
     place_gap: float = 0.003     # the material's bottom above the target surface at release
 
 
@@ -103,7 +104,7 @@ def place_waypoints(t_above: float, target: Sequence[float], size: float,
     ``target`` (the surface point it rests on); and the time to release."""
     surface = np.asarray(target, float)
     release = surface + np.array([0.0, 0.0, size + timing.place_gap])
-    above = release + np.array([0.0, 0.0, timing.lift_height])
+    above = release + np.array([0.0, 0.0, timing.place_height])
     t_release = t_above + timing.place_descend
     return ([(t_above, above), (t_release, release),
              (t_release + 0.3, release.copy()),

@@ -29,6 +29,10 @@ SAMPLE_PERIOD_S = 0.05
 # Plans stay this far inside the limits: the position motors add a small correction to the
 # planned speed while they follow it, and the measured speed must stay within the limit.
 LIMIT_MARGIN = 0.98
+# The speeds tried at a pass-through waypoint, as multiples of the first guess (the smaller of
+# the average speeds of the rest-to-rest segments around it): the one that gives the shortest
+# pair of segments around the waypoint is kept.
+VIA_SCALES = (1.0, 0.5, 1.5, 2.0, 3.0, 4.0)
 
 
 class PlanError(ValueError):
@@ -132,6 +136,39 @@ def _via_velocity(q_prev, q, q_next, limits: JointLimits) -> np.ndarray:
     return np.clip(v, -0.9 * limits.velocity, 0.9 * limits.velocity)
 
 
+def _improve_vias(q0, qs, velocities, accelerations, free, waypoints,
+                  limits: JointLimits) -> None:
+    """Choose, waypoint by waypoint, the speed at each pass-through waypoint (``free``) among
+    VIA_SCALES times the first guess: the one with the shortest two segments around it. The
+    average speeds of rest-to-rest segments are a cautious guess: a joint that keeps its
+    direction through a waypoint can pass it faster, and the profile out of it is shorter then.
+    A timed waypoint after it is taken at its state, as soon as the arm can be there (its
+    time is what the caller asks of the arm, and the sooner it can be met the better)."""
+    n = len(q0)
+    cap = 0.9 * np.asarray(limits.velocity, float)
+    for i in range(len(qs) - 1):
+        if not free[i] or waypoints[i + 1].direct:
+            continue
+        q_prev = qs[i - 1] if i else q0
+        v_prev = velocities[i - 1] if i else np.zeros(n)
+        guess = velocities[i]
+        if not np.any(guess):
+            continue
+        best, best_time = guess, None
+        for scale in VIA_SCALES:
+            v = np.clip(guess * scale, -cap, cap)
+            into = _profile(q_prev, v_prev, qs[i], v, limits, waypoints[i].min_time,
+                            accelerations[i - 1] if i else None)
+            out = _profile(qs[i], v, qs[i + 1], velocities[i + 1], limits,
+                           waypoints[i + 1].min_time, None, accelerations[i + 1])
+            if into is None or out is None:
+                continue
+            total = float(into.duration) + float(out.duration)
+            if best_time is None or total < best_time - 1e-6:
+                best, best_time = v, total
+        velocities[i] = best
+
+
 def plan(q0: Sequence[float], waypoints: Sequence[Waypoint], limits: JointLimits,
          t0: float = 0.0, period: float = SAMPLE_PERIOD_S) -> Plan:
     """The motion from rest at ``q0`` through ``waypoints`` (the last one is a stop), starting
@@ -174,6 +211,8 @@ def plan(q0: Sequence[float], waypoints: Sequence[Waypoint], limits: JointLimits
             velocities.append(np.zeros(n))
         else:
             velocities.append(_via_velocity(qs[i - 1] if i else q_prev, q, qs[i + 1], limits))
+    free = [given_v[i] is None and not stops[i] for i in range(len(qs))]
+    _improve_vias(q_prev, qs, velocities, given_a, free, waypoints, limits)
     samples = [Sample(t0, q_prev.copy(), np.zeros(n), np.zeros(n))]
     arrivals = []
     t, v_prev, a_prev = t0, np.zeros(n), np.zeros(n)

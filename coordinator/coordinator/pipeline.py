@@ -17,7 +17,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 from enum import Enum
-from typing import Callable, Dict, List, Optional, Protocol, Sequence, Tuple
+from typing import Callable, Dict, List, Optional, Protocol, Sequence, Tuple, Union
 
 import numpy as np
 
@@ -26,7 +26,7 @@ from controllers.path_follower import PDGains, PathFollower, TurnLimits
 from controllers.conveyor import Item, advance, held
 from controllers.pick_place import PickTiming, follow_pick
 from controllers.time_optimal import (SAMPLE_PERIOD_S, JointLimits, PlanError, TooLate,
-                                      Waypoint, plan, rest_to_rest_time)
+                                      Waypoint, plan)
 from controllers.transforms import matrix_to_quaternion
 from controllers.youbot_arm import ARM_BASE_IN_BASE_LINK_M
 from controllers import youbot_arm, zu12_arm
@@ -54,6 +54,8 @@ RELEASE_HOLD_S = 0.1
 # ``arrive_tolerance`` and at rest), so the hold need only cover a control period or so
 # (0.15 s cost about a second per run over the 15 grasps and releases).
 SETTLE_S = 0.05
+# An arm farther than this from where its motion has it now is not following it [rad].
+FOLLOW_TOLERANCE = 0.1
 # (absolute time [s], joint positions[, velocities, accelerations])
 Points = List[Tuple[float, np.ndarray]]
 
@@ -152,8 +154,9 @@ class Settings:
     drive_accel: float = 0.8          # [m/s^2]
     # The shortest times of the moves near a material (the time-optimal plan may take longer):
     # gentle enough that the cup and the fingers do not knock it.
-    timing: PickTiming = PickTiming(hover=0.06, descend=0.3, dwell=0.15, lift=0.3,
-                                    lift_height=0.12, place_descend=0.3)
+    timing: PickTiming = PickTiming(hover=0.06, descend=0.3, dwell=0.15, lift=0.2,
+                                    lift_height=0.07, place_descend=0.15,
+                                    place_height=0.07)
 
 
 @dataclass
@@ -299,6 +302,46 @@ class Machine:
         return arrived is not None
 
 
+@dataclass
+class PlaceWay:
+    """A held material's way onto its place (joints), and the rise from there."""
+    waypoints: List[Waypoint]     # from the lift point: over the belt's edge, above, down
+    then: np.ndarray              # where the cup rises to over the place (not to a pick)
+    above: np.ndarray             # above the place (x, y, z)
+    above_q: np.ndarray
+    onto_plate: bool
+
+
+@dataclass
+class Ahead:
+    """A pick's motion that goes on to the place: the way there, and when the arm is at rest
+    at the lift point on the way."""
+    way: PlaceWay
+    lift_end: float
+
+
+def _polar(v: np.ndarray) -> Tuple[float, float]:
+    return math.hypot(v[0], v[1]), math.atan2(v[1], v[0])
+
+
+def _crossing(g, samples: int = 200) -> float:
+    """The first fraction f in [0, 1] where g changes sign (bisected), or the end of [0, 1]
+    where |g| is smaller if it does not."""
+    fs = np.linspace(0.0, 1.0, samples + 1)
+    gs = [g(f) for f in fs]
+    for k in range(samples):
+        if gs[k] == 0.0 or gs[k] * gs[k + 1] < 0.0:
+            lo, hi = fs[k], fs[k + 1]
+            for _ in range(30):
+                mid = (lo + hi) / 2
+                if g(lo) * g(mid) <= 0.0:
+                    hi = mid
+                else:
+                    lo = mid
+            return (lo + hi) / 2
+    return 0.0 if abs(gs[0]) <= abs(gs[-1]) else 1.0
+
+
 class Loader(Machine):
     """The Zu 12: picks materials off the running belt (meeting each where it will be, and
     moving with it while the cup is on it); purple onto the ground target once it has ridden
@@ -313,8 +356,10 @@ class Loader(Machine):
         self._above: Optional[np.ndarray] = None    # above the place (x, y, z), joints
         self._above_q: Optional[np.ndarray] = None
         self._lift: Optional[np.ndarray] = None     # the last pick's lift point (x, y, z)
+        self._onto_plate = False                    # the last place was on the youBot's plate
         self._clear: Optional[np.ndarray] = None    # clear of the place once here (joints)
         self._leave = math.inf                      # when the cup lifts the material
+        self._ahead: Optional[Ahead] = None         # the pick's motion goes on to the place
         self._replans = 0                           # pick plans the port started late
         # The cup has just let go on the plate or the ground target: the next motion rises
         # first (straight up, after the release hold), whatever it is.
@@ -362,33 +407,54 @@ class Loader(Machine):
               start: Optional[float] = None, edge: Optional[np.ndarray] = None) -> Points:
         """From a release: the hold, then straight up to above the place and over the belt's
         edge at ``edge`` (joints; towards a pick), or without it up to the carry height."""
-        run = self.run
-        wait = 0.0
+        waypoints, wait = self._from_release(waypoints, edge)
         if self._at_release:
-            rise = run.s.timing.place_descend
-            if edge is not None:
-                first = [Waypoint(self._above_q, stop=False, min_time=rise),
-                         Waypoint(edge, stop=False)]
-            else:
-                first = [Waypoint(self._then, stop=not waypoints, min_time=rise)]
-            waypoints = first + list(waypoints)
-            wait = RELEASE_HOLD_S
-            self._clear = edge if edge is not None else self._then
-        return run.plan('zu12', obs.zu12_q, waypoints, wait, start)
+            # Clear of the place once straight above it: the cup may be switched on there
+            # (what it let go is place_height below it), and the youBot may leave.
+            self._clear = self._above_q
+        return self.run.plan('zu12', obs.zu12_q, waypoints, wait, start)
+
+    def _from_release(self, waypoints: List[Waypoint], edge: Optional[np.ndarray] = None
+                      ) -> Tuple[List[Waypoint], float]:
+        """``waypoints``, after the rise from a place the cup has just let go at (see _plan),
+        and how long the motion waits first."""
+        if not self._at_release:
+            return list(waypoints), 0.0
+        rise = self.run.s.timing.place_descend
+        if edge is not None:
+            first = [Waypoint(self._above_q, stop=False, min_time=rise),
+                     Waypoint(edge, stop=False)]
+        else:
+            first = [Waypoint(self._then, stop=not waypoints, min_time=rise)]
+        return first + list(waypoints), RELEASE_HOLD_S
 
     def _after_send(self) -> None:
         if self._at_release:
             self._at_release = False
             self._clear_at = self.run.arrival_time('zu12', self._clear)
 
-    def _edge(self, a: np.ndarray, b: np.ndarray, low: float) -> np.ndarray:
-        """Where the straight line from ``a`` (over the belt) to ``b`` (beside it) crosses the
-        belt's near edge, EDGE_CLEARANCE_M outside it, and at least ``low`` above its top."""
+    def _edge(self, a: np.ndarray, b: np.ndarray, low: float, arc: bool = False) -> np.ndarray:
+        """Where the way from ``a`` (over the belt) to ``b`` (beside it) crosses the belt's near
+        edge, EDGE_CLEARANCE_M outside it, and at least ``low`` above its top. The way is the
+        straight line, or with ``arc`` the arc round the Zu 12's base (angle, reach and height
+        changing evenly): the way its joints go, turning joint 1, when both ends lie at about
+        the same reach. The straight line between two such points passes nearer the base, and
+        the joints that set the reach pull in to the crossing and out again."""
         lay = self.run.layout
         y = lay.belt_y - math.copysign(lay.belt_width / 2 + EDGE_CLEARANCE_M,
                                        lay.belt_y - b[1])
-        f = (a[1] - y) / (a[1] - b[1]) if abs(a[1] - b[1]) > 1e-9 else 0.0
-        p = np.asarray(a, float) + min(max(f, 0.0), 1.0) * (np.asarray(b, float) - a)
+        a, b = np.asarray(a, float), np.asarray(b, float)
+        if arc:
+            base = np.array(lay.zu12_base[:2], float)
+            (ra, ta), (rb, tb) = (_polar(p[:2] - base) for p in (a, b))
+            tb = ta + math.remainder(tb - ta, 2 * math.pi)
+            f = _crossing(lambda f: base[1] + (ra + f * (rb - ra)) * math.sin(
+                ta + f * (tb - ta)) - y)
+            r, t = ra + f * (rb - ra), ta + f * (tb - ta)
+            p = np.array([base[0] + r * math.cos(t), y, a[2] + f * (b[2] - a[2])])
+        else:
+            f = (a[1] - y) / (a[1] - b[1]) if abs(a[1] - b[1]) > 1e-9 else 0.0
+            p = a + min(max(f, 0.0), 1.0) * (b - a)
         p[1], p[2] = y, max(p[2], lay.belt_top + low)
         return p
 
@@ -439,12 +505,14 @@ class Loader(Machine):
         # From a place: back over the belt's edge on the way to the hover point.
         q_edge = None
         if self._at_release and self._above is not None:
-            q_edge = run.solve('zu12', self._edge(hover, self._above, EDGE_CLEARANCE_M),
-                               DOWN, 'world', self._above_q)
-        # (An optimistic first guess; a plan that cannot make it says by how much.)
-        reach = rest_to_rest_time(obs.zu12_q, q_hover, run.limits('zu12'))
-        if self._at_release:
-            reach += RELEASE_HOLD_S
+            # (From the plate: round the arc, the cup clear of what rides on the belt.)
+            edge = (self._edge(hover, self._above, size + EDGE_CLEARANCE_M, arc=True)
+                    if self._onto_plate else self._edge(hover, self._above, EDGE_CLEARANCE_M))
+            q_edge = run.solve('zu12', edge, DOWN, 'world', self._above_q)
+        # (A first guess: the way to the hover point, at rest there; a plan that cannot make
+        # it says by how much.)
+        way, wait = self._from_release([Waypoint(q_hover)], q_edge)
+        reach = wait + plan(obs.zu12_q, way, run.limits('zu12')).end
         t_contact = max(t_contact, start + reach + timing.descend)
         for _ in range(PICK_TRIES):
             if track(t_contact)[0] < run.s.pick_x - 1e-6:
@@ -476,6 +544,19 @@ class Loader(Machine):
                 return self._pick_failed(obs, m, f'no motion for the pick: {exc}')
         else:
             return self._pick_failed(obs, m, 'the arm cannot meet the material in time')
+        # On to the place in the same motion, from the lift point (at rest there, so that a
+        # missed grasp can end the motion there instead): the place does not wait for the
+        # arrival check at the lift point and the plan after it.
+        self._ahead = None
+        way = self._place_way(m, self._lift, obs.youbot_pose, qs[-1])
+        if not isinstance(way, str):
+            try:
+                whole = self._plan(obs, waypoints + way.waypoints, start, q_edge)
+            except PlanError:
+                whole = None            # (the place is planned at the lift point then)
+            if whole is not None:
+                self._ahead = Ahead(way, points[-1][0])
+                points = whole
         self.current, m.status = m, 'picking'
         self.move(LoaderState.PICK, obs, points, start=start)
         late = run.motions['zu12'].start - start
@@ -505,6 +586,8 @@ class Loader(Machine):
                 return self._pick_failed(obs, m, f'the suction did not switch on: {why}')
         self._after_send()
         self._leave = t_contact + timing.dwell + late
+        if self._ahead is not None:
+            self._ahead.lift_end += late
         m.attempts += 1
         run.count_grasp('zu12')
         held = ' (held at the stop)' if run.held(m) else ''
@@ -521,7 +604,9 @@ class Loader(Machine):
     def _pick_failed(self, obs: Observation, m: Material, why: str) -> None:
         run = self.run
         run.fail(obs.now, m, 'grasp_failed', why, 'zu12')
+        m.slot = -1                     # (a place on the plate kept for it is free again)
         self.current = None
+        self._ahead = None
         self._move(LoaderState.RETREAT, obs, [Waypoint(run.home_q['zu12'].copy())])
 
     def _pick(self, obs: Observation) -> None:
@@ -538,6 +623,27 @@ class Loader(Machine):
             run.off_belt(m, now)
             run.count_grasp('zu12', success=True)
             run.event(now, 'picked', 'zu12', m, f'attempt {m.attempts}')
+            if self._ahead is not None:        # on its way to the place already
+                self._adopt(self._ahead.way)
+                self._ahead = None
+                return self.enter(LoaderState.PLACE, now, run.motions['zu12'].end - now
+                                  + run.s.settle_margin)
+        elif not m.picked and now >= self._leave and self._ahead is not None:
+            # Not held after the dwell: the motion ends at the lift point instead, at rest,
+            # where a missed grasp is judged (sent as planned, from the next sample on).
+            lift_end, self._ahead = self._ahead.lift_end, None
+            points = run.motions['zu12'].points
+            q_lift = min(points, key=lambda p: abs(p[0] - lift_end))[1]
+            rest = [p for p in points if now + run.s.plan_latency < p[0] <= lift_end + 1e-9]
+            q_now = min(points, key=lambda p: abs(p[0] - now))[1]
+            if float(np.max(np.abs(obs.zu12_q - q_now))) > FOLLOW_TOLERANCE:
+                pass                    # not following it (refused, stalled): judged below
+            elif rest:
+                run.send(Motion('zu12', rest))
+            else:                       # (real time: the arm is past the lift point)
+                run.send(Motion('zu12', run.plan('zu12', obs.zu12_q,
+                                                 [Waypoint(np.array(q_lift, float))])))
+            self.deadline = lift_end + run.s.settle_margin
         arrived = self.arrival(obs)
         if arrived is None:
             return
@@ -566,43 +672,61 @@ class Loader(Machine):
         self._plan_place(obs, m)
 
     def _plan_place(self, obs: Observation, m: Material) -> None:
-        """From the lift point over to above the place at the lift's height and down until the
-        material is just above it, in one motion; the release and the rise follow once the arm
-        is there."""
+        """From the lift point over to above the place and down until the material is just
+        above it, in one motion; the release and the rise follow once the arm is there. (A
+        pick's motion goes on to the place by itself: this is for a material held only once the
+        arm was at the lift point.)"""
+        way = self._place_way(m, self._lift, obs.youbot_pose, self.run.motions['zu12'].goal)
+        if isinstance(way, str):
+            return self._place_failed(obs, m, way)
+        self._adopt(way)
+        self.move(LoaderState.PLACE, obs, self.run.plan('zu12', obs.zu12_q, way.waypoints))
+
+    def _place_way(self, m: Material, lift: Optional[np.ndarray], youbot_pose: Pose2D,
+                   seed: np.ndarray) -> Union['PlaceWay', str]:
+        """The way from the lift point ``lift`` (x, y, z; None: from above the place) onto
+        ``m``'s place, or why there is none: over the belt's edge, to ``place_height`` above
+        the place, and straight down until the material is just above it."""
         run, size = self.run, self.run.layout.material_size
         if m.color == 'purple':
             target = run.layout.ground_target
         else:
-            taken = {x.slot: x.color for x in run.materials.values() if x.slot >= 0}
+            taken = {x.slot: x.color for x in run.materials.values()
+                     if x.slot >= 0 and x is not m}
             free = run.layout.free_slots(m.color, taken)
             if not free:
-                return self._place_failed(obs, m, 'the youBot plate is full')
+                return 'the youBot plate is full'
             m.slot = free[0]
-            target = slot_in_world(obs.youbot_pose, PLATE_SLOTS_IN_BASE_M[m.slot],
+            target = slot_in_world(youbot_pose, PLATE_SLOTS_IN_BASE_M[m.slot],
                                    YOUBOT_BASE_Z_M, size)
         t = run.s.timing
         release = np.asarray(target, float) + np.array([0.0, 0.0, size + t.place_gap])
-        above = release + np.array([0.0, 0.0, t.lift_height])
-        # Over to the place at the lift's height, clear of the belt (a joint-space move straight
-        # from the lift down to a place lower than the belt would sweep the held material
-        # through the belt's side), then down.
+        above = release + np.array([0.0, 0.0, t.place_height])
+        # Where the cup rises to over the place when it goes home or waits: clear of the belt
+        # (a joint-space move straight from there to a place lower than the belt would sweep
+        # the held material through the belt's side).
         transfer = release.copy()
         transfer[2] = max(above[2], run.layout.belt_top + 2 * size + t.lift_height)
-        # Over the belt's near edge on the straight line from the lift point to above the place
-        # (the material's bottom 5 cm over the belt's top), rather than up to the carry height
-        # over the place and down again.
-        edge = (self._edge(self._lift, above, size + EDGE_CLEARANCE_M)
-                if self._lift is not None else transfer)
-        qs = run.solve_path('zu12', [transfer, above, release, edge], run.motions['zu12'].goal)
+        # Over the belt's near edge (rather than up to the carry height over the place and down
+        # again), what the cup holds 5 cm over what can ride on the belt: onto the plate round
+        # the arc (the way crosses the edge near the plate; before that it lies over the
+        # belt), onto the ground target on the straight line, 5 cm over the belt's top.
+        onto_plate = m.color != 'purple'
+        edge = (transfer if lift is None else
+                self._edge(lift, above, 2 * size + EDGE_CLEARANCE_M, arc=True) if onto_plate
+                else self._edge(lift, above, size + EDGE_CLEARANCE_M))
+        qs = run.solve_path('zu12', [transfer, above, release, edge], seed)
         if qs is None:
-            return self._place_failed(obs, m, 'no IK solution for the place path')
+            return 'no IK solution for the place path'
         q_transfer, q_above, q_release, q_edge = qs
-        self._then = q_transfer       # where it rises to after the release (not to a pick)
-        self._above, self._above_q = above, q_above
-        points = run.plan('zu12', obs.zu12_q, [
-            Waypoint(q_edge, stop=False), Waypoint(q_above, stop=False),
-            Waypoint(q_release, hold=SETTLE_S, min_time=t.place_descend)])
-        self.move(LoaderState.PLACE, obs, points)
+        return PlaceWay([Waypoint(q_edge, stop=False), Waypoint(q_above, stop=False),
+                         Waypoint(q_release, hold=SETTLE_S, min_time=t.place_descend)],
+                        q_transfer, above, q_above, onto_plate)
+
+    def _adopt(self, way: 'PlaceWay') -> None:
+        """The place the arm is on its way to: where the cup rises from it to."""
+        self._then = way.then
+        self._above, self._above_q, self._onto_plate = way.above, way.above_q, way.onto_plate
 
     def _place_failed(self, obs: Observation, m: Material, why: str) -> None:
         self.run.ports.grip('zu12', False)

@@ -522,11 +522,12 @@ def test_the_belt_never_stops_and_the_cup_meets_each_material_where_it_is(belt_l
 
 def test_materials_faster_than_the_arm_wait_at_the_end_stop():
     # Materials close together reach the end while the arm is still busy: the stop holds them
-    # in a queue and the arm takes them from there; nothing goes off the end.
+    # in a queue and the arm takes them from there; nothing goes off the end. (The arm at half
+    # its speed: materials outpace it whatever its schedule.)
     layout = cell_layout()
     cell = FakeCell(layout, PAPER, gap=0.06)
     history = _watch_materials(cell)
-    p = run(cell)
+    p = run(cell, Settings(zu12_scaling=0.5))
     assert p.result.status == 'completed' and p.result.missed == 0
     furthest = max(x for h in history.values() for _, x in h)
     assert furthest <= layout.belt_end_x - layout.material_size / 2 + 1e-9
@@ -541,6 +542,15 @@ def test_a_missed_grasp_is_retried():
     assert [(e.material, e.detail) for e in missed] == [(2, 'attempt 1')]
     assert [e.detail for e in kinds(cell, 'picked') if e.material == 2] == ['attempt 2']
     assert p.result.grasp_attempts == 16 and p.result.grasp_successes == 15
+    # The pick's motion went on to the place; nothing held after the dwell, it was cut short
+    # to end at rest at the lift point, where the miss was judged.
+    sent = [pts for arm, t, pts in cell.trajectories if arm == 'zu12' and t < missed[0].time]
+    whole, cut = sent[-2], sent[-1]
+    assert cut[-1][0] < whole[-1][0] - 0.5 and not np.any(cut[-1][2])
+    assert cut[-1][0] <= missed[0].time
+    assert [t for t, *_ in cut] == [t for t, *_ in whole if cut[0][0] <= t <= cut[-1][0]]
+    slots = [e.detail for e in kinds(cell, 'loaded')]
+    assert len(set(slots)) == len(slots) == 7
 
 
 def test_a_grasp_that_keeps_missing_is_reported_and_the_run_goes_on():
@@ -591,13 +601,17 @@ def test_a_stalled_arm_is_detected_by_the_state_deadline():
     assert failed and 'did not reach the material' in failed[0].detail
     assert not kinds(cell, 'picked')
     # A state ends at its motion's planned end plus the settle margin; the pick is tried once
-    # more (the material rides on, untouched) before it fails.
+    # more (the material rides on, untouched) before it fails. The pick's motion went on to
+    # the place; nothing held after the dwell, it was cut short to end at the lift point.
     stalled = kinds(cell, 'arm_stalled')
     assert len(stalled) == Settings().max_retries + 1
     pick = [e.time for e in cell.events if e.kind == 'state' and e.detail == 'pick'][0]
-    (_, sent, points), = [t for t in cell.trajectories if t[0] == 'zu12'][:1]
-    assert sent == pick
-    assert stalled[0].time == pytest.approx(points[-1][0] + Settings().settle_margin,
+    # The pick's motion goes on to the place; an arm that does not follow it is judged at
+    # the time it was to be at rest at the lift point.
+    (_, sent, whole), = [t for t in cell.trajectories if t[0] == 'zu12'][:1]
+    lift_end = next(t for t, q, v, a in whole[1:] if not np.any(v))
+    assert sent == pick and lift_end < whole[-1][0] - 0.5
+    assert stalled[0].time == pytest.approx(lift_end + Settings().settle_margin,
                                             abs=DT + 1e-9)
 
 
@@ -722,10 +736,12 @@ def test_a_pick_planned_slower_than_its_allowance_is_planned_again_and_made():
     cell = FakeCell(cell_layout(), PAPER, solve_cost=0.06)
     p = run(cell, Settings(plan_latency=1.0))
     assert p.result.status == 'completed', p.result
-    # Replanned only while the allowance grows to the plans' length, never for long.
+    # Replanned only when a plan took longer than any before (the allowance grows to it), and
+    # each time made at once by the next plan.
     replans = kinds(cell, 'replanned')
     assert replans and len(replans) <= 3, replans
-    assert max(e.time for e in replans) < 20.0, replans
+    made = {(e.time, e.material) for e in kinds(cell, 'tracking')}
+    assert all((e.time, e.material) in made for e in replans), replans
     assert p.result.grasp_attempts == p.result.grasp_successes == 15
     assert not kinds(cell, 'arm_stalled') and not kinds(cell, 'grasp_missed')
 
@@ -830,10 +846,10 @@ def test_a_material_the_camera_sees_in_the_cup_beside_the_belt_is_not_a_new_one(
 
 
 def test_the_zu12_crosses_the_belts_edge_low_and_clear_instead_of_rising_to_carry_height():
-    """Between the belt and the plate the cup goes over the belt's near edge on the straight
-    line between the two (the fake cell's joints are the cup's position), with what it holds
-    5 cm over the belt's top, and does not rise to the carry height over the place and come
-    down again."""
+    """Between the belt and the plate the cup goes over the belt's near edge (the fake cell's
+    joints are the cup's position) with what it holds 5 cm over what rides on the belt, and
+    its empty cup 5 cm over that too, and does not rise higher beside the belt (to the carry
+    height over the place, say)."""
     layout = cell_layout()
     cell = FakeCell(layout, PAPER)
     track: List[tuple] = []
@@ -848,15 +864,18 @@ def test_the_zu12_crosses_the_belts_edge_low_and_clear_instead_of_rising_to_carr
     size, top = layout.material_size, layout.belt_top
     transfer = top + 2 * size + Settings().timing.lift_height
     edge = layout.belt_y - layout.belt_width / 2
-    crossing = [p for _, p, held in track if held and edge - size / 2 <= p[1] <= edge + size]
-    assert crossing and min(p[2] - size for p in crossing) >= top + 0.045
+    # (Onto the plate; the purple, last, goes onto the ground target, 5 cm over the belt.)
+    purple = min(e.time for e in kinds(cell, 'picked') if e.color == 'purple')
+    crossing = [p for t, p, held in track
+                if held and t < purple and edge - size / 2 <= p[1] <= edge + size / 2]
+    assert crossing and min(p[2] - size for p in crossing) >= top + size + 0.04
     # Beside the belt (the plate's side): carrying, and from a place straight on to a pick
     # (when nothing is there to pick yet, the cup waits up at the carry height).
     beside = lambda p: p[1] < edge - size                      # noqa: E731
-    assert max(p[2] for _, p, held in track if held and beside(p)) < transfer - 0.05
+    assert max(p[2] for _, p, held in track if held and beside(p)) < top + 2 * size + 0.06
     picks = {e.time for e in kinds(cell, 'tracking')}
     onward = [e.time for e in kinds(cell, 'loaded') if e.time in picks]
     assert len(onward) >= 3
     back = [p[2] for t, p, held in track if not held and beside(p)
             and any(t0 < t < t0 + 2.0 for t0 in onward)]
-    assert back and max(back) < transfer - 0.05, (max(back), transfer)
+    assert back and max(back) < top + size + 0.06, (max(back), transfer)

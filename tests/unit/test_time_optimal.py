@@ -44,6 +44,20 @@ def test_passing_through_a_via_point_is_faster_than_stopping_there():
     _check_within_limits(through, LIMITS)
 
 
+def test_the_speed_at_a_via_point_is_chosen_for_the_shortest_motion(monkeypatch):
+    # Two long moves in the same direction: the average-speed guess at the via point is slow,
+    # a faster pass is quicker, and the motion stays within the limits.
+    import controllers.time_optimal as time_optimal
+    q0, via, goal = np.zeros(3), np.array([1.0, 0.4, 0.2]), np.array([3.0, 1.2, 0.6])
+    chosen = plan(q0, [Waypoint(via, stop=False), Waypoint(goal)], LIMITS)
+    monkeypatch.setattr(time_optimal, 'VIA_SCALES', (1.0,))
+    guessed = plan(q0, [Waypoint(via, stop=False), Waypoint(goal)], LIMITS)
+    assert chosen.end < guessed.end - 0.05
+    _check_within_limits(chosen, LIMITS)
+    at_via = next(s for s in chosen.samples if s.t == chosen.arrivals[0])
+    assert np.allclose(at_via.q, via) and np.all(np.abs(at_via.v) <= 0.9 * LIMITS.velocity)
+
+
 def test_a_joint_that_turns_back_at_a_via_point_stops_there():
     q0, via, goal = np.zeros(3), np.array([1.0, 1.0, 0.0]), np.array([2.0, 0.0, 0.0])
     motion = plan(q0, [Waypoint(via, stop=False), Waypoint(goal)], LIMITS)
