@@ -136,7 +136,7 @@ def _via_velocity(q_prev, q, q_next, limits: JointLimits) -> np.ndarray:
     return np.clip(v, -0.9 * limits.velocity, 0.9 * limits.velocity)
 
 
-def _improve_vias(q0, qs, velocities, accelerations, free, waypoints,
+def _improve_vias(q0, v0, a0, qs, velocities, accelerations, free, waypoints,
                   limits: JointLimits) -> None:
     """Choose, waypoint by waypoint, the speed at each pass-through waypoint (``free``) among
     VIA_SCALES times the first guess: the one with the shortest two segments around it. The
@@ -144,13 +144,12 @@ def _improve_vias(q0, qs, velocities, accelerations, free, waypoints,
     direction through a waypoint can pass it faster, and the profile out of it is shorter then.
     A timed waypoint after it is taken at its state, as soon as the arm can be there (its
     time is what the caller asks of the arm, and the sooner it can be met the better)."""
-    n = len(q0)
     cap = 0.9 * np.asarray(limits.velocity, float)
     for i in range(len(qs) - 1):
         if not free[i] or waypoints[i + 1].direct:
             continue
         q_prev = qs[i - 1] if i else q0
-        v_prev = velocities[i - 1] if i else np.zeros(n)
+        v_prev = velocities[i - 1] if i else v0
         guess = velocities[i]
         if not np.any(guess):
             continue
@@ -158,7 +157,7 @@ def _improve_vias(q0, qs, velocities, accelerations, free, waypoints,
         for scale in VIA_SCALES:
             v = np.clip(guess * scale, -cap, cap)
             into = _profile(q_prev, v_prev, qs[i], v, limits, waypoints[i].min_time,
-                            accelerations[i - 1] if i else None)
+                            accelerations[i - 1] if i else a0)
             out = _profile(qs[i], v, qs[i + 1], velocities[i + 1], limits,
                            waypoints[i + 1].min_time, None, accelerations[i + 1])
             if into is None or out is None:
@@ -170,13 +169,19 @@ def _improve_vias(q0, qs, velocities, accelerations, free, waypoints,
 
 
 def plan(q0: Sequence[float], waypoints: Sequence[Waypoint], limits: JointLimits,
-         t0: float = 0.0, period: float = SAMPLE_PERIOD_S) -> Plan:
-    """The motion from rest at ``q0`` through ``waypoints`` (the last one is a stop), starting
-    at ``t0``, sampled every ``period`` and at every waypoint."""
+         t0: float = 0.0, period: float = SAMPLE_PERIOD_S,
+         v0: Optional[Sequence[float]] = None, a0: Optional[Sequence[float]] = None) -> Plan:
+    """The motion from rest at ``q0`` (or moving: velocity ``v0``, acceleration ``a0``)
+    through ``waypoints`` (the last one is a stop), starting at ``t0``, sampled every
+    ``period`` and at every waypoint."""
     q_prev = np.asarray(q0, float)
     n = len(q_prev)
     if not waypoints:
         raise PlanError('a motion needs at least one waypoint')
+    v_start = _state(v0, n, 'start velocity')
+    a_start = _state(a0, n, 'start acceleration')
+    v_start = np.zeros(n) if v_start is None else v_start
+    a_start = np.zeros(n) if a_start is None else a_start
     for name in ('velocity', 'acceleration', 'jerk'):
         value = np.asarray(getattr(limits, name), float)
         if value.shape != (n,) or not np.all(np.isfinite(value)) or np.any(value <= 0.0):
@@ -212,10 +217,10 @@ def plan(q0: Sequence[float], waypoints: Sequence[Waypoint], limits: JointLimits
         else:
             velocities.append(_via_velocity(qs[i - 1] if i else q_prev, q, qs[i + 1], limits))
     free = [given_v[i] is None and not stops[i] for i in range(len(qs))]
-    _improve_vias(q_prev, qs, velocities, given_a, free, waypoints, limits)
-    samples = [Sample(t0, q_prev.copy(), np.zeros(n), np.zeros(n))]
+    _improve_vias(q_prev, v_start, a_start, qs, velocities, given_a, free, waypoints, limits)
+    samples = [Sample(t0, q_prev.copy(), v_start.copy(), a_start.copy())]
     arrivals = []
-    t, v_prev, a_prev = t0, np.zeros(n), np.zeros(n)
+    t, v_prev, a_prev = t0, v_start, a_start
     for i, w in enumerate(waypoints):
         a_here = given_a[i] if given_a[i] is not None else np.zeros(n)
         if w.direct:

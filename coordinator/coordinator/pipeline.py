@@ -314,10 +314,11 @@ class PlaceWay:
 
 @dataclass
 class Ahead:
-    """A pick's motion that goes on to the place: the way there, and when the arm is at rest
-    at the lift point on the way."""
+    """A pick's motion that goes on to the place: the way there, and the lift point it passes
+    on the way."""
     way: PlaceWay
-    lift_end: float
+    q_lift: np.ndarray
+    lift_end: float               # (about when it passes it)
 
 
 def _polar(v: np.ndarray) -> Tuple[float, float]:
@@ -544,18 +545,20 @@ class Loader(Machine):
                 return self._pick_failed(obs, m, f'no motion for the pick: {exc}')
         else:
             return self._pick_failed(obs, m, 'the arm cannot meet the material in time')
-        # On to the place in the same motion, from the lift point (at rest there, so that a
-        # missed grasp can end the motion there instead): the place does not wait for the
-        # arrival check at the lift point and the plan after it.
+        # On to the place in the same motion, through the lift point without stopping there:
+        # the swing starts during the lift, and the place does not wait for an arrival check
+        # at the lift point and a plan after it. (A missed grasp stops the arm at the lift
+        # point instead: see _pick.)
         self._ahead = None
         way = self._place_way(m, self._lift, obs.youbot_pose, qs[-1])
         if not isinstance(way, str):
+            through = waypoints[:-1] + [Waypoint(qs[-1], stop=False, min_time=timing.lift)]
             try:
-                whole = self._plan(obs, waypoints + way.waypoints, start, q_edge)
+                whole = self._plan(obs, through + way.waypoints, start, q_edge)
             except PlanError:
                 whole = None            # (the place is planned at the lift point then)
             if whole is not None:
-                self._ahead = Ahead(way, points[-1][0])
+                self._ahead = Ahead(way, qs[-1], points[-1][0])
                 points = whole
         self.current, m.status = m, 'picking'
         self.move(LoaderState.PICK, obs, points, start=start)
@@ -631,19 +634,19 @@ class Loader(Machine):
         elif not m.picked and now >= self._leave and self._ahead is not None:
             # Not held after the dwell: the motion ends at the lift point instead, at rest,
             # where a missed grasp is judged (sent as planned, from the next sample on).
-            lift_end, self._ahead = self._ahead.lift_end, None
+            ahead, self._ahead = self._ahead, None
             points = run.motions['zu12'].points
-            q_lift = min(points, key=lambda p: abs(p[0] - lift_end))[1]
-            rest = [p for p in points if now + run.s.plan_latency < p[0] <= lift_end + 1e-9]
             q_now = min(points, key=lambda p: abs(p[0] - now))[1]
-            if float(np.max(np.abs(obs.zu12_q - q_now))) > FOLLOW_TOLERANCE:
-                pass                    # not following it (refused, stalled): judged below
-            elif rest:
-                run.send(Motion('zu12', rest))
-            else:                       # (real time: the arm is past the lift point)
-                run.send(Motion('zu12', run.plan('zu12', obs.zu12_q,
-                                                 [Waypoint(np.array(q_lift, float))])))
-            self.deadline = lift_end + run.s.settle_margin
+            after = [p for p in points if p[0] > now + run.s.plan_latency]
+            if float(np.max(np.abs(obs.zu12_q - q_now))) > FOLLOW_TOLERANCE or not after:
+                self.deadline = ahead.lift_end + run.s.settle_margin
+            else:
+                # From where the motion has the arm at its next sample, moving, to rest at the
+                # lift point (the controller takes over from its desired state there).
+                t1, q1, v1, a1 = after[0]
+                stop = plan(q1, [Waypoint(ahead.q_lift)], run.limits('zu12'), t1, v0=v1, a0=a1)
+                run.send(Motion('zu12', stop.points()))
+                self.deadline = run.motions['zu12'].end + run.s.settle_margin
         arrived = self.arrival(obs)
         if arrived is None:
             return

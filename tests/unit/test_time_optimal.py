@@ -58,6 +58,20 @@ def test_the_speed_at_a_via_point_is_chosen_for_the_shortest_motion(monkeypatch)
     assert np.allclose(at_via.q, via) and np.all(np.abs(at_via.v) <= 0.9 * LIMITS.velocity)
 
 
+def test_a_motion_may_start_moving_and_comes_to_rest_at_its_goal():
+    q0, v0, a0 = np.zeros(3), np.array([1.5, -0.5, 0.0]), np.array([2.0, 0.0, -1.0])
+    goal = np.array([0.1, 0.1, 0.0])
+    motion = plan(q0, [Waypoint(goal)], LIMITS, t0=2.0, v0=v0, a0=a0)
+    first, last = motion.samples[0], motion.samples[-1]
+    assert first.t == 2.0 and np.allclose(first.v, v0) and np.allclose(first.a, a0)
+    assert np.allclose(last.q, goal) and not np.any(last.v)
+    _check_within_limits(motion, LIMITS)
+    # Joint 1 overshoots its goal (it cannot stop in time) and comes back.
+    assert max(s.q[0] for s in motion.samples) > goal[0]
+    with pytest.raises(PlanError):
+        plan(q0, [Waypoint(goal)], LIMITS, v0=[1.0, np.nan, 0.0])
+
+
 def test_a_joint_that_turns_back_at_a_via_point_stops_there():
     q0, via, goal = np.zeros(3), np.array([1.0, 1.0, 0.0]), np.array([2.0, 0.0, 0.0])
     motion = plan(q0, [Waypoint(via, stop=False), Waypoint(goal)], LIMITS)
