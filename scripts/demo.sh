@@ -9,7 +9,7 @@ ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 source "$ROOT/scripts/env.sh"
 
 export ROS_AUTOMATIC_DISCOVERY_RANGE="${ROS_AUTOMATIC_DISCOVERY_RANGE:-LOCALHOST}"
-DOMAIN="${ROS_DOMAIN_ID:-$((RANDOM % 90 + 10))}"
+DOMAIN="${ROS_DOMAIN_ID:-$((RANDOM % 40 + 160))}"   # (demos: 160-199, see tests/conftest.py)
 SEED="${DEMO_SCENARIO_SEED:-0}"           # the world file's scenario
 BELT="${DEMO_BELT_SPEED:-0.12}"
 RUN_DIR="${DEMO_RUNS_DIR:-$ROOT/runs}/pipeline-$(date +%Y%m%d-%H%M%S)-$$"

@@ -8,7 +8,7 @@ ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 # shellcheck disable=SC1091
 source "$ROOT/scripts/env.sh"
 
-export ROS_DOMAIN_ID="${ROS_DOMAIN_ID:-$((RANDOM % 90 + 10))}"
+export ROS_DOMAIN_ID="${ROS_DOMAIN_ID:-$((RANDOM % 40 + 160))}"   # (demos: 160-199)
 export ROS_AUTOMATIC_DISCOVERY_RANGE="${ROS_AUTOMATIC_DISCOVERY_RANGE:-LOCALHOST}"
 RTF="${DEMO_REAL_TIME_FACTOR:-1.0}"
 SIDE_S="${DEMO_SIDE_SECONDS:-5}"           # 5 s at 0.1 m/s: 0.5 m sides

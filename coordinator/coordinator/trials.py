@@ -236,7 +236,8 @@ def _main(argv: Optional[Sequence[str]]) -> int:
     parser.add_argument('--belt-speed', type=float, nargs=2, default=(0.10, 0.16),
                         metavar=('LO', 'HI'), help='belt speed range [m/s]')
     parser.add_argument('--domain-base', type=int, default=int(os.environ.get(
-        'TRIALS_DOMAIN_BASE', '40')), help='trial k uses domain base + worker index')
+        'TRIALS_DOMAIN_BASE', '200')), help='trial k uses domain base + worker index (200 '
+        'on: apart from the test suite, 1-159, and the demos, 160-199)')
     parser.add_argument('--wall-timeout', type=float, default=900.0)
     parser.add_argument('--record', action='store_true', help='record a bag per trial')
     parser.add_argument('--out', type=Path, default=Path('runs') / time.strftime(
