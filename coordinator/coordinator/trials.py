@@ -204,6 +204,18 @@ def _rebuild(out: Path) -> int:
     return 0
 
 
+def _finished(out: Path, item: Dict) -> Optional[Dict]:
+    """The result of a planned trial already in ``out`` (same seed and belt speed), if any."""
+    path = out / f'trial_{item["trial"]:03d}' / 'result.json'
+    try:
+        r = json.loads(path.read_text())
+    except (OSError, ValueError):
+        return None
+    if r.get('scenario_seed') != item['seed'] or r.get('belt_speed') != item['belt_speed']:
+        return None
+    return r
+
+
 def _terminated(signum, frame) -> None:
     raise KeyboardInterrupt   # SIGTERM stops the running trials as Ctrl-C does
 
@@ -246,6 +258,9 @@ def _main(argv: Optional[Sequence[str]]) -> int:
                         help='wall seconds between progress lines')
     parser.add_argument('--report-only', action='store_true',
                         help='rebuild trials.csv and the report from the results in --out')
+    parser.add_argument('--resume', action='store_true',
+                        help='go on with an interrupted campaign: skip the trials of the plan '
+                             'whose result is in --out (same seed and belt speed)')
     args = parser.parse_args(argv)
     if args.report_only:
         return _rebuild(args.out)
@@ -261,8 +276,15 @@ def _main(argv: Optional[Sequence[str]]) -> int:
     if args.seeds is not None:
         plan = [{**item, 'trial': k, 'seed': seed} for k, (item, seed) in enumerate(
             zip(trial_plan(len(args.seeds), 0, args.seed0, (lo, hi)), args.seeds))]
-    print(f'[trials] {len(plan)} trials, {args.parallel} at a time, into {args.out}', flush=True)
     results: List[Dict] = []
+    if args.resume:
+        done = [r for r in (_finished(args.out, item) for item in plan) if r is not None]
+        plan = [item for item in plan if item['trial'] not in {r['trial'] for r in done}]
+        results.extend(done)
+        print(f'[trials] resuming: {len(done)} trials of the plan already in {args.out}',
+              flush=True)
+    print(f'[trials] {len(plan)} trials, {args.parallel} at a time, into {args.out}', flush=True)
+    total = len(plan) + len(results)
     free = list(range(args.parallel))
     started = time.monotonic()
     running: Dict[int, float] = {}                   # trial -> when it started (monotonic)
@@ -282,7 +304,7 @@ def _main(argv: Optional[Sequence[str]]) -> int:
             finished, _ = wait(futures, timeout=args.progress_period,
                                return_when=FIRST_COMPLETED)
             if not finished:
-                print(_progress(args.out, running, results, len(pending), len(plan),
+                print(_progress(args.out, running, results, len(pending), total,
                                 args.parallel), flush=True)
                 continue
             done = finished.pop()
@@ -292,7 +314,7 @@ def _main(argv: Optional[Sequence[str]]) -> int:
             results.append(r)
             write_csv(results, args.out / 'trials.csv')      # partial results survive
             elapsed = time.monotonic() - started
-            print(f'[trials] {len(results)}/{len(plan)} trial {r["trial"]} seed '
+            print(f'[trials] {len(results)}/{total} trial {r["trial"]} seed '
                   f'{r["scenario_seed"]} belt {r["belt_speed"]:.3f}: {r["status"]}, '
                   f'{r.get("completion_time", float("nan")):.1f} s sim, '
                   f'handling {r.get("handling_success_rate", 0.0):.0%}, wall '

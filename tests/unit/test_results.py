@@ -150,6 +150,37 @@ def test_a_trial_plan_is_reproducible_and_splits_over_machines():
     assert len({t['seed'] for t in whole}) == 10
 
 
+def test_an_interrupted_campaign_goes_on_where_it_stopped(tmp_path, monkeypatch):
+    import json
+
+    import coordinator.report
+    import coordinator.trials as trials
+    plan = trial_plan(3, 0, 7, (0.1, 0.16))
+    # Trial 0 of this plan finished before the interruption; trial 1's result is of another
+    # plan (another seed): it is run again.
+    for k, seed in ((0, plan[0]['seed']), (1, plan[1]['seed'] + 1)):
+        (tmp_path / f'trial_{k:03d}').mkdir()
+        (tmp_path / f'trial_{k:03d}' / 'result.json').write_text(json.dumps({
+            'trial': k, 'scenario_seed': seed, 'belt_speed': plan[k]['belt_speed'],
+            'status': 'completed', 'completion_time': 60.0, 'wall_time': 100.0}))
+    ran = []
+
+    def fake_trial(trial, seed, belt_speed, domain_id, out_dir, wall_timeout, record):
+        ran.append(trial)
+        return {'trial': trial, 'scenario_seed': seed, 'belt_speed': belt_speed,
+                'status': 'completed', 'completion_time': 61.0, 'wall_time': 90.0}
+    reported = []
+    monkeypatch.setattr(trials, 'run_trial', fake_trial)
+    monkeypatch.setattr(coordinator.report, 'write_report',
+                        lambda results, out, meta: reported.append(results) or out / 'report.md')
+    assert trials.main(['--trials', '3', '--seed0', '7', '--resume', '--out', str(tmp_path),
+                        '--progress-period', '0.01']) == 0
+    assert sorted(ran) == [1, 2]
+    assert sorted(r['trial'] for r in reported[0]) == [0, 1, 2]
+    with open(tmp_path / 'trials.csv') as f:
+        assert [row['trial'] for row in csv.DictReader(f)] == ['0', '1', '2']
+
+
 def _belt_truth(t: float, speed: float = 0.12) -> list:
     """Ground truth at time ``t``: an orange riding the belt (at x -0.5 at t = 10 s) and a
     purple 0.3 m behind it."""
