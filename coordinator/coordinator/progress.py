@@ -14,8 +14,9 @@ from pathlib import Path
 from typing import Dict, List, Optional, Sequence
 
 # Before any trial has finished, a trial is taken to need this much simulated time [s]
-# (the median completion of docs/trials); afterwards the median of the finished ones.
-TYPICAL_COMPLETION_S = 140.0
+# (about the median completion of the current schedule, docs/trials/current); afterwards the
+# median of the finished ones.
+TYPICAL_COMPLETION_S = 60.0
 
 
 @dataclass(frozen=True)
