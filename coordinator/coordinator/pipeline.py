@@ -601,6 +601,7 @@ class Loader(Machine):
         """The material cannot be picked before it leaves the belt."""
         m.status = 'seen'
         self.current = None
+        self._ahead = None
         if self.state is not LoaderState.WAIT:
             self.enter(LoaderState.WAIT, obs.now, self.run.s.idle_timeout)
 
@@ -633,7 +634,7 @@ class Loader(Machine):
                                   + run.s.settle_margin)
         elif not m.picked and now >= self._leave and self._ahead is not None:
             # Not held after the dwell: the motion ends at the lift point instead, at rest,
-            # where a missed grasp is judged (sent as planned, from the next sample on).
+            # where a missed grasp is judged.
             ahead, self._ahead = self._ahead, None
             points = run.motions['zu12'].points
             q_now = min(points, key=lambda p: abs(p[0] - now))[1]

@@ -16,6 +16,7 @@ import random
 import signal
 import subprocess
 import sys
+import threading
 import time
 from concurrent.futures import FIRST_COMPLETED, ThreadPoolExecutor, wait
 from pathlib import Path
@@ -30,6 +31,8 @@ PROGRESS_FILE = 'progress.json'
 PROGRESS_PERIOD_S = 10.0     # wall seconds between two progress lines
 # Process groups of the trials running now (stopped when the runner is interrupted).
 _ACTIVE_GROUPS: set = set()
+# Set when the user stops the campaign: a trial stopped then has no result of its own.
+_INTERRUPTED = threading.Event()
 CSV_FIELDS = ('trial', 'scenario_seed', 'belt_speed', 'status', 'completion_time',
               'identification_rate', 'grasp_success_rate', 'handling_success_rate', 'identified',
               'identified_correct', 'picked', 'delivered', 'handled_verified', 'grasp_attempts',
@@ -106,6 +109,9 @@ def run_trial(trial: int, seed: int, belt_speed: float, domain_id: int, out_dir:
     wall = time.monotonic() - start
     if result_file.exists():
         result = json.loads(result_file.read_text())
+    elif _INTERRUPTED.is_set():     # (stopped by the user: --resume runs it again)
+        result = {'status': 'interrupted', 'completion_time': float('nan'),
+                  'message': 'the campaign was interrupted'}
     else:
         result = {'status': 'error', 'completion_time': float('nan'), 'message':
                   f'no result (coordinator exit {procs["coordinator_node"].returncode}); see '
@@ -211,7 +217,8 @@ def _finished(out: Path, item: Dict) -> Optional[Dict]:
         r = json.loads(path.read_text())
     except (OSError, ValueError):
         return None
-    if r.get('scenario_seed') != item['seed'] or r.get('belt_speed') != item['belt_speed']:
+    if (r.get('scenario_seed') != item['seed'] or r.get('belt_speed') != item['belt_speed']
+            or r.get('status') == 'interrupted'):
         return None
     return r
 
@@ -225,14 +232,20 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     try:
         return _main(argv)
     except KeyboardInterrupt:
-        for group in list(_ACTIVE_GROUPS):
-            try:
-                os.killpg(group, signal.SIGKILL)
-            except ProcessLookupError:
-                pass
+        _stop_all()
         print('[trials] interrupted: running trials stopped; finished ones are in trials.csv',
               flush=True)
         return 130
+
+
+def _stop_all() -> None:
+    """Stop every running trial at once (their results read 'interrupted')."""
+    _INTERRUPTED.set()
+    for group in list(_ACTIVE_GROUPS):
+        try:
+            os.killpg(group, signal.SIGKILL)
+        except ProcessLookupError:
+            pass
 
 
 def _main(argv: Optional[Sequence[str]]) -> int:
@@ -300,27 +313,31 @@ def _main(argv: Optional[Sequence[str]]) -> int:
                                 args.record)] = worker
         while pending and free:
             submit()
-        while futures:
-            finished, _ = wait(futures, timeout=args.progress_period,
-                               return_when=FIRST_COMPLETED)
-            if not finished:
-                print(_progress(args.out, running, results, len(pending), total,
-                                args.parallel), flush=True)
-                continue
-            done = finished.pop()
-            free.append(futures.pop(done))
-            r = done.result()
-            running.pop(r['trial'], None)
-            results.append(r)
-            write_csv(results, args.out / 'trials.csv')      # partial results survive
-            elapsed = time.monotonic() - started
-            print(f'[trials] {len(results)}/{total} trial {r["trial"]} seed '
-                  f'{r["scenario_seed"]} belt {r["belt_speed"]:.3f}: {r["status"]}, '
-                  f'{r.get("completion_time", float("nan")):.1f} s sim, '
-                  f'handling {r.get("handling_success_rate", 0.0):.0%}, wall '
-                  f'{r["wall_time"]:.0f} s (elapsed {elapsed:.0f} s)', flush=True)
-            if pending:
-                submit()
+        try:
+            while futures:
+                finished, _ = wait(futures, timeout=args.progress_period,
+                                   return_when=FIRST_COMPLETED)
+                if not finished:
+                    print(_progress(args.out, running, results, len(pending), total,
+                                    args.parallel), flush=True)
+                    continue
+                done = finished.pop()
+                free.append(futures.pop(done))
+                r = done.result()
+                running.pop(r['trial'], None)
+                results.append(r)
+                write_csv(results, args.out / 'trials.csv')      # partial results survive
+                elapsed = time.monotonic() - started
+                print(f'[trials] {len(results)}/{total} trial {r["trial"]} seed '
+                      f'{r["scenario_seed"]} belt {r["belt_speed"]:.3f}: {r["status"]}, '
+                      f'{r.get("completion_time", float("nan")):.1f} s sim, '
+                      f'handling {r.get("handling_success_rate", 0.0):.0%}, wall '
+                      f'{r["wall_time"]:.0f} s (elapsed {elapsed:.0f} s)', flush=True)
+                if pending:
+                    submit()
+        except KeyboardInterrupt:
+            _stop_all()     # (now: leaving the pool waits for the running trials to end)
+            raise
     write_csv(results, args.out / 'trials.csv')
     from coordinator.report import write_report
     report = write_report(results, args.out, {

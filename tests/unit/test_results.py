@@ -157,12 +157,14 @@ def test_an_interrupted_campaign_goes_on_where_it_stopped(tmp_path, monkeypatch)
     import coordinator.trials as trials
     plan = trial_plan(3, 0, 7, (0.1, 0.16))
     # Trial 0 of this plan finished before the interruption; trial 1's result is of another
-    # plan (another seed): it is run again.
-    for k, seed in ((0, plan[0]['seed']), (1, plan[1]['seed'] + 1)):
+    # plan (another seed), and trial 2 was stopped by the interruption: both run again.
+    for k, seed, status in ((0, plan[0]['seed'], 'completed'),
+                            (1, plan[1]['seed'] + 1, 'completed'),
+                            (2, plan[2]['seed'], 'interrupted')):
         (tmp_path / f'trial_{k:03d}').mkdir()
         (tmp_path / f'trial_{k:03d}' / 'result.json').write_text(json.dumps({
             'trial': k, 'scenario_seed': seed, 'belt_speed': plan[k]['belt_speed'],
-            'status': 'completed', 'completion_time': 60.0, 'wall_time': 100.0}))
+            'status': status, 'completion_time': 60.0, 'wall_time': 100.0}))
     ran = []
 
     def fake_trial(trial, seed, belt_speed, domain_id, out_dir, wall_timeout, record):
