@@ -33,6 +33,8 @@ LIMIT_MARGIN = 0.98
 # the average speeds of the rest-to-rest segments around it): the one that gives the shortest
 # pair of segments around the waypoint is kept.
 VIA_SCALES = (1.0, 0.5, 1.5, 2.0, 3.0, 4.0)
+# The speed limits tried along a timed path, as fractions of the highest the joints allow.
+PATH_SPEED_FRACTIONS = (1.0, 0.85, 0.7, 0.55, 0.4)
 
 
 class PlanError(ValueError):
@@ -262,6 +264,85 @@ def plan(q0: Sequence[float], waypoints: Sequence[Waypoint], limits: JointLimits
             samples.append(Sample(t, qs[i].copy(), np.zeros(n), np.zeros(n)))
         q_prev, v_prev, a_prev = qs[i], velocities[i], a_here
     return Plan(samples, arrivals)
+
+
+def timed_path(qs: Sequence[Sequence[float]], limits: JointLimits, t0: float,
+               period: float = SAMPLE_PERIOD_S, end_speed: float = 0.0,
+               min_time: float = 0.0) -> List[Waypoint]:
+    """A path the tool must keep to (a straight line, say), given as joint positions at evenly
+    spaced points along it, timed as ``direct`` waypoints after ``t0``: from rest at
+    ``qs[0]`` at ``t0`` along the path, time-optimally within limits on the path's speed that
+    keep every joint within its own, and in ``min_time`` at least. It ends at ``qs[-1]`` at
+    rest, or moving on at ``end_speed`` (a fraction of the path's top speed) to go on to a
+    next waypoint. The path is a cubic in its length fitted to the points, through its ends:
+    a tool's straight line is smooth in joint space, and the youBot's 6 cm lift off its plate
+    keeps to its points within 0.05 mm."""
+    qs = np.asarray(qs, float)
+    if qs.ndim != 2 or len(qs) < 2 or not np.all(np.isfinite(qs)):
+        raise PlanError('a timed path needs two or more points of finite joint positions')
+    if not 0.0 <= end_speed <= 1.0:
+        raise PlanError(f'the end speed is a fraction within [0, 1], got {end_speed}')
+    # A cubic fitted to the points, corrected to pass through the path's ends exactly.
+    fit = np.polynomial.polynomial.polyfit(np.linspace(0.0, 1.0, len(qs)), qs,
+                                           min(len(qs) - 1, 3))
+    if len(fit) < 2:
+        fit = np.vstack([fit, np.zeros_like(fit)])
+    first = qs[0] - fit[0]
+    last = qs[-1] - np.polynomial.polynomial.polyval(1.0, fit).T
+    fit[0] += first
+    fit[1] += last - first
+    coef = [fit]
+    for _ in range(3):
+        coef.append(np.polynomial.polynomial.polyder(coef[-1]))
+    grid = np.linspace(0.0, 1.0, 201)
+    # The largest |dq/ds|, |d2q/ds2| and |d3q/ds3| of each joint along the path (s: its length
+    # fraction). With them, limits on the path's speed s', acceleration s'' and jerk s''' keep
+    # every joint within its own: dq/dt = q' s', d2q/dt2 = q'' s'^2 + q' s'', and
+    # d3q/dt3 = q''' s'^3 + 3 q'' s' s'' + q' s'''. A higher speed limit leaves less room for
+    # the acceleration: of a few speed limits, the one with the shortest profile is kept.
+    d1, d2, d3 = (np.max(np.abs(np.polynomial.polynomial.polyval(grid, c).T), 0) + 1e-12
+                  for c in coef[1:])
+    v_lim, a_lim, j_lim = (np.asarray(getattr(limits, k), float) * LIMIT_MARGIN
+                           for k in ('velocity', 'acceleration', 'jerk'))
+    top = min(np.min(v_lim / d1), np.min(np.sqrt(0.9 * a_lim / d2)),
+              np.min(np.cbrt(0.9 * j_lim / d3)))
+    profile = None
+    for fraction in PATH_SPEED_FRACTIONS:
+        ds = fraction * top
+        dds = np.min((a_lim - d2 * ds**2) / d1)
+        ddds = np.min((j_lim - d3 * ds**3 - 3 * d2 * ds * dds) / d1)
+        if not (dds > 0.0 and ddds > 0.0):
+            continue
+        otg, inp, candidate = Ruckig(1), InputParameter(1), Trajectory(1)
+        inp.current_position, inp.current_velocity = [0.0], [0.0]
+        inp.current_acceleration = [0.0]
+        inp.target_position, inp.target_velocity = [1.0], [end_speed * ds]
+        inp.target_acceleration = [0.0]
+        inp.max_velocity, inp.max_acceleration, inp.max_jerk = [ds], [dds], [ddds]
+        if min_time > 0.0:
+            inp.minimum_duration = float(min_time)
+        try:
+            if otg.calculate(inp, candidate) != Result.Working:
+                continue
+        except Exception:           # ruckig.RuckigError
+            continue
+        if profile is None or candidate.duration < profile.duration:
+            profile = candidate
+    if profile is None:
+        raise PlanError('no speed along the path keeps the joints within their limits')
+    duration = float(profile.duration)
+    steps = max(1, int(np.ceil(duration / period - 1e-9)))
+    waypoints = []
+    for k in range(1, steps + 1):
+        t = duration * k / steps
+        (s,), (s1,), (s2,) = profile.at_time(t)
+        q, q1, q2 = (np.polynomial.polynomial.polyval(min(max(s, 0.0), 1.0), c)
+                     for c in coef[:3])
+        v, a = q1 * s1, q2 * s1**2 + q1 * s2
+        if k == steps and end_speed == 0.0:
+            v, a = np.zeros_like(v), np.zeros_like(a)        # (zero but for rounding)
+        waypoints.append(Waypoint(q, velocity=v, acceleration=a, at=t0 + t, direct=True))
+    return waypoints
 
 
 def _state(value, n: int, what: str) -> Optional[np.ndarray]:

@@ -26,7 +26,7 @@ from controllers.path_follower import PDGains, PathFollower, TurnLimits
 from controllers.conveyor import Item, advance, held
 from controllers.pick_place import PickTiming, follow_pick
 from controllers.time_optimal import (SAMPLE_PERIOD_S, JointLimits, PlanError, TooLate,
-                                      Waypoint, plan)
+                                      Waypoint, plan, timed_path)
 from controllers.transforms import matrix_to_quaternion
 from controllers.youbot_arm import ARM_BASE_IN_BASE_LINK_M
 from controllers import youbot_arm, zu12_arm
@@ -774,6 +774,23 @@ class Loader(Machine):
             self.enter(LoaderState.DONE, obs.now, math.inf)
 
 
+@dataclass
+class UnloadPath:
+    """The youBot's joint positions for one unload, all at one tool tilt."""
+    hover: np.ndarray             # over the material on the plate
+    contact: np.ndarray           # the fingers round it
+    lift: List[np.ndarray]        # up off the plate, straight, to clear of its neighbours
+    over: np.ndarray              # 5 cm above its drop
+    drop: np.ndarray              # where it is let go
+
+
+# The youBot's lift off the plate: heights over the grip [m], the last clear of the neighbours.
+UNLOAD_LIFT_STEPS_M = (0.01, 0.02, 0.03, 0.04, 0.05, 0.06)
+# The speeds at its top tried for a lift that goes on to the drop, as fractions of its own top
+# speed: the one whose whole motion ends soonest within the joints' limits is kept.
+UNLOAD_LIFT_END_SPEEDS = (0.0, 0.25, 0.5, 0.75, 1.0)
+
+
 class Transport(Machine):
     """The youBot: waits for its load, drives along Bezier paths with a PD follower, unloads
     one material at a time (orange into the pool, blue onto the platform), drives home."""
@@ -786,7 +803,7 @@ class Transport(Machine):
         self._follower: Optional[PathFollower] = None   # while the base drives
         self._followed = False                           # the port runs the follower
         self._drive_goal = ''
-        self._carry: List[np.ndarray] = []           # the unload's joint positions after the grip
+        self._carry: Optional[UnloadPath] = None     # the unload's joint positions
         self._armed = False
         self._dropped: Dict[str, int] = {}             # pool drops made, per stand
         self._drive_deadline = math.inf
@@ -921,15 +938,18 @@ class Transport(Machine):
         path = self._unload_path(m, stand, YOUBOT_CARRY_Q, high=True)
         waypoints = [Waypoint(YOUBOT_CARRY_Q.copy(), stop=path is None)]
         if path is not None:
-            waypoints.append(Waypoint(path[0]))
+            waypoints.append(Waypoint(path.hover))
         run.send(Motion('youbot', run.plan('youbot', obs.youbot_q, waypoints)))
 
     def _unload_path(self, m: Material, pose: Pose2D, seed: np.ndarray,
-                     high: bool = False) -> Optional[List[np.ndarray]]:
+                     high: bool = False) -> Optional['UnloadPath']:
         """Joint positions over the material on the plate (4 times as high with ``high``), on
-        it, lifted clear of its neighbours, above its drop and at its drop, for the base standing
-        at ``pose``. The fingers come down from 3 cm over its top face (the neighbours' tops are
-        level with it); the material rises 6 cm before it swings out (over their 5 cm)."""
+        it, up its straight lift clear of its neighbours, above its drop and at its drop, for
+        the base standing at ``pose``. The fingers come down from 3 cm over its top face (the
+        neighbours' tops are level with it). The material rises 6 cm, over their 5 cm, before it
+        swings out, through a point every centimetre at the same tool tilt: between two points
+        6 cm apart the joints' straight line swings what is held 2 cm sideways and tilts it 8
+        degrees, into a neighbour 1 cm away."""
         run = self.run
         size, t = run.layout.material_size, run.s.timing
         slot = PLATE_SLOTS_IN_BASE_M[m.slot]
@@ -937,7 +957,7 @@ class Transport(Machine):
                - 0.004 * m.unload_attempts)
         contact = np.array([slot[0], slot[1], top])
         hover = contact + np.array([0.0, 0.0, 0.12 if high else 0.03])
-        up = contact + np.array([0.0, 0.0, 0.06])
+        lift = [contact + np.array([0.0, 0.0, h]) for h in UNLOAD_LIFT_STEPS_M]
         stand = self._stand_for(m)
         if m.color == 'blue':
             candidates = [run.layout.platform_place + np.array(
@@ -951,11 +971,34 @@ class Transport(Machine):
         for drop_world in candidates:
             drop = world_to_base(pose, drop_world)
             drop[2] -= YOUBOT_BASE_Z_M
-            path = run.solve_tilted([hover, contact, up, drop + np.array([0.0, 0.0, 0.05]),
+            path = run.solve_tilted([hover, contact, *lift, drop + np.array([0.0, 0.0, 0.05]),
                                      drop], np.array(seed, float))
             if path is not None:
-                return path
+                return UnloadPath(path[0], path[1], path[2:-2], path[-2], path[-1])
         return None
+
+    def _lift(self, obs: Observation, then: Sequence[Waypoint] = ()) -> Points:
+        """The motion from the grip: the straight lift off the plate, timed along the line (a
+        joint motion between its ends would swing the material into its neighbours), at rest
+        at its top, or going on from there through ``then``: at the speed, of those tried,
+        that ends soonest and keeps the joints within their limits."""
+        run = self.run
+        limits = run.limits('youbot')
+        best = None
+        for speed in (UNLOAD_LIFT_END_SPEEDS if then else (0.0,)):
+            lift = timed_path([obs.youbot_q, *self._carry.lift], limits,
+                              run.now + run.s.plan_latency, end_speed=speed,
+                              min_time=run.s.timing.lift)
+            try:
+                points = run.plan('youbot', obs.youbot_q, [*lift, *then])
+            except PlanError:
+                continue
+            within = all(np.all(np.abs(v) <= limits.velocity) for _, _, v, _ in points)
+            if within and (best is None or points[-1][0] < best[-1][0]):
+                best = points
+        if best is None:
+            raise PlanError('no motion off the plate within the joint limits')
+        return best
 
     def _stand_pose(self, obs: Observation) -> Pose2D:
         """Where the base stands for its unloads: its drive's goal while it is on its way."""
@@ -971,12 +1014,12 @@ class Transport(Machine):
             self.queue.pop(0)
             run.fail(now, m, 'grasp_failed', 'unload: no IK solution', 'youbot')
             return self._next_unload(obs)
-        self._carry, self._armed = plan[2:], False
+        self._carry, self._armed = plan, False
         m.unload_attempts += 1
         run.count_grasp('youbot')
         self.move(TransportState.GRASP, obs, run.plan('youbot', obs.youbot_q, [
-            Waypoint(plan[0], stop=False),
-            Waypoint(plan[1], hold=SETTLE_S, min_time=t.descend)]))
+            Waypoint(plan.hover, stop=False),
+            Waypoint(plan.contact, hold=SETTLE_S, min_time=t.descend)]))
 
     def _grasp(self, obs: Observation) -> None:
         run, m, now = self.run, self.queue[0], obs.now
@@ -1005,28 +1048,33 @@ class Transport(Machine):
                                        f'{m.unload_attempts} attempts')
         run.count_grasp('youbot', success=True)
         run.event(now, 'unload_grasped', 'youbot', m, f'attempt {m.unload_attempts}')
-        up, over, drop = self._carry
-        t = run.s.timing
         if self.driving:
             # Up clear of its neighbours, and held there until the base stands.
             self._drop_pending = True
-            return self.move(TransportState.CARRY, obs, run.plan(
-                'youbot', obs.youbot_q, [Waypoint(up, min_time=t.lift)]))
-        self._carry_out(obs, m, [Waypoint(up, stop=False, min_time=t.lift)], over, drop)
+            try:
+                return self.move(TransportState.CARRY, obs, self._lift(obs))
+            except PlanError as exc:
+                return self._unload_failed(obs, m, 'failed', f'unload: {exc}')
+        self._carry_out(obs, m, self._carry.over, self._carry.drop, lift=True)
 
-    def _carry_out(self, obs: Observation, m: Material, first: List[Waypoint],
-                   over: np.ndarray, drop: np.ndarray) -> None:
-        """From the grip (through ``first``) over to the material's drop."""
+    def _carry_out(self, obs: Observation, m: Material, over: np.ndarray, drop: np.ndarray,
+                   lift: bool = False) -> None:
+        """Over to the material's drop (first up off the plate with ``lift``)."""
         run, t = self.run, self.run.s.timing
         self._drop_pending = False
         if m.color == 'blue':
             # Set down on the platform gently, from above, and still before letting go.
-            carry = first + [Waypoint(over, stop=False),
-                             Waypoint(drop, hold=SETTLE_S, min_time=t.place_descend)]
+            carry = [Waypoint(over, stop=False),
+                     Waypoint(drop, hold=SETTLE_S, min_time=t.place_descend)]
         else:
             # Let go over the pool, 14 cm up (4 cm over its walls): straight there.
-            carry = first + [Waypoint(drop)]
-        self.move(TransportState.CARRY, obs, run.plan('youbot', obs.youbot_q, carry))
+            carry = [Waypoint(drop)]
+        try:
+            points = (self._lift(obs, carry) if lift
+                      else run.plan('youbot', obs.youbot_q, carry))
+        except PlanError as exc:
+            return self._unload_failed(obs, m, 'failed', f'unload: {exc}')
+        self.move(TransportState.CARRY, obs, points)
 
     def _unload_failed(self, obs: Observation, m: Material, kind: str, why: str) -> None:
         self._drop_pending = False
@@ -1048,9 +1096,8 @@ class Transport(Machine):
             if not arrived:
                 run.event(now, 'arm_stalled', 'youbot', m, 'the lift off the plate not completed')
             # Over to its drop as the base stands now (the drive ends a little off its goal).
-            path = self._unload_path(m, obs.youbot_pose, obs.youbot_q)
-            over, drop = path[3:] if path is not None else self._carry[1:]
-            return self._carry_out(obs, m, [], over, drop)
+            path = self._unload_path(m, obs.youbot_pose, obs.youbot_q) or self._carry
+            return self._carry_out(obs, m, path.over, path.drop)
         if not arrived:
             run.event(now, 'arm_stalled', 'youbot', m, 'unload motion not completed')
         run.ports.grip('youbot', False)

@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 from controllers.conveyor import Item, advance
+from controllers.time_optimal import Waypoint
 from coordinator.layout import CellLayout, LayoutError, layout_from_world
 from coordinator.pipeline import (Detection, LoaderState, NodeTimeout, Observation, Pipeline,
                                   Settings, YOUBOT_CARRY_Q, youbot_tool_quaternion)
@@ -884,3 +885,63 @@ def test_the_zu12_crosses_the_belts_edge_low_and_clear_instead_of_rising_to_carr
     back = [p[2] for t, p, held in track if not held and beside(p)
             and any(t0 < t < t0 + 2.0 for t0 in onward)]
     assert back and max(back) < top + size + 0.06, (max(back), transfer)
+
+
+class _YoubotIK:
+    """Ports with the youBot's real IK (the unload paths' geometry), and nothing else."""
+
+    def __init__(self) -> None:
+        from controllers.youbot_kinematics import YoubotKinematics
+        self.kin = YoubotKinematics()
+
+    def solve(self, arm, position, orientation, frame, seed):
+        from controllers.transforms import pose_matrix
+        solution = self.kin.ik(pose_matrix(position, orientation), seed=seed)
+        return (solution.positions, '') if solution.success else (None, solution.reason)
+
+    def event(self, event):
+        pass
+
+
+def _hermite(points, steps=8):
+    """The controller's path between samples (cubic in position and velocity)."""
+    for (t0, q0, v0, _), (t1, q1, v1, _) in zip(points, points[1:]):
+        h = t1 - t0
+        for x in np.linspace(0.0, 1.0, steps, endpoint=False):
+            yield ((2 * x**3 - 3 * x**2 + 1) * q0 + (x**3 - 2 * x**2 + x) * h * v0
+                   + (-2 * x**3 + 3 * x**2) * q1 + (x**3 - x**2) * h * v1)
+
+
+@pytest.mark.parametrize('color', ['orange', 'blue'])
+def test_the_youbot_lifts_a_material_straight_off_its_plate_until_clear_of_its_neighbours(
+        color):
+    """Plate slots are 1 cm apart. From every slot the material rises straight up, untilted,
+    until it is over its neighbours' tops, and only then swings to its drop (a joint motion
+    from the grip to the top of the lift swung it 2 cm sideways and tilted it 8 degrees)."""
+    from coordinator.layout import PLATE_SLOTS_IN_BASE_M
+    from coordinator.pipeline import Material
+    ports = _YoubotIK()
+    layout = cell_layout()
+    run = Pipeline(layout, ports, Settings())
+    transport, size = run.transport, layout.material_size
+    for slot in range(len(PLATE_SLOTS_IN_BASE_M)):
+        m = Material(1, color, np.zeros(3), 0.0, 3, slot=slot)
+        path = transport._unload_path(m, layout.stand_for(color, slot).pose, YOUBOT_CARRY_Q)
+        assert path is not None
+        transport._carry = path
+        obs = Observation(0.0, np.zeros(6), path.contact.copy(), (0.0, 0.0, 0.0))
+        motion = transport._lift(obs, [Waypoint(path.drop)])
+        limits = run.limits('youbot')
+        assert all(np.all(np.abs(v) <= limits.velocity) for _, _, v, _ in motion)
+        grip = ports.kin.fk(path.contact)
+        rose = False
+        for q in _hermite(motion):
+            tool = ports.kin.fk(q)
+            if tool[2, 3] - grip[2, 3] > size:
+                rose = True
+                break
+            assert np.linalg.norm(tool[:2, 3] - grip[:2, 3]) < 0.001, slot
+            tilt = np.arccos(np.clip((np.trace(grip[:3, :3].T @ tool[:3, :3]) - 1) / 2, -1, 1))
+            assert np.degrees(tilt) < 0.5, slot
+        assert rose
+        assert np.allclose(motion[-1][1], path.drop)

@@ -4,7 +4,7 @@ import pytest
 
 from controllers.pick_place import PickTiming, follow_pick
 from controllers.time_optimal import (JointLimits, PlanError, TooLate, Waypoint, plan,
-                                      rest_to_rest_time)
+                                      rest_to_rest_time, timed_path)
 
 LIMITS = JointLimits(np.array([2.0, 2.0, 3.0]), np.array([8.0, 8.0, 12.0]),
                      np.array([80.0, 80.0, 120.0]))
@@ -180,3 +180,48 @@ def test_the_pick_path_moves_with_the_material_while_on_it():
             assert p[2] == pytest.approx(top)                # on its top face from contact
     # The lift point: the lift's height over the contact, ahead by half the travel of the lift.
     assert lift == pytest.approx(track(5.15) + np.array([0.12 * 0.15, 0.0, 0.025 + 0.12]))
+
+
+def _curve(s):
+    """A curved joint-space path (a tool's straight line is one for a real arm)."""
+    s = np.asarray(s, float)
+    return np.stack([0.8 * s, 0.3 * np.sin(1.5 * s), -0.6 * s + 0.3 * s**2], -1)
+
+
+@pytest.mark.parametrize('end_speed', [0.0, 0.5, 1.0])
+def test_a_timed_path_keeps_to_its_points_line_within_the_limits(end_speed):
+    """Through the path's points and on the smooth line between them, not a joint-space
+    chord; from rest, within the limits (between samples too), at rest or moving on at the
+    end; and on to a next waypoint from there."""
+    points = _curve(np.linspace(0.0, 1.0, 7))
+    path = timed_path(points, LIMITS, t0=5.0, end_speed=end_speed, min_time=0.1)
+    assert all(w.direct for w in path) and path[0].at > 5.0
+    assert np.allclose(path[-1].q, points[-1], atol=1e-6)
+    moving = np.linalg.norm(path[-1].velocity)
+    assert moving == 0.0 if end_speed == 0.0 else moving > 0.1
+    goal = np.array([1.0, 0.0, 0.0])
+    motion = plan(points[0], path + [Waypoint(goal)], LIMITS, t0=5.0)
+    _check_within_limits(motion, LIMITS)
+    on_path = [s for s in motion.samples if s.t <= path[-1].at + 1e-9]
+    fine = np.linspace(0.0, 1.0, 2001)
+    line = _curve(fine)
+    for s in on_path:
+        assert np.min(np.linalg.norm(line - s.q, axis=1)) < 1e-3     # (a cubic fit; the chord: 0.05)
+    # Monotonic along the line: the first joint only rises.
+    assert all(b.q[0] >= a.q[0] - 1e-9 for a, b in zip(on_path, on_path[1:]))
+    assert np.allclose(motion.samples[-1].q, goal)
+
+
+def test_a_timed_path_is_not_much_slower_than_a_joint_motion_between_its_ends():
+    s = np.linspace(0.0, 1.0, 7)[:, None]
+    points = np.hstack([0.5 * s, -0.45 * s + 0.1 * s**2, 0.45 * s + 0.05 * s**2])
+    along = timed_path(points, LIMITS, t0=0.0)[-1].at
+    assert along < 1.3 * rest_to_rest_time(points[0], points[-1], LIMITS)
+
+
+@pytest.mark.parametrize('points, speed', [([[0.0, 0.0, 0.0]], 0.0),
+                                           ([[0.0, 0.0, 0.0], [np.nan, 0.0, 0.0]], 0.0),
+                                           ([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0]], 1.5)])
+def test_a_timed_path_refuses_bad_points_or_speeds(points, speed):
+    with pytest.raises(PlanError):
+        timed_path(points, LIMITS, t0=0.0, end_speed=speed)
