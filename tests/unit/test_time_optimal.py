@@ -206,7 +206,7 @@ def test_a_timed_path_keeps_to_its_points_line_within_the_limits(end_speed):
     fine = np.linspace(0.0, 1.0, 2001)
     line = _curve(fine)
     for s in on_path:
-        assert np.min(np.linalg.norm(line - s.q, axis=1)) < 1e-3     # (a cubic fit; the chord: 0.05)
+        assert np.min(np.linalg.norm(line - s.q, axis=1)) < 1e-3  # (a cubic fit; a chord: 0.05)
     # Monotonic along the line: the first joint only rises.
     assert all(b.q[0] >= a.q[0] - 1e-9 for a, b in zip(on_path, on_path[1:]))
     assert np.allclose(motion.samples[-1].q, goal)
