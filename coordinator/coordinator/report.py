@@ -164,6 +164,9 @@ def write_report(trials: List[Dict], out_dir: Path, setup: Dict) -> Path:
         f'{len(trials)} trials (lock-step), plan seed {setup.get("seed0")}, belt speed '
         f'{setup.get("belt_speed")} m/s, {setup.get("parallel")} in parallel, wall time '
         f'{setup.get("wall_time", 0.0):.0f} s.'), '']
+    codes = sorted({str(t.get('code', 'unknown')) for t in trials})
+    lines[-1:-1] = [f'Code: {", ".join(codes)}' + (
+        ' (the trials were run by different code)' if len(codes) > 1 else '') + '.']
     if s:
         lines += ['| | trials | completion time (s, median) | identification (%) | grasp (%) | '
                   'handling (%) |', '|---|---|---|---|---|---|',

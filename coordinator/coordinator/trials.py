@@ -39,6 +39,27 @@ CSV_FIELDS = ('trial', 'scenario_seed', 'belt_speed', 'status', 'completion_time
               'grasp_successes', 'missed', 'failed', 'wall_time', 'message')
 
 
+def code_version() -> str:
+    """The code a trial runs: the checkout's commit, with ``-dirty`` when a tracked file outside
+    docs/ and the Markdown files differs from it (results written into docs/ do not count), or
+    'unknown' outside a git checkout. ``--resume`` reuses a result only of the same code."""
+    here = str(Path(__file__).resolve().parent)
+
+    def git(*args: str) -> Optional[str]:
+        try:
+            out = subprocess.run(['git', '-C', here, *args], capture_output=True, text=True,
+                                 timeout=30.0)
+        except (OSError, subprocess.SubprocessError):
+            return None
+        return out.stdout.strip() if out.returncode == 0 else None
+    commit, root = git('rev-parse', '--short=12', 'HEAD'), git('rev-parse', '--show-toplevel')
+    if not commit or not root:
+        return 'unknown'
+    changed = git('-C', root, 'status', '--porcelain', '--untracked-files=no', '--', '.',
+                  ':(exclude)docs', ':(exclude)*.md')
+    return commit + ('-dirty' if changed is None or changed else '')
+
+
 def trial_commands(seed: int, belt_speed: float, result_file: Path,
                    record_dir: Optional[Path] = None) -> Dict[str, List[str]]:
     """The processes of one lock-step trial (executables as installed by the workspace)."""
@@ -71,7 +92,7 @@ def trial_commands(seed: int, belt_speed: float, result_file: Path,
 
 
 def run_trial(trial: int, seed: int, belt_speed: float, domain_id: int, out_dir: Path,
-              wall_timeout: float = 900.0, record: bool = False) -> Dict:
+              wall_timeout: float = 900.0, record: bool = False, code: str = '') -> Dict:
     """One trial as a process group; returns its result (or a failure record)."""
     trial_dir = out_dir / f'trial_{trial:03d}'
     trial_dir.mkdir(parents=True, exist_ok=True)
@@ -117,7 +138,7 @@ def run_trial(trial: int, seed: int, belt_speed: float, domain_id: int, out_dir:
                   f'no result (coordinator exit {procs["coordinator_node"].returncode}); see '
                   f'{trial_dir}'}
     result.update({'trial': trial, 'scenario_seed': seed, 'belt_speed': belt_speed,
-                   'wall_time': wall, 'cpu_seconds': cpu})
+                   'wall_time': wall, 'cpu_seconds': cpu, 'code': code or code_version()})
     result_file.write_text(json.dumps(result, indent=1))
     return result
 
@@ -210,15 +231,16 @@ def _rebuild(out: Path) -> int:
     return 0
 
 
-def _finished(out: Path, item: Dict) -> Optional[Dict]:
-    """The result of a planned trial already in ``out`` (same seed and belt speed), if any."""
+def _finished(out: Path, item: Dict, code: str) -> Optional[Dict]:
+    """The result of a planned trial already in ``out`` (same seed and belt speed, made by the
+    same code), if any."""
     path = out / f'trial_{item["trial"]:03d}' / 'result.json'
     try:
         r = json.loads(path.read_text())
     except (OSError, ValueError):
         return None
     if (r.get('scenario_seed') != item['seed'] or r.get('belt_speed') != item['belt_speed']
-            or r.get('status') == 'interrupted'):
+            or r.get('status') == 'interrupted' or r.get('code') != code):
         return None
     return r
 
@@ -273,7 +295,8 @@ def _main(argv: Optional[Sequence[str]]) -> int:
                         help='rebuild trials.csv and the report from the results in --out')
     parser.add_argument('--resume', action='store_true',
                         help='go on with an interrupted campaign: skip the trials of the plan '
-                             'whose result is in --out (same seed and belt speed)')
+                             'whose result is in --out (same seed and belt speed, and made by '
+                             'the same code: the same commit, with no uncommitted changes)')
     args = parser.parse_args(argv)
     if args.report_only:
         return _rebuild(args.out)
@@ -290,12 +313,13 @@ def _main(argv: Optional[Sequence[str]]) -> int:
         plan = [{**item, 'trial': k, 'seed': seed} for k, (item, seed) in enumerate(
             zip(trial_plan(len(args.seeds), 0, args.seed0, (lo, hi)), args.seeds))]
     results: List[Dict] = []
+    code = code_version()
     if args.resume:
-        done = [r for r in (_finished(args.out, item) for item in plan) if r is not None]
+        done = [r for r in (_finished(args.out, item, code) for item in plan) if r is not None]
         plan = [item for item in plan if item['trial'] not in {r['trial'] for r in done}]
         results.extend(done)
-        print(f'[trials] resuming: {len(done)} trials of the plan already in {args.out}',
-              flush=True)
+        print(f'[trials] resuming: {len(done)} trials of the plan already in {args.out} '
+              f'made by this code ({code})', flush=True)
     print(f'[trials] {len(plan)} trials, {args.parallel} at a time, into {args.out}', flush=True)
     total = len(plan) + len(results)
     free = list(range(args.parallel))
@@ -310,7 +334,7 @@ def _main(argv: Optional[Sequence[str]]) -> int:
             running[item['trial']] = time.monotonic()
             futures[pool.submit(run_trial, item['trial'], item['seed'], item['belt_speed'],
                                 args.domain_base + worker, args.out, args.wall_timeout,
-                                args.record)] = worker
+                                args.record, code)] = worker
         while pending and free:
             submit()
         try:
@@ -342,7 +366,7 @@ def _main(argv: Optional[Sequence[str]]) -> int:
     from coordinator.report import write_report
     report = write_report(results, args.out, {
         'seed0': args.seed0, 'belt_speed': (lo, hi), 'parallel': args.parallel,
-        'wall_time': time.monotonic() - started})
+        'wall_time': time.monotonic() - started, 'code': code})
     print(f'[trials] CSV {args.out / "trials.csv"}, report {report}', flush=True)
     return 0 if all(r['status'] == 'completed' for r in results) else 1
 

@@ -1,5 +1,7 @@
 """Scoring a run against ground truth, the trials' summary, CSV and report."""
 import csv
+import importlib.util
+import re
 
 import cv2
 import numpy as np
@@ -155,32 +157,68 @@ def test_an_interrupted_campaign_goes_on_where_it_stopped(tmp_path, monkeypatch)
 
     import coordinator.report
     import coordinator.trials as trials
-    plan = trial_plan(3, 0, 7, (0.1, 0.16))
+    plan = trial_plan(4, 0, 7, (0.1, 0.16))
+    monkeypatch.setattr(trials, 'code_version', lambda: 'abc123')
     # Trial 0 of this plan finished before the interruption; trial 1's result is of another
-    # plan (another seed), and trial 2 was stopped by the interruption: both run again.
-    for k, seed, status in ((0, plan[0]['seed'], 'completed'),
-                            (1, plan[1]['seed'] + 1, 'completed'),
-                            (2, plan[2]['seed'], 'interrupted')):
+    # plan (another seed), trial 2 was stopped by the interruption, and trial 3 was run by
+    # other code: those three run again.
+    for k, seed, status, code in ((0, plan[0]['seed'], 'completed', 'abc123'),
+                                  (1, plan[1]['seed'] + 1, 'completed', 'abc123'),
+                                  (2, plan[2]['seed'], 'interrupted', 'abc123'),
+                                  (3, plan[3]['seed'], 'completed', 'abc123-dirty')):
         (tmp_path / f'trial_{k:03d}').mkdir()
         (tmp_path / f'trial_{k:03d}' / 'result.json').write_text(json.dumps({
             'trial': k, 'scenario_seed': seed, 'belt_speed': plan[k]['belt_speed'],
-            'status': status, 'completion_time': 60.0, 'wall_time': 100.0}))
+            'status': status, 'completion_time': 60.0, 'wall_time': 100.0, 'code': code}))
     ran = []
 
-    def fake_trial(trial, seed, belt_speed, domain_id, out_dir, wall_timeout, record):
+    def fake_trial(trial, seed, belt_speed, domain_id, out_dir, wall_timeout, record, code):
+        assert code == 'abc123'
         ran.append(trial)
         return {'trial': trial, 'scenario_seed': seed, 'belt_speed': belt_speed,
-                'status': 'completed', 'completion_time': 61.0, 'wall_time': 90.0}
+                'status': 'completed', 'completion_time': 61.0, 'wall_time': 90.0,
+                'code': code}
     reported = []
     monkeypatch.setattr(trials, 'run_trial', fake_trial)
     monkeypatch.setattr(coordinator.report, 'write_report',
                         lambda results, out, meta: reported.append(results) or out / 'report.md')
-    assert trials.main(['--trials', '3', '--seed0', '7', '--resume', '--out', str(tmp_path),
+    assert trials.main(['--trials', '4', '--seed0', '7', '--resume', '--out', str(tmp_path),
                         '--progress-period', '0.01']) == 0
-    assert sorted(ran) == [1, 2]
-    assert sorted(r['trial'] for r in reported[0]) == [0, 1, 2]
+    assert sorted(ran) == [1, 2, 3]
+    assert sorted(r['trial'] for r in reported[0]) == [0, 1, 2, 3]
     with open(tmp_path / 'trials.csv') as f:
-        assert [row['trial'] for row in csv.DictReader(f)] == ['0', '1', '2']
+        assert [row['trial'] for row in csv.DictReader(f)] == ['0', '1', '2', '3']
+
+
+def test_the_code_version_names_the_commit_and_uncommitted_code_changes(tmp_path):
+    import shutil
+    import subprocess
+
+    import coordinator.trials as trials
+    if shutil.which('git') is None:
+        pytest.skip('git is not installed')
+    repo = tmp_path / 'repo'
+    (repo / 'pkg').mkdir(parents=True)
+    (repo / 'docs').mkdir()
+    shutil.copy(trials.__file__, repo / 'pkg' / 'trials.py')
+    (repo / 'docs' / 'result.json').write_text('{}')
+
+    def git(*args):
+        subprocess.run(['git', '-C', str(repo), '-c', 'user.name=t', '-c', 'user.email=t@t',
+                        *args], check=True, capture_output=True)
+    git('init', '-q')
+    git('add', '-A')
+    git('commit', '-qm', 'one')
+    spec = importlib.util.spec_from_file_location('copied_trials', repo / 'pkg' / 'trials.py')
+    copied = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(copied)
+    commit = copied.code_version()
+    assert re.fullmatch(r'[0-9a-f]{12}', commit)
+    (repo / 'docs' / 'result.json').write_text('{"status": "completed"}')   # a result: clean
+    assert copied.code_version() == commit
+    with open(repo / 'pkg' / 'trials.py', 'a') as f:
+        f.write('# changed\n')
+    assert copied.code_version() == commit + '-dirty'
 
 
 def _belt_truth(t: float, speed: float = 0.12) -> list:
