@@ -64,7 +64,8 @@ def trial_commands(seed: int, belt_speed: float, result_file: Path,
                    record_dir: Optional[Path] = None) -> Dict[str, List[str]]:
     """The processes of one lock-step trial (executables as installed by the workspace)."""
     sim = ['sim_node', '--ros-args', '-p', f'world:={WORLD}', '-p', 'synchronous:=true',
-           '-p', f'state_publish_rate:={CONTROL_RATE}', '-p', f'scenario_seed:={seed}',
+           '-p', f'state_publish_rate:={CONTROL_RATE}',
+           '-p', f'clock_publish_rate:={CONTROL_RATE}', '-p', f'scenario_seed:={seed}',
            '-p', f'belt_speed:={belt_speed}', '-p', 'max_speed:=0.8', '-p', 'max_turn:=1.5']
     commands = {}
     if record_dir is not None:

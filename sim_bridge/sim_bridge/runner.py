@@ -68,17 +68,25 @@ class SimRunner:
 
     Each step: the command of every driven robot is taken from its guard (which zeroes it once
     it is older than the timeout, in simulated time) and, for a robot with acceleration limits,
-    approached at no more than those; physics advances one fixed step, then
-    /clock is due, robot states are due at ``state_rate`` and each camera at its own rate (each on
-    its own grid of simulated time); the sink renders a camera only if someone wants the image.
+    approached at no more than those; physics advances one fixed step, then /clock is due at
+    ``clock_rate`` (or every step), robot states at ``state_rate`` and each camera at its own rate
+    (each on its own grid of simulated time); the sink renders a camera only if someone wants
+    the image.
     """
 
     def __init__(self, world: SimWorld, limits: DriveLimits, state_rate: float,
-                 world_state_rate: float = 10.0) -> None:
+                 world_state_rate: float = 10.0, clock_rate: float = 0.0) -> None:
+        """``clock_rate``: /clock is due on its own grid at this rate [Hz of simulated time];
+        0: after every physics step."""
         if not (state_rate > 0.0 and math.isfinite(state_rate)):
             raise ValueError(f'state_rate must be > 0, got {state_rate}')
+        if not (clock_rate >= 0.0 and math.isfinite(clock_rate)):
+            raise ValueError(f'clock_rate must be >= 0, got {clock_rate}')
         self.world = world
         dt_ns = round(world.time_step * 1e9)
+        self.clock_period_ns = max(dt_ns, round(1e9 / clock_rate)) if clock_rate else dt_ns
+        self._clock_next_ns = 0
+        self.last_clock_ns = -1           # the last /clock the sink was given [ns]
         # States go out at the first step at or after each point of their own time grid, so the
         # average rate is exact even when the period is not a whole number of steps.
         self.state_period_ns = max(dt_ns, round(1e9 / state_rate))
@@ -154,7 +162,9 @@ class SimRunner:
                     sink.on_command_applied(name, world.sim_time_ns)
             world.step()
             t_ns = world.sim_time_ns
-            sink.on_clock(t_ns)
+            if t_ns >= self._clock_next_ns:
+                self._clock_next_ns = next_on_grid(t_ns, self.clock_period_ns)
+                self.tick_clock(sink)
             if t_ns >= self._state_next_ns:
                 self._state_next_ns = next_on_grid(t_ns, self.state_period_ns)
                 for name in world.robots:
@@ -167,6 +177,13 @@ class SimRunner:
                     # Keep the camera's own grid of due times, skipping frames nobody wanted.
                     self._camera_next_ns[i] = next_on_grid(t_ns, self._camera_period_ns[i])
                     sink.on_camera_due(i, t_ns, lambda cam=cam: world.render(cam))
+
+    def tick_clock(self, sink: StepSink) -> None:
+        """/clock now, unless it already shows this time."""
+        t_ns = self.world.sim_time_ns
+        if t_ns != self.last_clock_ns:
+            self.last_clock_ns = t_ns
+            sink.on_clock(t_ns)
 
     def reset(self) -> None:
         self.world.reset()

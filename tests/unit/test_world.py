@@ -215,3 +215,26 @@ def test_no_frame_of_the_robots_camera_comes_out_black(world):
     runner = SimRunner(world, DriveLimits(0.2, 0.2, 10.0), 50.0, 10.0)
     runner.advance(round(3.0 / world.time_step), Frames())
     assert black == []
+
+
+@pytest.mark.parametrize('rate, period_ms', [(0.0, None), (100.0, 10), (30.0, 1000 / 30)])
+def test_the_clock_is_due_every_step_or_on_its_own_grid(world, rate, period_ms):
+    """/clock costs every node with sim time about a millisecond a message: it can go out at
+    a lower rate than physics, at the first step at or after each point of its own grid."""
+    runner, sink = SimRunner(world, DriveLimits(), 100.0, clock_rate=rate), Recorder()
+    steps = []
+    for _ in range(240):
+        runner.advance(1, sink)
+        steps.append(world.sim_time_ns)
+    if period_ms is None:
+        assert sink.clock == steps
+    else:
+        period_ns = round(period_ms * 1e6)
+        grid = range(0, steps[-1] + 1, period_ns)
+        assert sink.clock == sorted({next(t for t in steps if t >= g) for g in grid})
+        assert len(sink.clock) == pytest.approx(rate, abs=1)      # (1 s of steps)
+    # The end of a batch off the grid: tick_clock gives it once.
+    runner.advance(1, sink)
+    runner.tick_clock(sink)
+    runner.tick_clock(sink)
+    assert sink.clock[-1] == world.sim_time_ns and sink.clock.count(world.sim_time_ns) == 1

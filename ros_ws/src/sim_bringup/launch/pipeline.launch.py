@@ -31,6 +31,7 @@ def generate_launch_description():
         Node(package='sim_bridge', executable='sim_node', output='screen',
              parameters=[{'world': 'package://sim_bridge/worlds/pipeline_cell.yaml',
                           'synchronous': sync, 'state_publish_rate': 30.0,
+                          'clock_publish_rate': 30.0,
                           'scenario_seed': seed, 'belt_speed': belt,
                           'real_time_factor': LaunchConfiguration('real_time_factor')}]),
         Node(package='perception', executable='vision_node', output='screen',
