@@ -102,8 +102,8 @@ class SimNode(Node):
         p = {name: self.get_parameter(name).value for name in (
             'world', 'gui', 'time_step', 'real_time_factor', 'synchronous', 'state_publish_rate',
             'clock_publish_rate', 'max_speed', 'max_turn', 'cmd_vel_timeout', 'use_stamped_vel',
-            'rtf_log_period', 'max_steps_per_tick', 'belt_speed', 'scenario_seed', 'materials_publish_rate',
-            'command_wait_timeout')}
+            'rtf_log_period', 'max_steps_per_tick', 'belt_speed', 'scenario_seed',
+            'materials_publish_rate', 'command_wait_timeout')}
         self._command_wait_timeout = p['command_wait_timeout']
         if p['state_publish_rate'] * p['time_step'] > 1.0 + 1e-9:
             raise SimConfigError(
