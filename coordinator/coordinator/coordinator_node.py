@@ -553,6 +553,8 @@ class CoordinatorNode(Node):
                       'time': (round(p.time - self.pipeline.start_time, 4)
                                if math.isfinite(p.time) else None)}
                 for arm, p in self._peak.items()}
+        # (Its own CPU time: the trial runner measures the other nodes', which run on.)
+        out['cpu_seconds_self'] = round(time.process_time(), 2)
         out.update({'scenario_seed': self.seed, 'belt_speed': self.layout.belt_speed,
                     'mode': 'lock-step' if self.synchronous else 'real-time',
                     'youbot_path': [[round(x, 4), round(y, 4)] for x, y in self._path[::3]],

@@ -138,6 +138,8 @@ def run_trial(trial: int, seed: int, belt_speed: float, domain_id: int, out_dir:
         result = {'status': 'error', 'completion_time': float('nan'), 'message':
                   f'no result (coordinator exit {procs["coordinator_node"].returncode}); see '
                   f'{trial_dir}'}
+    if 'cpu_seconds_self' in result:
+        cpu['coordinator_node'] = result.pop('cpu_seconds_self')
     result.update({'trial': trial, 'scenario_seed': seed, 'belt_speed': belt_speed,
                    'wall_time': wall, 'cpu_seconds': cpu, 'code': code or code_version()})
     result_file.write_text(json.dumps(result, indent=1))
@@ -252,12 +254,12 @@ def _terminated(signum, frame) -> None:
 
 def main(argv: Optional[Sequence[str]] = None) -> int:
     signal.signal(signal.SIGTERM, _terminated)
+    _INTERRUPTED.clear()
     try:
         return _main(argv)
-    except KeyboardInterrupt:
+    except KeyboardInterrupt:       # (before the campaign started, or while it wrote up)
         _stop_all()
-        print('[trials] interrupted: running trials stopped; finished ones are in trials.csv',
-              flush=True)
+        print('[trials] interrupted', flush=True)
         return 130
 
 
@@ -271,61 +273,99 @@ def _stop_all() -> None:
             pass
 
 
+# The options that define a campaign's plan, and their defaults. A campaign keeps them in
+# its directory (CAMPAIGN_FILE), so that ``--resume DIR`` needs nothing else.
+PLAN_DEFAULTS = {'trials': 10, 'seed0': 2026, 'seeds': None, 'first_trial': 0,
+                 'belt_speed': [0.10, 0.16]}
+CAMPAIGN_FILE = 'campaign.json'
+
+
+def _plan_options(args: argparse.Namespace, parser: argparse.ArgumentParser) -> Dict:
+    """The plan: as given, else as the campaign being resumed had it, else the defaults."""
+    given = {k: (list(v) if isinstance(v, (tuple, list)) else v)
+             for k in PLAN_DEFAULTS if (v := getattr(args, k)) is not None}
+    stored = {}
+    if args.resume is not None:
+        try:
+            stored = json.loads((args.out / CAMPAIGN_FILE).read_text())['plan']
+        except FileNotFoundError:
+            pass
+        except (OSError, ValueError, KeyError, TypeError) as exc:
+            parser.error(f'{args.out / CAMPAIGN_FILE} is not readable: {exc}')
+        for k, v in given.items():
+            if k in stored and stored[k] != v:
+                parser.error(f'--{k.replace("_", "-")} {v} differs from the campaign being '
+                             f'resumed ({stored[k]}, in {args.out / CAMPAIGN_FILE})')
+    return {**PLAN_DEFAULTS, **stored, **given}
+
+
 def _main(argv: Optional[Sequence[str]]) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument('--trials', type=int, default=10)
+    parser.add_argument('--trials', type=int, default=None, help='trials in the plan (10)')
     parser.add_argument('--parallel', type=int, default=1,
                         help='trials at once (each a process group on its own DDS domain)')
-    parser.add_argument('--seed0', type=int, default=2026, help='seeds the trial plan')
+    parser.add_argument('--seed0', type=int, default=None, help='seeds the trial plan (2026)')
     parser.add_argument('--seeds', type=int, nargs='+', default=None,
                         help='run exactly these scenario seeds (instead of --trials drawn ones)')
-    parser.add_argument('--first-trial', type=int, default=0,
+    parser.add_argument('--first-trial', type=int, default=None,
                         help='skip this many trials of the plan (split a plan over machines)')
-    parser.add_argument('--belt-speed', type=float, nargs=2, default=(0.10, 0.16),
-                        metavar=('LO', 'HI'), help='belt speed range [m/s]')
+    parser.add_argument('--belt-speed', type=float, nargs=2, default=None,
+                        metavar=('LO', 'HI'), help='belt speed range [m/s] (0.10 0.16)')
     parser.add_argument('--domain-base', type=int, default=int(os.environ.get(
         'TRIALS_DOMAIN_BASE', '200')), help='trial k uses domain base + worker index (200 '
         'on: apart from the test suite, 1-159, and the demos, 160-199)')
     parser.add_argument('--wall-timeout', type=float, default=900.0)
     parser.add_argument('--record', action='store_true', help='record a bag per trial')
-    parser.add_argument('--out', type=Path, default=Path('runs') / time.strftime(
-        'trials-%Y%m%d-%H%M%S'))
+    parser.add_argument('--out', type=Path, default=None,
+                        help='the campaign directory (runs/trials-<date>-<time>)')
     parser.add_argument('--progress-period', type=float, default=PROGRESS_PERIOD_S,
                         help='wall seconds between progress lines')
     parser.add_argument('--report-only', action='store_true',
                         help='rebuild trials.csv and the report from the results in --out')
-    parser.add_argument('--resume', action='store_true',
-                        help='go on with an interrupted campaign: skip the trials of the plan '
-                             'whose result is in --out (same seed and belt speed, and made by '
-                             'the same code: the same commit, with no uncommitted changes)')
+    parser.add_argument('--resume', nargs='?', const='', default=None, metavar='DIR',
+                        help='go on with an interrupted campaign in DIR (or --out), with its '
+                             'plan: skip the trials whose result is there (same seed and belt '
+                             'speed, and made by the same code: the same commit, with no '
+                             'uncommitted changes)')
     args = parser.parse_args(argv)
+    if args.resume:
+        if args.out is not None and args.out != Path(args.resume):
+            parser.error(f'--resume {args.resume} and --out {args.out} name two directories')
+        args.out = Path(args.resume)
+    if args.out is None:
+        if args.resume is not None or args.report_only:
+            parser.error('name the campaign directory: --resume DIR, or --out DIR')
+        args.out = Path('runs') / time.strftime('trials-%Y%m%d-%H%M%S')
     if args.report_only:
         return _rebuild(args.out)
-    if args.trials < 1 or args.parallel < 1:
+    opts = _plan_options(args, parser)
+    if opts['trials'] < 1 or args.parallel < 1:
         parser.error('--trials and --parallel must be >= 1')
-    lo, hi = args.belt_speed
+    lo, hi = opts['belt_speed']
     if not 0.0 < lo <= hi <= 0.5:
         parser.error('--belt-speed needs 0 < LO <= HI <= 0.5')
     if args.domain_base + args.parallel > 232:
         parser.error('--domain-base + --parallel must stay within DDS domain 232')
     args.out.mkdir(parents=True, exist_ok=True)
-    plan = trial_plan(args.trials, args.first_trial, args.seed0, (lo, hi))
-    if args.seeds is not None:
+    plan = trial_plan(opts['trials'], opts['first_trial'], opts['seed0'], (lo, hi))
+    if opts['seeds'] is not None:
         plan = [{**item, 'trial': k, 'seed': seed} for k, (item, seed) in enumerate(
-            zip(trial_plan(len(args.seeds), 0, args.seed0, (lo, hi)), args.seeds))]
+            zip(trial_plan(len(opts['seeds']), 0, opts['seed0'], (lo, hi)), opts['seeds']))]
     results: List[Dict] = []
     code = code_version()
-    if args.resume:
+    if args.resume is not None:
         done = [r for r in (_finished(args.out, item, code) for item in plan) if r is not None]
         plan = [item for item in plan if item['trial'] not in {r['trial'] for r in done}]
         results.extend(done)
         print(f'[trials] resuming: {len(done)} trials of the plan already in {args.out} '
               f'made by this code ({code})', flush=True)
+    (args.out / CAMPAIGN_FILE).write_text(json.dumps({'plan': opts, 'code': code}, indent=1))
     print(f'[trials] {len(plan)} trials, {args.parallel} at a time, into {args.out}', flush=True)
     total = len(plan) + len(results)
     free = list(range(args.parallel))
     started = time.monotonic()
     running: Dict[int, float] = {}                   # trial -> when it started (monotonic)
+    interrupted = False
     with ThreadPoolExecutor(args.parallel) as pool:
         futures = {}
         pending = list(plan)
@@ -336,9 +376,9 @@ def _main(argv: Optional[Sequence[str]]) -> int:
             futures[pool.submit(run_trial, item['trial'], item['seed'], item['belt_speed'],
                                 args.domain_base + worker, args.out, args.wall_timeout,
                                 args.record, code)] = worker
-        while pending and free:
-            submit()
         try:
+            while pending and free:
+                submit()
             while futures:
                 finished, _ = wait(futures, timeout=args.progress_period,
                                    return_when=FIRST_COMPLETED)
@@ -361,14 +401,24 @@ def _main(argv: Optional[Sequence[str]]) -> int:
                 if pending:
                     submit()
         except KeyboardInterrupt:
-            _stop_all()     # (now: leaving the pool waits for the running trials to end)
-            raise
+            # Stopped by the user (Ctrl-C, SIGTERM): the running trials are killed at once (the
+            # pool then waits for nothing); what finished goes into the CSV and the report.
+            _stop_all()
+            interrupted = True
     write_csv(results, args.out / 'trials.csv')
     from coordinator.report import write_report
-    report = write_report(results, args.out, {
-        'seed0': args.seed0, 'belt_speed': (lo, hi), 'parallel': args.parallel,
-        'wall_time': time.monotonic() - started, 'code': code})
+    setup = {'seed0': opts['seed0'], 'belt_speed': (lo, hi), 'parallel': args.parallel,
+             'wall_time': time.monotonic() - started, 'code': code}
+    if interrupted:
+        setup['note'] = (f'Interrupted: {len(results)} of the {total} trials of the plan '
+                         f'finished (plan seed {opts["seed0"]}, belt {lo}-{hi} m/s); '
+                         f'`run_trials --resume {args.out}` runs the others.')
+    report = write_report(results, args.out, setup) if results else None
     print(f'[trials] CSV {args.out / "trials.csv"}, report {report}', flush=True)
+    if interrupted:
+        print(f'[trials] interrupted: running trials stopped; {len(results)} finished, in the '
+              f'CSV and report; run_trials --resume {args.out} goes on', flush=True)
+        return 130
     return 0 if all(r['status'] == 'completed' for r in results) else 1
 
 

@@ -1,6 +1,7 @@
 """Scoring a run against ground truth, the trials' summary, CSV and report."""
 import csv
 import importlib.util
+import json
 import re
 
 import cv2
@@ -153,8 +154,6 @@ def test_a_trial_plan_is_reproducible_and_splits_over_machines():
 
 
 def test_an_interrupted_campaign_goes_on_where_it_stopped(tmp_path, monkeypatch):
-    import json
-
     import coordinator.report
     import coordinator.trials as trials
     plan = trial_plan(4, 0, 7, (0.1, 0.16))
@@ -188,6 +187,51 @@ def test_an_interrupted_campaign_goes_on_where_it_stopped(tmp_path, monkeypatch)
     assert sorted(r['trial'] for r in reported[0]) == [0, 1, 2, 3]
     with open(tmp_path / 'trials.csv') as f:
         assert [row['trial'] for row in csv.DictReader(f)] == ['0', '1', '2', '3']
+
+
+def test_a_campaign_stopped_by_the_user_keeps_a_report_and_resumes_with_its_plan(
+        tmp_path, monkeypatch):
+    """Ctrl-C: the running trial is stopped, the finished ones are in the CSV and the report;
+    ``--resume DIR`` alone goes on with the same plan, and a plan option that differs from it
+    is refused."""
+    import coordinator.trials as trials
+    monkeypatch.setattr(trials, 'code_version', lambda: 'abc123')
+    ran, reports = [], []
+
+    def fake_trial(trial, seed, belt_speed, domain_id, out_dir, wall_timeout, record, code):
+        if trial == 1 and not ran.count(1):
+            ran.append(1)
+            raise KeyboardInterrupt          # (the user's Ctrl-C, as the pool passes it on)
+        ran.append(trial)
+        result = {'trial': trial, 'scenario_seed': seed, 'belt_speed': belt_speed,
+                  'status': 'completed', 'completion_time': 60.0, 'wall_time': 90.0,
+                  'code': code}
+        (out_dir / f'trial_{trial:03d}').mkdir(parents=True, exist_ok=True)
+        (out_dir / f'trial_{trial:03d}' / 'result.json').write_text(json.dumps(result))
+        return result
+    monkeypatch.setattr(trials, 'run_trial', fake_trial)
+    monkeypatch.setattr(trials, '_stop_all', lambda: trials._INTERRUPTED.set())
+    import coordinator.report
+    monkeypatch.setattr(coordinator.report, 'write_report',
+                        lambda results, out, setup: reports.append((results, setup))
+                        or out / 'report.md')
+    out = tmp_path / 'campaign'
+    assert trials.main(['--trials', '3', '--seed0', '7', '--belt-speed', '0.11', '0.15',
+                        '--out', str(out), '--progress-period', '0.01']) == 130
+    with open(out / 'trials.csv') as f:
+        assert [row['trial'] for row in csv.DictReader(f)] == ['0']
+    results, setup = reports[-1]
+    assert [r['trial'] for r in results] == [0] and 'Interrupted: 1 of the 3' in setup['note']
+    with pytest.raises(SystemExit):
+        trials.main(['--resume', str(out), '--trials', '4'])
+    assert trials.main(['--resume', str(out), '--progress-period', '0.01']) == 0
+    assert ran == [0, 1, 1, 2]
+    results, setup = reports[-1]
+    plan = trial_plan(3, 0, 7, (0.11, 0.15))
+    assert [(r['trial'], r['scenario_seed'], r['belt_speed']) for r in
+            sorted(results, key=lambda r: r['trial'])] == [
+        (p['trial'], p['seed'], p['belt_speed']) for p in plan]
+    assert 'note' not in setup
 
 
 def test_the_code_version_names_the_commit_and_uncommitted_code_changes(tmp_path):
