@@ -107,6 +107,8 @@ class KinematicsNode(Node):
                                    throttle_duration_sec=5.0)
             return
         self._positions = q
+        if self._pose_pub.get_subscription_count() == 0:
+            return              # (nobody reads the pose: no FK, no message)
         out = PoseStamped()
         out.header.stamp = msg.header.stamp
         out.header.frame_id = self._prefix + 'base_link'

@@ -274,25 +274,32 @@ class SimNode(Node):
         self._publish_clock(time_ns)
 
     def on_state(self, robot: str, time_ns: int) -> None:
+        # A state nobody reads is not built or sent (as the cameras): each costs about a
+        # millisecond in rclpy, and a lock-step trial sends about 20,000 of them. A reader that
+        # joins gets the next one.
         stamp = _stamp(time_ns)
         sim_robot = self._world.robots[robot]
-        js = sim_robot.joint_states()
-        msg = JointState(name=js.names, position=js.positions, velocity=js.velocities,
-                         effort=js.efforts)
-        msg.header.stamp = stamp
-        self._joint_pubs[robot].publish(msg)
+        if _wanted(self._joint_pubs[robot]):
+            js = sim_robot.joint_states()
+            msg = JointState(name=js.names, position=js.positions, velocity=js.velocities,
+                             effort=js.efforts)
+            msg.header.stamp = stamp
+            self._joint_pubs[robot].publish(msg)
         if robot in self._holding_pubs:
             suction = self._world.suctions[robot]
             holding = suction.held is not None
             bool_pub, state_pub = self._holding_pubs[robot]
-            bool_pub.publish(Bool(data=holding))
-            grip = GripState(armed=suction.armed, holding=holding)
-            grip.header.stamp = stamp
-            state_pub.publish(grip)
+            if _wanted(bool_pub):
+                bool_pub.publish(Bool(data=holding))
+            if _wanted(state_pub):
+                grip = GripState(armed=suction.armed, holding=holding)
+                grip.header.stamp = stamp
+                state_pub.publish(grip)
         for name, group in sim_robot.controllers.items():
-            self._state_pubs[(robot, name)].publish(
-                _controller_state(group, stamp, self._world.sim_time))
-        if robot not in self._odom_pubs:
+            if _wanted(self._state_pubs[(robot, name)]):
+                self._state_pubs[(robot, name)].publish(
+                    _controller_state(group, stamp, self._world.sim_time))
+        if robot not in self._odom_pubs or not _wanted(self._odom_pubs[robot]):
             return
         base = sim_robot.base_state()
         odom = Odometry()
@@ -309,7 +316,7 @@ class SimNode(Node):
         self._odom_pubs[robot].publish(odom)
 
     def on_world_state(self, time_ns: int) -> None:
-        if self._materials_pub is None:
+        if self._materials_pub is None or not _wanted(self._materials_pub):
             return
         world = self._world
         held = {s.held.index for s in world.suctions.values() if s.held is not None}
@@ -515,6 +522,11 @@ def trajectory_request(msg: JointTrajectory) -> TrajectoryRequest:
                                    tuple(p.velocities), tuple(p.accelerations), tuple(p.effort))
                    for p in msg.points)
     return TrajectoryRequest(tuple(msg.joint_names), points, start)
+
+
+def _wanted(publisher) -> bool:
+    """Someone reads this topic now."""
+    return publisher.get_subscription_count() > 0
 
 
 def _controller_state(group, stamp: Time, now: float) -> JointTrajectoryControllerState:
