@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import math
+from functools import lru_cache
 from typing import Sequence
 
 import numpy as np
@@ -52,6 +53,7 @@ def _theta_limits() -> list:
     return limits
 
 
+@lru_cache(maxsize=None)
 def youbot_arm_chain() -> DHChain:
     """The 5-joint arm in the table's theta, from the arm base frame to the joint-5 flange."""
     rows = tuple(DHRow(math.radians(alpha), a, d, 0.0, lo, hi) for (alpha, a, d), (lo, hi)

@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import math
+from functools import lru_cache
 
 import numpy as np
 
@@ -26,6 +27,7 @@ JOINT_JERK_LIMITS = (80.0, 80.0, 80.0, 120.0, 120.0, 120.0)
 SUCTION_TCP_OFFSET_M = 0.1
 
 
+@lru_cache(maxsize=None)
 def zu12_chain() -> DHChain:
     rows = tuple(DHRow(math.radians(alpha), a, d, 0.0, math.radians(lo), math.radians(hi))
                  for (d, a, alpha), (lo, hi) in zip(DH_ROWS, LIMITS_DEG))

@@ -102,3 +102,26 @@ def test_bad_input_raises():
         DHChain((), MODIFIED)
     with pytest.raises(ValueError):
         DHChain((DHRow(0, 0, 0),), 'craig')
+
+
+@pytest.mark.parametrize('convention', [MODIFIED, STANDARD])
+def test_the_float_fk_is_the_product_of_the_joint_transforms(convention):
+    """fk multiplies each joint's transform out in floats: the same pose as the 4x4 matrix
+    products of ``frames``, with offsets, twists and a tool."""
+    rng = np.random.default_rng(7)
+    rows = tuple(DHRow(alpha, a, d, offset) for alpha, a, d, offset in
+                 rng.uniform(-1.5, 1.5, (6, 4)))
+    tool = np.eye(4)
+    tool[:3, 3] = (0.01, -0.02, 0.1)
+    tool[:3, :3] = np.array([[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]])
+    for chain in (DHChain(rows, convention), DHChain(rows, convention, tuple(map(tuple, tool)))):
+        for _ in range(50):
+            q = rng.uniform(-math.pi, math.pi, 6)
+            np.testing.assert_allclose(chain.fk(q), chain.frames(q)[-1], atol=1e-14)
+            np.testing.assert_allclose(chain.fk(list(q)), chain.fk(tuple(q)), atol=0.0)
+    with pytest.raises(ValueError, match='expected 6'):
+        chain.fk(np.zeros((2, 3)))
+    with pytest.raises(ValueError, match='expected 6'):
+        chain.fk(None)
+    with pytest.raises(ValueError, match='finite'):
+        chain.fk([0.0, 0.0, 0.0, math.inf, 0.0, 0.0])

@@ -14,6 +14,7 @@ def test_malformed_joint_states_are_ignored(context):
     node = KinematicsNode(context=context)
     published = []
     node._pose_pub.publish = published.append
+    node._pose_pub.get_subscription_count = lambda: 1       # (a reader of the pose)
     try:
         node._on_joint_states(JointState(name=list(JOINT_NAMES), position=[0.0, 0.1]))
         node._on_joint_states(JointState(name=list(JOINT_NAMES),
@@ -23,6 +24,10 @@ def test_malformed_joint_states_are_ignored(context):
         node._on_joint_states(JointState(name=list(JOINT_NAMES), position=[0.0] * 5))
         assert len(published) == 1
         assert published[0].pose.position.z == pytest.approx(0.014 + 0.55 + 0.1046)
+        # Nobody reads the pose: the positions are kept, no FK is done and nothing is sent.
+        node._pose_pub.get_subscription_count = lambda: 0
+        node._on_joint_states(JointState(name=list(JOINT_NAMES), position=[0.1] * 5))
+        assert len(published) == 1 and node._positions[0] == 0.1
     finally:
         node.destroy_node()
 
