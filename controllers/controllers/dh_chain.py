@@ -111,6 +111,14 @@ class DHChain:
         """4x4 pose of the tool frame in the base frame. In plain float arithmetic (each joint's
         transform multiplied out by hand), about ten times faster than ``frames(q)[-1]``,
         which gives the same pose."""
+        r00, r01, r02, px, r10, r11, r12, py, r20, r21, r22, pz = self.fk_rows(q)
+        pose = np.array(((r00, r01, r02, px), (r10, r11, r12, py), (r20, r21, r22, pz),
+                         (0.0, 0.0, 0.0, 1.0)))
+        return pose if not self.has_tool else pose @ np.asarray(self.tool)
+
+    def fk_rows(self, q: Sequence[float]) -> Tuple[float, ...]:
+        """The flange's pose (before the tool) as the 12 floats of its top three rows, row by
+        row: for callers that do their own float arithmetic (the analytic IK)."""
         values = self._values(q)
         modified = self.convention == MODIFIED
         r00, r01, r02, r10, r11, r12, r20, r21, r22 = 1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0
@@ -133,9 +141,7 @@ class DHChain:
                 r10 * l01 + r11 * l11 + r12 * l21, r10 * l02 + r11 * l12 + r12 * l22,
                 r20 * l00 + r21 * l10 + r22 * l20, r20 * l01 + r21 * l11 + r22 * l21,
                 r20 * l02 + r21 * l12 + r22 * l22)
-        pose = np.array(((r00, r01, r02, px), (r10, r11, r12, py), (r20, r21, r22, pz),
-                         (0.0, 0.0, 0.0, 1.0)))
-        return pose if self._plain_tool else pose @ np.asarray(self.tool)
+        return r00, r01, r02, px, r10, r11, r12, py, r20, r21, r22, pz
 
     @cached_property
     def _constants(self) -> Tuple[Tuple[float, float, float, float, float], ...]:
@@ -143,8 +149,9 @@ class DHChain:
                      for r in self.rows)
 
     @cached_property
-    def _plain_tool(self) -> bool:
-        return bool(np.array_equal(np.asarray(self.tool), np.eye(4)))
+    def has_tool(self) -> bool:
+        """A tool transform other than the identity follows the last joint."""
+        return not np.array_equal(np.asarray(self.tool), np.eye(4))
 
     def _values(self, q: Sequence[float]) -> List[float]:
         """``q`` as floats, checked as ``_check`` does (without numpy's overhead)."""

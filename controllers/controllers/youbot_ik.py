@@ -9,7 +9,7 @@ turned by pi, elbow up or down).
 from __future__ import annotations
 
 import math
-from typing import Optional, Sequence
+from typing import List, Optional, Sequence
 
 import numpy as np
 
@@ -27,72 +27,81 @@ def _wrap(a: float) -> float:
 
 def solve_ik(target: np.ndarray, q_seed: Optional[Sequence[float]] = None,
              chain: Optional[DHChain] = None) -> IKResult:
-    """Joint values (table theta) whose flange pose is ``target`` (4x4), nearest to the seed."""
+    """Joint values (table theta) whose flange pose is ``target`` (4x4), nearest to the seed.
+    In plain float arithmetic (numpy's per-call overhead was most of a solve)."""
     chain = chain or youbot_arm_chain()
+    if chain.has_tool:
+        raise ValueError('solve_ik solves for the flange: give it a chain without a tool')
     target = np.asarray(target, float)
     if target.shape != (4, 4) or not np.all(np.isfinite(target)):
         return IKResult(False, reason='target must be a finite 4x4 pose')
-    seed = np.zeros(5) if q_seed is None else np.asarray(q_seed, float)
-    p, rot = target[:3, 3], target[:3, :3]
-    approach = rot[:, 2]
-    wrist = p - _WRIST * approach
-    radial = math.hypot(wrist[0], wrist[1])
+    seed = [0.0] * 5 if q_seed is None else [float(v) for v in q_seed]
+    (r00, r01, r02, px), (r10, r11, r12, py), (r20, r21, r22, pz), _ = target.tolist()
+    ax, ay, az = r02, r12, r22                        # the approach (tool z)
+    wx, wy, wz = px - _WRIST * ax, py - _WRIST * ay, pz - _WRIST * az
+    radial = math.hypot(wx, wy)
     if radial > 1e-9:
-        bases = [math.atan2(wrist[1], wrist[0])]
+        bases = [math.atan2(wy, wx)]
     else:  # wrist centre on joint 1's axis: the plane follows the approach, or the seed
-        horizontal = math.hypot(approach[0], approach[1])
-        bases = [math.atan2(approach[1], approach[0]) if horizontal > 1e-9 else seed[0]]
+        horizontal = math.hypot(ax, ay)
+        bases = [math.atan2(ay, ax) if horizontal > 1e-9 else seed[0]]
+    lower, upper = chain.limits
+    lower, upper = lower.tolist(), upper.tolist()
     candidates, reasons = [], set()
     for base in bases:
         for theta1, sign in ((base, 1.0), (_wrap(base + math.pi), -1.0)):
-            normal = np.array([-math.sin(theta1), math.cos(theta1), 0.0])
-            if abs(float(approach @ normal)) > PLANE_TOLERANCE:
+            c1, s1 = math.cos(theta1), math.sin(theta1)
+            if abs(-s1 * ax + c1 * ay) > PLANE_TOLERANCE:      # approach . the plane's normal
                 reasons.add('approach direction not in the arm plane (a 5-joint arm cannot)')
                 continue
             r = sign * radial - _SHOULDER_R
-            z = wrist[2] - _SHOULDER_Z
+            z = wz - _SHOULDER_Z
             c3 = (r * r + z * z - _L2 * _L2 - _L3 * _L3) / (2 * _L2 * _L3)
             if c3 > 1 + 1e-12 or c3 < -1 - 1e-12:
                 reasons.add('out of reach')
                 continue
             c3 = max(-1.0, min(1.0, c3))
-            forward = np.array([math.cos(theta1), math.sin(theta1), 0.0])
-            psi = math.atan2(approach[2], float(approach @ forward))   # approach in the plane
+            psi = math.atan2(az, c1 * ax + s1 * ay)      # the approach in the plane
             for theta3 in {math.acos(c3), -math.acos(c3)}:
                 theta2 = math.atan2(z, r) - math.atan2(_L3 * math.sin(theta3),
                                                        _L2 + _L3 * math.cos(theta3))
                 theta4 = _wrap(psi - math.pi / 2 - theta2 - theta3)
-                q = np.array([theta1, _wrap(theta2), theta3, theta4, 0.0])
-                # theta5: the remaining rotation about the approach.
-                r04 = chain.fk(q)[:3, :3]
-                x_now, x_want = r04[:, 0], rot[:, 0]
-                q[4] = math.atan2(float(np.cross(x_now, x_want) @ approach),
-                                  float(x_now @ x_want))
-                candidates.append(_into_limits(q, chain))
+                q = [theta1, _wrap(theta2), theta3, theta4, 0.0]
+                # theta5: the remaining rotation about the approach, from the tool's x axis
+                # with joint 5 at zero (n) to the target's (x): atan2((n x x) . a, n . x).
+                pose = chain.fk_rows(q)
+                n = (pose[0], pose[4], pose[8])
+                cross_a = ((n[1] * r20 - n[2] * r10) * ax + (n[2] * r00 - n[0] * r20) * ay
+                           + (n[0] * r10 - n[1] * r00) * az)
+                q[4] = math.atan2(cross_a, n[0] * r00 + n[1] * r10 + n[2] * r20)
+                candidates.append(_into_limits(q, lower, upper))
     if not candidates:
         return IKResult(False, reason=' and '.join(sorted(reasons)) or 'no solution')
     valid = [q for q in candidates if q is not None]
     if not valid:
         return IKResult(False, reason='every solution violates the joint limits',
-                        candidates=[c for c in candidates if c is not None])
-    best = min(valid, key=lambda q: float(np.abs(q - seed).sum()))
-    reached = chain.fk(best)
-    pos_err = float(np.linalg.norm(reached[:3, 3] - p))
-    rot_err = float(np.linalg.norm(reached[:3, :3] - rot))
+                        candidates=[np.array(c) for c in candidates if c is not None])
+    best = min(valid, key=lambda q: sum(abs(a - b) for a, b in zip(q, seed)))
+    reached = chain.fk_rows(best)
+    wanted = (r00, r01, r02, px, r10, r11, r12, py, r20, r21, r22, pz)
+    pos_err = math.sqrt(sum((reached[k] - wanted[k]) ** 2 for k in (3, 7, 11)))
+    rot_err = math.sqrt(sum((reached[k] - wanted[k]) ** 2 for k in (0, 1, 2, 4, 5, 6, 8, 9, 10)))
+    valid = [np.array(q) for q in valid]
+    best = np.array(best)
     if pos_err > 1e-6 or rot_err > 1e-6:
         return IKResult(False, best, 'no exact solution for this pose', pos_err, rot_err,
                         valid)
     return IKResult(True, best, '', pos_err, rot_err, valid)
 
 
-def _into_limits(q: np.ndarray, chain: DHChain) -> Optional[np.ndarray]:
+def _into_limits(q: List[float], lower: List[float], upper: List[float]
+                 ) -> Optional[List[float]]:
     """The same pose with each angle shifted by 2 pi into its limits, or None if impossible."""
-    lower, upper = chain.limits
-    out = q.copy()
-    for i in range(len(q)):
+    out = list(q)
+    for i, value in enumerate(q):
         for shift in (0.0, 2 * math.pi, -2 * math.pi):
-            if lower[i] - 1e-9 <= q[i] + shift <= upper[i] + 1e-9:
-                out[i] = min(max(q[i] + shift, lower[i]), upper[i])
+            if lower[i] - 1e-9 <= value + shift <= upper[i] + 1e-9:
+                out[i] = min(max(value + shift, lower[i]), upper[i])
                 break
         else:
             return None
