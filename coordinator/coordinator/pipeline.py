@@ -29,6 +29,7 @@ from controllers.time_optimal import (SAMPLE_PERIOD_S, JointLimits, PlanError, T
                                       Waypoint, plan, timed_path)
 from controllers.transforms import matrix_to_quaternion
 from controllers.youbot_arm import ARM_BASE_IN_BASE_LINK_M
+from controllers.youbot_kinematics import YoubotKinematics
 from controllers import youbot_arm, zu12_arm
 from coordinator.layout import (PLATE_SLOTS_IN_BASE_M, PLATE_TOP_IN_BASE_M, CellLayout,
                                 slot_in_world, world_to_base)
@@ -971,34 +972,51 @@ class Transport(Machine):
         for drop_world in candidates:
             drop = world_to_base(pose, drop_world)
             drop[2] -= YOUBOT_BASE_Z_M
-            path = run.solve_tilted([hover, contact, *lift, drop + np.array([0.0, 0.0, 0.05]),
-                                     drop], np.array(seed, float))
+            # Over the drop, at least as high as the lift's top: a swing there keeps what is
+            # held over the plate's other materials where a joint motion from the lift's top
+            # straight down to a pool drop (lower than the plate) would swing it into the next
+            # one (campaign trial 31). Taken only when that is so (_lift).
+            over = drop.copy()
+            over[2] = max(drop[2] + 0.05, lift[-1][2])
+            path = run.solve_tilted([hover, contact, *lift, over, drop],
+                                    np.array(seed, float))
             if path is not None:
                 return UnloadPath(path[0], path[1], path[2:-2], path[-2], path[-1])
         return None
 
-    def _lift(self, obs: Observation, then: Sequence[Waypoint] = ()) -> Points:
+    def _lift(self, obs: Observation, then: Sequence[Waypoint] = (),
+              detour: Sequence[Waypoint] = (), m: Optional[Material] = None) -> Points:
         """The motion from the grip: the straight lift off the plate, timed along the line (a
         joint motion between its ends would swing the material into its neighbours), at rest
-        at its top, or going on from there through ``then``: at the speed, of those tried,
-        that ends soonest and keeps the joints within their limits."""
+        at its top, or going on from there through ``then`` (or ``detour`` where ``then``
+        would not keep ``m`` clear of the plate's other materials): at the speed, of those
+        tried, that ends soonest and keeps the joints within their limits."""
         run = self.run
         limits = run.limits('youbot')
-        best = None
-        for speed in (UNLOAD_LIFT_END_SPEEDS if then else (0.0,)):
-            lift = timed_path([obs.youbot_q, *self._carry.lift], limits,
-                              run.now + run.s.plan_latency, end_speed=speed,
-                              min_time=run.s.timing.lift)
-            try:
-                points = run.plan('youbot', obs.youbot_q, [*lift, *then])
-            except PlanError:
-                continue
-            within = all(np.all(np.abs(v) <= limits.velocity) for _, _, v, _ in points)
-            if within and (best is None or points[-1][0] < best[-1][0]):
-                best = points
-        if best is None:
-            raise PlanError('no motion off the plate within the joint limits')
-        return best
+        others = self._others(m)
+        for way in ((then, detour) if detour else (then,)):
+            best = None
+            for speed in (UNLOAD_LIFT_END_SPEEDS if way else (0.0,)):
+                lift = timed_path([obs.youbot_q, *self._carry.lift], limits,
+                                  run.now + run.s.plan_latency, end_speed=speed,
+                                  min_time=run.s.timing.lift)
+                try:
+                    points = run.plan('youbot', obs.youbot_q, [*lift, *way])
+                except PlanError:
+                    continue
+                within = all(np.all(np.abs(v) <= limits.velocity) for _, _, v, _ in points)
+                if (within and (best is None or points[-1][0] < best[-1][0])
+                        and clear_of_the_plate(points, others, run.layout.material_size)):
+                    best = points
+            if best is not None:
+                return best
+        raise PlanError('no motion off the plate within the joint limits and clear of the '
+                        'other materials')
+
+    def _others(self, m: Optional[Material]) -> List[Tuple[float, float]]:
+        """The plate slots of the materials on the plate but ``m``."""
+        return [PLATE_SLOTS_IN_BASE_M[o.slot] for o in self.run.materials.values()
+                if o.status == 'on_plate' and o.slot >= 0 and (m is None or o.id != m.id)]
 
     def _stand_pose(self, obs: Observation) -> Pose2D:
         """Where the base stands for its unloads: its drive's goal while it is on its way."""
@@ -1067,11 +1085,17 @@ class Transport(Machine):
             carry = [Waypoint(over, stop=False),
                      Waypoint(drop, hold=SETTLE_S, min_time=t.place_descend)]
         else:
-            # Let go over the pool, 14 cm up (4 cm over its walls): straight there.
+            # Let go over the pool, 14 cm up (4 cm over its walls): straight there, or over it
+            # first where the straight swing would not clear the plate's other materials.
             carry = [Waypoint(drop)]
+        detour = [Waypoint(over, stop=False), Waypoint(drop)]
         try:
-            points = (self._lift(obs, carry) if lift
-                      else run.plan('youbot', obs.youbot_q, carry))
+            if lift:
+                points = self._lift(obs, carry, detour, m)
+            else:       # (from the lift's top, where it waited for the base to stand)
+                points = run.plan('youbot', obs.youbot_q, carry)
+                if not clear_of_the_plate(points, self._others(m), run.layout.material_size):
+                    points = run.plan('youbot', obs.youbot_q, detour)
         except PlanError as exc:
             return self._unload_failed(obs, m, 'failed', f'unload: {exc}')
         self.move(TransportState.CARRY, obs, points)
@@ -1462,6 +1486,34 @@ YOUBOT_CARRY_Q = np.zeros(5)
 # The youBot's fingertips reach 10.4 mm beyond gripper_tcp: it grasps a material's top face with
 # the TCP this far above it, so that the fingertips do not push the material away.
 YOUBOT_GRASP_STANDOFF_M = 0.0104 + 0.002
+
+
+# What the youBot holds passes this far over the tops of the plate's other materials [m].
+PLATE_CLEARANCE_M = 0.01
+_YOUBOT_FK = YoubotKinematics('gripper_tcp')
+
+
+def clear_of_the_plate(points: Points, others: Sequence[Tuple[float, float]], size: float,
+                       steps: int = 8) -> bool:
+    """Whether a youBot motion (samples of time, positions, velocities, accelerations) keeps
+    the material it holds (gripped by its top face) ``PLATE_CLEARANCE_M`` over the materials
+    in the plate slots ``others`` wherever it passes over one: along the path the controller
+    follows between the samples (cubic in position and velocity)."""
+    if not others:
+        return True
+    tops = PLATE_TOP_IN_BASE_M + size + PLATE_CLEARANCE_M
+    reach = size + 0.005         # centre to centre, nearer than this in x and y: over it
+    for (t0, q0, v0, _), (t1, q1, v1, _) in zip(points, points[1:]):
+        h = t1 - t0
+        for x in np.linspace(0.0, 1.0, steps, endpoint=False):
+            q = ((2 * x**3 - 3 * x**2 + 1) * q0 + (x**3 - 2 * x**2 + x) * h * v0
+                 + (-2 * x**3 + 3 * x**2) * q1 + (x**3 - x**2) * h * v1)
+            px, py, pz = _YOUBOT_FK.fk(q)[:3, 3]
+            bottom = pz - YOUBOT_GRASP_STANDOFF_M - size
+            if bottom < tops and any(abs(px - sx) < reach and abs(py - sy) < reach
+                                     for sx, sy in others):
+                return False
+    return True
 
 
 def youbot_tool_quaternion(p: Sequence[float], tilt: float) -> Tuple[float, float, float, float]:

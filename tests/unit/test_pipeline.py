@@ -915,31 +915,49 @@ def _hermite(points, steps=8):
 @pytest.mark.parametrize('color', ['orange', 'blue'])
 def test_the_youbot_lifts_a_material_straight_off_its_plate_until_clear_of_its_neighbours(
         color):
-    """Plate slots are 1 cm apart. From every slot the material rises straight up, untilted,
-    until it is over its neighbours' tops, and only then swings to its drop (a joint motion
-    from the grip to the top of the lift swung it 2 cm sideways and tilted it 8 degrees)."""
-    from coordinator.layout import PLATE_SLOTS_IN_BASE_M
-    from coordinator.pipeline import Material
+    """Plate slots are 1 cm apart. From every slot, with every other slot full, the material
+    rises straight up, untilted, until it is over its neighbours' tops (a joint motion from the
+    grip to the top of the lift swung it 2 cm sideways and tilted it 8 degrees), and on its way
+    to the drop it passes over the other materials, never into them (a swing from the lift's
+    top down to a pool drop lower than the plate knocked one over: campaign trial 31)."""
+    from coordinator.layout import PLATE_SLOTS_IN_BASE_M, PLATE_TOP_IN_BASE_M
+    from coordinator.pipeline import YOUBOT_GRASP_STANDOFF_M, Material
     ports = _YoubotIK()
     layout = cell_layout()
     run = Pipeline(layout, ports, Settings())
     transport, size = run.transport, layout.material_size
-    for slot in range(len(PLATE_SLOTS_IN_BASE_M)):
-        m = Material(1, color, np.zeros(3), 0.0, 3, slot=slot)
+    slots = PLATE_SLOTS_IN_BASE_M
+    for slot in range(len(slots)):
+        run.materials = {k + 10: Material(k + 10, 'orange', np.zeros(3), 0.0, 3,
+                                          status='on_plate', slot=k)
+                         for k in range(len(slots)) if k != slot}
+        m = Material(1, color, np.zeros(3), 0.0, 3, status='on_plate', slot=slot)
+        run.materials[1] = m
         path = transport._unload_path(m, layout.stand_for(color, slot).pose, YOUBOT_CARRY_Q)
         assert path is not None
         transport._carry = path
         obs = Observation(0.0, np.zeros(6), path.contact.copy(), (0.0, 0.0, 0.0))
-        motion = transport._lift(obs, [Waypoint(path.drop)])
+        if color == 'blue':
+            motion = transport._lift(obs, [Waypoint(path.over, stop=False),
+                                           Waypoint(path.drop)], (), m)
+        else:
+            motion = transport._lift(obs, [Waypoint(path.drop)],
+                                     [Waypoint(path.over, stop=False), Waypoint(path.drop)], m)
         limits = run.limits('youbot')
         assert all(np.all(np.abs(v) <= limits.velocity) for _, _, v, _ in motion)
         grip = ports.kin.fk(path.contact)
         rose = False
         for q in _hermite(motion):
             tool = ports.kin.fk(q)
+            bottom = tool[2, 3] - YOUBOT_GRASP_STANDOFF_M - size
+            over = [k for k in range(len(slots)) if k != slot
+                    and abs(tool[0, 3] - slots[k][0]) < size + 0.004
+                    and abs(tool[1, 3] - slots[k][1]) < size + 0.004]
+            assert not over or bottom > PLATE_TOP_IN_BASE_M + size + 0.005, (slot, over)
             if tool[2, 3] - grip[2, 3] > size:
                 rose = True
-                break
+            if rose:
+                continue
             assert np.linalg.norm(tool[:2, 3] - grip[:2, 3]) < 0.001, slot
             tilt = np.arccos(np.clip((np.trace(grip[:3, :3].T @ tool[:3, :3]) - 1) / 2, -1, 1))
             assert np.degrees(tilt) < 0.5, slot
