@@ -63,10 +63,11 @@ class SimNode(Node):
             description='Lock-step: physics advances only on ~/step requests', read_only=True))
         self.declare_parameter('state_publish_rate', 100.0, float_range(
             'Rate of joint_states and odom [Hz of simulated time]', 0.1, 10000.0))
-        self.declare_parameter('clock_publish_rate', 100.0, float_range(
+        self.declare_parameter('clock_publish_rate', 0.0, float_range(
             'Rate of /clock [Hz of simulated time]; 0: after every physics step. Lock-step '
             'also publishes it at the end of every ~/step. Each message costs every node '
-            'with use_sim_time about a millisecond of CPU in rclpy', 0.0, 10000.0))
+            'with use_sim_time about a millisecond of CPU in rclpy; a node that plans ahead '
+            'in real time needs a fresh clock', 0.0, 10000.0))
         self.declare_parameter('max_speed', 0.2, float_range(
             'Linear speed limit (each of x, y) of bases whose world entry sets none [m/s]',
             1e-3, 10.0))

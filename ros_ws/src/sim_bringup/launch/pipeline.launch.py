@@ -11,7 +11,7 @@ and `/coordinator_node/events`. (ros2 launch is not installable from the package
 from launch import LaunchDescription
 from launch.actions import DeclareLaunchArgument
 from launch.conditions import IfCondition
-from launch.substitutions import LaunchConfiguration
+from launch.substitutions import LaunchConfiguration, PythonExpression
 from launch_ros.actions import Node
 from launch_ros.parameter_descriptions import ParameterValue
 
@@ -31,7 +31,11 @@ def generate_launch_description():
         Node(package='sim_bridge', executable='sim_node', output='screen',
              parameters=[{'world': 'package://sim_bridge/worlds/pipeline_cell.yaml',
                           'synchronous': sync, 'state_publish_rate': 30.0,
-                          'clock_publish_rate': 30.0,
+                          # Lock-step: /clock at the control rate (each costs every node with
+                          # sim time about a millisecond); real time: every step, fresh.
+                          'clock_publish_rate': ParameterValue(PythonExpression([
+                              "30.0 if '", LaunchConfiguration('synchronous'),
+                              "'.lower() == 'true' else 0.0"]), value_type=float),
                           'scenario_seed': seed, 'belt_speed': belt,
                           'real_time_factor': LaunchConfiguration('real_time_factor')}]),
         Node(package='perception', executable='vision_node', output='screen',
