@@ -984,8 +984,8 @@ class Transport(Machine):
                 return UnloadPath(path[0], path[1], path[2:-2], path[-2], path[-1])
         return None
 
-    def _lift(self, obs: Observation, then: Sequence[Waypoint] = (),
-              detour: Sequence[Waypoint] = (), m: Optional[Material] = None) -> Points:
+    def _lift(self, obs: Observation, m: Material, then: Sequence[Waypoint] = (),
+              detour: Sequence[Waypoint] = ()) -> Points:
         """The motion from the grip: the straight lift off the plate, timed along the line (a
         joint motion between its ends would swing the material into its neighbours), at rest
         at its top, or going on from there through ``then`` (or ``detour`` where ``then``
@@ -1013,10 +1013,10 @@ class Transport(Machine):
         raise PlanError('no motion off the plate within the joint limits and clear of the '
                         'other materials')
 
-    def _others(self, m: Optional[Material]) -> List[Tuple[float, float]]:
+    def _others(self, m: Material) -> List[Tuple[float, float]]:
         """The plate slots of the materials on the plate but ``m``."""
         return [PLATE_SLOTS_IN_BASE_M[o.slot] for o in self.run.materials.values()
-                if o.status == 'on_plate' and o.slot >= 0 and (m is None or o.id != m.id)]
+                if o.status == 'on_plate' and o.slot >= 0 and o.id != m.id]
 
     def _stand_pose(self, obs: Observation) -> Pose2D:
         """Where the base stands for its unloads: its drive's goal while it is on its way."""
@@ -1070,7 +1070,7 @@ class Transport(Machine):
             # Up clear of its neighbours, and held there until the base stands.
             self._drop_pending = True
             try:
-                return self.move(TransportState.CARRY, obs, self._lift(obs))
+                return self.move(TransportState.CARRY, obs, self._lift(obs, m))
             except PlanError as exc:
                 return self._unload_failed(obs, m, 'failed', f'unload: {exc}')
         self._carry_out(obs, m, self._carry.over, self._carry.drop, lift=True)
@@ -1091,7 +1091,7 @@ class Transport(Machine):
         detour = [Waypoint(over, stop=False), Waypoint(drop)]
         try:
             if lift:
-                points = self._lift(obs, carry, detour, m)
+                points = self._lift(obs, m, carry, detour)
             else:       # (from the lift's top, where it waited for the base to stand)
                 points = run.plan('youbot', obs.youbot_q, carry)
                 if not clear_of_the_plate(points, self._others(m), run.layout.material_size):

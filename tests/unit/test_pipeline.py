@@ -921,7 +921,7 @@ def test_the_youbot_lifts_a_material_straight_off_its_plate_until_clear_of_its_n
     to the drop it passes over the other materials, never into them (a swing from the lift's
     top down to a pool drop lower than the plate knocked one over: campaign trial 31)."""
     from coordinator.layout import PLATE_SLOTS_IN_BASE_M, PLATE_TOP_IN_BASE_M
-    from coordinator.pipeline import YOUBOT_GRASP_STANDOFF_M, Material
+    from coordinator.pipeline import YOUBOT_GRASP_STANDOFF_M, Material, clear_of_the_plate
     ports = _YoubotIK()
     layout = cell_layout()
     run = Pipeline(layout, ports, Settings())
@@ -938,11 +938,14 @@ def test_the_youbot_lifts_a_material_straight_off_its_plate_until_clear_of_its_n
         transport._carry = path
         obs = Observation(0.0, np.zeros(6), path.contact.copy(), (0.0, 0.0, 0.0))
         if color == 'blue':
-            motion = transport._lift(obs, [Waypoint(path.over, stop=False),
-                                           Waypoint(path.drop)], (), m)
+            motion = transport._lift(obs, m, [Waypoint(path.over, stop=False),
+                                              Waypoint(path.drop)])
         else:
-            motion = transport._lift(obs, [Waypoint(path.drop)],
-                                     [Waypoint(path.over, stop=False), Waypoint(path.drop)], m)
+            motion = transport._lift(obs, m, [Waypoint(path.drop)],
+                                     [Waypoint(path.over, stop=False), Waypoint(path.drop)])
+        # Held at the lift's top (the base still drives): straight up, clear of the others.
+        assert clear_of_the_plate(transport._lift(obs, m), [
+            slots[k] for k in range(len(slots)) if k != slot], size)
         limits = run.limits('youbot')
         assert all(np.all(np.abs(v) <= limits.velocity) for _, _, v, _ in motion)
         grip = ports.kin.fk(path.contact)
