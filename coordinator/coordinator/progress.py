@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import json
 import os
+import shutil
 import statistics
 from dataclasses import dataclass
 from pathlib import Path
@@ -85,3 +86,56 @@ def progress_line(done: int, planned: int, running: List[TrialProgress],
                        f'delivered ({p.loader}/{p.transport})' for p in running)
     return (f'[trials] {done}/{planned} done; ' + (trials or 'starting')
             + f'; ETA {format_duration(eta)}')
+
+
+def running_figures(results: Sequence[Dict], short: bool = False) -> str:
+    """The campaign's Table-2 figures so far: failures, median completion time, and the
+    identification, grasp and handling rates over the finished trials (``short``: for a
+    terminal's line)."""
+    scored = [r for r in results if 'identification_rate' in r]
+    failed = sum(1 for r in results if r.get('status') != 'completed')
+    done = [r['completion_time'] for r in results if r.get('status') == 'completed']
+    parts = [f'{failed} failed' if short else f'{failed} not completed']
+    if done:
+        parts.append(f'median {statistics.median(done):.1f} s')
+    if scored:
+        rates = [100 * statistics.mean(r[k] for r in scored) for k in (
+            'identification_rate', 'grasp_success_rate', 'handling_success_rate')]
+        parts.append(('ident {:.0f}% grasp {:.0f}% handling {:.0f}%' if short else
+                      'identification {:.1f} %, grasp {:.1f} %, handling {:.1f} %'
+                      ).format(*rates))
+    return '; '.join(parts)
+
+
+class CampaignBar:
+    """A live progress bar of a campaign on a terminal (tqdm): trials done of the plan, the
+    running trials' simulated time, failures so far, the running Table-2 figures, and the ETA
+    from the trials' own pace (tqdm's, from the finished count alone, would read hours for a
+    first trial that is nearly done)."""
+
+    def __init__(self, total: int, done: int, stream) -> None:
+        from tqdm import tqdm          # (only for a terminal: logs get lines)
+        # The terminal's size at the start (one that reports none: 120 x 24; tqdm hides a bar
+        # below a terminal's last line, and a size of 0 lines would hide it).
+        size = shutil.get_terminal_size((120, 24))
+        self._bar = tqdm(total=total, initial=done, file=stream, unit='trial',
+                         ncols=size.columns, nrows=size.lines,
+                         bar_format='{desc} {bar:12} {n_fmt}/{total_fmt}{postfix}')
+        self._bar.set_description_str('[trials]')
+        self._stream = stream
+
+    def update(self, results: Sequence[Dict], running: Sequence[TrialProgress],
+               eta: Optional[float], finished: int = 0) -> None:
+        # The ETA first, the running trials last (a narrow terminal cuts the end off).
+        trials = ', '.join(f'#{p.trial} {p.sim_time:.0f} s' for p in running)
+        self._bar.set_postfix_str(f'ETA {format_duration(eta)}; '
+                                  f'{running_figures(results, short=True)}; {trials or "-"}',
+                                  refresh=False)
+        self._bar.update(finished)
+
+    def write(self, line: str) -> None:
+        """A line above the bar (a finished trial)."""
+        self._bar.write(line, file=self._stream)
+
+    def close(self) -> None:
+        self._bar.close()

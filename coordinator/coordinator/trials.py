@@ -20,10 +20,10 @@ import threading
 import time
 from concurrent.futures import FIRST_COMPLETED, ThreadPoolExecutor, wait
 from pathlib import Path
-from typing import Dict, List, Optional, Sequence
+from typing import Dict, List, Optional, Sequence, Tuple
 
-from coordinator.progress import (TrialProgress, eta_seconds, progress_line,
-                                  read_progress)
+from coordinator.progress import (CampaignBar, TrialProgress, eta_seconds, progress_line,
+                                  read_progress, running_figures)
 
 WORLD = 'package://sim_bridge/worlds/pipeline_cell.yaml'
 CONTROL_RATE = 30.0
@@ -147,8 +147,8 @@ def run_trial(trial: int, seed: int, belt_speed: float, domain_id: int, out_dir:
 
 
 def _progress(out: Path, running: Dict[int, float], results: List[Dict], pending: int,
-              planned: int, parallel: int) -> str:
-    """One line: every running trial's simulated time and deliveries, and the campaign's ETA."""
+              parallel: int) -> Tuple[List[TrialProgress], Optional[float]]:
+    """Every running trial's simulated time and deliveries, and the campaign's ETA."""
     now, states = time.monotonic(), []
     for trial, since in sorted(running.items()):
         p = read_progress(out / f'trial_{trial:03d}' / PROGRESS_FILE) or {}
@@ -158,7 +158,7 @@ def _progress(out: Path, running: Dict[int, float], results: List[Dict], pending
     ok = [r for r in results if r['status'] == 'completed']
     eta = eta_seconds(states, [r['wall_time'] for r in results],
                       [r['completion_time'] for r in ok], pending, parallel)
-    return progress_line(len(results), planned, states, eta)
+    return states, eta
 
 
 def _wait_for_line(path: Path, text: str, timeout: float) -> bool:
@@ -319,7 +319,9 @@ def _main(argv: Optional[Sequence[str]]) -> int:
     parser.add_argument('--out', type=Path, default=None,
                         help='the campaign directory (runs/trials-<date>-<time>)')
     parser.add_argument('--progress-period', type=float, default=PROGRESS_PERIOD_S,
-                        help='wall seconds between progress lines')
+                        help='wall seconds between progress updates')
+    parser.add_argument('--bar', choices=('auto', 'on', 'off'), default='auto',
+                        help='a live progress bar (auto: on a terminal; else progress lines)')
     parser.add_argument('--report-only', action='store_true',
                         help='rebuild trials.csv and the report from the results in --out')
     parser.add_argument('--resume', nargs='?', const='', default=None, metavar='DIR',
@@ -362,6 +364,10 @@ def _main(argv: Optional[Sequence[str]]) -> int:
     (args.out / CAMPAIGN_FILE).write_text(json.dumps({'plan': opts, 'code': code}, indent=1))
     print(f'[trials] {len(plan)} trials, {args.parallel} at a time, into {args.out}', flush=True)
     total = len(plan) + len(results)
+    # On a terminal a live bar; in a log, a line now and then.
+    bar = (CampaignBar(total, len(results), sys.stderr)
+           if args.bar == 'on' or args.bar == 'auto' and sys.stderr.isatty() else None)
+    say = bar.write if bar is not None else (lambda line: print(line, flush=True))
     free = list(range(args.parallel))
     started = time.monotonic()
     running: Dict[int, float] = {}                   # trial -> when it started (monotonic)
@@ -383,8 +389,13 @@ def _main(argv: Optional[Sequence[str]]) -> int:
                 finished, _ = wait(futures, timeout=args.progress_period,
                                    return_when=FIRST_COMPLETED)
                 if not finished:
-                    print(_progress(args.out, running, results, len(pending), total,
-                                    args.parallel), flush=True)
+                    states, eta = _progress(args.out, running, results, len(pending),
+                                            args.parallel)
+                    if bar is not None:
+                        bar.update(results, states, eta)
+                    else:
+                        say(progress_line(len(results), total, states, eta) + '; '
+                            + running_figures(results))
                     continue
                 done = finished.pop()
                 free.append(futures.pop(done))
@@ -393,11 +404,14 @@ def _main(argv: Optional[Sequence[str]]) -> int:
                 results.append(r)
                 write_csv(results, args.out / 'trials.csv')      # partial results survive
                 elapsed = time.monotonic() - started
-                print(f'[trials] {len(results)}/{total} trial {r["trial"]} seed '
-                      f'{r["scenario_seed"]} belt {r["belt_speed"]:.3f}: {r["status"]}, '
-                      f'{r.get("completion_time", float("nan")):.1f} s sim, '
-                      f'handling {r.get("handling_success_rate", 0.0):.0%}, wall '
-                      f'{r["wall_time"]:.0f} s (elapsed {elapsed:.0f} s)', flush=True)
+                say(f'[trials] {len(results)}/{total} trial {r["trial"]} seed '
+                    f'{r["scenario_seed"]} belt {r["belt_speed"]:.3f}: {r["status"]}, '
+                    f'{r.get("completion_time", float("nan")):.1f} s sim, '
+                    f'handling {r.get("handling_success_rate", 0.0):.0%}, wall '
+                    f'{r["wall_time"]:.0f} s (elapsed {elapsed:.0f} s)')
+                if bar is not None:
+                    bar.update(results, *_progress(args.out, running, results, len(pending),
+                                                   args.parallel), finished=1)
                 if pending:
                     submit()
         except KeyboardInterrupt:
@@ -405,6 +419,9 @@ def _main(argv: Optional[Sequence[str]]) -> int:
             # pool then waits for nothing); what finished goes into the CSV and the report.
             _stop_all()
             interrupted = True
+        finally:
+            if bar is not None:
+                bar.close()
     write_csv(results, args.out / 'trials.csv')
     from coordinator.report import write_report
     setup = {'seed0': opts['seed0'], 'belt_speed': (lo, hi), 'parallel': args.parallel,
