@@ -85,27 +85,43 @@ def solve_ik(target: np.ndarray, q_seed: Optional[Sequence[float]] = None,
 
 def _arm(target: np.ndarray, q1: float, q5: float, q6: float, sign: float,
          chain: DHChain) -> Optional[np.ndarray]:
-    """q2, q3, q4 for the given q1, q5, q6 and elbow sign, or None if out of reach."""
+    """q2, q3, q4 for the given q1, q5, q6 and elbow sign, or None if out of reach: frame 4 in
+    frame 1 is T01^-1 T T56^-1 T45^-1 (multiplied out in floats)."""
     t01 = chain.joint_transform(0, q1)
-    t45 = chain.joint_transform(4, q5)
-    t56 = chain.joint_transform(5, q6)
-    t14 = np.linalg.inv(t01) @ target @ np.linalg.inv(t45 @ t56)
-    x, y = t14[0, 3], t14[1, 3]
+    t46 = chain.joint_transform(4, q5) @ chain.joint_transform(5, q6)
+    # Inverses of rigid transforms: (R, p)^-1 = (R^T, -R^T p).
+    r01, p01 = t01[:3, :3], t01[:3, 3]
+    r46, p46 = t46[:3, :3], t46[:3, 3]
+    r = r01.T @ target[:3, :3] @ r46.T
+    p = r01.T @ (target[:3, 3] - p01) - r @ p46
+    x, y = float(p[0]), float(p[1])
     c3 = (x * x + y * y - _A2 * _A2 - _A3 * _A3) / (2 * _A2 * _A3)
     if abs(c3) > 1.0 + 1e-9:
         return None
     q3 = sign * math.acos(max(-1.0, min(1.0, c3)))
     q2 = math.atan2(y, x) - math.atan2(_A3 * math.sin(q3), _A2 + _A3 * math.cos(q3))
-    q4 = math.atan2(t14[1, 0], t14[0, 0]) - q2 - q3
+    q4 = math.atan2(float(r[1, 0]), float(r[0, 0])) - q2 - q3
     return np.array([q1, q2, q3, q4, q5, q6])
 
 
 def _errors(chain: DHChain, q: np.ndarray, target: np.ndarray):
-    reached = chain.fk(q)
-    pos = float(np.linalg.norm(reached[:3, 3] - target[:3, 3]))
-    rel = reached[:3, :3].T @ target[:3, :3]
-    s = np.linalg.norm([rel[2, 1] - rel[1, 2], rel[0, 2] - rel[2, 0], rel[1, 0] - rel[0, 1]])
-    return pos, math.atan2(s / 2, (np.trace(rel) - 1) / 2)
+    """Position error [m] and rotation angle [rad] of the flange at ``q`` from ``target``
+    (float arithmetic on the FK's rows)."""
+    r00, r01, r02, px, r10, r11, r12, py, r20, r21, r22, pz = chain.fk_rows(q)
+    (t00, t01, t02, tx), (t10, t11, t12, ty), (t20, t21, t22, tz) = target[:3].tolist()
+    pos = math.sqrt((px - tx) ** 2 + (py - ty) ** 2 + (pz - tz) ** 2)
+    # rel = reached^T target: its trace and its skew part give the angle.
+    m00 = r00 * t00 + r10 * t10 + r20 * t20
+    m11 = r01 * t01 + r11 * t11 + r21 * t21
+    m22 = r02 * t02 + r12 * t12 + r22 * t22
+    m21 = r02 * t01 + r12 * t11 + r22 * t21
+    m12 = r01 * t02 + r11 * t12 + r21 * t22
+    m02 = r00 * t02 + r10 * t12 + r20 * t22
+    m20 = r02 * t00 + r12 * t10 + r22 * t20
+    m10 = r01 * t00 + r11 * t10 + r21 * t20
+    m01 = r00 * t01 + r10 * t11 + r20 * t21
+    s = math.sqrt((m21 - m12) ** 2 + (m02 - m20) ** 2 + (m10 - m01) ** 2)
+    return pos, math.atan2(s / 2, (m00 + m11 + m22 - 1) / 2)
 
 
 def _refine(chain: DHChain, target: np.ndarray, q: np.ndarray, iterations: int = 8
