@@ -9,9 +9,11 @@ from __future__ import annotations
 
 import argparse
 import io
+import shutil
 import sqlite3
 import struct
 import sys
+import tempfile
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Dict, Iterator, List, Optional, Tuple
@@ -123,9 +125,25 @@ def _scan_record(op: int, content: bytes, found: Recovered) -> None:
 
 
 def scan_sqlite(path: Path) -> Recovered:
+    """What a sqlite3 bag's database holds, as committed. A writer killed in a transaction
+    leaves a hot journal (or a write-ahead log) beside it that SQLite must roll back (or check)
+    before it reads, and it cannot in a read-only connection ("attempt to write a readonly
+    database"): the database is read from a copy made with those files, so the bag is left as
+    it was."""
     found = Recovered()
+    with tempfile.TemporaryDirectory(prefix='repair_') as scratch:
+        copy = Path(scratch) / path.name
+        for suffix in ('', '-journal', '-wal', '-shm'):
+            side = path.with_name(path.name + suffix)
+            if side.exists():
+                shutil.copyfile(side, copy.with_name(copy.name + suffix))
+        _scan_sqlite_copy(copy, path, found)
+    return found
+
+
+def _scan_sqlite_copy(copy: Path, path: Path, found: Recovered) -> None:
     try:
-        db = sqlite3.connect(f'file:{path}?mode=ro', uri=True)
+        db = sqlite3.connect(copy)
         defs = {row[0]: row[1] for row in db.execute(
             'SELECT topic_type, encoded_message_definition FROM message_definitions')}
         for tid, name, msgtype, qos in db.execute(
@@ -138,7 +156,6 @@ def scan_sqlite(path: Path) -> Recovered:
         db.close()
     except (sqlite3.DatabaseError, sqlite3.OperationalError) as exc:
         raise RepairError(f'{path}: {exc}') from None
-    return found
 
 
 def repair(bag: Path, output: Optional[Path] = None) -> Tuple[Path, int, bool]:
