@@ -37,6 +37,10 @@ class KinematicsConfigError(ValueError):
     """Parameters the node cannot run with."""
 
 
+# The longest motion a request may ask for [s] (a duration is sent as whole nanoseconds).
+MAX_MOTION_S = 3600.0
+
+
 class KinematicsNode(Node):
 
     def __init__(self, **kwargs) -> None:
@@ -150,8 +154,8 @@ class KinematicsNode(Node):
             return self._fail(f'bad target: {exc.args[0]}')
         if not np.all(np.isfinite(pose)):
             return self._fail('bad target: non-finite pose')
-        if not (np.isfinite(duration) and duration >= 0.0):
-            return self._fail(f'bad duration {duration}: must be >= 0')
+        if not (np.isfinite(duration) and 0.0 <= duration <= MAX_MOTION_S):
+            return self._fail(f'bad duration {duration}: must be within [0, {MAX_MOTION_S:g}] s')
         if not (np.isfinite(scaling) and 0.0 <= scaling <= 1.0):
             return self._fail(f'bad velocity_scaling {scaling}: must be within [0, 1]')
         if execute and self._positions is None:
@@ -172,10 +176,19 @@ class KinematicsNode(Node):
         if not execute:
             return True, 'solved', solution.positions, errors, None
         scaling = scaling or self.get_parameter('velocity_scaling').value
+        # The fastest the joints allow (the simulator refuses a motion faster than that).
+        fastest = motion_duration(self._positions, solution.positions,
+                                  self._kin.velocity_limits, 1.0, 0.0)
         if duration == 0.0:
             duration = motion_duration(self._positions, solution.positions,
                                        self._kin.velocity_limits, scaling,
                                        self.get_parameter('min_duration').value)
+            if duration > MAX_MOTION_S:
+                return self._fail(f'the motion would take {duration:.3g} s at velocity_scaling '
+                                  f'{scaling:g} (at most {MAX_MOTION_S:g} s)')
+        elif duration < fastest:
+            return self._fail(f'duration {duration:g} s is too short: the joints\' velocity '
+                              f'limits need at least {fastest:.3f} s for this motion')
         trajectory = _trajectory(self._kin.joint_names, solution.positions, duration)
         self._traj_pub.publish(trajectory)
         message = f'solved; moving there in {duration:.2f} s'
