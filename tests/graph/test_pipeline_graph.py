@@ -87,5 +87,6 @@ def test_a_real_time_run_delivers_every_material(start_node, tmp_path):
     r = json.loads(result.read_text())
     assert r['mode'] == 'real-time'
     assert r['status'] == 'completed', json.dumps({k: r.get(k) for k in (
-        'status', 'message', 'materials')}, indent=1)
+        'status', 'message', 'materials', 'odometry_age')}, indent=1) + ''.join(
+        f'\n{e}' for e in r['events'] if e[1] != 'state')
     assert r['handled_verified'] == 8 and r['identified_correct'] == 8

@@ -149,3 +149,62 @@ def test_commands_respect_the_limits():
 def test_key_poses_between_keeps_the_start_heading_for_via_points():
     keys = key_poses_between((0, 0, 0.5), (2, 0, 0.0), [(1, 1)])
     assert keys == [(0, 0, 0.5), (1, 1, 0.5), (2, 0, 0.0)]
+
+
+def _stand_to_stand():
+    """The youBot's turn between its two unload stands beside the pool, as the cell plans it."""
+    from coordinator.layout import layout_from_world
+    from coordinator.pipeline import Settings
+    from sim_bridge.world import resolve_resource
+    from sim_bridge.world_config import load_world
+    lay = layout_from_world(load_world(resolve_resource(
+        'package://sim_bridge/worlds/pipeline_cell.yaml')))
+    s, a, b = Settings(), lay.stand('pool_left').pose, lay.stand('pool_right').pose
+    return a, lambda: PathFollower(
+        BezierPath(key_poses_between(a, b, lay.via_turn)), 0.0, s.drive_speed, s.drive_accel,
+        PDGains(max_speed=s.base_max_speed, max_turn=s.base_max_turn),
+        turn=TurnLimits(s.drive_turn, s.drive_turn_accel))
+
+
+def test_the_lead_keeps_a_turning_base_on_its_path_when_commands_arrive_late():
+    """Commands that take effect 0.2 s after the odometry they answer (a real-time run on a
+    loaded machine): computed for the heading of 0.2 s ago while the base turns at 1.2 rad/s,
+    they carry it 10 cm off its path, and its corner into the pool's west wall (x = 2.08 m).
+    Predicted that far ahead, it stays within 2.5 cm of the dummy and 4 cm off the wall."""
+    start, follower = _stand_to_stand()
+
+    def east(poses):       # the easternmost point of the base's 0.57 m x 0.36 m box
+        return max(x + abs(math.cos(th)) * 0.285 + abs(math.sin(th)) * 0.18
+                   for x, _, th in poses)
+
+    poses, statuses = simulate_kinematic(follower(), start, dt=0.01, delay=0.2)
+    assert max(s.position_error for s in statuses) > 0.08 and east(poses) > 2.08
+    poses, statuses = simulate_kinematic(follower(), start, dt=0.01, delay=0.2, lead=0.2)
+    assert statuses[-1].finished
+    assert max(s.position_error for s in statuses) < 0.025 and east(poses) < 2.04
+    # Without a delay, the lead changes nothing.
+    base, _ = simulate_kinematic(follower(), start, dt=0.01)
+    assert east(base) < 2.04
+
+
+def test_the_drive_lead_is_the_trip_and_the_age_beyond_the_clock():
+    from controllers.path_follower import DriveLead
+    lead = DriveLead(trip=0.1, max_lead=0.3)
+    assert lead.lead(0.0) == pytest.approx(0.1)
+    assert lead.lead(0.05) == pytest.approx(0.15)
+    assert lead.lead(-0.5) == pytest.approx(0.1)           # a clock behind the stamp
+    assert lead.lead(float('nan')) == pytest.approx(0.1)
+    assert lead.lead(5.0) == 0.3
+    assert lead.summary() == {'samples': 5, 'median': 0.0, 'p99': pytest.approx(4.8, abs=0.01),
+                              'max': 5.0}
+
+
+def test_a_fixed_lead_is_safe_over_the_range_of_delays():
+    """The coordinator's 0.1 s, whatever the real delay (0 to 0.2 s): the base's corner stays
+    1 cm off the pool's wall, and it settles on its stand."""
+    start, follower = _stand_to_stand()
+    for delay in (0.0, 0.05, 0.1, 0.15, 0.2):
+        poses, statuses = simulate_kinematic(follower(), start, dt=0.01, delay=delay, lead=0.1)
+        east = max(x + abs(math.cos(th)) * 0.285 + abs(math.sin(th)) * 0.18
+                   for x, _, th in poses)
+        assert statuses[-1].finished and east < 2.07, delay
