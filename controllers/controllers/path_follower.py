@@ -179,8 +179,8 @@ class DriveLead:
     The receiver's clock cannot see all of the delay: a receiver that falls behind takes the
     clock's messages as late as the odometry's. Offline (``simulate_kinematic``, the turn
     between the youBot's stands), a fixed 0.1 s keeps the base within 5 cm of its path and
-    its corner at least 14 mm off the pool's wall for any loop delay up to 0.2 s; without a
-    lead, 0.2 s puts it 19 mm into the wall."""
+    its outline off the pool's wall for any loop delay up to 0.2 s (4 mm at 0.2 s); without a
+    lead, 0.2 s puts its wheels 31 mm into the wall."""
 
     def __init__(self, trip: float = 0.1, max_lead: float = 0.3) -> None:
         self.trip, self.max_lead = trip, max_lead

@@ -155,11 +155,14 @@ def layout_from_world(world) -> CellLayout:
     # The youBot unloads from two stands west of the pool, side-on to it (Mecanum: it can stand
     # any way round): facing south (the pool on its left, the platform ahead on the left) for
     # the left row of its plate and the platform, then facing north (the pool on its right) for
-    # the right row. Its side (0.18 m from base_link) stays 5 cm off the pool's west wall. Each
+    # the right row. Its wheels (0.209 m from base_link; its side 0.18 m) stay 3.1 cm off the
+    # pool's west wall (its face 2 cm inside wall_x): at 2.1 cm, the base's overshoot on a
+    # loaded machine touched it (real time: 1.5 cm and 3 degrees past the stand); each
+    # centimetre further costs a run about 0.25 s (the arm reaches further). Each
     # orange has its own drop spot, 7-15 cm inside the wall and 10 cm from the next: a cube
     # dropped onto another can tumble back over the wall.
     wall_x = px - half
-    side_x = wall_x - 0.25
+    side_x = wall_x - 0.26
     top = platform.position[2] + platform.size[2] / 2
     place = np.array([platform.position[0] - platform.size[0] / 2 + 0.05, platform.position[1],
                       top])
@@ -181,9 +184,11 @@ def layout_from_world(world) -> CellLayout:
         youbot_home=home, zu12_base=(zu.x, zu.y, zu.z, zu.yaw), platform_place=place,
         stands=(left, right),
         # Out: down to the first stand from the north-west (never east of it, so never
-        # nearer the wall), facing south as it parks; between the stands it turns about 0.3 m
-        # off the wall (its corners sweep 0.34 m about base_link); back home it turns round on
-        # the way.
-        via_out=((side_x - 0.1, py + 0.55, -math.pi / 2),),
+        # nearer the wall), facing south as it parks: through a point 15 cm west of it, from
+        # which the path comes in along the wall (from 10 cm, it bowed 1 cm past the stand
+        # towards the wall, and 2 cm more with 0.2 s of delay between odometry and command);
+        # between the stands it turns about 0.3 m off the wall (its corners sweep 0.34 m
+        # about base_link); back home it turns round on the way.
+        via_out=((side_x - 0.15, py + 0.55, -math.pi / 2),),
         via_turn=((side_x - 0.3, py - 0.12, 0.0),),
         via_back=((0.5 * (home[0] + side_x), 0.5 * (home[1] + right.pose[1]), 0.0),))
