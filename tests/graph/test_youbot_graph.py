@@ -66,16 +66,29 @@ def _pose2d(msg):
                                      (0.15, -0.1, 0.3)],
                          ids=['vx', 'vy', 'wz', 'combined'])
 def test_base_odometry_follows_cmd_vel(youbot_sim, probe, command):
+    """The base moves as the command it takes says, over the longest stretch (at least 1.2 s)
+    in which its wheels held that command (``cmd_vel_out``), from 0.15 s after they reached it.
+    Paced at 2x, this test's sender, starved for 0.25 s of wall time on a busy machine, misses
+    the command timeout, and the base rightly stops until the next command: that stretch is
+    the sender's, not the base's, and is not judged."""
     base = Base(probe)
+    applied = probe.collect(TwistStamped, '/youbot/cmd_vel_out')
     assert probe.call(Trigger, '/sim_node/reset', Trigger.Request()).success
     t_cmd = base.now()
     base.hold(command, 2.8)
-    # A 2 s window of the commanded motion, after 0.4 s of start-up.
-    window = [m for _, m in list(base.odom)
-              if t_cmd + 0.4 <= stamp_s(m.header.stamp) <= t_cmd + 2.4 + 1e-9]
+    wait_for(lambda: applied and stamp_s(applied[-1][1].header.stamp) >= t_cmd + 2.8, 10.0,
+             what='the stop in cmd_vel_out')
+    changes = sorted((stamp_s(m.header.stamp), (m.twist.linear.x, m.twist.linear.y,
+                                                m.twist.angular.z)) for _, m in list(applied))
+    held = [(t, t_next) for (t, c), (t_next, _) in zip(changes, changes[1:])
+            if t >= t_cmd and np.allclose(c, command, atol=1e-9)]
+    start, end = max(held, key=lambda span: span[1] - span[0])
+    start, end = start + 0.15, min(end, t_cmd + 2.8)
+    assert end - start >= 1.2, (held, command)
+    window = [m for _, m in list(base.odom) if start <= stamp_s(m.header.stamp) <= end]
     first, last = window[0], window[-1]
     duration = stamp_s(last.header.stamp) - stamp_s(first.header.stamp)
-    assert duration == pytest.approx(2.0, abs=0.02)
+    assert duration == pytest.approx(end - start, abs=0.02)
     twist = np.mean([(m.twist.twist.linear.x, m.twist.twist.linear.y, m.twist.twist.angular.z)
                      for m in window], axis=0)
     e = tracking_errors(command, duration, _pose2d(first), _pose2d(last), tuple(twist), K)
