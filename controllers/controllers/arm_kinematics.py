@@ -14,7 +14,7 @@ from typing import Callable, Dict, Optional, Sequence
 import numpy as np
 
 from controllers.dh_chain import DHChain, IKResult
-from controllers.transforms import rotation_angle
+from controllers.transforms import pose_distance
 
 Solver = Callable[[np.ndarray, Optional[np.ndarray], DHChain], IKResult]
 Convert = Callable[[Sequence[float]], np.ndarray]
@@ -70,7 +70,8 @@ class ArmKinematics:
         """Joint positions that put the tool frame at ``target`` (4x4 in base_link), nearest
         to ``seed``; a failure names why (out of reach, orientation, limits)."""
         target = np.asarray(target, float)
-        if target.shape != (4, 4) or not np.all(np.isfinite(target)):
+        # The sum is finite only if every element is (inf - inf and NaN give NaN).
+        if target.shape != (4, 4) or not math.isfinite(float(target.sum())):
             return ArmSolution(False, reason='target must be a finite 4x4 pose')
         flange = self._base_inv @ target @ self._tool_inv
         seed_chain = None if seed is None else self._to_chain(seed)
@@ -79,21 +80,34 @@ class ArmKinematics:
             return ArmSolution(False, reason=result.reason)
         q = result.q
         if self.min_frame_height is not None:
-            clear = [c for c in result.candidates if self._clear(c)]
-            if not clear:
+            # The solver checked its answer; the others are checked here before use.
+            ref = seed_chain if seed_chain is not None else np.zeros(self.chain.dof)
+            order = sorted(result.candidates[1:], key=lambda c: float(np.abs(c - ref).sum()))
+            q = next((c for c in [result.q] + order if self.above_floor(c) and (
+                c is result.q or self._reaches(c, flange))), None)
+            if q is None:
                 return ArmSolution(False, reason='every solution puts the arm below '
                                                  f'{self.min_frame_height} m (the floor)')
-            ref = seed_chain if seed_chain is not None else np.zeros(self.chain.dof)
-            q = min(clear, key=lambda c: float(np.abs(c - ref).sum()))
-        positions = self._from_chain(q)
-        reached = self.fk(positions)
-        return ArmSolution(True, positions, '',
-                           float(np.linalg.norm(reached[:3, 3] - target[:3, 3])),
-                           rotation_angle(reached[:3, :3].T @ target[:3, :3]))
+        reached = self._base @ self.chain.fk(q) @ self._tool
+        return ArmSolution(True, self._from_chain(q), '',
+                           *pose_distance(reached.tolist(), target.tolist()))
 
-    def _clear(self, q_chain: np.ndarray) -> bool:
-        heights = [(self._base @ f)[2, 3] for f in self.chain.frames(q_chain)[1:]]
-        return min(heights) >= self.min_frame_height
+    def _reaches(self, q_chain: np.ndarray, flange: np.ndarray, tol: float = 1e-6) -> bool:
+        reached = self.chain.fk(q_chain)
+        return bool(np.abs(reached - flange).max() < tol)
+
+    def above_floor(self, q_chain: np.ndarray) -> bool:
+        """Every joint frame above frame 1, and the tool frame, at least min_frame_height
+        above base_link's floor (the tool's origin: the flange's, plus the chain's tool)."""
+        if self.chain.has_tool:
+            points = [f[:3, 3] for f in self.chain.frames(q_chain)[1:]]
+        else:
+            points = []
+            self.chain.fk_rows(q_chain, points)
+            points = points[1:]
+        b20, b21, b22, b23 = self._base[2].tolist()
+        return min(b20 * x + b21 * y + b22 * z for x, y, z in points) + b23 >= \
+            self.min_frame_height
 
     def within_limits(self, positions: Sequence[float], tol: float = 1e-9) -> bool:
         q = np.asarray(positions, float)

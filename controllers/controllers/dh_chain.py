@@ -83,6 +83,11 @@ class DHChain:
     def limits(self) -> Tuple[np.ndarray, np.ndarray]:
         return (np.array([r.lower for r in self.rows]), np.array([r.upper for r in self.rows]))
 
+    @cached_property
+    def limit_lists(self) -> Tuple[List[float], List[float]]:
+        """The limits as lists of floats, for solvers in float arithmetic (do not modify)."""
+        return [r.lower for r in self.rows], [r.upper for r in self.rows]
+
     def within_limits(self, q: Sequence[float], tol: float = 1e-9) -> bool:
         lower, upper = self.limits
         q = np.asarray(q, float)
@@ -114,39 +119,57 @@ class DHChain:
         r00, r01, r02, px, r10, r11, r12, py, r20, r21, r22, pz = self.fk_rows(q)
         pose = np.array(((r00, r01, r02, px), (r10, r11, r12, py), (r20, r21, r22, pz),
                          (0.0, 0.0, 0.0, 1.0)))
-        return pose if not self.has_tool else pose @ np.asarray(self.tool)
+        return pose if not self.has_tool else pose @ self._tool_matrix
 
-    def fk_rows(self, q: Sequence[float]) -> Tuple[float, ...]:
+    def fk_rows(self, q: Sequence[float], origins: Optional[list] = None
+                ) -> Tuple[float, ...]:
         """The flange's pose (before the tool) as the 12 floats of its top three rows, row by
-        row: for callers that do their own float arithmetic (the analytic IK)."""
+        row: for callers that do their own float arithmetic (the analytic IK). ``origins``, a
+        list, receives the base-frame origin (x, y, z) of every joint frame 1..n."""
         values = self._values(q)
-        modified = self.convention == MODIFIED
-        r00, r01, r02, r10, r11, r12, r20, r21, r22 = 1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0
+        # The rotation's columns (x0.., x1.., x2..) and the origin, right-multiplied joint by
+        # joint: RotX and RotZ mix two columns, TransX and TransZ add a column to the origin.
+        x0, y0, z0, x1, y1, z1, x2, y2, z2 = 1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0
         px = py = pz = 0.0
-        for (ca, sa, a, d, offset), qi in zip(self._constants, values):
+        modified = self.convention == MODIFIED
+        for (ca, sa, a, d, offset, twisted), qi in zip(self._constants, values):
             ct, st = math.cos(qi + offset), math.sin(qi + offset)
             if modified:     # RotX(alpha) TransX(a) RotZ(theta) TransZ(d)
-                l00, l01, l02, lx = ct, -st, 0.0, a
-                l10, l11, l12, ly = ca * st, ca * ct, -sa, -sa * d
-                l20, l21, l22, lz = sa * st, sa * ct, ca, ca * d
+                if twisted:
+                    x1, y1, z1, x2, y2, z2 = (ca * x1 + sa * x2, ca * y1 + sa * y2,
+                                              ca * z1 + sa * z2, ca * x2 - sa * x1,
+                                              ca * y2 - sa * y1, ca * z2 - sa * z1)
+                if a:
+                    px, py, pz = px + a * x0, py + a * y0, pz + a * z0
+                x0, y0, z0, x1, y1, z1 = (ct * x0 + st * x1, ct * y0 + st * y1,
+                                          ct * z0 + st * z1, ct * x1 - st * x0,
+                                          ct * y1 - st * y0, ct * z1 - st * z0)
+                if d:
+                    px, py, pz = px + d * x2, py + d * y2, pz + d * z2
             else:            # RotZ(theta) TransZ(d) TransX(a) RotX(alpha)
-                l00, l01, l02, lx = ct, -st * ca, st * sa, a * ct
-                l10, l11, l12, ly = st, ct * ca, -ct * sa, a * st
-                l20, l21, l22, lz = 0.0, sa, ca, d
-            px, py, pz = (r00 * lx + r01 * ly + r02 * lz + px, r10 * lx + r11 * ly + r12 * lz + py,
-                          r20 * lx + r21 * ly + r22 * lz + pz)
-            r00, r01, r02, r10, r11, r12, r20, r21, r22 = (
-                r00 * l00 + r01 * l10 + r02 * l20, r00 * l01 + r01 * l11 + r02 * l21,
-                r00 * l02 + r01 * l12 + r02 * l22, r10 * l00 + r11 * l10 + r12 * l20,
-                r10 * l01 + r11 * l11 + r12 * l21, r10 * l02 + r11 * l12 + r12 * l22,
-                r20 * l00 + r21 * l10 + r22 * l20, r20 * l01 + r21 * l11 + r22 * l21,
-                r20 * l02 + r21 * l12 + r22 * l22)
-        return r00, r01, r02, px, r10, r11, r12, py, r20, r21, r22, pz
+                x0, y0, z0, x1, y1, z1 = (ct * x0 + st * x1, ct * y0 + st * y1,
+                                          ct * z0 + st * z1, ct * x1 - st * x0,
+                                          ct * y1 - st * y0, ct * z1 - st * z0)
+                if d:
+                    px, py, pz = px + d * x2, py + d * y2, pz + d * z2
+                if a:
+                    px, py, pz = px + a * x0, py + a * y0, pz + a * z0
+                if twisted:
+                    x1, y1, z1, x2, y2, z2 = (ca * x1 + sa * x2, ca * y1 + sa * y2,
+                                              ca * z1 + sa * z2, ca * x2 - sa * x1,
+                                              ca * y2 - sa * y1, ca * z2 - sa * z1)
+            if origins is not None:
+                origins.append((px, py, pz))
+        return x0, x1, x2, px, y0, y1, y2, py, z0, z1, z2, pz
 
     @cached_property
-    def _constants(self) -> Tuple[Tuple[float, float, float, float, float], ...]:
-        return tuple((math.cos(r.alpha), math.sin(r.alpha), r.a, r.d, r.theta_offset)
-                     for r in self.rows)
+    def _constants(self) -> Tuple[Tuple[float, float, float, float, float, bool], ...]:
+        return tuple((math.cos(r.alpha), math.sin(r.alpha), r.a, r.d, r.theta_offset,
+                      r.alpha != 0.0) for r in self.rows)
+
+    @cached_property
+    def _tool_matrix(self) -> np.ndarray:
+        return np.asarray(self.tool, float)
 
     @cached_property
     def has_tool(self) -> bool:
@@ -156,7 +179,8 @@ class DHChain:
     def _values(self, q: Sequence[float]) -> List[float]:
         """``q`` as floats, checked as ``_check`` does (without numpy's overhead)."""
         try:
-            values = [float(v) for v in q]
+            values = q.tolist() if isinstance(q, np.ndarray) and q.ndim == 1 else \
+                [float(v) for v in q]
         except TypeError:
             raise ValueError(f'expected {self.dof} joint values, got {q!r}') from None
         if len(values) != self.dof or getattr(q, 'ndim', 1) != 1:

@@ -19,6 +19,7 @@ from controllers.youbot_arm import youbot_arm_chain
 _SHOULDER_R, _SHOULDER_Z = 0.033, 0.147     # joint 2's axis in the arm plane
 _L2, _L3, _WRIST = 0.155, 0.135, 0.113       # links 2 and 3, joint 4 to the flange
 PLANE_TOLERANCE = 1e-6                       # |approach . plane normal| accepted
+_TWO_PI = 2 * math.pi
 
 
 def _wrap(a: float) -> float:
@@ -33,10 +34,11 @@ def solve_ik(target: np.ndarray, q_seed: Optional[Sequence[float]] = None,
     if chain.has_tool:
         raise ValueError('solve_ik solves for the flange: give it a chain without a tool')
     target = np.asarray(target, float)
-    if target.shape != (4, 4) or not np.all(np.isfinite(target)):
+    rows = target.tolist() if target.shape == (4, 4) else None
+    if rows is None or not all(math.isfinite(v) for row in rows for v in row):
         return IKResult(False, reason='target must be a finite 4x4 pose')
     seed = [0.0] * 5 if q_seed is None else [float(v) for v in q_seed]
-    (r00, r01, r02, px), (r10, r11, r12, py), (r20, r21, r22, pz), _ = target.tolist()
+    (r00, r01, r02, px), (r10, r11, r12, py), (r20, r21, r22, pz), _ = rows
     ax, ay, az = r02, r12, r22                        # the approach (tool z)
     wx, wy, wz = px - _WRIST * ax, py - _WRIST * ay, pz - _WRIST * az
     radial = math.hypot(wx, wy)
@@ -45,8 +47,7 @@ def solve_ik(target: np.ndarray, q_seed: Optional[Sequence[float]] = None,
     else:  # wrist centre on joint 1's axis: the plane follows the approach, or the seed
         horizontal = math.hypot(ax, ay)
         bases = [math.atan2(ay, ax) if horizontal > 1e-9 else seed[0]]
-    lower, upper = chain.limits
-    lower, upper = lower.tolist(), upper.tolist()
+    lower, upper = chain.limit_lists
     candidates, reasons = [], set()
     for base in bases:
         for theta1, sign in ((base, 1.0), (_wrap(base + math.pi), -1.0)):
@@ -61,20 +62,23 @@ def solve_ik(target: np.ndarray, q_seed: Optional[Sequence[float]] = None,
                 reasons.add('out of reach')
                 continue
             c3 = max(-1.0, min(1.0, c3))
-            psi = math.atan2(az, c1 * ax + s1 * ay)      # the approach in the plane
-            for theta3 in {math.acos(c3), -math.acos(c3)}:
+            along = c1 * ax + s1 * ay                     # the approach in the plane
+            psi = math.atan2(az, along)
+            # theta5: the remaining rotation about the approach, from the tool's x axis with
+            # joint 5 at zero (n) to the target's (x): atan2((n x x) . a, n . x). With
+            # phi = theta2 + theta3 + theta4 = psi - pi/2, n = x4 = (c1 cos phi, s1 cos phi,
+            # sin phi) and (cos phi, sin phi) = (az, -along) for a unit approach in the plane.
+            n0, n1, n2 = c1 * az, s1 * az, -along
+            cross_a = ((n1 * r20 - n2 * r10) * ax + (n2 * r00 - n0 * r20) * ay
+                       + (n0 * r10 - n1 * r00) * az)
+            theta5 = math.atan2(cross_a, n0 * r00 + n1 * r10 + n2 * r20)
+            elbow = math.acos(c3)
+            for theta3 in ((elbow, -elbow) if elbow else (elbow,)):
                 theta2 = math.atan2(z, r) - math.atan2(_L3 * math.sin(theta3),
                                                        _L2 + _L3 * math.cos(theta3))
                 theta4 = _wrap(psi - math.pi / 2 - theta2 - theta3)
-                q = [theta1, _wrap(theta2), theta3, theta4, 0.0]
-                # theta5: the remaining rotation about the approach, from the tool's x axis
-                # with joint 5 at zero (n) to the target's (x): atan2((n x x) . a, n . x).
-                pose = chain.fk_rows(q)
-                n = (pose[0], pose[4], pose[8])
-                cross_a = ((n[1] * r20 - n[2] * r10) * ax + (n[2] * r00 - n[0] * r20) * ay
-                           + (n[0] * r10 - n[1] * r00) * az)
-                q[4] = math.atan2(cross_a, n[0] * r00 + n[1] * r10 + n[2] * r20)
-                candidates.append(_into_limits(q, lower, upper))
+                candidates.append(_into_limits([theta1, _wrap(theta2), theta3, theta4, theta5],
+                                               lower, upper))
     if not candidates:
         return IKResult(False, reason=' and '.join(sorted(reasons)) or 'no solution')
     valid = [q for q in candidates if q is not None]
@@ -97,12 +101,15 @@ def solve_ik(target: np.ndarray, q_seed: Optional[Sequence[float]] = None,
 def _into_limits(q: List[float], lower: List[float], upper: List[float]
                  ) -> Optional[List[float]]:
     """The same pose with each angle shifted by 2 pi into its limits, or None if impossible."""
-    out = list(q)
-    for i, value in enumerate(q):
-        for shift in (0.0, 2 * math.pi, -2 * math.pi):
-            if lower[i] - 1e-9 <= value + shift <= upper[i] + 1e-9:
-                out[i] = min(max(value + shift, lower[i]), upper[i])
-                break
-        else:
-            return None
+    out = []
+    for value, lo, hi in zip(q, lower, upper):
+        lo_tol, hi_tol = lo - 1e-9, hi + 1e-9
+        if not lo_tol <= value <= hi_tol:
+            if lo_tol <= value + _TWO_PI <= hi_tol:
+                value += _TWO_PI
+            elif lo_tol <= value - _TWO_PI <= hi_tol:
+                value -= _TWO_PI
+            else:
+                return None
+        out.append(lo if value < lo else hi if value > hi else value)
     return out

@@ -129,3 +129,34 @@ def test_kinematics_with_the_suction_tool_and_the_world_frame():
     assert (base @ kin.fk(result.positions))[:3, 3] == pytest.approx((1.6, -0.2, 0.3), abs=1e-9)
     with pytest.raises(KeyError):
         Zu12Kinematics().in_base_link('world', target_world)
+
+
+def test_the_floor_check_sees_every_joint_frame_above_the_shoulder():
+    """above_floor (float arithmetic) against the joint frames multiplied out in numpy."""
+    kin = Zu12Kinematics()
+    lower, upper = kin.chain.limits
+    rng = np.random.default_rng(8)
+    verdicts = set()
+    for _ in range(500):
+        q = rng.uniform(lower, upper)
+        lowest = min(f[2, 3] for f in kin.chain.frames(q)[1:])
+        assert kin.above_floor(q) == (lowest >= kin.min_frame_height)
+        verdicts.add(kin.above_floor(q))
+    assert verdicts == {True, False}
+
+
+def test_ik_never_answers_with_an_arm_through_the_floor():
+    kin = Zu12Kinematics()
+    lower, upper = kin.chain.limits
+    rng = np.random.default_rng(9)
+    answered = 0
+    for _ in range(300):
+        target = kin.fk(rng.uniform(lower, upper))
+        result = kin.ik(target, rng.uniform(lower, upper))
+        if result.success:
+            answered += 1
+            assert kin.above_floor(result.positions)
+            assert result.position_error < 1e-9 and result.rotation_error < 1e-9
+        else:
+            assert 'floor' in result.reason or 'limits' in result.reason, result.reason
+    assert answered > 100
