@@ -12,9 +12,11 @@ demo: setup
 demo-mini: setup
 	@bash scripts/demo_mini_robot.sh
 
-# The paper's Table 2 over many seeded trials: make trials TRIALS=100 PARALLEL=2
+# The paper's Table 2 over many seeded trials: make trials TRIALS=100 PARALLEL=2; on a Ray
+# cluster: make trials TRIALS=110 RAY=auto (README: "A campaign on a Ray cluster").
 trials: setup
-	@bash -c 'source scripts/env.sh && run_trials --trials $${TRIALS:-10} --parallel $${PARALLEL:-1}'
+	@bash -c 'source scripts/env.sh && run_trials --trials $${TRIALS:-10} \
+	  $${PARALLEL:+--parallel $$PARALLEL} $${RAY:+--ray $$RAY}'
 
 test: setup
 	@bash scripts/test.sh

@@ -195,13 +195,16 @@ def write_report(trials: List[Dict], out_dir: Path, setup: Dict) -> Path:
                               for m in t.get('materials', []) if m.get('failure'))
                   for t in bad]
         lines.append('')
-    lines += ['Definitions: identification = materials whose track had their true colour / 8; '
-              'grasp = successful grasps / attempts (both arms); handling = materials resting at '
-              'their destination at the end (checked against the simulator\'s ground truth) / '
-              '8. Split: the Zu 12\'s grasp = its successful picks / pick attempts; the youBot\'s '
-              'transport = materials loaded onto its plate that rest at their destination / '
-              'materials loaded onto its plate; completion time = simulated seconds until both '
-              'robots are back home. The '
+    totals = sorted({int(t['total']) for t in trials if t.get('total')}) or [8]
+    per = '/'.join(map(str, totals))
+    lines += [f'Definitions: identification = materials whose track had their true colour / '
+              f'{per} (the materials of a trial); grasp = successful grasps / attempts (both '
+              'arms); handling = materials resting at their destination at the end (checked '
+              f'against the simulator\'s ground truth) / {per}. Split: the Zu 12\'s grasp = '
+              'its successful picks / pick attempts; the youBot\'s transport = materials '
+              'loaded onto its plate that rest at their destination / materials loaded onto '
+              'its plate; completion time = simulated seconds until both robots are back '
+              'home. The '
               "paper's last row prints 10 % handling (a typo for 100 %, by the rows before it).",
               '', '![completion times](completion_times.png) ![success rates](success_rates.png)'
               ' ![youBot paths](youbot_paths.png)', '']

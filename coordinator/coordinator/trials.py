@@ -10,17 +10,21 @@ from __future__ import annotations
 
 import argparse
 import csv
+import ctypes
+import fcntl
 import json
 import os
 import random
 import signal
 import subprocess
 import sys
+import tempfile
 import threading
 import time
 from concurrent.futures import FIRST_COMPLETED, ThreadPoolExecutor, wait
+from contextlib import contextmanager
 from pathlib import Path
-from typing import Dict, List, Optional, Sequence, Tuple
+from typing import Dict, Iterator, List, Optional, Sequence, Tuple
 
 from coordinator.progress import (CampaignBar, TrialProgress, eta_seconds, progress_line,
                                   read_progress, running_figures)
@@ -29,6 +33,11 @@ WORLD = 'package://sim_bridge/worlds/pipeline_cell.yaml'
 CONTROL_RATE = 30.0
 PROGRESS_FILE = 'progress.json'
 PROGRESS_PERIOD_S = 10.0     # wall seconds between two progress lines
+# The highest DDS domain id (Fast DDS's ports for 233 and above exceed 65535 on Linux).
+MAX_DOMAIN = 232
+# Lock files that keep two trials on one machine off the same domain (run_trials processes,
+# Ray workers): one per domain, held while a trial runs.
+DOMAIN_LOCK_DIR = Path(tempfile.gettempdir()) / 'run_trials-domains'
 # Process groups of the trials running now (stopped when the runner is interrupted).
 _ACTIVE_GROUPS: set = set()
 # Set when the user stops the campaign: a trial stopped then has no result of its own.
@@ -61,9 +70,10 @@ def code_version() -> str:
 
 
 def trial_commands(seed: int, belt_speed: float, result_file: Path,
-                   record_dir: Optional[Path] = None) -> Dict[str, List[str]]:
+                   record_dir: Optional[Path] = None, world: str = WORLD
+                   ) -> Dict[str, List[str]]:
     """The processes of one lock-step trial (executables as installed by the workspace)."""
-    sim = ['sim_node', '--ros-args', '-p', f'world:={WORLD}', '-p', 'synchronous:=true',
+    sim = ['sim_node', '--ros-args', '-p', f'world:={world}', '-p', 'synchronous:=true',
            '-p', f'state_publish_rate:={CONTROL_RATE}',
            '-p', f'clock_publish_rate:={CONTROL_RATE}', '-p', f'scenario_seed:={seed}',
            '-p', f'belt_speed:={belt_speed}', '-p', 'max_speed:=0.8', '-p', 'max_turn:=1.5']
@@ -86,14 +96,15 @@ def trial_commands(seed: int, belt_speed: float, result_file: Path,
         'coordinator_node': ['coordinator_node', '--ros-args', '-p', 'use_sim_time:=true',
                              '-p', 'synchronous:=true', '-p', f'control_rate:={CONTROL_RATE}',
                              '-p', f'belt_speed:={belt_speed}', '-p', f'scenario_seed:={seed}',
-                             '-p', f'result_file:={result_file}', '-p',
+                             '-p', f'world:={world}', '-p', f'result_file:={result_file}', '-p',
                              f'progress_file:={result_file.with_name(PROGRESS_FILE)}'],
     })
     return commands
 
 
 def run_trial(trial: int, seed: int, belt_speed: float, domain_id: int, out_dir: Path,
-              wall_timeout: float = 900.0, record: bool = False, code: str = '') -> Dict:
+              wall_timeout: float = 900.0, record: bool = False, code: str = '',
+              world: str = WORLD) -> Dict:
     """One trial as a process group; returns its result (or a failure record)."""
     trial_dir = out_dir / f'trial_{trial:03d}'
     trial_dir.mkdir(parents=True, exist_ok=True)
@@ -103,7 +114,8 @@ def run_trial(trial: int, seed: int, belt_speed: float, domain_id: int, out_dir:
     env = {**os.environ, 'ROS_DOMAIN_ID': str(domain_id),
            'ROS_AUTOMATIC_DISCOVERY_RANGE': os.environ.get('ROS_AUTOMATIC_DISCOVERY_RANGE',
                                                            'LOCALHOST')}
-    commands = trial_commands(seed, belt_speed, result_file, trial_dir if record else None)
+    commands = trial_commands(seed, belt_speed, result_file, trial_dir if record else None,
+                              world)
     procs: Dict[str, subprocess.Popen] = {}
     cpu: Dict[str, float] = {}
     group: Optional[int] = None
@@ -116,7 +128,10 @@ def run_trial(trial: int, seed: int, belt_speed: float, domain_id: int, out_dir:
             procs[name] = subprocess.Popen(
                 argv, stdout=log, stderr=subprocess.STDOUT, env=env,
                 # One process group per trial: stopped together, never mixed with another.
-                process_group=0 if group is None else group)
+                process_group=0 if group is None else group,
+                # Killed with this thread if the runner is (a Ray worker killed with its node
+                # or its driver): a trial never outlives what started it.
+                preexec_fn=_die_with_parent)
             log.close()
             group = procs[name].pid if group is None else group
             _ACTIVE_GROUPS.add(group)
@@ -146,19 +161,107 @@ def run_trial(trial: int, seed: int, belt_speed: float, domain_id: int, out_dir:
     return result
 
 
-def _progress(out: Path, running: Dict[int, float], results: List[Dict], pending: int,
-              parallel: int) -> Tuple[List[TrialProgress], Optional[float]]:
+@contextmanager
+def domain_lease(first: int) -> Iterator[int]:
+    """The first DDS domain from ``first`` on that no other trial on this machine holds, held
+    (by an advisory lock on a file per domain) until the block ends; a crashed holder's lock
+    goes with its process."""
+    DOMAIN_LOCK_DIR.mkdir(mode=0o777, parents=True, exist_ok=True)
+    for domain in range(first, MAX_DOMAIN + 1):
+        lock = open(DOMAIN_LOCK_DIR / f'{domain}.lock', 'a')
+        try:
+            fcntl.flock(lock, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except OSError:
+            lock.close()
+            continue
+        try:
+            yield domain
+        finally:
+            lock.close()               # (releases the lock)
+        return
+    raise RuntimeError(f'no free DDS domain in {first}-{MAX_DOMAIN} on this machine')
+
+
+def run_leased_trial(item: Dict, out_dir: Path, options: Dict) -> Dict:
+    """``run_trial`` for a plan item on a DDS domain of its own (``options``: domain_base,
+    wall_timeout, record, code, world)."""
+    opts = dict(options)
+    with domain_lease(opts.pop('domain_base')) as domain:
+        return run_trial(item['trial'], item['seed'], item['belt_speed'], domain, out_dir,
+                         **opts)
+
+
+class LocalPool:
+    """Trials as process groups on this machine, ``parallel`` at a time."""
+
+    def __init__(self, parallel: int, out: Path, options: Dict) -> None:
+        self.capacity, self._out, self._options = parallel, out, options
+        self._pool = ThreadPoolExecutor(parallel)
+        self._futures: Dict = {}
+        self.running: Dict[int, float] = {}          # trial -> when it started (monotonic)
+
+    def describe(self) -> str:
+        return f'{self.capacity} at a time'
+
+    def has_room(self) -> bool:
+        return len(self._futures) < self.capacity
+
+    def busy(self) -> bool:
+        return bool(self._futures)
+
+    def submit(self, item: Dict) -> None:
+        self.running[item['trial']] = time.monotonic()
+        self._futures[self._pool.submit(run_leased_trial, item, self._out,
+                                        self._options)] = item
+
+    def wait(self, timeout: float) -> Optional[Dict]:
+        """The next finished trial's result, or None after ``timeout`` seconds."""
+        finished, _ = wait(self._futures, timeout=timeout, return_when=FIRST_COMPLETED)
+        if not finished:
+            return None
+        done = finished.pop()
+        item = self._futures.pop(done)
+        self.running.pop(item['trial'], None)
+        return done.result()
+
+    def progress(self) -> Dict[int, Dict]:
+        """The running trials' progress files, by trial."""
+        return {trial: read_progress(self._out / f'trial_{trial:03d}' / PROGRESS_FILE)
+                for trial in self.running}
+
+    def stop(self) -> None:
+        """Kill the running trials at once (their results read 'interrupted')."""
+        _stop_all()
+
+    def close(self) -> None:
+        self._pool.shutdown(wait=True)
+
+
+def _progress(pool, results: List[Dict], pending: int
+              ) -> Tuple[List[TrialProgress], Optional[float]]:
     """Every running trial's simulated time and deliveries, and the campaign's ETA."""
     now, states = time.monotonic(), []
-    for trial, since in sorted(running.items()):
-        p = read_progress(out / f'trial_{trial:03d}' / PROGRESS_FILE) or {}
+    reports = pool.progress()
+    for trial, since in sorted(pool.running.items()):
+        p = reports.get(trial) or {}
         states.append(TrialProgress(trial, float(p.get('sim_time', 0.0)),
                                     int(p.get('delivered', 0)), int(p.get('total', 0)),
                                     now - since, p.get('loader', '-'), p.get('transport', '-')))
     ok = [r for r in results if r['status'] == 'completed']
     eta = eta_seconds(states, [r['wall_time'] for r in results],
-                      [r['completion_time'] for r in ok], pending, parallel)
+                      [r['completion_time'] for r in ok], pending, pool.capacity)
     return states, eta
+
+
+# Linux's prctl, looked up here: a child between fork and exec must not load libraries.
+_PRCTL = ctypes.CDLL(None, use_errno=True).prctl if sys.platform.startswith('linux') else None
+
+
+def _die_with_parent() -> None:
+    """(In the child, before exec) SIGKILL when the thread that started it ends (Linux's
+    PR_SET_PDEATHSIG, kept across exec)."""
+    if _PRCTL is not None:
+        _PRCTL(1, signal.SIGKILL)                       # 1: PR_SET_PDEATHSIG
 
 
 def _wait_for_line(path: Path, text: str, timeout: float) -> bool:
@@ -183,12 +286,12 @@ def _cpu_seconds(pid: int) -> float:
 def _stop_group(group: Optional[int], procs: Dict[str, subprocess.Popen]) -> None:
     if group is None:
         return
-    for sig, wait in ((signal.SIGINT, 10.0), (signal.SIGKILL, 5.0)):
+    for sig, grace in ((signal.SIGINT, 10.0), (signal.SIGKILL, 5.0)):
         try:
             os.killpg(group, sig)
         except ProcessLookupError:
             return
-        end = time.monotonic() + wait
+        end = time.monotonic() + grace
         while time.monotonic() < end and any(p.poll() is None for p in procs.values()):
             time.sleep(0.05)
         if all(p.poll() is not None for p in procs.values()):
@@ -276,7 +379,7 @@ def _stop_all() -> None:
 # The options that define a campaign's plan, and their defaults. A campaign keeps them in
 # its directory (CAMPAIGN_FILE), so that ``--resume DIR`` needs nothing else.
 PLAN_DEFAULTS = {'trials': 10, 'seed0': 2026, 'seeds': None, 'first_trial': 0,
-                 'belt_speed': [0.10, 0.16]}
+                 'belt_speed': [0.10, 0.16], 'world': WORLD}
 CAMPAIGN_FILE = 'campaign.json'
 
 
@@ -302,8 +405,9 @@ def _plan_options(args: argparse.Namespace, parser: argparse.ArgumentParser) -> 
 def _main(argv: Optional[Sequence[str]]) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument('--trials', type=int, default=None, help='trials in the plan (10)')
-    parser.add_argument('--parallel', type=int, default=1,
-                        help='trials at once (each a process group on its own DDS domain)')
+    parser.add_argument('--parallel', type=int, default=None,
+                        help='trials at once (each a process group on its own DDS domain); '
+                             '1, or with --ray as many as the cluster has CPUs for')
     parser.add_argument('--seed0', type=int, default=None, help='seeds the trial plan (2026)')
     parser.add_argument('--seeds', type=int, nargs='+', default=None,
                         help='run exactly these scenario seeds (instead of --trials drawn ones)')
@@ -312,8 +416,20 @@ def _main(argv: Optional[Sequence[str]]) -> int:
     parser.add_argument('--belt-speed', type=float, nargs=2, default=None,
                         metavar=('LO', 'HI'), help='belt speed range [m/s] (0.10 0.16)')
     parser.add_argument('--domain-base', type=int, default=int(os.environ.get(
-        'TRIALS_DOMAIN_BASE', '200')), help='trial k uses domain base + worker index (200 '
-        'on: apart from the test suite, 1-159, and the demos, 160-199)')
+        'TRIALS_DOMAIN_BASE', '200')), help='a trial takes the first DDS domain from here on '
+        'that no other trial on its machine holds (200 on: apart from the test suite, 1-159, '
+        'and the demos, 160-199)')
+    parser.add_argument('--ray', nargs='?', const='', default=None, metavar='ADDRESS',
+                        help='run each trial as a task on a Ray cluster: ADDRESS as ray.init '
+                             'takes it (auto, HOST:6379, ray://HOST:10001); without it, the '
+                             'cluster of RAY_ADDRESS or one started on this machine')
+    parser.add_argument('--cpus-per-trial', type=float, default=None,
+                        help='with --ray: the CPUs a trial takes on its node (1)')
+    parser.add_argument('--collect-bags', action='store_true',
+                        help='with --ray --record: copy each bag to --out (else it stays on '
+                             'the worker that recorded it, named in the result)')
+    parser.add_argument('--world', default=None,
+                        help=f'the cell\'s world file, for sim_node and the coordinator ({WORLD})')
     parser.add_argument('--wall-timeout', type=float, default=900.0)
     parser.add_argument('--record', action='store_true', help='record a bag per trial')
     parser.add_argument('--out', type=Path, default=None,
@@ -341,13 +457,21 @@ def _main(argv: Optional[Sequence[str]]) -> int:
     if args.report_only:
         return _rebuild(args.out)
     opts = _plan_options(args, parser)
-    if opts['trials'] < 1 or args.parallel < 1:
+    if opts['trials'] < 1 or args.parallel is not None and args.parallel < 1:
         parser.error('--trials and --parallel must be >= 1')
     lo, hi = opts['belt_speed']
     if not 0.0 < lo <= hi <= 0.5:
         parser.error('--belt-speed needs 0 < LO <= HI <= 0.5')
-    if args.domain_base + args.parallel > 232:
-        parser.error('--domain-base + --parallel must stay within DDS domain 232')
+    if not 0 <= args.domain_base <= MAX_DOMAIN:
+        parser.error(f'--domain-base must be a DDS domain, 0-{MAX_DOMAIN}')
+    if args.ray is None and (args.domain_base + (args.parallel or 1) - 1 > MAX_DOMAIN):
+        parser.error(f'--domain-base + --parallel must stay within DDS domain {MAX_DOMAIN}')
+    if args.ray is None and (args.collect_bags or args.cpus_per_trial is not None):
+        parser.error('--collect-bags and --cpus-per-trial go with --ray')
+    if args.collect_bags and not args.record:
+        parser.error('--collect-bags needs --record')
+    if args.cpus_per_trial is not None and args.cpus_per_trial <= 0:
+        parser.error('--cpus-per-trial must be > 0')
     args.out.mkdir(parents=True, exist_ok=True)
     plan = trial_plan(opts['trials'], opts['first_trial'], opts['seed0'], (lo, hi))
     if opts['seeds'] is not None:
@@ -362,69 +486,66 @@ def _main(argv: Optional[Sequence[str]]) -> int:
         print(f'[trials] resuming: {len(done)} trials of the plan already in {args.out} '
               f'made by this code ({code})', flush=True)
     (args.out / CAMPAIGN_FILE).write_text(json.dumps({'plan': opts, 'code': code}, indent=1))
-    print(f'[trials] {len(plan)} trials, {args.parallel} at a time, into {args.out}', flush=True)
+    trial_options = {'wall_timeout': args.wall_timeout, 'record': args.record, 'code': code,
+                     'world': opts['world'], 'domain_base': args.domain_base}
+    if args.ray is None:
+        pool = LocalPool(args.parallel or 1, args.out, trial_options)
+    else:
+        from coordinator.trials_ray import RayPool   # Ray is imported only with --ray
+        try:
+            pool = RayPool(args.ray or None, args.out, trial_options, args.cpus_per_trial,
+                           args.collect_bags, args.parallel)
+        except Exception as exc:                     # (Ray's errors have no common base)
+            print(f'[trials] cannot use the Ray cluster {args.ray or "(local)"}: {exc}',
+                  file=sys.stderr, flush=True)
+            return 2
+    print(f'[trials] {len(plan)} trials, {pool.describe()}, into {args.out}', flush=True)
     total = len(plan) + len(results)
     # On a terminal a live bar; in a log, a line now and then.
     bar = (CampaignBar(total, len(results), sys.stderr)
            if args.bar == 'on' or args.bar == 'auto' and sys.stderr.isatty() else None)
     say = bar.write if bar is not None else (lambda line: print(line, flush=True))
-    free = list(range(args.parallel))
     started = time.monotonic()
-    running: Dict[int, float] = {}                   # trial -> when it started (monotonic)
     interrupted = False
-    with ThreadPoolExecutor(args.parallel) as pool:
-        futures = {}
-        pending = list(plan)
-
-        def submit() -> None:
-            item, worker = pending.pop(0), free.pop(0)
-            running[item['trial']] = time.monotonic()
-            futures[pool.submit(run_trial, item['trial'], item['seed'], item['belt_speed'],
-                                args.domain_base + worker, args.out, args.wall_timeout,
-                                args.record, code)] = worker
-        try:
-            while pending and free:
-                submit()
-            while futures:
-                finished, _ = wait(futures, timeout=args.progress_period,
-                                   return_when=FIRST_COMPLETED)
-                if not finished:
-                    states, eta = _progress(args.out, running, results, len(pending),
-                                            args.parallel)
-                    if bar is not None:
-                        bar.update(results, states, eta)
-                    else:
-                        say(progress_line(len(results), total, states, eta) + '; '
-                            + running_figures(results))
-                    continue
-                done = finished.pop()
-                free.append(futures.pop(done))
-                r = done.result()
-                running.pop(r['trial'], None)
-                results.append(r)
-                write_csv(results, args.out / 'trials.csv')      # partial results survive
-                elapsed = time.monotonic() - started
-                say(f'[trials] {len(results)}/{total} trial {r["trial"]} seed '
-                    f'{r["scenario_seed"]} belt {r["belt_speed"]:.3f}: {r["status"]}, '
-                    f'{r.get("completion_time", float("nan")):.1f} s sim, '
-                    f'handling {r.get("handling_success_rate", 0.0):.0%}, wall '
-                    f'{r["wall_time"]:.0f} s (elapsed {elapsed:.0f} s)')
+    pending = list(plan)
+    try:
+        while pending and pool.has_room():
+            pool.submit(pending.pop(0))
+        while pool.busy():
+            r = pool.wait(args.progress_period)
+            if r is None:
+                states, eta = _progress(pool, results, len(pending))
                 if bar is not None:
-                    bar.update(results, *_progress(args.out, running, results, len(pending),
-                                                   args.parallel), finished=1)
-                if pending:
-                    submit()
-        except KeyboardInterrupt:
-            # Stopped by the user (Ctrl-C, SIGTERM): the running trials are killed at once (the
-            # pool then waits for nothing); what finished goes into the CSV and the report.
-            _stop_all()
-            interrupted = True
-        finally:
+                    bar.update(results, states, eta)
+                else:
+                    say(progress_line(len(results), total, states, eta) + '; '
+                        + running_figures(results))
+                continue
+            results.append(r)
+            write_csv(results, args.out / 'trials.csv')      # partial results survive
+            elapsed = time.monotonic() - started
+            where = f' on {r["node"]}' if 'node' in r else ''
+            say(f'[trials] {len(results)}/{total} trial {r["trial"]} seed '
+                f'{r["scenario_seed"]} belt {r["belt_speed"]:.3f}: {r["status"]}, '
+                f'{r.get("completion_time", float("nan")):.1f} s sim, '
+                f'handling {r.get("handling_success_rate", 0.0):.0%}, wall '
+                f'{r["wall_time"]:.0f} s{where} (elapsed {elapsed:.0f} s)')
             if bar is not None:
-                bar.close()
+                bar.update(results, *_progress(pool, results, len(pending)), finished=1)
+            while pending and pool.has_room():
+                pool.submit(pending.pop(0))
+    except KeyboardInterrupt:
+        # Stopped by the user (Ctrl-C, SIGTERM): the running trials are stopped at once; what
+        # finished goes into the CSV and the report.
+        pool.stop()
+        interrupted = True
+    finally:
+        pool.close()
+        if bar is not None:
+            bar.close()
     write_csv(results, args.out / 'trials.csv')
     from coordinator.report import write_report
-    setup = {'seed0': opts['seed0'], 'belt_speed': (lo, hi), 'parallel': args.parallel,
+    setup = {'seed0': opts['seed0'], 'belt_speed': (lo, hi), 'parallel': pool.capacity,
              'wall_time': time.monotonic() - started, 'code': code}
     if interrupted:
         setup['note'] = (f'Interrupted: {len(results)} of the {total} trials of the plan '

@@ -171,7 +171,8 @@ def test_an_interrupted_campaign_goes_on_where_it_stopped(tmp_path, monkeypatch)
             'status': status, 'completion_time': 60.0, 'wall_time': 100.0, 'code': code}))
     ran = []
 
-    def fake_trial(trial, seed, belt_speed, domain_id, out_dir, wall_timeout, record, code):
+    def fake_trial(trial, seed, belt_speed, domain_id, out_dir, wall_timeout, record, code,
+                   world):
         assert code == 'abc123'
         ran.append(trial)
         return {'trial': trial, 'scenario_seed': seed, 'belt_speed': belt_speed,
@@ -198,7 +199,8 @@ def test_a_campaign_stopped_by_the_user_keeps_a_report_and_resumes_with_its_plan
     monkeypatch.setattr(trials, 'code_version', lambda: 'abc123')
     ran, reports = [], []
 
-    def fake_trial(trial, seed, belt_speed, domain_id, out_dir, wall_timeout, record, code):
+    def fake_trial(trial, seed, belt_speed, domain_id, out_dir, wall_timeout, record, code,
+                   world):
         if trial == 1 and not ran.count(1):
             ran.append(1)
             raise KeyboardInterrupt          # (the user's Ctrl-C, as the pool passes it on)
@@ -232,6 +234,37 @@ def test_a_campaign_stopped_by_the_user_keeps_a_report_and_resumes_with_its_plan
             sorted(results, key=lambda r: r['trial'])] == [
         (p['trial'], p['seed'], p['belt_speed']) for p in plan]
     assert 'note' not in setup
+
+
+def test_trials_on_one_machine_never_share_a_dds_domain(tmp_path, monkeypatch):
+    """A lease is the first domain from the base that no other holder has, across processes,
+    and comes free when its holder ends (even a killed one)."""
+    import subprocess
+    import sys
+    import coordinator.trials as trials
+    monkeypatch.setattr(trials, 'DOMAIN_LOCK_DIR', tmp_path)
+    with trials.domain_lease(150) as first, trials.domain_lease(150) as second:
+        assert (first, second) == (150, 151)
+        holder = subprocess.Popen([sys.executable, '-c', (
+            'import sys, time, coordinator.trials as t, pathlib\n'
+            f't.DOMAIN_LOCK_DIR = pathlib.Path({str(tmp_path)!r})\n'
+            'with t.domain_lease(150) as d:\n'
+            '    print(d, flush=True); time.sleep(60)')], stdout=subprocess.PIPE, text=True)
+        try:
+            assert holder.stdout.readline().strip() == '152'
+            with trials.domain_lease(150) as fourth:
+                assert fourth == 153
+        finally:
+            holder.kill()
+            holder.wait()
+        with trials.domain_lease(150) as freed:         # the killed holder's domain
+            assert freed == 152
+    with trials.domain_lease(150) as again:
+        assert again == 150
+    with trials.domain_lease(trials.MAX_DOMAIN) as last:
+        with pytest.raises(RuntimeError, match='no free DDS domain'):
+            with trials.domain_lease(last):
+                pass
 
 
 def test_the_code_version_names_the_commit_and_uncommitted_code_changes(tmp_path):

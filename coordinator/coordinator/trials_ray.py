@@ -1,0 +1,200 @@
+"""Trials as Ray tasks (``run_trials --ray [ADDRESS]``): a campaign spread over a cluster.
+
+Each trial is one task that reserves ``--cpus-per-trial`` CPUs on whichever node runs it. There
+it takes a DDS domain no other trial on that node holds (``domain_lease``), keeps discovery to
+localhost, and runs the trial's process group as ``run_trials`` does on one machine. The task
+returns the result and the trial's files (logs, events, result); the driver writes them into
+its own campaign directory. A bag stays on the worker, named in the result, unless
+``--collect-bags``.
+
+Every node needs this project's workspace at the driver's commit, and Ray started from a shell
+that sourced ``scripts/env.sh`` (the tasks start ``sim_node`` and the other executables from
+PATH, with that environment). A node with other code refuses its trials, since its results
+would not be comparable.
+
+This module is imported only with ``--ray``.
+"""
+from __future__ import annotations
+
+import json
+import shutil
+import signal
+import socket
+import tempfile
+import threading
+import time
+from pathlib import Path
+from typing import Dict, List, Optional, Tuple
+
+import ray
+
+from coordinator.progress import read_progress
+from coordinator.trials import PROGRESS_FILE, code_version, run_leased_trial
+
+# Where a worker keeps its trials' directories: <tmp>/run_trials/<campaign>/trial_NNN.
+WORKER_ROOT = 'run_trials'
+# Wall seconds between two progress reports of a running trial.
+PROGRESS_PERIOD_S = 2.0
+# Wall seconds that the driver gives cancelled tasks to stop their process groups.
+CANCEL_GRACE_S = 30.0
+
+
+@ray.remote(num_cpus=0)
+class ProgressBoard:
+    """The running trials' progress as their tasks report it (the driver cannot read the
+    progress files on the workers)."""
+
+    def __init__(self) -> None:
+        self._reports: Dict[int, Dict] = {}
+
+    def report(self, trial: int, progress: Optional[Dict]) -> None:
+        if progress is None:
+            self._reports.pop(trial, None)
+        else:
+            self._reports[trial] = progress
+
+    def snapshot(self) -> Dict[int, Dict]:
+        return dict(self._reports)
+
+
+def _report_progress(board, trial: int, path: Path, done: threading.Event) -> None:
+    """Send the trial's progress file to the board every PROGRESS_PERIOD_S until ``done``."""
+    while not done.wait(PROGRESS_PERIOD_S):
+        progress = read_progress(path)
+        if progress is not None:
+            board.report.remote(trial, progress)
+    board.report.remote(trial, None)
+
+
+def run_trial_task(item: Dict, campaign: str, options: Dict, collect_bags: bool, board=None
+                   ) -> Tuple[Dict, Dict[str, bytes]]:
+    """One trial on this node (a Ray task): its result, with where it ran, and its files by
+    path within the trial's directory."""
+    host = socket.gethostname()
+    failure = {'trial': item['trial'], 'scenario_seed': item['seed'],
+               'belt_speed': item['belt_speed'], 'status': 'error',
+               'completion_time': float('nan'), 'wall_time': 0.0, 'node': host}
+    if shutil.which('sim_node') is None:
+        return {**failure, 'message': f'sim_node is not on PATH on {host}: start Ray there from '
+                'a shell that sourced scripts/env.sh'}, {}
+    code = code_version()
+    if code != options['code']:
+        return {**failure, 'message': f'{host} runs code {code}, the driver {options["code"]}: '
+                'check out and build the same commit on every node'}, {}
+    work = Path(tempfile.gettempdir()) / WORKER_ROOT / campaign
+    trial_dir = work / f'trial_{item["trial"]:03d}'
+    done = threading.Event()
+    if board is not None:
+        threading.Thread(target=_report_progress, daemon=True,
+                         args=(board, item['trial'], trial_dir / PROGRESS_FILE, done)).start()
+    try:
+        result = run_leased_trial(item, work, options)
+    finally:
+        done.set()
+    files = {}
+    for path in sorted(trial_dir.rglob('*')):
+        relative = path.relative_to(trial_dir)
+        if path.is_file() and (collect_bags or relative.parts[0] != 'bag'):
+            files[str(relative)] = path.read_bytes()
+    result.update(node=host, ray_node=ray.get_runtime_context().get_node_id())
+    if options['record'] and not collect_bags:
+        result['bag'] = f'{host}:{trial_dir / "bag"}'
+    else:
+        shutil.rmtree(trial_dir, ignore_errors=True)
+    return result, files
+
+
+class RayPool:
+    """Trials as tasks on a Ray cluster, as many at a time as its CPUs allow (or ``limit``)."""
+
+    def __init__(self, address: Optional[str], out: Path, options: Dict,
+                 cpus_per_trial: Optional[float] = None, collect_bags: bool = False,
+                 limit: Optional[int] = None) -> None:
+        on_term = signal.getsignal(signal.SIGTERM)
+        ray.init(address=address, logging_level='warning', log_to_driver=False,
+                 configure_logging=True)
+        signal.signal(signal.SIGTERM, on_term)   # (ray.init takes SIGTERM: SIGTERM stops a
+        #                                          campaign as Ctrl-C does)
+        self._out, self._options, self._collect = out, options, collect_bags
+        self._cpus = cpus_per_trial or 1.0
+        self._task = ray.remote(num_cpus=self._cpus, max_retries=0)(run_trial_task)
+        # The campaign's name on the workers: unique per driver run.
+        self._campaign = f'{out.resolve().name}-{socket.gethostname()}-{time.time_ns()}'
+        self._limit = limit
+        self._final_capacity: Optional[int] = None     # once disconnected
+        self._board = ProgressBoard.remote()
+        self._refs: Dict = {}                          # ObjectRef -> plan item
+        self.running: Dict[int, float] = {}            # trial -> when it was submitted
+
+    @property
+    def capacity(self) -> int:
+        """Trials the cluster runs at once now (its CPUs, which may grow or shrink)."""
+        if self._final_capacity is not None:
+            return self._final_capacity
+        slots = int(ray.cluster_resources().get('CPU', 0.0) // self._cpus)
+        return max(1, min(slots, self._limit) if self._limit else slots)
+
+    def describe(self) -> str:
+        nodes = [n for n in ray.nodes() if n.get('Alive')]
+        return (f'on a Ray cluster of {len(nodes)} node(s), {self.capacity} at a time '
+                f'({self._cpus:g} CPU per trial)')
+
+    def has_room(self) -> bool:
+        return len(self._refs) < self.capacity
+
+    def busy(self) -> bool:
+        return bool(self._refs)
+
+    def submit(self, item: Dict) -> None:
+        self.running[item['trial']] = time.monotonic()
+        ref = self._task.remote(item, self._campaign, self._options, self._collect,
+                                self._board)
+        self._refs[ref] = item
+
+    def wait(self, timeout: float) -> Optional[Dict]:
+        """The next finished trial's result (its files written into the campaign directory),
+        or None after ``timeout`` seconds."""
+        ready, _ = ray.wait(list(self._refs), num_returns=1, timeout=timeout)
+        if not ready:
+            return None
+        item = self._refs.pop(ready[0])
+        self.running.pop(item['trial'], None)
+        try:
+            result, files = ray.get(ready[0])
+        except ray.exceptions.RayError as exc:        # the task or its node failed
+            result, files = {'trial': item['trial'], 'scenario_seed': item['seed'],
+                             'belt_speed': item['belt_speed'], 'status': 'error',
+                             'completion_time': float('nan'), 'wall_time': 0.0,
+                             'message': f'the Ray task failed: {exc}'.splitlines()[0]}, {}
+        self._write(item['trial'], result, files)
+        return result
+
+    def _write(self, trial: int, result: Dict, files: Dict[str, bytes]) -> None:
+        trial_dir = self._out / f'trial_{trial:03d}'
+        trial_dir.mkdir(parents=True, exist_ok=True)
+        for name, data in files.items():
+            path = trial_dir / name
+            path.parent.mkdir(parents=True, exist_ok=True)
+            path.write_bytes(data)
+        (trial_dir / 'result.json').write_text(json.dumps(result, indent=1))
+
+    def progress(self) -> Dict[int, Dict]:
+        """The running trials' progress, as their tasks last reported it."""
+        try:
+            return ray.get(self._board.snapshot.remote(), timeout=5.0)
+        except ray.exceptions.RayError:
+            return {}
+
+    def stop(self) -> None:
+        """Cancel every trial: a running task is interrupted, which stops its process
+        group."""
+        refs: List = list(self._refs)
+        for ref in refs:
+            ray.cancel(ref)
+        ray.wait(refs, num_returns=len(refs), timeout=CANCEL_GRACE_S)
+        self._refs.clear()
+        self.running.clear()
+
+    def close(self) -> None:
+        self._final_capacity = self.capacity
+        ray.shutdown()
