@@ -88,7 +88,12 @@ class ArmKinematics:
             if q is None:
                 return ArmSolution(False, reason='every solution puts the arm below '
                                                  f'{self.min_frame_height} m (the floor)')
-        reached = self._base @ self.chain.fk(q) @ self._tool
+        rows = result.flange_rows
+        if q is result.q and rows is not None and not self.chain.has_tool:
+            reached = np.array((rows[0:4], rows[4:8], rows[8:12], (0.0, 0.0, 0.0, 1.0)))
+        else:
+            reached = self.chain.fk(q)
+        reached = self._base @ reached @ self._tool
         return ArmSolution(True, self._from_chain(q), '',
                            *pose_distance(reached.tolist(), target.tolist()))
 

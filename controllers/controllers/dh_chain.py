@@ -21,6 +21,9 @@ class IKResult:
     position_error: float = math.inf
     rotation_error: float = math.inf
     candidates: List[np.ndarray] = field(default_factory=list)
+    # The answer's flange pose (before the chain's tool) as fk_rows gives it, when the solver
+    # computed it to check the answer: callers need not compute it again.
+    flange_rows: Optional[Tuple[float, ...]] = None
 
 
 @dataclass(frozen=True)

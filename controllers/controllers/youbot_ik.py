@@ -95,7 +95,7 @@ def solve_ik(target: np.ndarray, q_seed: Optional[Sequence[float]] = None,
     if pos_err > 1e-6 or rot_err > 1e-6:
         return IKResult(False, best, 'no exact solution for this pose', pos_err, rot_err,
                         valid)
-    return IKResult(True, best, '', pos_err, rot_err, valid)
+    return IKResult(True, best, '', pos_err, rot_err, valid, reached)
 
 
 def _into_limits(q: List[float], lower: List[float], upper: List[float]

@@ -52,10 +52,10 @@ def solve_ik(target: np.ndarray, q_seed: Optional[Sequence[float]] = None,
                   if q is not None]
     candidates.sort(key=lambda q: _distance(q, seed))
     for i, q in enumerate(candidates):
-        q, pos_err, rot_err = _checked(chain, rows, target, q, seed, lower, upper)
+        q, pos_err, rot_err, reached = _checked(chain, rows, target, q, seed, lower, upper)
         if q is not None:
             return IKResult(True, np.array(q), '', pos_err, rot_err,
-                            [np.array(c) for c in [q] + candidates[i + 1:]])
+                            [np.array(c) for c in [q] + candidates[i + 1:]], reached)
     free = [-math.inf] * 6, [math.inf] * 6
     if any(_checked(chain, rows, target, q, q, *free)[0] is not None for q in raw):
         return IKResult(False, reason='every solution violates the joint limits')
@@ -126,18 +126,21 @@ def _closed_form(rows: List[List[float]], seed_q6: float
 
 def _checked(chain: DHChain, rows: List[List[float]], target: np.ndarray, q: List[float],
              seed: List[float], lower: List[float], upper: List[float]):
-    """``q`` with its errors if it reaches the target, refined (and brought back into the
-    limits) when it is close but not exact; (None, inf, inf) if it does not reach it."""
-    pos_err, rot_err = _errors(chain, q, rows)
+    """``q`` with its errors and its flange's rows if it reaches the target, refined (and
+    brought back into the limits) when it is close but not exact; (None, inf, inf, None) if it
+    does not reach it."""
+    reached = chain.fk_rows(q)
+    pos_err, rot_err = _distance_to(reached, rows)
     if pos_err < TOLERANCE and rot_err < TOLERANCE:
-        return q, pos_err, rot_err
+        return q, pos_err, rot_err, reached
     refined = _nearest_in_limits(_refine(chain, target, np.array(q)).tolist(), seed, lower,
                                  upper)
     if refined is not None:
-        pos_err, rot_err = _errors(chain, refined, rows)
+        reached = chain.fk_rows(refined)
+        pos_err, rot_err = _distance_to(reached, rows)
         if pos_err < TOLERANCE and rot_err < TOLERANCE:
-            return refined, pos_err, rot_err
-    return None, math.inf, math.inf
+            return refined, pos_err, rot_err, reached
+    return None, math.inf, math.inf, None
 
 
 def _distance(q: List[float], seed: List[float]) -> float:
@@ -147,8 +150,11 @@ def _distance(q: List[float], seed: List[float]) -> float:
 def _errors(chain: DHChain, q: Sequence[float], rows: List[List[float]]):
     """Position error [m] and rotation angle [rad] of the flange at ``q`` from the target's
     rows."""
-    r = chain.fk_rows(q)
-    return pose_distance((r[0:4], r[4:8], r[8:12]), rows)
+    return _distance_to(chain.fk_rows(q), rows)
+
+
+def _distance_to(reached: Tuple[float, ...], rows: List[List[float]]):
+    return pose_distance((reached[0:4], reached[4:8], reached[8:12]), rows)
 
 
 def _refine(chain: DHChain, target: np.ndarray, q: np.ndarray, iterations: int = 8
@@ -186,16 +192,15 @@ def _pose_error(reached: np.ndarray, target: np.ndarray) -> np.ndarray:
 def _nearest_in_limits(q: Sequence[float], seed: Sequence[float], lower: Sequence[float],
                        upper: Sequence[float]) -> Optional[List[float]]:
     """The representative (each joint shifted by whole turns) within the limits nearest the
-    seed, or None."""
+    seed, or None: the turn nearest the seed, else the next one towards the limits."""
     out = []
     for value, ref, lo, hi in zip(q, seed, lower, upper):
-        base = (value + math.pi) % _TWO_PI - math.pi
-        best = None
-        for k in (-2, -1, 0, 1, 2):
-            v = base + k * _TWO_PI
-            if lo - 1e-9 <= v <= hi + 1e-9 and (best is None or abs(v - ref) < abs(best - ref)):
-                best = v
-        if best is None:
+        v = value + _TWO_PI * round((ref - value) / _TWO_PI)
+        if v < lo - 1e-9:
+            v += _TWO_PI
+        elif v > hi + 1e-9:
+            v -= _TWO_PI
+        if not lo - 1e-9 <= v <= hi + 1e-9:
             return None
-        out.append(min(max(best, lo), hi))
+        out.append(lo if v < lo else hi if v > hi else v)
     return out
