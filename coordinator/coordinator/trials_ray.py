@@ -17,6 +17,7 @@ This module is imported only with ``--ray``.
 from __future__ import annotations
 
 import json
+import os
 import shutil
 import signal
 import socket
@@ -96,7 +97,8 @@ def run_trial_task(item: Dict, campaign: str, options: Dict, collect_bags: bool,
         relative = path.relative_to(trial_dir)
         if path.is_file() and (collect_bags or relative.parts[0] != 'bag'):
             files[str(relative)] = path.read_bytes()
-    result.update(node=host, ray_node=ray.get_runtime_context().get_node_id())
+    result.update(node=host, ray_node=ray.get_runtime_context().get_node_id(),
+                  niceness=os.nice(0))
     if options['record'] and not collect_bags:
         result['bag'] = f'{host}:{trial_dir / "bag"}'
     else:
@@ -111,8 +113,11 @@ class RayPool:
                  cpus_per_trial: Optional[float] = None, collect_bags: bool = False,
                  limit: Optional[int] = None) -> None:
         on_term = signal.getsignal(signal.SIGTERM)
+        # Ray starts its workers at niceness 15, and a trial's processes would inherit it: on a
+        # node with other work they would crawl (a lock-step trial at a few % of a core).
         ray.init(address=address, logging_level='warning', log_to_driver=False,
-                 configure_logging=True)
+                 configure_logging=True,
+                 runtime_env={'env_vars': {'RAY_worker_niceness': '0'}})
         signal.signal(signal.SIGTERM, on_term)   # (ray.init takes SIGTERM: SIGTERM stops a
         #                                          campaign as Ctrl-C does)
         self._out, self._options, self._collect = out, options, collect_bags

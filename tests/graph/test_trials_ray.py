@@ -6,6 +6,7 @@ The trials run a two-material cell (one purple, one orange: both of the Zu 12's 
 the youBot's delivery) to keep the test short; the campaign machinery is the same."""
 import csv
 import json
+import os
 import random
 import subprocess
 from pathlib import Path
@@ -61,6 +62,9 @@ def test_a_campaign_on_two_ray_nodes_matches_the_same_seeds_run_locally(tmp_path
     results = [json.loads((tmp_path / 'ray' / f'trial_{k:03d}' / 'result.json').read_text())
                for k in range(len(SEEDS))]
     assert len({r['ray_node'] for r in results}) == 2, 'the trials did not use both nodes'
+    # At the niceness of a process started here, not Ray's 15 for its workers (on a busy
+    # machine a trial would crawl).
+    assert {r['niceness'] for r in results} == {os.nice(0)}
     for k in range(len(SEEDS)):
         trial_dir = tmp_path / 'ray' / f'trial_{k:03d}'
         for name in ('sim_node.log', 'coordinator_node.log', 'vision_node.log'):
