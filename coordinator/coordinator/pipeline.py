@@ -144,11 +144,15 @@ class Settings:
     idle_timeout: float = 20.0        # belt running, nothing new to pick: loading is over [s]
     run_timeout: float = 300.0        # the whole run [s]
     drive_speed: float = 0.7          # the dummy's speed along a path [m/s]
-    drive_turn: float = 1.2           # its heading's turn rate, at most [rad/s]
-    drive_turn_accel: float = 1.5     # [rad/s^2]
-    # The follower's command limits, within the youBot's (0.8 m/s each of vx, vy; 1.5 rad/s).
+    # Its heading's turn rate and acceleration, at most: a half turn (between the stands, and
+    # home) takes 3.1 s, within the follower's and the base's limits (below; the base's
+    # acceleration limit is 2 rad/s^2) [rad/s, rad/s^2].
+    drive_turn: float = 1.3
+    drive_turn_accel: float = 1.8
+    # The follower's command limits, within the youBot's (0.8 m/s each of vx, vy; 1.5 rad/s):
+    # a margin over the path's speed and the heading's turn rate to correct with.
     base_max_speed: float = 0.75
-    base_max_turn: float = 1.4
+    base_max_turn: float = 1.45
     # A motion starts this much later than planned-for "now" (real time: the plan's IK calls
     # and the message's trip; a late first segment would be too fast and rejected) [s].
     plan_latency: float = 0.0
@@ -888,12 +892,12 @@ class Transport(Machine):
             turn=TurnLimits(run.s.drive_turn, run.s.drive_turn_accel))
         self._followed = run.ports.follow(self._follower)
         self._drive_goal = goal
-        if goal != 'home' and self.queue:
-            self._ready_arm(obs, lay.stand(goal).pose)
         run.event(obs.now, 'driving', 'youbot', detail=f'to {goal}, {path.length:.2f} m')
         budget = self._follower.profile.duration + run.s.drive_margin
         self._drive_deadline = obs.now + budget
         self.enter(TransportState.DRIVE, obs.now, budget)
+        if goal != 'home' and self.queue:
+            self._ready_arm(obs, lay.stand(goal).pose)
 
     def _drive(self, obs: Observation) -> None:
         run = self.run
@@ -908,10 +912,9 @@ class Transport(Machine):
             run.plan_home('youbot', obs)
             return self.enter(TransportState.FOLD, obs.now, run.motions['youbot'].end
                               - obs.now + run.s.settle_margin)
-        # The arm rises over the first material it unloads here while the base drives, and
-        # takes it from there, the base still on its way or not (the unload is planned from
-        # where the arm comes to rest).
-        if self.queue and not self.motion_over(obs, 'ready pose'):
+        # Here only when the arm could not be sent down onto the first material it unloads
+        # here (_ready_arm): from the carry pose, the unload is planned (or its failure told).
+        if self.queue and not self.motion_over(obs, 'carry pose'):
             return
         if self.queue or not self.driving:
             self._next_unload(obs)
@@ -933,18 +936,23 @@ class Transport(Machine):
     def _ready_arm(self, obs: Observation, stand: Pose2D) -> None:
         """While the base drives to a stand: the arm up through the carry pose (folded, it
         reaches down in front of the base, and its fingers would scrape the floor as the base
-        pitches) to high over the first material it unloads there, so that the unload there
-        starts by going down."""
+        pitches), over the first material it unloads there, and on down onto it without
+        stopping over it: the grasp starts as the arm arrives, the base still on its way or
+        not. Between the stands the arm swings joint 1 round 4.1 rad, and the first grasp there
+        waited for it: a stop 12 cm over the material, and the descent from there, added 0.7 s
+        to that wait."""
         run, m = self.run, self.queue[0]
         path = self._unload_path(m, stand, YOUBOT_CARRY_Q, high=True)
-        waypoints = [Waypoint(YOUBOT_CARRY_Q.copy(), stop=path is None)]
-        if path is not None:
-            waypoints.append(Waypoint(path.hover))
-        run.send(Motion('youbot', run.plan('youbot', obs.youbot_q, waypoints)))
+        if path is None:
+            # Up to the carry pose; the unload is planned (and its failure told) from there.
+            run.send(Motion('youbot', run.plan('youbot', obs.youbot_q,
+                                               [Waypoint(YOUBOT_CARRY_Q.copy())])))
+            return
+        self._approach(obs, m, path, [Waypoint(YOUBOT_CARRY_Q.copy(), stop=False)])
 
     def _unload_path(self, m: Material, pose: Pose2D, seed: np.ndarray,
                      high: bool = False) -> Optional['UnloadPath']:
-        """Joint positions over the material on the plate (4 times as high with ``high``), on
+        """Joint positions over the material on the plate (5 cm over it with ``high``, else 3), on
         it, up its straight lift clear of its neighbours, above its drop and at its drop, for
         the base standing at ``pose``. The fingers come down from 3 cm over its top face (the
         neighbours' tops are level with it). The material rises 6 cm, over their 5 cm, before it
@@ -957,7 +965,7 @@ class Transport(Machine):
         top = (PLATE_TOP_IN_BASE_M + size + YOUBOT_GRASP_STANDOFF_M
                - 0.004 * m.unload_attempts)
         contact = np.array([slot[0], slot[1], top])
-        hover = contact + np.array([0.0, 0.0, 0.12 if high else 0.03])
+        hover = contact + np.array([0.0, 0.0, 0.05 if high else 0.03])
         lift = [contact + np.array([0.0, 0.0, h]) for h in UNLOAD_LIFT_STEPS_M]
         stand = self._stand_for(m)
         if m.color == 'blue':
@@ -1026,17 +1034,24 @@ class Transport(Machine):
 
     def _plan_unload(self, obs: Observation, m: Material) -> None:
         """Down onto the material on the plate; the gripper closes once the arm is there."""
-        run, now, t = self.run, obs.now, self.run.s.timing
+        run, now = self.run, obs.now
         plan = self._unload_path(m, self._stand_pose(obs), obs.youbot_q)
         if plan is None:
             self.queue.pop(0)
             run.fail(now, m, 'grasp_failed', 'unload: no IK solution', 'youbot')
             return self._next_unload(obs)
+        self._approach(obs, m, plan)
+
+    def _approach(self, obs: Observation, m: Material, plan: 'UnloadPath',
+                  through: Sequence[Waypoint] = ()) -> None:
+        """Down onto ``m`` on the plate through ``through`` and its hover; the gripper closes
+        once the arm is there (GRASP)."""
+        run, t = self.run, self.run.s.timing
         self._carry, self._armed = plan, False
         m.unload_attempts += 1
         run.count_grasp('youbot')
         self.move(TransportState.GRASP, obs, run.plan('youbot', obs.youbot_q, [
-            Waypoint(plan.hover, stop=False),
+            *through, Waypoint(plan.hover, stop=False),
             Waypoint(plan.contact, hold=SETTLE_S, min_time=t.descend)]))
 
     def _grasp(self, obs: Observation) -> None:

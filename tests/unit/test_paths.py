@@ -152,18 +152,20 @@ def test_key_poses_between_keeps_the_start_heading_for_via_points():
 
 
 def _stand_to_stand():
-    """The youBot's turn between its two unload stands beside the pool, as the cell plans it."""
+    """The youBot's turn between its two unload stands beside the pool, as the cell plans it:
+    where it starts, its follower (a new one each call), and the pool's west wall's face (x)."""
     from coordinator.layout import layout_from_world
     from coordinator.pipeline import Settings
     from sim_bridge.world import resolve_resource
     from sim_bridge.world_config import load_world
-    lay = layout_from_world(load_world(resolve_resource(
-        'package://sim_bridge/worlds/pipeline_cell.yaml')))
+    world = load_world(resolve_resource('package://sim_bridge/worlds/pipeline_cell.yaml'))
+    lay = layout_from_world(world)
+    wall = next(o for o in world.obstacles if o.name == 'pool_wall_w')
     s, a, b = Settings(), lay.stand('pool_left').pose, lay.stand('pool_right').pose
     return a, lambda: PathFollower(
         BezierPath(key_poses_between(a, b, lay.via_turn)), 0.0, s.drive_speed, s.drive_accel,
         PDGains(max_speed=s.base_max_speed, max_turn=s.base_max_turn),
-        turn=TurnLimits(s.drive_turn, s.drive_turn_accel))
+        turn=TurnLimits(s.drive_turn, s.drive_turn_accel)), wall.position[0] - wall.size[0] / 2
 
 
 def _east(poses):
@@ -175,19 +177,18 @@ def _east(poses):
 
 def test_the_lead_keeps_a_turning_base_on_its_path_when_commands_arrive_late():
     """Commands that take effect 0.2 s after the odometry they answer (a real-time run on a
-    loaded machine): computed for the heading of 0.2 s ago while the base turns at 1.2 rad/s,
-    they carry it 10 cm off its path, and its wheels 2 cm into the pool's west wall (its face
-    at x = 2.08 m). Predicted that far ahead, it stays within 2.5 cm of the dummy and 2 cm off
-    the wall."""
-    start, follower = _stand_to_stand()
+    loaded machine): computed for the heading of 0.2 s ago while the base turns at 1.3 rad/s,
+    they carry it 10 cm off its path, and its wheels into the pool's west wall. Predicted that
+    far ahead, it stays within 2.5 cm of the dummy and 2 cm off the wall."""
+    start, follower, wall = _stand_to_stand()
     poses, statuses = simulate_kinematic(follower(), start, dt=0.01, delay=0.2)
-    assert max(s.position_error for s in statuses) > 0.08 and _east(poses) > 2.08
+    assert max(s.position_error for s in statuses) > 0.08 and _east(poses) > wall
     poses, statuses = simulate_kinematic(follower(), start, dt=0.01, delay=0.2, lead=0.2)
     assert statuses[-1].finished
-    assert max(s.position_error for s in statuses) < 0.025 and _east(poses) < 2.06
+    assert max(s.position_error for s in statuses) < 0.025 and _east(poses) < wall - 0.02
     # Without a delay, no lead is needed.
     base, _ = simulate_kinematic(follower(), start, dt=0.01)
-    assert _east(base) < 2.06
+    assert _east(base) < wall - 0.02
 
 
 def test_the_drive_lead_is_the_trip_and_the_age_beyond_the_clock():
@@ -205,7 +206,7 @@ def test_the_drive_lead_is_the_trip_and_the_age_beyond_the_clock():
 def test_a_fixed_lead_is_safe_over_the_range_of_delays():
     """The coordinator's 0.1 s, whatever the real delay (0 to 0.2 s): the base's outline stays
     off the pool's wall (4 mm at 0.2 s), and it settles on its stand."""
-    start, follower = _stand_to_stand()
+    start, follower, wall = _stand_to_stand()
     for delay in (0.0, 0.05, 0.1, 0.15, 0.2):
         poses, statuses = simulate_kinematic(follower(), start, dt=0.01, delay=delay, lead=0.1)
-        assert statuses[-1].finished and _east(poses) < 2.08, delay
+        assert statuses[-1].finished and _east(poses) < wall, delay

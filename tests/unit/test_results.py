@@ -17,20 +17,33 @@ from sim_bridge.world import resolve_resource
 from sim_bridge.world_config import load_world
 
 
+WORLD = load_world(resolve_resource('package://sim_bridge/worlds/pipeline_cell.yaml'))
+
+
+def _near(obstacle: str, dx: float, dy: float, z: float) -> np.ndarray:
+    """A point at (dx, dy) from a named obstacle's centre of the cell's world, at height z."""
+    o = next(o for o in WORLD.obstacles if o.name == obstacle)
+    return np.array([o.position[0] + dx, o.position[1] + dy, z])
+
+
+IN_POOL = _near('pool_floor', -0.2, -0.1, 0.025)          # on the pool's floor
+ON_PLATFORM = _near('pool_platform', -0.1, 0.0, 0.175)
+BESIDE_PLATFORM = _near('pool_platform', -0.19, 0.2, 0.025)     # on the floor, between the two
+
+
 @pytest.fixture(scope='module')
 def regions():
-    world = load_world(resolve_resource('package://sim_bridge/worlds/pipeline_cell.yaml'))
-    return regions_from_world(world, world.materials.size)
+    return regions_from_world(WORLD, WORLD.materials.size)
 
 
 def test_destinations_by_colour(regions):
     assert at_destination('purple', (-0.5, 0.3, 0.025), regions)
     assert not at_destination('purple', (-0.5, 0.0, 0.025), regions)     # beside the target
-    assert at_destination('orange', (2.2, -1.7, 0.075), regions)            # in the pool, stacked
-    assert not at_destination('orange', (2.2, -1.7, 0.125), regions)        # on the wall top
-    assert at_destination('blue', (2.3, -2.15, 0.175), regions)             # on the platform
-    assert not at_destination('blue', (2.21, -1.95, 0.025), regions)        # fell off it
-    assert not at_destination('orange', (1.0, 0.75, 0.425), regions)        # still on the belt
+    assert at_destination('orange', IN_POOL + [0, 0, 0.05], regions)       # in the pool, stacked
+    assert not at_destination('orange', IN_POOL + [0, 0, 0.1], regions)    # on the wall top
+    assert at_destination('blue', ON_PLATFORM, regions)
+    assert not at_destination('blue', BESIDE_PLATFORM, regions)           # fell off it
+    assert not at_destination('orange', (1.0, 0.75, 0.425), regions)       # still on the belt
 
 
 def test_identifications_are_matched_to_the_nearest_true_material():
@@ -48,8 +61,8 @@ def _result(**kw):
 
 
 def test_score_takes_handling_from_ground_truth_not_from_the_coordinator(regions):
-    truth = [('orange', np.array([2.2, -1.7, 0.025]))] * 6 + [
-        ('purple', np.array([-0.5, 0.3, 0.025])), ('blue', np.array([2.21, -1.95, 0.025]))]
+    truth = [('orange', IN_POOL)] * 6 + [
+        ('purple', np.array([-0.5, 0.3, 0.025])), ('blue', BESIDE_PLATFORM)]
     out = score(_result(), truth, [True] * 7 + [False], regions)
     assert out['delivered'] == 8                       # what the coordinator believed
     assert out['handled_verified'] == 7 and out['handling_success_rate'] == 7 / 8
@@ -62,8 +75,8 @@ def test_the_rates_split_as_the_paper_splits_them(regions):
     # its plate one orange ended outside the pool.
     r = _result(zu12_grasp_attempts=9, zu12_grasp_successes=8, youbot_grasp_attempts=8,
                 youbot_grasp_successes=7, loaded=7)
-    truth = ([('purple', np.array([-0.5, 0.3, 0.025])), ('blue', np.array([2.3, -2.15, 0.175]))]
-             + [('orange', np.array([2.2, -1.7, 0.075]))] * 5
+    truth = ([('purple', np.array([-0.5, 0.3, 0.025])), ('blue', ON_PLATFORM)]
+             + [('orange', IN_POOL + [0, 0, 0.05])] * 5
              + [('orange', np.array([1.0, 0.0, 0.025]))])
     out = score(r, truth, [True] * 8, regions)
     assert out['zu12_grasp_rate'] == pytest.approx(8 / 9)
