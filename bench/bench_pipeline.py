@@ -17,8 +17,10 @@ from pathlib import Path
 
 from coordinator.trials import run_trial
 from sim_bridge.runner import DriveLimits, NullSink, SimRunner
-from sim_bridge.world import SimWorld, resolve_resource
-from sim_bridge.world_config import load_world
+from sim_bridge.world import SimWorld
+from world_description import PIPELINE_CELL
+from world_description.resources import resolve_resource
+from world_description.world_config import load_world
 
 HERE = Path(__file__).resolve().parent
 DT = 1.0 / 240.0
@@ -33,8 +35,8 @@ class _RenderSink(NullSink):
 
 
 def in_process_baseline(sim_seconds: float) -> dict:
-    world = SimWorld(load_world(resolve_resource(
-        'package://sim_bridge/worlds/pipeline_cell.yaml')), time_step=DT, scenario_seed=SEED)
+    world = SimWorld(load_world(resolve_resource(PIPELINE_CELL)), time_step=DT,
+                     scenario_seed=SEED)
     world.conveyor.speed = BELT
     runner = SimRunner(world, DriveLimits(0.8, 1.5, 0.5), 30.0)
     steps = int(round(sim_seconds / DT))

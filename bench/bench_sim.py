@@ -36,10 +36,11 @@ from rosgraph_msgs.msg import Clock  # noqa: E402
 from sensor_msgs.msg import Image  # noqa: E402
 
 from sim_bridge.runner import DriveLimits, NullSink, SimRunner  # noqa: E402
-from sim_bridge.world import SimWorld, resolve_resource  # noqa: E402
-from sim_bridge.world_config import load_world  # noqa: E402
+from sim_bridge.world import SimWorld  # noqa: E402
+from world_description.resources import resolve_resource  # noqa: E402
+from world_description.world_config import load_world  # noqa: E402
 
-WORLD = 'package://sim_bridge/worlds/mini_robot.yaml'
+WORLD = 'package://world_description/worlds/mini_robot.yaml'
 
 
 class _CameraSink(NullSink):

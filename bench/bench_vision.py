@@ -9,9 +9,10 @@ from pathlib import Path
 
 import numpy as np
 
-from perception.evaluation import WORLD, evaluate
-from sim_bridge.world import SimWorld, resolve_resource
-from sim_bridge.world_config import load_world
+from sim_bringup.vision_evaluation import WORLD, evaluate
+from sim_bridge.world import SimWorld
+from world_description.resources import resolve_resource
+from world_description.world_config import load_world
 
 HERE = Path(__file__).resolve().parent
 

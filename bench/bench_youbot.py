@@ -21,8 +21,11 @@ from controllers.youbot_arm import theta_from_datasheet
 from controllers.youbot_kinematics import REFERENCE_FRAMES, YoubotKinematics, motion_duration
 from robot_description import urdf_path
 from sim_bridge.runner import DriveLimits, NullSink, SimRunner
-from sim_bridge.world import URDF_FLAGS, SimWorld, resolve_resource, yaw_from_quaternion
-from sim_bridge.world_config import load_world
+from sim_bridge.world import URDF_FLAGS, SimWorld
+from world_description import YOUBOT_WORLD
+from world_description.resources import resolve_resource
+from controllers.transforms import yaw_from_quaternion
+from world_description.world_config import load_world
 
 HERE = Path(__file__).resolve().parent
 DT = 1.0 / 240.0
@@ -34,8 +37,7 @@ CASES = [('vx', (0.2, 0.0, 0.0)), ('vy', (0.0, 0.2, 0.0)), ('wz', (0.0, 0.0, 0.5
 
 
 def _world():
-    world = SimWorld(load_world(resolve_resource('package://sim_bridge/worlds/youbot.yaml')),
-                     time_step=DT)
+    world = SimWorld(load_world(resolve_resource(YOUBOT_WORLD)), time_step=DT)
     return world, SimRunner(world, DriveLimits(cmd_vel_timeout=0.5), 100.0)
 
 

@@ -61,13 +61,13 @@ def test_command_line_tool_resolves_and_runs(package, executable):
 def test_every_package_is_in_the_ament_index():
     for package in ('sim_bridge', 'controllers', 'perception', 'robot_description',
                     'sim_bringup', 'sim_interfaces', 'recording', 'arm_kinematics',
-                    'coordinator'):
+                    'coordinator', 'ros_common', 'world_description'):
         share = Path(get_package_share_directory(package))
         assert (share / 'package.xml').is_file()
     assert (Path(get_package_share_directory('robot_description')) / 'urdf' /
             'mini_robot.urdf').is_file()
     for world in ('mini_robot', 'youbot', 'pipeline_cell'):
-        assert (Path(get_package_share_directory('sim_bridge')) / 'worlds' /
+        assert (Path(get_package_share_directory('world_description')) / 'worlds' /
                 f'{world}.yaml').is_file()
     for robot in ('youbot', 'zu12'):
         assert (Path(get_package_share_directory('robot_description')) / 'urdf' /

@@ -43,6 +43,12 @@ def matrix_to_quaternion(r: np.ndarray) -> Tuple[float, float, float, float]:
     return tuple(float(v) for v in q)
 
 
+def yaw_from_quaternion(q: Sequence[float]) -> float:
+    """The yaw (about z) of a quaternion (x, y, z, w), as REP-103's roll-pitch-yaw has it."""
+    x, y, z, w = q
+    return math.atan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))
+
+
 def pose_matrix(position: Sequence[float], quaternion: Sequence[float]) -> np.ndarray:
     t = np.eye(4)
     t[:3, :3] = quaternion_to_matrix(quaternion)

@@ -55,6 +55,9 @@ from coordinator.pipeline import (Detection, Event, NodeTimeout, Observation, Pi
 from coordinator.progress import write_progress
 from coordinator.results import (IdentificationCheck, PeakJointSpeed, at_destination,
                                  regions_from_world, score)
+from world_description import PIPELINE_CELL
+from world_description.resources import resolve_resource
+from world_description.world_config import load_world
 
 ARMS = {'zu12': ZU12_JOINTS, 'youbot': YOUBOT_JOINTS}
 CAMERA_TOPIC = '/belt_camera/image_raw'
@@ -71,7 +74,7 @@ class CoordinatorNode(Node):
     def __init__(self, **kwargs) -> None:
         super().__init__('coordinator_node', **kwargs)
         ro, rng = ParameterDescriptor, float_range
-        self.declare_parameter('world', 'package://sim_bridge/worlds/pipeline_cell.yaml', ro(
+        self.declare_parameter('world', PIPELINE_CELL, ro(
             description='World file of the cell (layout, manifest, belt)', read_only=True))
         self.declare_parameter('synchronous', False, ro(
             description='Lock-step: request every simulator step (sim_node synchronous:=true)',
@@ -118,8 +121,6 @@ class CoordinatorNode(Node):
             description='Recorded with the result (the simulator draws the scenario)',
             read_only=True))
         get = lambda n: self.get_parameter(n).value  # noqa: E731
-        from sim_bridge.world import resolve_resource
-        from sim_bridge.world_config import load_world
         self.world = load_world(resolve_resource(get('world')))
         try:
             layout = layout_from_world(self.world)

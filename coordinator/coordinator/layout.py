@@ -133,7 +133,7 @@ def world_to_base(pose: Pose2D, point) -> np.ndarray:
 
 
 def layout_from_world(world) -> CellLayout:
-    """The layout of a loaded WorldConfig (sim_bridge.world_config) of the pipeline cell."""
+    """The layout of a loaded WorldConfig (world_description.world_config) of the pipeline cell."""
     if world.conveyor is None or world.materials is None:
         raise LayoutError('the world has no conveyor with materials')
     named = {o.name: o for o in world.obstacles if o.name}

@@ -29,7 +29,7 @@ from typing import Dict, Iterator, List, Optional, Sequence, Tuple
 from coordinator.progress import (CampaignBar, TrialProgress, eta_seconds, progress_line,
                                   read_progress, running_figures)
 
-WORLD = 'package://sim_bridge/worlds/pipeline_cell.yaml'
+WORLD = 'package://world_description/worlds/pipeline_cell.yaml'
 CONTROL_RATE = 30.0
 PROGRESS_FILE = 'progress.json'
 PROGRESS_PERIOD_S = 10.0     # wall seconds between two progress lines

@@ -27,6 +27,10 @@ from perception.projection import CameraModel
 from perception.segmentation import DEFAULT_CLASSES, ColorClass
 from perception.tracker import Tracker
 from perception.vision import MaterialVision
+from world_description import PIPELINE_CELL
+from world_description.camera_geometry import look_at_rotation
+from world_description.resources import resolve_resource
+from world_description.world_config import load_world
 
 ENCODINGS = ('rgb8', 'bgr8')
 
@@ -40,7 +44,7 @@ class VisionNode(Node):
     def __init__(self, **kwargs) -> None:
         super().__init__('vision_node', **kwargs)
         ro = ParameterDescriptor
-        self.declare_parameter('world', 'package://sim_bridge/worlds/pipeline_cell.yaml', ro(
+        self.declare_parameter('world', PIPELINE_CELL, ro(
             description='World file with the camera pose, the conveyor and the materials; '
                         'empty: use the explicit parameters below', read_only=True))
         self.declare_parameter('camera', 'belt_camera', ro(
@@ -123,13 +127,10 @@ class VisionNode(Node):
         return classes
 
     def _geometry(self):
-        from sim_bridge.camera import look_at_rotation
         get = lambda n: self.get_parameter(n).value  # noqa: E731
         position, look_at = list(get('camera_position')), list(get('camera_look_at'))
         support, size, yaw = get('support_height'), get('material_size'), 0.0
         if get('world'):
-            from sim_bridge.world import resolve_resource
-            from sim_bridge.world_config import load_world
             world = load_world(resolve_resource(get('world')))
             cams = [c for c in world.cameras if c.name == get('camera')]
             if not cams or cams[0].position is None:

@@ -21,7 +21,7 @@ from pybullet_utils.bullet_client import BulletClient
 
 from controllers.conveyor import Item, advance
 from controllers.transforms import matrix_to_quaternion
-from sim_bridge.world_config import ConveyorConfig, MaterialsConfig
+from world_description.world_config import ConveyorConfig, MaterialsConfig
 
 BELT_THICKNESS_M = 0.04
 BELT_COLOR = (0.15, 0.15, 0.17, 1.0)

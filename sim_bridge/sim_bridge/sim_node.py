@@ -32,10 +32,11 @@ from controllers.transforms import matrix_to_quaternion
 from sim_bridge.camera import ImageBuffer
 from sim_bridge.pacing import Pacer, RtfMeter
 from sim_bridge.runner import DriveLimits, SimRunner
-from sim_bridge.world import SimWorld, WorldError, resolve_resource
-from sim_bridge.world_config import WorldConfigError, load_world
+from sim_bridge.world import SimWorld, WorldError
+from world_description.resources import resolve_resource
+from world_description.world_config import WorldConfigError, load_world
 
-DEFAULT_WORLD = 'package://sim_bridge/worlds/mini_robot.yaml'
+DEFAULT_WORLD = 'package://world_description/worlds/mini_robot.yaml'
 MAX_STEPS_PER_REQUEST = 100_000
 # Ground truth: tiny but non-zero covariance (zero often reads as "unknown").
 GROUND_TRUTH_COVARIANCE = [1e-9 if i % 7 == 0 else 0.0 for i in range(36)]

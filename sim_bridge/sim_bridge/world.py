@@ -15,10 +15,11 @@ from controllers.diff_drive import wheel_speeds as diff_wheel_speeds
 from controllers.joint_trajectory import JointLimits, TrajectoryFollower
 from controllers.mecanum import MecanumGeometry
 from controllers.mecanum import wheel_speeds as mecanum_wheel_speeds
-from sim_bridge.camera import (intrinsics_from_fov, look_at_rotation, projection_matrix,
-                               view_matrix_from_optical)
+from sim_bridge.camera import projection_matrix, view_matrix_from_optical
+from world_description.camera_geometry import intrinsics_from_fov, look_at_rotation
+from world_description.resources import resolve_resource
 from sim_bridge.cell import Conveyor, Material, MaterialSource, Suction
-from sim_bridge.world_config import (CameraConfig, ControllerConfig, DiffDriveConfig,
+from world_description.world_config import (CameraConfig, ControllerConfig, DiffDriveConfig,
                                      MecanumConfig, RobotConfig, WorldConfig)
 
 FLOOR_COLOR = (0.82, 0.80, 0.76, 1.0)
@@ -49,37 +50,6 @@ class BaseState:
     orientation: Tuple[float, float, float, float]  # x, y, z, w
     linear: Tuple[float, float, float]
     angular: Tuple[float, float, float]
-
-
-def resolve_resource(uri: str, base_dir: Optional[Path] = None) -> Path:
-    """Resolve ``package://pkg/rel``, ``file://`` or a path (relative to the world file)."""
-    if uri.startswith('package://'):
-        package, _, rel = uri[len('package://'):].partition('/')
-        share = _package_share(package)
-        return share / rel
-    if uri.startswith('file://'):
-        uri = uri[len('file://'):]
-    path = Path(uri)
-    if not path.is_absolute() and base_dir is not None:
-        path = base_dir / path
-    return path
-
-
-def _package_share(package: str) -> Path:
-    try:
-        from ament_index_python.packages import (PackageNotFoundError,
-                                                 get_package_share_directory)
-        try:
-            return Path(get_package_share_directory(package))
-        except (PackageNotFoundError, OSError):  # OSError: AMENT_PREFIX_PATH unset
-            pass
-    except ImportError:
-        pass
-    if package == 'robot_description':
-        from robot_description import share_directory
-        return share_directory()
-    raise WorldError(f'package "{package}" not found in the ament index '
-                     '(is the workspace sourced?)')
 
 
 class SimRobot:
@@ -488,8 +458,3 @@ class SimWorld:
             col = -1
         p.createMultiBody(0.0, col, vis, basePosition=obstacle.position,
                           baseOrientation=p.getQuaternionFromEuler((0.0, 0.0, obstacle.yaw)))
-
-
-def yaw_from_quaternion(q: Tuple[float, float, float, float]) -> float:
-    x, y, z, w = q
-    return math.atan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))

@@ -13,7 +13,7 @@ from visualization_msgs.msg import MarkerArray
 
 from helpers import wait_for
 
-WORLD = 'world:=package://sim_bridge/worlds/pipeline_cell.yaml'
+WORLD = 'world:=package://world_description/worlds/pipeline_cell.yaml'
 
 
 @pytest.fixture

@@ -27,7 +27,7 @@ class InProcessSim:
         self.context = rclpy.Context()
         rclpy.init(context=self.context)
         self.node = SimNode(context=self.context, parameter_overrides=[
-            Parameter('world', value='package://sim_bridge/worlds/youbot.yaml'),
+            Parameter('world', value='package://world_description/worlds/youbot.yaml'),
             Parameter('real_time_factor', value=RTF), Parameter('rtf_log_period', value=0.0)])
         self.executor = SingleThreadedExecutor(context=self.context)
         self.executor.add_node(self.node)

@@ -68,7 +68,7 @@ def test_a_real_time_run_delivers_every_material(start_node, tmp_path):
     """The same graph paced by the simulator's clock (2x real time): the coordinator decides on
     the latest messages, without stepping the simulator; its motions start plan_latency late
     and the belt's stop is taken at the clock seen after the simulator's reply."""
-    world = 'world:=package://sim_bridge/worlds/pipeline_cell.yaml'
+    world = 'world:=package://world_description/worlds/pipeline_cell.yaml'
     start_node('sim_node', '-p', world, '-p', 'real_time_factor:=2.0', '-p',
                f'scenario_seed:={SEED}', '-p', f'belt_speed:={BELT}', '-p', 'max_speed:=0.8',
                '-p', 'max_turn:=1.5')

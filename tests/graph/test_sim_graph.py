@@ -14,7 +14,7 @@ from sim_interfaces.srv import StepSimulation
 from std_srvs.srv import Trigger
 
 from helpers import LockStepDriver, stamp_s, wait_for
-from sim_bridge.world import yaw_from_quaternion
+from controllers.transforms import yaw_from_quaternion
 
 RTF = 4.0   # paced, but faster than real time to keep the suite short
 DT = 1.0 / 240.0

@@ -15,7 +15,7 @@ import pytest
 import yaml
 from ray.cluster_utils import Cluster
 
-from sim_bridge.world import resolve_resource
+from world_description.resources import resolve_resource
 
 SEEDS = ('11', '12', '13', '14')
 # Everything a trial's row holds except what depends on the machine's load.
@@ -27,7 +27,7 @@ COMPARED = ('trial', 'scenario_seed', 'belt_speed', 'status', 'completion_time',
 @pytest.fixture
 def small_world(tmp_path) -> Path:
     world = yaml.safe_load(resolve_resource(
-        'package://sim_bridge/worlds/pipeline_cell.yaml').read_text())
+        'package://world_description/worlds/pipeline_cell.yaml').read_text())
     world['materials']['counts'] = {'purple': 1, 'orange': 1}
     path = tmp_path / 'two_materials.yaml'
     path.write_text(yaml.safe_dump(world))

@@ -17,9 +17,9 @@ from controllers.base_fidelity import tracking_errors
 from controllers.diff_drive import Pose2D
 from controllers.youbot_arm import JOINT_NAMES
 from helpers import NodeProcess, stamp_s, wait_for
-from sim_bridge.world import yaw_from_quaternion
+from controllers.transforms import yaw_from_quaternion
 
-WORLD = 'world:=package://sim_bridge/worlds/youbot.yaml'
+WORLD = 'world:=package://world_description/worlds/youbot.yaml'
 RTF = 2.0
 K = 0.386
 

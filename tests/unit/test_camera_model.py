@@ -5,8 +5,8 @@ import numpy as np
 import pybullet
 import pytest
 
-from sim_bridge.camera import (ImageBuffer, intrinsics_from_fov, look_at_rotation,
-                               projection_matrix, view_matrix_from_optical)
+from sim_bridge.camera import ImageBuffer, projection_matrix, view_matrix_from_optical
+from world_description.camera_geometry import intrinsics_from_fov, look_at_rotation
 
 
 def test_projection_matches_pybullet():

@@ -8,10 +8,11 @@ import pytest
 
 from controllers.conveyor import QUEUE_GAP_M, held
 from sim_bridge.runner import DriveLimits, NullSink, SimRunner
-from sim_bridge.world import SimWorld, resolve_resource
-from sim_bridge.world_config import WorldConfigError, load_world, parse_world
+from sim_bridge.world import SimWorld
+from world_description.resources import resolve_resource
+from world_description.world_config import WorldConfigError, load_world, parse_world
 
-WORLD = load_world(resolve_resource('package://sim_bridge/worlds/pipeline_cell.yaml'))
+WORLD = load_world(resolve_resource('package://world_description/worlds/pipeline_cell.yaml'))
 
 
 def _run(world, seconds):

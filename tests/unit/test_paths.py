@@ -156,9 +156,9 @@ def _stand_to_stand():
     where it starts, its follower (a new one each call), and the pool's west wall's face (x)."""
     from coordinator.layout import layout_from_world
     from coordinator.pipeline import Settings
-    from sim_bridge.world import resolve_resource
-    from sim_bridge.world_config import load_world
-    world = load_world(resolve_resource('package://sim_bridge/worlds/pipeline_cell.yaml'))
+    from world_description.resources import resolve_resource
+    from world_description.world_config import load_world
+    world = load_world(resolve_resource('package://world_description/worlds/pipeline_cell.yaml'))
     lay = layout_from_world(world)
     wall = next(o for o in world.obstacles if o.name == 'pool_wall_w')
     s, a, b = Settings(), lay.stand('pool_left').pose, lay.stand('pool_right').pose

@@ -5,12 +5,12 @@ import math
 import numpy as np
 import pytest
 
-from perception.evaluation import evaluate
+from sim_bringup.vision_evaluation import evaluate
 from perception.projection import (CameraModel, cube_silhouette_centroid, locate_cube,
                                    pixel_to_plane)
 from perception.segmentation import DEFAULT_CLASSES, ColorClass, confidence, segment
 from perception.tracker import Observation, Tracker
-from sim_bridge.camera import look_at_rotation
+from world_description.camera_geometry import look_at_rotation
 
 K = np.array([[290.0, 0.0, 160.0], [0.0, 290.0, 119.0], [0.0, 0.0, 1.0]])
 CAMERA = CameraModel(K, look_at_rotation((-0.55, 0.75, 1.25), (-0.55, 0.75, 0.4)),

@@ -12,15 +12,15 @@ from controllers.time_optimal import Waypoint
 from coordinator.layout import CellLayout, LayoutError, layout_from_world
 from coordinator.pipeline import (Detection, LoaderState, NodeTimeout, Observation, Pipeline,
                                   Settings, YOUBOT_CARRY_Q, youbot_tool_quaternion)
-from sim_bridge.world import resolve_resource
-from sim_bridge.world_config import load_world
+from world_description.resources import resolve_resource
+from world_description.world_config import load_world
 
 DT = 1.0 / 30.0
 CAMERA_X = (-1.0, -0.1)          # the fake camera sees this stretch of the belt
 
 
 def cell_layout() -> CellLayout:
-    world = load_world(resolve_resource('package://sim_bridge/worlds/pipeline_cell.yaml'))
+    world = load_world(resolve_resource('package://world_description/worlds/pipeline_cell.yaml'))
     return layout_from_world(world)
 
 
@@ -376,7 +376,7 @@ def test_oranges_leave_a_slot_of_the_platforms_row_for_the_blue_still_to_come():
 def test_the_cells_youbot_waits_with_its_arm_in_the_carry_pose():
     # It starts (and so ends) the run as it drives: no unfolding on the way out, no folding at
     # home. Upright, the arm stands in front of the load plate, clear of the Zu 12's places.
-    world = load_world(resolve_resource('package://sim_bridge/worlds/pipeline_cell.yaml'))
+    world = load_world(resolve_resource('package://world_description/worlds/pipeline_cell.yaml'))
     start = dict(world.robot('youbot').initial_joint_positions)
     arm = [start.get(f'arm_joint_{k}', 0.0) for k in range(1, 6)]
     assert np.allclose(arm, YOUBOT_CARRY_Q)
@@ -419,7 +419,7 @@ def test_the_youbot_turns_between_its_stands_and_home_clear_of_the_pool():
     layout = cell_layout()
     cell = FakeCell(layout, PAPER)
     assert run(cell).result.status == 'completed'
-    world = load_world(resolve_resource('package://sim_bridge/worlds/pipeline_cell.yaml'))
+    world = load_world(resolve_resource('package://world_description/worlds/pipeline_cell.yaml'))
     boxes = [(o.name, o.position, o.size) for o in world.obstacles
              if o.name.startswith('pool_wall') or o.name == 'pool_platform']
     assert len(boxes) == 5
@@ -707,7 +707,7 @@ def test_the_layout_of_the_cell_world():
 
 
 def test_a_world_without_the_cell_is_refused():
-    world = load_world(resolve_resource('package://sim_bridge/worlds/youbot.yaml'))
+    world = load_world(resolve_resource('package://world_description/worlds/youbot.yaml'))
     with pytest.raises(LayoutError, match='conveyor'):
         layout_from_world(world)
 

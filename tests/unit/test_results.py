@@ -13,11 +13,11 @@ from coordinator.report import STATE_COLORS, activity, write_report
 from coordinator.results import (IdentificationCheck, at_destination, match_identification,
                                  regions_from_world, score, summary_rows)
 from coordinator.trials import trial_plan, write_csv
-from sim_bridge.world import resolve_resource
-from sim_bridge.world_config import load_world
+from world_description.resources import resolve_resource
+from world_description.world_config import load_world
 
 
-WORLD = load_world(resolve_resource('package://sim_bridge/worlds/pipeline_cell.yaml'))
+WORLD = load_world(resolve_resource('package://world_description/worlds/pipeline_cell.yaml'))
 
 
 def _near(obstacle: str, dx: float, dy: float, z: float) -> np.ndarray:

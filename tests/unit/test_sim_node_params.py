@@ -5,7 +5,7 @@ from rclpy.exceptions import InvalidParameterValueException
 from rclpy.parameter import Parameter
 
 from sim_bridge.sim_node import SimConfigError, SimNode
-from sim_bridge.world_config import WorldConfigError
+from world_description.world_config import WorldConfigError
 
 
 def make(context, **overrides):

@@ -5,10 +5,12 @@ import numpy as np
 import pytest
 
 from sim_bridge.runner import DriveLimits, NullSink, SimRunner
-from sim_bridge.world import SimWorld, WorldError, resolve_resource, yaw_from_quaternion
-from sim_bridge.world_config import load_world, parse_world
+from sim_bridge.world import SimWorld, WorldError
+from world_description.resources import resolve_resource
+from controllers.transforms import yaw_from_quaternion
+from world_description.world_config import load_world, parse_world
 
-DEFAULT = resolve_resource('package://sim_bridge/worlds/mini_robot.yaml')
+DEFAULT = resolve_resource('package://world_description/worlds/mini_robot.yaml')
 
 
 class Recorder(NullSink):

@@ -1,14 +1,14 @@
 """World YAML loading and its error messages."""
 import pytest
 
-from sim_bridge.world_config import WorldConfigError, load_world, parse_world
-from sim_bridge.world import resolve_resource
+from world_description.world_config import WorldConfigError, load_world, parse_world
+from world_description.resources import resolve_resource
 
 ROBOT = {'name': 'r1', 'urdf': 'package://robot_description/urdf/mini_robot.urdf'}
 
 
 def test_default_world_loads():
-    cfg = load_world(resolve_resource('package://sim_bridge/worlds/mini_robot.yaml'))
+    cfg = load_world(resolve_resource('package://world_description/worlds/mini_robot.yaml'))
     robot = cfg.robot('mini_robot')
     assert robot.namespace == 'mini_robot'
     assert robot.drive.wheel_radius == 0.03 and robot.drive.wheel_separation == 0.113
@@ -78,8 +78,8 @@ def test_missing_and_malformed_files(tmp_path):
 
 def test_the_youbot_has_acceleration_limits_and_the_mini_robot_none():
     for world in ('youbot', 'pipeline_cell'):
-        cfg = load_world(resolve_resource(f'package://sim_bridge/worlds/{world}.yaml'))
+        cfg = load_world(resolve_resource(f'package://world_description/worlds/{world}.yaml'))
         limits = cfg.robot('youbot').limits
         assert (limits.max_accel, limits.max_turn_accel) == (1.0, 2.0)
-    mini = load_world(resolve_resource('package://sim_bridge/worlds/mini_robot.yaml'))
+    mini = load_world(resolve_resource('package://world_description/worlds/mini_robot.yaml'))
     assert mini.robot('mini_robot').limits.max_accel is None

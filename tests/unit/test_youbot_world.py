@@ -11,8 +11,11 @@ from controllers.joint_trajectory import TrajectoryPoint, TrajectoryRequest
 from controllers.mecanum import MecanumGeometry, wheel_speeds
 from controllers.youbot_arm import JOINT_NAMES
 from sim_bridge.runner import DriveLimits, NullSink, SimRunner
-from sim_bridge.world import SimWorld, resolve_resource, yaw_from_quaternion
-from sim_bridge.world_config import load_world
+from sim_bridge.world import SimWorld
+from world_description import YOUBOT_WORLD
+from world_description.resources import resolve_resource
+from controllers.transforms import yaw_from_quaternion
+from world_description.world_config import load_world
 
 HZ = 240
 K = 0.386
@@ -28,7 +31,7 @@ class Sink(NullSink):
 
 @pytest.fixture(scope='module')
 def sim():
-    world = SimWorld(load_world(resolve_resource('package://sim_bridge/worlds/youbot.yaml')))
+    world = SimWorld(load_world(resolve_resource(YOUBOT_WORLD)))
     runner = SimRunner(world, DriveLimits(cmd_vel_timeout=0.5), 100.0)
     yield world, runner
     world.close()

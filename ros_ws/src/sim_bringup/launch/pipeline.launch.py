@@ -29,7 +29,7 @@ def generate_launch_description():
         DeclareLaunchArgument('record', default_value='false'),
         DeclareLaunchArgument('bag_dir', default_value='bags'),
         Node(package='sim_bridge', executable='sim_node', output='screen',
-             parameters=[{'world': 'package://sim_bridge/worlds/pipeline_cell.yaml',
+             parameters=[{'world': 'package://world_description/worlds/pipeline_cell.yaml',
                           'synchronous': sync, 'state_publish_rate': 30.0,
                           # Lock-step: /clock at the control rate (each costs every node with
                           # sim time about a millisecond); real time: every step, fresh.

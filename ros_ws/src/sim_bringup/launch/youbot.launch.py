@@ -30,7 +30,7 @@ def generate_launch_description():
         DeclareLaunchArgument('record', default_value='false'),
         DeclareLaunchArgument('bag_dir', default_value='bags'),
         Node(package='sim_bridge', executable='sim_node', output='screen',
-             parameters=[{'world': 'package://sim_bridge/worlds/youbot.yaml',
+             parameters=[{'world': 'package://world_description/worlds/youbot.yaml',
                           'real_time_factor': LaunchConfiguration('real_time_factor'),
                           'gui': LaunchConfiguration('gui')}]),
         Node(package='arm_kinematics', executable='kinematics_node', namespace='youbot',

@@ -23,7 +23,7 @@ from rclpy.qos import DurabilityPolicy, QoSProfile
 from controllers.diff_drive import Pose2D, predict_pose, wrap_angle
 from controllers.params import float_range
 from controllers.teleop_core import TeleopError, parse_script
-from sim_bridge.world import yaw_from_quaternion
+from controllers.transforms import yaw_from_quaternion
 
 
 

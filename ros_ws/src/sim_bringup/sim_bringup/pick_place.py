@@ -32,6 +32,9 @@ from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 from controllers.arm_kinematics import motion_duration
 from controllers.pick_place import PickTiming, pick_waypoints, place_waypoints, plate_slots
 from controllers.zu12_arm import JOINT_NAMES, JOINT_VELOCITY_LIMITS
+from world_description import PIPELINE_CELL
+from world_description.resources import resolve_resource
+from world_description.world_config import load_world
 
 DOWN = (1.0, 0.0, 0.0, 0.0)          # tool z pointing down (x, y, z, w)
 PLATE_HEIGHT_M = 0.0815 + 0.046 + 0.01   # youBot load plate's top above the ground
@@ -47,7 +50,7 @@ class PickPlace(Node):
     def __init__(self, **kwargs) -> None:
         super().__init__('pick_place', **kwargs)
         ro = ParameterDescriptor
-        self.declare_parameter('world', 'package://sim_bridge/worlds/pipeline_cell.yaml', ro(
+        self.declare_parameter('world', PIPELINE_CELL, ro(
             description='World file: targets, youBot pose, belt and material size',
             read_only=True))
         self.declare_parameter('count', 1, ro(description='Materials to pick', read_only=True))
@@ -97,8 +100,6 @@ class PickPlace(Node):
         self.suction = self.create_client(SetBool, '/zu12/suction', callback_group=group)
 
     def _load_world(self, uri: str) -> None:
-        from sim_bridge.world import resolve_resource
-        from sim_bridge.world_config import load_world
         world = load_world(resolve_resource(uri))
         if world.materials is None or world.conveyor is None:
             raise PickPlaceError(f'{uri} has no conveyor with materials')

@@ -11,11 +11,12 @@ import numpy as np
 
 from perception.projection import CameraModel
 from perception.vision import MaterialVision
-from sim_bridge.camera import look_at_rotation
-from sim_bridge.world import SimWorld, resolve_resource
-from sim_bridge.world_config import load_world
+from world_description.camera_geometry import look_at_rotation
+from sim_bridge.world import SimWorld
+from world_description.resources import resolve_resource
+from world_description.world_config import load_world
 
-WORLD = 'package://sim_bridge/worlds/pipeline_cell.yaml'
+WORLD = 'package://world_description/worlds/pipeline_cell.yaml'
 
 
 @dataclass

@@ -1,0 +1,46 @@
+"""Where a resource named in a world file is: ``package://``, ``file://`` or a plain path."""
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Optional
+
+from world_description.world_config import WorldConfigError
+
+
+class ResourceError(WorldConfigError):
+    """A ``package://`` resource whose package is not found."""
+
+
+def resolve_resource(uri: str, base_dir: Optional[Path] = None) -> Path:
+    """Resolve ``package://pkg/rel``, ``file://`` or a path (relative to ``base_dir``, the
+    world file's directory, when given)."""
+    if uri.startswith('package://'):
+        package, _, rel = uri[len('package://'):].partition('/')
+        return package_share(package) / rel
+    if uri.startswith('file://'):
+        uri = uri[len('file://'):]
+    path = Path(uri)
+    if not path.is_absolute() and base_dir is not None:
+        path = base_dir / path
+    return path
+
+
+def package_share(package: str) -> Path:
+    """A package's share directory, from the ament index (the workspace sourced); the two
+    description packages also from their source trees."""
+    try:
+        from ament_index_python.packages import (PackageNotFoundError,
+                                                 get_package_share_directory)
+        try:
+            return Path(get_package_share_directory(package))
+        except (PackageNotFoundError, OSError):  # OSError: AMENT_PREFIX_PATH unset
+            pass
+    except ImportError:
+        pass
+    if package == 'robot_description':
+        from robot_description import share_directory
+        return share_directory()
+    if package == 'world_description':
+        return Path(__file__).resolve().parent.parent
+    raise ResourceError(f'package "{package}" not found in the ament index '
+                        '(is the workspace sourced?)')
