@@ -14,11 +14,7 @@ setup(
     zip_safe=True,
     maintainer='robot-sim maintainers',
     maintainer_email='maintainers@example.org',
-    description='Robot base kinematics, command safety and the teleop node.',
+    description='The robots\' motion cores, without ROS: base kinematics, command safety, '
+                'arm kinematics and IK, trajectories, paths and their follower.',
     license='Apache-2.0',
-    entry_points={
-        'console_scripts': [
-            'teleop = controllers.teleop:main',
-        ],
-    },
 )

@@ -14,6 +14,7 @@ setup(
     zip_safe=True,
     maintainer='robot-sim maintainers',
     maintainer_email='maintainers@example.org',
-    description='What every node of the project repeats: start-up and shutdown.',
+    description='What every node of the project repeats: start-up and shutdown, stamps, '
+                'geometry_msgs helpers, parameter descriptors.',
     license='Apache-2.0',
 )

@@ -12,7 +12,7 @@ from helpers import ROOT, wait_for
 # (package, executable, arguments, a line the executable logs once it runs)
 EXECUTABLES = [
     ('sim_bridge', 'sim_node', [], 'with robots'),
-    ('controllers', 'teleop', ['-p', 'script:=stop', '-p', 'wait_for_subscriber:=60.0'],
+    ('teleop', 'teleop', ['-p', 'script:=stop', '-p', 'wait_for_subscriber:=60.0'],
      'publishing on'),
     ('sim_bringup', 'drive_check', ['-p', 'script:=forward 1s'], 'waiting for'),
     ('recording', 'recorder', ['-p', 'output_dir:={tmp}'], 'recording all topics'),
@@ -61,7 +61,7 @@ def test_command_line_tool_resolves_and_runs(package, executable):
 def test_every_package_is_in_the_ament_index():
     for package in ('sim_bridge', 'controllers', 'perception', 'robot_description',
                     'sim_bringup', 'sim_interfaces', 'recording', 'arm_kinematics',
-                    'coordinator', 'ros_common', 'world_description'):
+                    'coordinator', 'ros_common', 'world_description', 'teleop'):
         share = Path(get_package_share_directory(package))
         assert (share / 'package.xml').is_file()
     assert (Path(get_package_share_directory('robot_description')) / 'urdf' /
@@ -72,7 +72,7 @@ def test_every_package_is_in_the_ament_index():
     for robot in ('youbot', 'zu12'):
         assert (Path(get_package_share_directory('robot_description')) / 'urdf' /
                 f'{robot}.urdf').is_file()
-    for executable in ('arm_move', 'pick_place', 'drive_check'):
+    for executable in ('arm_move', 'drive_check'):
         assert _ros2_run_path('sim_bringup', executable).is_file()
 
 

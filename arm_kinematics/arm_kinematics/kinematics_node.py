@@ -13,7 +13,6 @@ import sys
 from typing import Optional, Tuple
 
 import numpy as np
-from builtin_interfaces.msg import Duration
 from diagnostic_msgs.msg import DiagnosticStatus, KeyValue
 from geometry_msgs.msg import PoseStamped
 from rcl_interfaces.msg import ParameterDescriptor
@@ -25,10 +24,11 @@ from sim_interfaces.srv import SolveIK
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
 from controllers.arm_kinematics import motion_duration
-from controllers.params import float_range
+from ros_common.params import float_range
 from controllers.transforms import matrix_to_quaternion, pose_matrix
 from controllers.youbot_kinematics import YoubotKinematics
 from controllers.zu12_kinematics import Zu12Kinematics
+from ros_common.stamps import duration_from_seconds
 
 ARMS = {'youbot': (YoubotKinematics, 'gripper_tcp'), 'zu12': (Zu12Kinematics, 'suction_tcp')}
 
@@ -216,8 +216,7 @@ def _trajectory(names, positions: np.ndarray, duration: float) -> JointTrajector
     """One point at rest at ``duration``: the controller interpolates from where it is."""
     point = JointTrajectoryPoint(positions=positions.tolist(),
                                  velocities=[0.0] * len(positions))
-    ns = round(duration * 1e9)
-    point.time_from_start = Duration(sec=ns // 1_000_000_000, nanosec=ns % 1_000_000_000)
+    point.time_from_start = duration_from_seconds(duration)
     return JointTrajectory(joint_names=list(names), points=[point])
 
 

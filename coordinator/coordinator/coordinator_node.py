@@ -26,7 +26,6 @@ from typing import Dict, List, Optional, Sequence, Tuple
 
 import numpy as np
 import rclpy
-from builtin_interfaces.msg import Duration
 from geometry_msgs.msg import Twist
 from nav_msgs.msg import Odometry
 from rcl_interfaces.msg import Parameter, ParameterDescriptor, ParameterType, ParameterValue
@@ -43,7 +42,7 @@ from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 from visualization_msgs.msg import MarkerArray
 
 from controllers.lockstep import CommandCounter, DueGrid
-from controllers.params import float_range
+from ros_common.params import float_range
 from controllers.path_follower import DriveLead, PathFollower
 from controllers.youbot_arm import JOINT_NAMES as YOUBOT_JOINTS
 from controllers.youbot_arm import JOINT_VELOCITY_LIMIT as YOUBOT_VELOCITY_LIMIT
@@ -58,6 +57,8 @@ from coordinator.results import (IdentificationCheck, PeakJointSpeed, at_destina
 from world_description import PIPELINE_CELL
 from world_description.resources import resolve_resource
 from world_description.world_config import load_world
+from ros_common.geometry import yaw_of
+from ros_common.stamps import duration_from_ns, set_stamp, stamp_from_ns, to_ns
 
 ARMS = {'zu12': ZU12_JOINTS, 'youbot': YOUBOT_JOINTS}
 CAMERA_TOPIC = '/belt_camera/image_raw'
@@ -214,20 +215,20 @@ class CoordinatorNode(Node):
         velocity = (np.array([msg.velocity[index[n]] for n in names])
                     if len(msg.velocity) == len(msg.name) else None)
         with self._lock:
-            self._joints[arm] = (_ns(msg.header.stamp),
+            self._joints[arm] = (to_ns(msg.header.stamp),
                                  np.array([msg.position[index[n]] for n in names]), velocity)
             if velocity is not None:
-                self._peak[arm].update(velocity, _ns(msg.header.stamp) * 1e-9)
+                self._peak[arm].update(velocity, to_ns(msg.header.stamp) * 1e-9)
             self._lock.notify_all()
 
     def _on_grip(self, arm: str, msg: GripState) -> None:
         with self._lock:
-            self._grip[arm] = (_ns(msg.header.stamp), bool(msg.holding), bool(msg.armed))
+            self._grip[arm] = (to_ns(msg.header.stamp), bool(msg.holding), bool(msg.armed))
             self._lock.notify_all()
 
     def _on_odom(self, msg: Odometry) -> None:
         p, q, v = msg.pose.pose.position, msg.pose.pose.orientation, msg.twist.twist
-        yaw = math.atan2(2.0 * (q.w * q.z + q.x * q.y), 1.0 - 2.0 * (q.y * q.y + q.z * q.z))
+        yaw = yaw_of(q)
         # The odom frame is the youBot's start pose in the cell (REP-105; no tf2 here).
         hx, hy, hyaw = self.layout.youbot_home
         c, s = math.cos(hyaw), math.sin(hyaw)
@@ -236,9 +237,9 @@ class CoordinatorNode(Node):
         c, s = math.cos(pose[2]), math.sin(pose[2])
         world = (c * v.linear.x - s * v.linear.y, s * v.linear.x + c * v.linear.y,
                  v.angular.z)
-        stamp = _ns(msg.header.stamp) * 1e-9
+        stamp = to_ns(msg.header.stamp) * 1e-9
         with self._lock:
-            self._odom = (_ns(msg.header.stamp), pose, world)
+            self._odom = (to_ns(msg.header.stamp), pose, world)
             self._lock.notify_all()
             if self._follower is not None:
                 # Real time: the base controller, on every odometry message. A decision held
@@ -250,7 +251,7 @@ class CoordinatorNode(Node):
                 self.drive(*status.command)
 
     def _on_detections(self, msg: MaterialDetectionArray) -> None:
-        stamp = _ns(msg.header.stamp)
+        stamp = to_ns(msg.header.stamp)
         dets = [Detection(d.id, d.color, np.array([d.position.x, d.position.y, d.position.z]),
                           stamp * 1e-9, d.hits) for d in msg.detections]
         with self._lock:
@@ -263,7 +264,7 @@ class CoordinatorNode(Node):
         truth = [(m.ns, np.array([m.pose.position.x, m.pose.position.y, m.pose.position.z]))
                  for m in msg.markers]
         with self._lock:
-            self._markers.append((_ns(msg.markers[0].header.stamp), truth))
+            self._markers.append((to_ns(msg.markers[0].header.stamp), truth))
             del self._markers[:-50]
             self._identifications.truth(self._markers[-1][0], truth)
 
@@ -303,12 +304,12 @@ class CoordinatorNode(Node):
             delay = max(0.0, self.now() + self.settings.plan_latency - start)
         start_ns = round((start + delay) * 1e9)
         msg = JointTrajectory(joint_names=list(ARMS[arm]))
-        msg.header.stamp.sec, msg.header.stamp.nanosec = divmod(start_ns, 1_000_000_000)
+        set_stamp(msg.header.stamp, start_ns)
         for t, q, *rates in points:
             ns = max(1, round((t + delay) * 1e9) - start_ns)
             point = JointTrajectoryPoint(
                 positions=[float(v) for v in q],
-                time_from_start=Duration(sec=ns // 1_000_000_000, nanosec=ns % 1_000_000_000))
+                time_from_start=duration_from_ns(ns))
             if rates:       # the plan's velocities and accelerations: followed exactly
                 point.velocities = [float(v) for v in rates[0]]
                 point.accelerations = [float(v) for v in rates[1]]
@@ -352,7 +353,7 @@ class CoordinatorNode(Node):
     def event(self, e: Event) -> None:
         msg = PipelineEvent(kind=e.kind, robot=e.robot, material_id=e.material, color=e.color,
                             detail=e.detail)
-        msg.header.stamp = _stamp(e.time)
+        msg.header.stamp = stamp_from_ns(max(0, round(e.time * 1e9)))
         self.event_pub.publish(msg)
         if e.kind == 'seen':
             self._check_identification(e)
@@ -608,7 +609,7 @@ class CoordinatorNode(Node):
                             missed=sum(1 for m in mats if m.status == 'missed'),
                             failed=sum(1 for m in mats if m.status == 'failed'),
                             elapsed=float(now - p.start_time), result_json=result_json)
-        msg.header.stamp = _stamp(now)
+        msg.header.stamp = stamp_from_ns(max(0, round(now * 1e9)))
         self.state_pub.publish(msg)
         if self.progress_file is not None:
             try:
@@ -623,16 +624,6 @@ class CoordinatorNode(Node):
 def _replace(layout, **changes):
     from dataclasses import replace
     return replace(layout, **changes)
-
-
-def _ns(stamp) -> int:
-    return stamp.sec * 1_000_000_000 + stamp.nanosec
-
-
-def _stamp(t: float):
-    from builtin_interfaces.msg import Time
-    ns = max(0, round(t * 1e9))
-    return Time(sec=ns // 1_000_000_000, nanosec=ns % 1_000_000_000)
 
 
 def main(args=None) -> int:

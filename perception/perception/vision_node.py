@@ -22,7 +22,7 @@ from ros_common.node_main import run_node
 from sensor_msgs.msg import CameraInfo, Image
 from sim_interfaces.msg import MaterialDetection, MaterialDetectionArray
 
-from controllers.params import float_range
+from ros_common.params import float_range
 from perception.projection import CameraModel
 from perception.segmentation import DEFAULT_CLASSES, ColorClass
 from perception.tracker import Tracker
@@ -31,6 +31,7 @@ from world_description import PIPELINE_CELL
 from world_description.camera_geometry import look_at_rotation
 from world_description.resources import resolve_resource
 from world_description.world_config import load_world
+from ros_common.stamps import to_seconds
 
 ENCODINGS = ('rgb8', 'bgr8')
 
@@ -178,7 +179,7 @@ class VisionNode(Node):
             self._pub.publish(skipped)
             return
         start = time.perf_counter()
-        t = msg.header.stamp.sec + msg.header.stamp.nanosec * 1e-9
+        t = to_seconds(msg.header.stamp)
         result = self._vision.process(t, frame)
         out = MaterialDetectionArray()
         out.header.stamp = msg.header.stamp

@@ -17,6 +17,7 @@ import numpy as np
 from rosbags.highlevel import AnyReader, AnyReaderError
 from rosbags.rosbag2 import ReaderError
 
+from controllers.transforms import yaw_from_quaternion
 from recording.plot import plot_paths
 
 ODOMETRY = 'nav_msgs/msg/Odometry'
@@ -110,8 +111,7 @@ def analyse(bag: Path) -> tuple:
                     pose = reader.deserialize(raw, c.msgtype).pose.pose
                     paths.setdefault(c.topic, []).append((pose.position.x, pose.position.y))
                     q = pose.orientation
-                    yaws[c.topic] = math.atan2(2 * (q.w * q.z + q.x * q.y),
-                                               1 - 2 * (q.y * q.y + q.z * q.z))
+                    yaws[c.topic] = yaw_from_quaternion((q.x, q.y, q.z, q.w))
         except Exception as exc:  # noqa: BLE001 - rosbags raises several kinds on bad data
             raise AnalysisError(f'{bag}: unreadable data ({type(exc).__name__}: {exc}); the '
                                 'bag is truncated or corrupt') from None

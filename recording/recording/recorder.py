@@ -12,7 +12,7 @@ from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from ros_common.node_main import run_node
 from rosbags.rosbag2 import WriterError
 
-from controllers.params import float_range
+from ros_common.params import float_range
 from recording.bag_writer import STORAGES, BagError, BagWriter
 from recording.qos_profiles import adapt_to_publishers, bag_qos
 from recording.types import TypeResolutionError, message_class

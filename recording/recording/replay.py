@@ -16,10 +16,11 @@ from rosgraph_msgs.msg import Clock
 from rosbags.highlevel import AnyReader, AnyReaderError
 from rosbags.rosbag2 import ReaderError
 
-from controllers.params import float_range
+from ros_common.params import float_range
 from recording.qos_profiles import replay_policies
 from recording.replay_schedule import ReplaySchedule
 from recording.types import TypeResolutionError, message_class
+from ros_common.stamps import set_stamp
 
 
 SUBSCRIBER_MATCH_SETTLE_S = 0.5
@@ -167,7 +168,7 @@ class Replay(Node):
 
     def _publish_clock(self, bag_ns: int) -> None:
         msg = Clock()
-        msg.clock.sec, msg.clock.nanosec = divmod(bag_ns, 1_000_000_000)
+        set_stamp(msg.clock, bag_ns)
         self.clock_pub.publish(msg)
 
     def destroy_node(self) -> None:

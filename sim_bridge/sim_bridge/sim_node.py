@@ -27,7 +27,7 @@ from std_srvs.srv import SetBool, Trigger
 
 from controllers.joint_trajectory import TrajectoryPoint, TrajectoryRequest
 from controllers.lockstep import CommandBarrier
-from controllers.params import float_range
+from ros_common.params import float_range
 from controllers.transforms import matrix_to_quaternion
 from sim_bridge.camera import ImageBuffer
 from sim_bridge.pacing import Pacer, RtfMeter
@@ -35,6 +35,7 @@ from sim_bridge.runner import DriveLimits, SimRunner
 from sim_bridge.world import SimWorld, WorldError
 from world_description.resources import resolve_resource
 from world_description.world_config import WorldConfigError, load_world
+from ros_common.stamps import stamp_from_ns, to_seconds
 
 DEFAULT_WORLD = 'package://world_description/worlds/mini_robot.yaml'
 MAX_STEPS_PER_REQUEST = 100_000
@@ -281,7 +282,7 @@ class SimNode(Node):
         # A state nobody reads is not built or sent (as the cameras): each costs about a
         # millisecond in rclpy, and a lock-step trial sends about 20,000 of them. A reader that
         # joins gets the next one.
-        stamp = _stamp(time_ns)
+        stamp = stamp_from_ns(time_ns)
         sim_robot = self._world.robots[robot]
         if _wanted(self._joint_pubs[robot]):
             js = sim_robot.joint_states()
@@ -330,12 +331,12 @@ class SimNode(Node):
             state = ('held' if m.index in held else
                      'on_belt' if world.conveyor.on_belt(m.body) else 'free')
             msg.markers.append(_material_marker(m, pos, rot, state, world.source.config,
-                                                _stamp(time_ns)))
+                                                stamp_from_ns(time_ns)))
         self._materials_pub.publish(msg)
 
     def on_camera_due(self, index: int, time_ns: int, render) -> None:
         # Rendering dominates the cost of a step: only for image subscribers.
-        stamp = _stamp(time_ns)
+        stamp = stamp_from_ns(time_ns)
         if self._image_pubs[index].get_subscription_count() > 0:
             image = self._image_msgs[index]
             self._buffers[index].fill_from_rgba(render())
@@ -358,13 +359,13 @@ class SimNode(Node):
         command = self._runner.applied(robot)
         vx, vy, wz = command if len(command) == 3 else (command[0], 0.0, command[1])
         msg = TwistStamped()
-        msg.header.stamp = _stamp(time_ns)
+        msg.header.stamp = stamp_from_ns(time_ns)
         msg.header.frame_id = self._odom_frames[robot][1]
         msg.twist.linear.x, msg.twist.linear.y, msg.twist.angular.z = vx, vy, wz
         self._cmd_out_pubs[robot].publish(msg)
 
     def _publish_clock(self, time_ns: int) -> None:
-        self._clock_msg.clock = _stamp(time_ns)
+        self._clock_msg.clock = stamp_from_ns(time_ns)
         self._clock_pub.publish(self._clock_msg)
 
     # --- subscriptions and services --------------------------------------------------------
@@ -480,7 +481,7 @@ class SimNode(Node):
             self._note_progress()
             response.success = True
         response.step_count = self._world.step_count
-        response.sim_time = _stamp(self._world.sim_time_ns)
+        response.sim_time = stamp_from_ns(self._world.sim_time_ns)
         return response
 
     async def _commands_in(self, expected: int) -> bool:
@@ -514,15 +515,11 @@ def _fmt(values) -> str:
     return '(' + ', '.join(f'{v:.3f}' for v in values) + ')'
 
 
-def _seconds(duration) -> float:
-    return duration.sec + duration.nanosec * 1e-9
-
-
 def trajectory_request(msg: JointTrajectory) -> TrajectoryRequest:
     """A JointTrajectory as the follower takes it (a zero stamp means "start now")."""
     stamp = msg.header.stamp
-    start = None if stamp.sec == 0 and stamp.nanosec == 0 else _seconds(stamp)
-    points = tuple(TrajectoryPoint(_seconds(p.time_from_start), tuple(p.positions),
+    start = None if stamp.sec == 0 and stamp.nanosec == 0 else to_seconds(stamp)
+    points = tuple(TrajectoryPoint(to_seconds(p.time_from_start), tuple(p.positions),
                                    tuple(p.velocities), tuple(p.accelerations), tuple(p.effort))
                    for p in msg.points)
     return TrajectoryRequest(tuple(msg.joint_names), points, start)
@@ -564,10 +561,6 @@ def _material_marker(material, pos, rot, state: str, config, stamp: Time) -> Mar
     r, g, b, a = dict(config.colors)[material.color]
     marker.color.r, marker.color.g, marker.color.b, marker.color.a = r, g, b, a
     return marker
-
-
-def _stamp(time_ns: int) -> Time:
-    return Time(sec=time_ns // 1_000_000_000, nanosec=time_ns % 1_000_000_000)
 
 
 def main(args=None) -> int:

@@ -12,6 +12,7 @@ from sim_interfaces.msg import MaterialDetectionArray
 from visualization_msgs.msg import MarkerArray
 
 from helpers import wait_for
+from ros_common.stamps import to_seconds
 
 WORLD = 'world:=package://world_description/worlds/pipeline_cell.yaml'
 
@@ -44,7 +45,7 @@ def test_vision_reports_every_material_once_with_its_colour(cell, start_node, pr
     # The first snapshot taken after the reply was taken on a moving belt.
     heard = len(truth)
     wait_for(lambda: len(truth) > heard, 10.0, what='the materials after the belt started')
-    moving_from = _seconds(truth[heard][1].markers[0].header.stamp)
+    moving_from = to_seconds(truth[heard][1].markers[0].header.stamp)
 
     def all_past_the_camera():
         if not truth:
@@ -55,11 +56,11 @@ def test_vision_reports_every_material_once_with_its_colour(cell, start_node, pr
     time.sleep(0.5)
     # Ground truth (10 Hz) carried forward to each frame's stamp at the belt speed. Frames
     # from before the belt ran at a steady speed count for identity and colour only.
-    snapshots = [(_seconds(m.markers[0].header.stamp), {mk.id: mk for mk in m.markers})
+    snapshots = [(to_seconds(m.markers[0].header.stamp), {mk.id: mk for mk in m.markers})
                  for _, m in list(truth) if m.markers]
     matches, worst = {}, 0.0
     for _, msg in list(frames):
-        t = _seconds(msg.header.stamp)
+        t = to_seconds(msg.header.stamp)
         before = [s for s in snapshots if s[0] <= t + 1e-9]
         if not before:
             continue
@@ -85,50 +86,6 @@ def test_vision_reports_every_material_once_with_its_colour(cell, start_node, pr
     assert worst < 0.005
     assert debug, 'no debug image'
     assert vision.alive() and cell.alive()
-
-
-def _seconds(stamp):
-    return stamp.sec + stamp.nanosec * 1e-9
-
-
-def test_pick_and_place_every_material_of_a_seeded_scenario(start_node, probe):
-    """The Zu 12 takes each of the eight materials off the moving belt where the vision node
-    located it (through the kinematics node and the suction cup) and places it: purple on the
-    ground target, the others on the youBot's plate. Each ends within 1 cm of its target and
-    stays there; nothing is knocked off the belt."""
-    sim = start_node('sim_node', '-p', WORLD, '-p', 'real_time_factor:=3.0', '-p',
-                     'belt_speed:=0.04', '-p', 'scenario_seed:=5')
-    start_node('vision_node', '-r', 'image_raw:=/belt_camera/image_raw', '-r',
-               'camera_info:=/belt_camera/camera_info', '-p', 'use_sim_time:=true')
-    start_node('kinematics_node', '-r', '__ns:=/zu12', '-p', 'arm:=zu12', '-p',
-               'use_sim_time:=true')
-    truth = probe.collect(MarkerArray, '/cell/materials')
-    task = start_node('pick_place', '-p', 'use_sim_time:=true', '-p', 'count:=8')
-    wait_for(lambda: not task.alive(), 400.0, what='the pick and place script')
-    log = task.output()
-    assert task.proc.returncode == 0, log
-    placed = {}
-    for line in log.splitlines():
-        if 'released material' in line:
-            index = int(line.split('released material ')[1].split()[0])
-            target = line.split(' at ')[-1]
-            placed[index] = [float(v) for v in target.strip('[] ').split(',')]
-    assert len(placed) == 8, log
-    time.sleep(1.0)
-    first = {m.id: m for m in truth[-1][1].markers}
-    time.sleep(1.0)
-    final = {m.id: m for m in truth[-1][1].markers}
-    assert sorted(m.ns for m in final.values()) == ['blue', 'orange', 'orange', 'orange',
-                                                     'orange', 'orange', 'orange', 'purple']
-    for index, target in placed.items():
-        p, q = final[index].pose.position, first[index].pose.position
-        if final[index].ns == 'purple':
-            assert target[:2] == [-0.5, 0.3]
-        # Resting on its target: centre within 1 cm of the target point, half a size above.
-        assert np.hypot(p.x - target[0], p.y - target[1]) < 0.01, (index, p, target)
-        assert abs(p.z - (target[2] + 0.025)) < 0.005 and final[index].text == 'free'
-        assert np.hypot(p.x - q.x, p.y - q.y) < 0.001          # and stays there
-    assert sim.alive()
 
 
 def test_unusable_frames_are_rejected_with_a_warning(start_node, probe):

@@ -1,7 +1,7 @@
 """Teleop key handling and the timed-script parser."""
 import pytest
 
-from controllers.teleop_core import TeleopError, TeleopState, parse_script
+from teleop.teleop_core import TeleopError, TeleopState, parse_script
 
 
 def test_report_buttons_at_the_default_speed_level():

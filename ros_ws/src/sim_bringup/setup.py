@@ -24,7 +24,6 @@ setup(
         'console_scripts': [
             'drive_check = sim_bringup.drive_check:main',
             'arm_move = sim_bringup.arm_move:main',
-            'pick_place = sim_bringup.pick_place:main',
         ],
     },
 )

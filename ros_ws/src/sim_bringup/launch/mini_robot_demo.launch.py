@@ -35,7 +35,7 @@ def generate_launch_description():
              parameters=[params, {'real_time_factor': LaunchConfiguration('real_time_factor'),
                                   'gui': LaunchConfiguration('gui')}]),
         check,
-        Node(package='controllers', executable='teleop', namespace='mini_robot',
+        Node(package='teleop', executable='teleop', namespace='mini_robot',
              output='screen',
              parameters=[{'use_sim_time': True, 'script': SQUARE, 'publish_rate': 50.0,
                           'wait_for_subscriber': 30.0}]),

@@ -5,7 +5,7 @@ kinematics node, and optionally a recorder.
         [record:=false] [bag_dir:=bags]
 
 Then drive it:
-    ros2 run controllers teleop --ros-args -r __ns:=/youbot -p holonomic:=true
+    ros2 run teleop teleop --ros-args -r __ns:=/youbot -p holonomic:=true
     ros2 topic pub --once /youbot/arm_controller/joint_trajectory \\
         trajectory_msgs/msg/JointTrajectory "{joint_names: [arm_joint_1, arm_joint_2,
         arm_joint_3, arm_joint_4, arm_joint_5], points: [{positions: [0.5, 0.6, 0.9, 0.8, 0.0],

@@ -19,8 +19,9 @@ from rclpy.qos import QoSProfile
 from sim_interfaces.msg import JointTrajectoryControllerState
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
-from controllers.params import float_range
+from ros_common.params import float_range
 from controllers.youbot_arm import JOINT_NAMES
+from ros_common.stamps import set_stamp
 
 
 class ArmMove(Node):
@@ -46,7 +47,7 @@ class ArmMove(Node):
         self.names, self.target, self.tolerance = names, positions, get('tolerance')
         point = JointTrajectoryPoint(positions=positions)
         ns = round(get('duration') * 1e9)
-        point.time_from_start.sec, point.time_from_start.nanosec = divmod(ns, 1_000_000_000)
+        set_stamp(point.time_from_start, ns)
         self.trajectory = JointTrajectory(joint_names=names, points=[point])
         controller = get('controller')
         self.pub = self.create_publisher(JointTrajectory, f'{controller}/joint_trajectory',

@@ -21,9 +21,10 @@ from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile
 
 from controllers.diff_drive import Pose2D, predict_pose, wrap_angle
-from controllers.params import float_range
-from controllers.teleop_core import TeleopError, parse_script
+from ros_common.params import float_range
+from teleop.teleop_core import TeleopError, parse_script
 from controllers.transforms import yaw_from_quaternion
+from ros_common.stamps import to_seconds
 
 
 
@@ -80,7 +81,7 @@ class DriveCheck(Node):
             f'y={self.predicted.y:+.4f} m yaw={math.degrees(self.predicted.yaw):+.2f} deg')
 
     def _on_applied(self, msg: TwistStamped) -> None:
-        t = msg.header.stamp.sec + msg.header.stamp.nanosec * 1e-9
+        t = to_seconds(msg.header.stamp)
         self._applied.append((t, msg.twist.linear.x, msg.twist.angular.z))
 
     def _on_cmd(self, msg: Twist) -> None:
@@ -92,7 +93,7 @@ class DriveCheck(Node):
         self._odom = msg
         if self.result is not None or not self._moving or not self._last_cmd[1]:
             return
-        t = msg.header.stamp.sec + msg.header.stamp.nanosec * 1e-9
+        t = to_seconds(msg.header.stamp)
         twist = msg.twist.twist
         if (t - self._last_cmd[0] > self._settle and abs(twist.linear.x) < 1e-3
                 and abs(twist.angular.z) < 1e-3):
@@ -117,7 +118,7 @@ class DriveCheck(Node):
             'exactly on time)')
         if self._applied:
             stamp = self._odom.header.stamp
-            predicted = self.as_applied(stamp.sec + stamp.nanosec * 1e-9)
+            predicted = self.as_applied(to_seconds(stamp))
             basis = f'for the {len(self._applied)} commands as the simulator applied them'
         else:
             self.get_logger().warn('nothing on cmd_vel_out (a simulator without it?): '

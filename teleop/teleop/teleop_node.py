@@ -19,8 +19,8 @@ from rclpy.node import Node
 from rclpy.qos import QoSProfile
 from rclpy.signals import SignalHandlerOptions
 
-from controllers.params import float_range
-from controllers.teleop_core import (HELP, HOLONOMIC_HELP, TeleopError, TeleopScript,
+from ros_common.params import float_range
+from teleop.teleop_core import (HELP, HOLONOMIC_HELP, TeleopError, TeleopScript,
                                      TeleopState, parse_script)
 
 

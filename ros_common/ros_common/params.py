@@ -1,4 +1,4 @@
-"""Parameter descriptors shared by the project's nodes (message types only, no rclpy)."""
+"""Parameter descriptors shared by the project's nodes."""
 from rcl_interfaces.msg import FloatingPointRange, ParameterDescriptor
 
 
