@@ -30,7 +30,6 @@ from geometry_msgs.msg import Twist
 from nav_msgs.msg import Odometry
 from rcl_interfaces.msg import Parameter, ParameterDescriptor, ParameterType, ParameterValue
 from rcl_interfaces.srv import GetParameters, SetParameters
-from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile
 from sensor_msgs.msg import JointState
@@ -59,6 +58,7 @@ from world_description.resources import resolve_resource
 from world_description.world_config import load_world
 from ros_common.geometry import yaw_of
 from ros_common.stamps import duration_from_ns, set_stamp, stamp_from_ns, to_ns
+from ros_common.node_main import run_task
 
 ARMS = {'zu12': ZU12_JOINTS, 'youbot': YOUBOT_JOINTS}
 CAMERA_TOPIC = '/belt_camera/image_raw'
@@ -626,36 +626,23 @@ def _replace(layout, **changes):
     return replace(layout, **changes)
 
 
-def main(args=None) -> int:
-    rclpy.init(args=args)
+def _run(node: CoordinatorNode) -> int:
+    return 0 if node.run()['status'] == 'completed' else 1
+
+
+def _stop_the_robots(node: CoordinatorNode) -> None:
     try:
-        node = CoordinatorNode()
-    except (CoordinatorError, rclpy.exceptions.ParameterException, FileNotFoundError,
-            KeyError, ValueError) as exc:
-        rclpy.logging.get_logger('coordinator_node').fatal(f'cannot start: {exc}')
-        rclpy.try_shutdown()
-        return 2
-    executor = SingleThreadedExecutor()
-    executor.add_node(node)
-    spinner = threading.Thread(target=executor.spin, daemon=True)
-    spinner.start()
-    code = 1
-    try:
-        out = node.run()
-        code = 0 if out['status'] == 'completed' else 1
-    except (KeyboardInterrupt, ExternalShutdownException):
+        node.follow(None)
+        node.drive(0.0, 0.0, 0.0)
+    except Exception:   # noqa: BLE001 - shutting down: the context may be gone already
         pass
-    finally:
-        try:
-            node.follow(None)
-            node.drive(0.0, 0.0, 0.0)
-        except Exception:   # noqa: BLE001 - shutting down: the context may be gone already
-            pass
-        executor.shutdown(timeout_sec=2.0)
-        spinner.join(2.0)
-        node.destroy_node()
-        rclpy.try_shutdown()
-    return code
+
+
+def main(args=None) -> int:
+    return run_task(CoordinatorNode, 'coordinator_node', _run,
+                    (CoordinatorError, FileNotFoundError, KeyError, ValueError),
+                    on_exit=_stop_the_robots, background_spin=True, interrupted_code=1,
+                    args=args)
 
 
 if __name__ == '__main__':

@@ -9,7 +9,6 @@ from typing import Dict
 import rclpy
 from rcl_interfaces.msg import ParameterDescriptor
 from rclpy.duration import Duration
-from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from rosgraph_msgs.msg import Clock
@@ -21,6 +20,7 @@ from recording.qos_profiles import replay_policies
 from recording.replay_schedule import ReplaySchedule
 from recording.types import TypeResolutionError, message_class
 from ros_common.stamps import set_stamp
+from ros_common.node_main import run_task
 
 
 SUBSCRIBER_MATCH_SETTLE_S = 0.5
@@ -177,22 +177,7 @@ class Replay(Node):
 
 
 def main(args=None) -> int:
-    rclpy.init(args=args)
-    try:
-        node = Replay()
-    except (ReplayError, rclpy.exceptions.ParameterException) as exc:
-        rclpy.logging.get_logger('replay').fatal(f'cannot start: {exc}')
-        rclpy.try_shutdown()
-        return 1
-    code = 0
-    try:
-        code = node.run()
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    finally:
-        node.destroy_node()
-        rclpy.try_shutdown()
-    return code
+    return run_task(Replay, 'replay', lambda node: node.run(), (ReplayError,), args=args)
 
 
 if __name__ == '__main__':

@@ -1,4 +1,5 @@
-"""One ``main()`` for the project's nodes: start-up errors as one fatal line and exit code 1,
+"""The ``main()`` of the project's nodes (``run_node``: spin until shutdown; ``run_task``: run
+a job to its end): start-up errors as one fatal line and exit code 1,
 and a shutdown by SIGINT or SIGTERM that always ends cleanly with exit code 0.
 
 rclpy's signal handler shuts the context down from outside the executor. If that happens while
@@ -8,11 +9,12 @@ the same thing, a requested shutdown, and are treated alike here.
 """
 from __future__ import annotations
 
+import threading
 from typing import Callable, Optional, Tuple, Type
 
 import rclpy
 from rclpy.exceptions import ParameterException
-from rclpy.executors import Executor, ExternalShutdownException
+from rclpy.executors import Executor, ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
 
 try:
@@ -32,6 +34,20 @@ def spin(node: Node, executor: Optional[Executor] = None) -> None:
             raise           # a real failure, not the shutdown race
 
 
+def _create(factory: Callable[[], Node], name: str,
+            startup_errors: Tuple[Type[BaseException], ...]) -> Optional[Node]:
+    """The node, or None after one fatal line for a configuration error (the context is then
+    shut down)."""
+    try:
+        return factory()
+    except ParameterException as exc:
+        rclpy.logging.get_logger(name).fatal(f'bad parameter: {exc}')
+    except tuple(startup_errors) as exc:
+        rclpy.logging.get_logger(name).fatal(f'cannot start: {exc}')
+    rclpy.try_shutdown()
+    return None
+
+
 def run_node(factory: Callable[[], Node], name: str,
              startup_errors: Tuple[Type[BaseException], ...] = (),
              on_exit: Optional[Callable[[Node], None]] = None, args=None) -> int:
@@ -42,15 +58,8 @@ def run_node(factory: Callable[[], Node], name: str,
     the node is destroyed (a recorder closes its bag there).
     """
     rclpy.init(args=args)
-    try:
-        node = factory()
-    except ParameterException as exc:
-        rclpy.logging.get_logger(name).fatal(f'bad parameter: {exc}')
-        rclpy.try_shutdown()
-        return 1
-    except tuple(startup_errors) as exc:
-        rclpy.logging.get_logger(name).fatal(f'cannot start: {exc}')
-        rclpy.try_shutdown()
+    node = _create(factory, name, startup_errors)
+    if node is None:
         return 1
     try:
         spin(node)
@@ -60,3 +69,46 @@ def run_node(factory: Callable[[], Node], name: str,
         node.destroy_node()
         rclpy.try_shutdown()
     return 0
+
+
+def run_task(factory: Callable[[], Node], name: str, task: Callable[[Node], int],
+             startup_errors: Tuple[Type[BaseException], ...] = (),
+             on_exit: Optional[Callable[[Node], None]] = None, background_spin: bool = False,
+             interrupted_code: int = 0, args=None) -> int:
+    """Create the node and run ``task(node)`` to its end: a node that does a job and exits
+    with the task's code (a trial's coordinator, a replay, a check).
+
+    Start-up errors as ``run_node``'s (exit code 1). With ``background_spin`` an executor
+    spins the node in a thread while the task runs in this one (a task that blocks on what
+    its callbacks deliver); otherwise the task spins the node itself. A shutdown by SIGINT or
+    SIGTERM ends the task with ``interrupted_code`` (0: stopping is how a replay ends; 1: a
+    check or a run that did not finish). ``on_exit`` runs however the task ended, before the
+    node is destroyed (a coordinator stops its robots there).
+    """
+    rclpy.init(args=args)
+    node = _create(factory, name, startup_errors)
+    if node is None:
+        return 1
+    executor, spinner = None, None
+    if background_spin:
+        executor = SingleThreadedExecutor(context=node.context)
+        executor.add_node(node)
+        spinner = threading.Thread(target=executor.spin, daemon=True)
+        spinner.start()
+    code = interrupted_code
+    try:
+        code = task(node)
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    except RCLError:
+        if node.context.ok():
+            raise           # a real failure, not the shutdown race
+    finally:
+        if on_exit is not None:
+            on_exit(node)
+        if executor is not None:
+            executor.shutdown(timeout_sec=2.0)
+            spinner.join(2.0)
+        node.destroy_node()
+        rclpy.try_shutdown()
+    return code

@@ -13,7 +13,6 @@ import time
 
 import rclpy
 from rcl_interfaces.msg import ParameterDescriptor
-from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from rclpy.qos import QoSProfile
 from sim_interfaces.msg import JointTrajectoryControllerState
@@ -22,6 +21,7 @@ from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 from ros_common.params import float_range
 from controllers.youbot_arm import JOINT_NAMES
 from ros_common.stamps import set_stamp
+from ros_common.node_main import run_task
 
 
 class ArmMove(Node):
@@ -79,38 +79,27 @@ class ArmMove(Node):
             self.result = 1
 
 
+def _move(node: 'ArmMove') -> int:
+    end = time.monotonic() + 30.0
+    while rclpy.ok() and node.pub.get_subscription_count() == 0:
+        if time.monotonic() > end:
+            node.get_logger().error(f'nobody listens on {node.pub.topic_name}')
+            return 1
+        rclpy.spin_once(node, timeout_sec=0.05)
+    node.pub.publish(node.trajectory)
+    node.sent_at = time.monotonic()
+    node.get_logger().info(f'sent {node.names} -> {node.target}')
+    while rclpy.ok() and node.result is None:
+        rclpy.spin_once(node, timeout_sec=0.1)
+        if not node.started and time.monotonic() - node.sent_at > 5.0:
+            node.get_logger().error('the controller did not start the trajectory (rejected?'
+                                    ' see the simulator log)')
+            return 1
+    return node.result if node.result is not None else 1
+
+
 def main(args=None) -> int:
-    rclpy.init(args=args)
-    try:
-        node = ArmMove()
-    except (ValueError, rclpy.exceptions.ParameterException) as exc:
-        rclpy.logging.get_logger('arm_move').fatal(f'cannot start: {exc}')
-        rclpy.try_shutdown()
-        return 1
-    code = 1
-    try:
-        end = time.monotonic() + 30.0
-        while rclpy.ok() and node.pub.get_subscription_count() == 0:
-            if time.monotonic() > end:
-                node.get_logger().error(f'nobody listens on {node.pub.topic_name}')
-                return 1
-            rclpy.spin_once(node, timeout_sec=0.05)
-        node.pub.publish(node.trajectory)
-        node.sent_at = time.monotonic()
-        node.get_logger().info(f'sent {node.names} -> {node.target}')
-        while rclpy.ok() and node.result is None:
-            rclpy.spin_once(node, timeout_sec=0.1)
-            if not node.started and time.monotonic() - node.sent_at > 5.0:
-                node.get_logger().error('the controller did not start the trajectory (rejected?'
-                                        ' see the simulator log)')
-                return 1
-        code = node.result if node.result is not None else 1
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    finally:
-        node.destroy_node()
-        rclpy.try_shutdown()
-    return code
+    return run_task(ArmMove, 'arm_move', _move, (ValueError,), interrupted_code=1, args=args)
 
 
 if __name__ == '__main__':

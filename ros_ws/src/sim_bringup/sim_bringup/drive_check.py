@@ -16,7 +16,6 @@ import rclpy
 from geometry_msgs.msg import Twist, TwistStamped
 from nav_msgs.msg import Odometry
 from rcl_interfaces.msg import ParameterDescriptor
-from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile
 
@@ -25,6 +24,7 @@ from ros_common.params import float_range
 from teleop.teleop_core import TeleopError, parse_script
 from controllers.transforms import yaw_from_quaternion
 from ros_common.stamps import to_seconds
+from ros_common.node_main import run_task
 
 
 
@@ -139,29 +139,19 @@ class DriveCheck(Node):
         return ok
 
 
-def main(args=None) -> int:
-    rclpy.init(args=args)
-    try:
-        node = DriveCheck()
-    except (TeleopError, rclpy.exceptions.ParameterException) as exc:
-        rclpy.logging.get_logger('drive_check').fatal(f'cannot start: {exc}')
-        rclpy.try_shutdown()
-        return 1
+def _check(node: 'DriveCheck') -> int:
     deadline = time.monotonic() + node.wall_timeout
-    code = 1
-    try:
-        while rclpy.ok() and node.result is None and time.monotonic() < deadline:
-            rclpy.spin_once(node, timeout_sec=0.1)
-        if node.result is None:
-            node.get_logger().error('timed out before the drive ended')
-        else:
-            code = 0 if node.result else 1
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    finally:
-        node.destroy_node()
-        rclpy.try_shutdown()
-    return code
+    while rclpy.ok() and node.result is None and time.monotonic() < deadline:
+        rclpy.spin_once(node, timeout_sec=0.1)
+    if node.result is None:
+        node.get_logger().error('timed out before the drive ended')
+        return 1
+    return 0 if node.result else 1
+
+
+def main(args=None) -> int:
+    return run_task(DriveCheck, 'drive_check', _check, (TeleopError,), interrupted_code=1,
+                    args=args)
 
 
 if __name__ == '__main__':
