@@ -16,6 +16,7 @@ from pybullet_utils.bullet_client import BulletClient
 
 from controllers.base_fidelity import tracking_errors
 from controllers.diff_drive import Pose2D
+from controllers.mecanum import BASE_LINK_HEIGHT_M
 from controllers.joint_trajectory import TrajectoryPoint, TrajectoryRequest
 from controllers.youbot_arm import theta_from_datasheet
 from controllers.youbot_kinematics import REFERENCE_FRAMES, YoubotKinematics, motion_duration
@@ -109,7 +110,7 @@ def arm_tracking(trials: int):
 def _clear_of_the_floor(kin, q0, q1, margin=0.05):
     """Every joint frame and the gripper stay ``margin`` above the ground along the joint-space
     line from q0 to q1 (the arm does not collide with its own base here, but with the floor)."""
-    ground = -0.0815 + margin                       # base_link is 0.0815 m above the ground
+    ground = -BASE_LINK_HEIGHT_M + margin            # base_link above the ground
     for s in np.linspace(0.0, 1.0, 11):
         q = (1 - s) * np.asarray(q0) + s * np.asarray(q1)
         frames = kin.chain.frames(theta_from_datasheet(q))
@@ -126,7 +127,7 @@ def stepping_cost(seconds: float):
     p.setTimeStep(DT)
     p.setGravity(0, 0, -9.81)
     p.createMultiBody(0.0, p.createCollisionShape(pybullet.GEOM_PLANE))
-    p.loadURDF(str(urdf_path('youbot')), (0, 0, 0.0815), flags=URDF_FLAGS)
+    p.loadURDF(str(urdf_path('youbot')), (0, 0, BASE_LINK_HEIGHT_M), flags=URDF_FLAGS)
     n = int(seconds / DT)
     t0 = time.perf_counter()
     for _ in range(n):

@@ -22,7 +22,7 @@ sys.path.insert(0, str(ROOT / 'controllers'))
 sys.path.insert(0, str(ROOT / 'scripts'))
 
 import urdf_writer as uw  # noqa: E402
-from controllers.mecanum import WHEEL_RADIUS_M  # noqa: E402
+from controllers.mecanum import BASE_LINK_HEIGHT_M, WHEEL_RADIUS_M  # noqa: E402
 from controllers.youbot_arm import (ARM_BASE_IN_BASE_LINK_M, CRAIG_ROWS_DEG_M,  # noqa: E402
                                     DATASHEET_LIMITS_DEG, GRIPPER_TCP_OFFSET_M,
                                     JOINT_NAMES, JOINT_VELOCITY_LIMIT, THETA_OFFSET_RAD,
@@ -32,7 +32,6 @@ OUT = ROOT / 'robot_description' / 'urdf' / 'youbot.urdf'
 
 BASE_SIZE_M = (0.57, 0.36, 0.10)
 BASE_MASS_KG = 22.0
-BASE_HEIGHT_M = 0.0815                    # base_link above the ground
 WHEEL_MASS_KG = 1.4
 WHEEL_WIDTH_M = 0.05
 WHEEL_X_M, WHEEL_Y_M, WHEEL_Z_M = 0.228, 0.158, -0.034
@@ -128,7 +127,8 @@ HEADER = f'''<?xml version="1.0"?>
 <!--
   KUKA youBot, written by scripts/generate_youbot_urdf.py from the published numbers
   (ROBOT_MODELS.md §2-3); do not edit by hand.
-  base_link: centre of the base box, {BASE_HEIGHT_M} m above the ground (REP-103: x forward, z up).
+  base_link: centre of the base box, {BASE_LINK_HEIGHT_M} m above the ground (REP-103: x forward,
+  z up).
   Wheels: "virtual omni-wheels" (ROBOT_MODELS.md §2b): each wheel collides as a sphere of the
   wheel radius whose joint axis (link y) is the contact roller's axis, yawed -45 deg (FL, RR) or
   +45 deg (FR, RL) from the wheel axle; the simulator gives it anisotropic friction [1, 0, 1]

@@ -8,6 +8,9 @@ from typing import Tuple
 # The published description's wheel geometry: radius, and k = lx + ly (0.228 + 0.158).
 WHEEL_RADIUS_M = 0.0475
 LX_PLUS_LY_M = 0.386
+# The youBot's base_link above the floor when it stands on its wheels (their axles 0.034 m
+# below it).
+BASE_LINK_HEIGHT_M = 0.0815
 
 Wheels = Tuple[float, float, float, float]
 

@@ -49,6 +49,7 @@ class CellLayout:
     manifest: Dict[str, int]            # materials per colour in the batch
     ground_target: np.ndarray           # purple materials: a point on the floor (world)
     youbot_home: Pose2D                 # the youBot's start (and loading) pose
+    youbot_base_z: float                # its base_link above the floor, on its wheels [m]
     zu12_base: Tuple[float, float, float, float]   # x, y, z, yaw
     platform_place: np.ndarray = field(default_factory=lambda: np.zeros(3))  # blue: surface
     # Where the youBot stands to unload (the right row, then the left row and the platform),
@@ -181,7 +182,8 @@ def layout_from_world(world) -> CellLayout:
         material_size=size, manifest=dict(world.materials.counts),
         ground_target=np.array([named['ground_target'].position[0],
                                 named['ground_target'].position[1], 0.0]),
-        youbot_home=home, zu12_base=(zu.x, zu.y, zu.z, zu.yaw), platform_place=place,
+        youbot_home=home, youbot_base_z=yb.z, zu12_base=(zu.x, zu.y, zu.z, zu.yaw),
+        platform_place=place,
         stands=(left, right),
         # Out: down to the first stand from the north-west (never east of it, so never
         # nearer the wall), facing south as it parks: through a point 15 cm west of it, from

@@ -707,7 +707,7 @@ class Loader(Machine):
                 return 'the youBot plate is full'
             m.slot = free[0]
             target = slot_in_world(youbot_pose, PLATE_SLOTS_IN_BASE_M[m.slot],
-                                   YOUBOT_BASE_Z_M, size)
+                                   run.layout.youbot_base_z, size)
         t = run.s.timing
         release = np.asarray(target, float) + np.array([0.0, 0.0, size + t.place_gap])
         above = release + np.array([0.0, 0.0, t.place_height])
@@ -979,7 +979,7 @@ class Transport(Machine):
             candidates = [drops[(first + k) % len(drops)] for k in range(len(drops))]
         for drop_world in candidates:
             drop = world_to_base(pose, drop_world)
-            drop[2] -= YOUBOT_BASE_Z_M
+            drop[2] -= run.layout.youbot_base_z
             # Over the drop, at least as high as the lift's top: a swing there keeps what is
             # held over the plate's other materials where a joint motion from the lift's top
             # straight down to a pool drop (lower than the plate) would swing it into the next
@@ -1494,8 +1494,6 @@ class Pipeline:
         return min(points, key=lambda p: float(np.max(np.abs(p[1] - q))))[0]
 
 
-# base_link's height above the floor when the youBot stands on its wheels [m].
-YOUBOT_BASE_Z_M = 0.0815
 # The youBot's arm upright (the datasheet's candle pose) while the base drives home.
 YOUBOT_CARRY_Q = np.zeros(5)
 # The youBot's fingertips reach 10.4 mm beyond gripper_tcp: it grasps a material's top face with

@@ -650,12 +650,11 @@ def test_a_pool_drop_out_of_reach_is_swapped_for_another():
     # the stand's next drop instead of failing.
     layout = cell_layout()
     from coordinator.layout import world_to_base
-    from coordinator.pipeline import YOUBOT_BASE_Z_M
     blocked = []
     for stand in layout.stands:
         if stand.drops:
             b = world_to_base(stand.pose, stand.drops[0])
-            b[2] -= YOUBOT_BASE_Z_M
+            b[2] -= layout.youbot_base_z
             blocked.append(b)
 
     def unreachable(arm, p):
