@@ -19,7 +19,8 @@ from controllers.diff_drive import Pose2D
 from controllers.mecanum import BASE_LINK_HEIGHT_M
 from controllers.joint_trajectory import TrajectoryPoint, TrajectoryRequest
 from controllers.youbot_arm import theta_from_datasheet
-from controllers.youbot_kinematics import REFERENCE_FRAMES, YoubotKinematics, motion_duration
+from controllers.arm_model import motion_duration
+from controllers.youbot_kinematics import REFERENCE_FRAMES, YoubotKinematics
 from robot_description import urdf_path
 from sim_bridge.runner import DriveLimits, NullSink, SimRunner
 from sim_bridge.world import URDF_FLAGS, SimWorld

@@ -23,7 +23,7 @@ from sensor_msgs.msg import JointState
 from sim_interfaces.srv import SolveIK
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
-from controllers.arm_kinematics import motion_duration
+from controllers.arm_model import motion_duration
 from ros_common.params import float_range
 from controllers.transforms import matrix_to_quaternion, pose_matrix
 from controllers.youbot_kinematics import YoubotKinematics

@@ -1,11 +1,11 @@
-"""The youBot arm's kinematics in the description's terms (see arm_kinematics.py)."""
+"""The youBot arm's kinematics in the description's terms (see arm_model.py)."""
 from __future__ import annotations
 
 from typing import Dict
 
 import numpy as np
 
-from controllers.arm_kinematics import ArmKinematics, ArmSolution, motion_duration  # noqa
+from controllers.arm_model import ArmKinematics
 from controllers.transforms import translation
 from controllers.youbot_arm import (ARM_BASE_IN_BASE_LINK_M, GRIPPER_TCP_OFFSET_M, JOINT_NAMES,
                                     JOINT_VELOCITY_LIMIT, datasheet_from_theta,

@@ -1,11 +1,11 @@
-"""The Zu 12's kinematics in the description's terms (see arm_kinematics.py)."""
+"""The Zu 12's kinematics in the description's terms (see arm_model.py)."""
 from __future__ import annotations
 
 from typing import Dict, Optional
 
 import numpy as np
 
-from controllers.arm_kinematics import ArmKinematics
+from controllers.arm_model import ArmKinematics
 from controllers.transforms import translation
 from controllers.zu12_arm import (JOINT_NAMES, JOINT_VELOCITY_LIMITS, SUCTION_TCP_OFFSET_M,
                                   zu12_chain)

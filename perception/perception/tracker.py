@@ -10,7 +10,8 @@ import numpy as np
 
 
 @dataclass
-class Observation:
+class Sighting:
+    """A material seen in one frame: its colour class and where the frame puts it."""
     color: str
     position: np.ndarray         # world, metres
     u: float
@@ -26,7 +27,7 @@ class Track:
     votes: Counter = field(default_factory=Counter)
     hits: int = 0
     missed: int = 0
-    last: Optional[Observation] = None
+    last: Optional[Sighting] = None
     confidence: float = 0.0
     mean_confidence: float = 0.0
 
@@ -71,7 +72,7 @@ class Tracker:
         self.next_id = 1
         self.confirmed_ids: List[int] = []
 
-    def update(self, t: float, observations: Sequence[Observation]) -> List[Track]:
+    def update(self, t: float, observations: Sequence[Sighting]) -> List[Track]:
         """Associate one frame's observations; return the confirmed tracks seen in it."""
         pairs = []
         for ti, track in enumerate(self.tracks):
@@ -105,7 +106,7 @@ class Tracker:
                 seen.append(track)
         return seen
 
-    def _add(self, track: Track, t: float, obs: Observation) -> None:
+    def _add(self, track: Track, t: float, obs: Sighting) -> None:
         track.history.append((t, np.asarray(obs.position, float)))
         track.votes[obs.color] += 1
         track.hits += 1

@@ -2,14 +2,14 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import List, Optional, Sequence, Tuple
+from typing import List, Optional, Sequence
 
 import cv2
 import numpy as np
 
 from perception.projection import CameraModel, locate_cube
 from perception.segmentation import DEFAULT_CLASSES, Blob, ColorClass, confidence, segment
-from perception.tracker import Observation, Track, Tracker
+from perception.tracker import Sighting, Track, Tracker
 
 BORDER_PX = 2
 
@@ -17,7 +17,7 @@ BORDER_PX = 2
 @dataclass
 class FrameResult:
     blobs: List[Blob]
-    observations: List[Observation]
+    observations: List[Sighting]
     tracks: List[Track]          # confirmed tracks seen in this frame
 
 
@@ -55,7 +55,7 @@ class MaterialVision:
                                            self.size, self.yaw)
             if residual > 1.0:
                 continue
-            observations.append(Observation(blob.color, centre, blob.u, blob.v,
+            observations.append(Sighting(blob.color, centre, blob.u, blob.v,
                                             confidence(blob, self.expected_area)))
         return FrameResult(blobs, observations, self.tracker.update(t, observations))
 

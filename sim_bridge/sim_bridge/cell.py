@@ -32,7 +32,8 @@ STAND_COLOR = (0.45, 0.47, 0.5, 1.0)
 
 
 @dataclass
-class Material:
+class MaterialBody:
+    """A material as the simulator holds it: a rigid body of the scenario (ground truth)."""
     index: int                 # order of appearance, 0-based: its ground-truth id
     color: str
     body: int
@@ -146,7 +147,7 @@ class MaterialSource:
         self._p, self._conveyor, self.config = client, conveyor, config
         self._colors = dict(config.colors)
         self.seed = config.seed if seed is None else seed
-        self.materials: List[Material] = []
+        self.materials: List[MaterialBody] = []
         self.restart()
 
     def restart(self) -> None:
@@ -170,7 +171,7 @@ class MaterialSource:
     def done(self) -> bool:
         return len(self.materials) == len(self.plan)
 
-    def update(self, sim_time: float) -> Optional[Material]:
+    def update(self, sim_time: float) -> Optional[MaterialBody]:
         """Drop the next material once the belt has travelled its gap; return it."""
         if self.done:
             return None
@@ -188,11 +189,11 @@ class MaterialSource:
         body = self._p.createMultiBody(self.config.mass, col, vis, basePosition=position,
                                        baseOrientation=orn)
         self._p.changeDynamics(body, -1, lateralFriction=0.8)
-        material = Material(len(self.materials), color, body, sim_time)
+        material = MaterialBody(len(self.materials), color, body, sim_time)
         self.materials.append(material)
         return material
 
-    def pose(self, material: Material) -> Tuple[np.ndarray, np.ndarray]:
+    def pose(self, material: MaterialBody) -> Tuple[np.ndarray, np.ndarray]:
         """World position and rotation matrix of a material's centre."""
         pos, orn = self._p.getBasePositionAndOrientation(material.body)
         return np.asarray(pos), np.array(self._p.getMatrixFromQuaternion(orn)).reshape(3, 3)
@@ -209,7 +210,7 @@ class Suction:
         if link not in robot.link_index or robot.link_index[link] == -1:
             raise ValueError(f'robot "{robot.config.name}" has no link "{link}" for suction')
         self.link, self.reach, self.max_payload = link, reach, max_payload
-        self.held: Optional[Material] = None
+        self.held: Optional[MaterialBody] = None
         self.armed = False
         self._constraint: Optional[int] = None
 

@@ -18,7 +18,7 @@ from controllers.mecanum import wheel_speeds as mecanum_wheel_speeds
 from sim_bridge.camera import projection_matrix, view_matrix_from_optical
 from world_description.camera_geometry import intrinsics_from_fov, look_at_rotation
 from world_description.resources import resolve_resource
-from sim_bridge.cell import Conveyor, Material, MaterialSource, Suction
+from sim_bridge.cell import Conveyor, MaterialBody, MaterialSource, Suction
 from world_description.world_config import (CameraConfig, ControllerConfig, DiffDriveConfig,
                                      MecanumConfig, RobotConfig, WorldConfig)
 
@@ -57,7 +57,7 @@ class SimRobot:
 
     def __init__(self, client: BulletClient, config: RobotConfig, urdf: Path) -> None:
         self.config = config
-        self._p = client
+        self.client = client
         if not urdf.is_file():
             raise WorldError(f'robot "{config.name}": URDF {urdf} does not exist')
         pose = config.pose
@@ -103,7 +103,7 @@ class SimRobot:
             self.controllers[cc.name] = JointGroup(self, cc)
         self._initial: Dict[int, float] = {}
         for joint, position in config.initial_joint_positions:
-            j = self._movable_joint(joint, 'initial_joint_positions')
+            j = self.movable_joint(joint, 'initial_joint_positions')
             lower, upper = self._joint_limits[joint][:2]
             if not lower <= position <= upper:
                 raise WorldError(f'robot "{config.name}": initial position {position} of '
@@ -143,7 +143,7 @@ class SimRobot:
             group.apply(t)
 
     def joint_states(self) -> JointStates:
-        states = self._p.getJointStates(self.body, self.movable)
+        states = self.client.getJointStates(self.body, self.movable)
         scale = self._report_scale
         # A virtual omni-wheel turns 1/sqrt(2) as fast with sqrt(2) times the torque (same power).
         return JointStates(self.joint_names, [s[0] * k for s, k in zip(states, scale)],
@@ -151,28 +151,28 @@ class SimRobot:
                            [s[3] / k for s, k in zip(states, scale)])
 
     def joint_positions(self, joints: Sequence[str]) -> np.ndarray:
-        states = self._p.getJointStates(self.body, [self.joint_index[j] for j in joints])
+        states = self.client.getJointStates(self.body, [self.joint_index[j] for j in joints])
         return np.array([s[0] for s in states])
 
     def joint_velocities(self, joints: Sequence[str]) -> np.ndarray:
-        states = self._p.getJointStates(self.body, [self.joint_index[j] for j in joints])
+        states = self.client.getJointStates(self.body, [self.joint_index[j] for j in joints])
         return np.array([s[1] for s in states])
 
     def base_link_world(self) -> Tuple[tuple, tuple]:
-        com_pos, com_orn = self._p.getBasePositionAndOrientation(self.body)
-        inv_pos, inv_orn = self._p.invertTransform(self._inertial_pos, self._inertial_orn)
-        return self._p.multiplyTransforms(com_pos, com_orn, inv_pos, inv_orn)
+        com_pos, com_orn = self.client.getBasePositionAndOrientation(self.body)
+        inv_pos, inv_orn = self.client.invertTransform(self._inertial_pos, self._inertial_orn)
+        return self.client.multiplyTransforms(com_pos, com_orn, inv_pos, inv_orn)
 
     def base_state(self) -> BaseState:
         pos, orn = self.base_link_world()
-        com_pos, _ = self._p.getBasePositionAndOrientation(self.body)
-        v_com, omega = self._p.getBaseVelocity(self.body)
+        com_pos, _ = self.client.getBasePositionAndOrientation(self.body)
+        v_com, omega = self.client.getBaseVelocity(self.body)
         # Velocity of the base_link origin, not of the centre of mass.
         v_link = np.asarray(v_com) + np.cross(omega, np.subtract(pos, com_pos))
-        rot = np.array(self._p.getMatrixFromQuaternion(orn)).reshape(3, 3)
+        rot = np.array(self.client.getMatrixFromQuaternion(orn)).reshape(3, 3)
         # Pose relative to the start pose, which is the odom frame's origin.
-        inv_pos, inv_orn = self._p.invertTransform(self._start_pos, self._start_orn)
-        odom_pos, odom_orn = self._p.multiplyTransforms(inv_pos, inv_orn, pos, orn)
+        inv_pos, inv_orn = self.client.invertTransform(self._start_pos, self._start_orn)
+        odom_pos, odom_orn = self.client.multiplyTransforms(inv_pos, inv_orn, pos, orn)
         return BaseState(tuple(odom_pos), tuple(odom_orn), tuple(rot.T @ v_link),
                          tuple(rot.T @ np.asarray(omega)))
 
@@ -184,9 +184,9 @@ class SimRobot:
         if index == -1:
             pos, orn = self.base_link_world()
         else:
-            state = self._p.getLinkState(self.body, index, computeForwardKinematics=True)
+            state = self.client.getLinkState(self.body, index, computeForwardKinematics=True)
             pos, orn = state[4], state[5]
-        return np.asarray(pos), np.array(self._p.getMatrixFromQuaternion(orn)).reshape(3, 3)
+        return np.asarray(pos), np.array(self.client.getMatrixFromQuaternion(orn)).reshape(3, 3)
 
     def link_pose_in_base(self, link: str) -> np.ndarray:
         """4x4 pose of a link frame in base_link (ground truth of the simulation)."""
@@ -198,10 +198,10 @@ class SimRobot:
         return out
 
     def reset(self) -> None:
-        self._p.resetBasePositionAndOrientation(self.body, *self._start_com())
-        self._p.resetBaseVelocity(self.body, (0.0, 0.0, 0.0), (0.0, 0.0, 0.0))
+        self.client.resetBasePositionAndOrientation(self.body, *self._start_com())
+        self.client.resetBaseVelocity(self.body, (0.0, 0.0, 0.0), (0.0, 0.0, 0.0))
         for j in self.movable:
-            self._p.resetJointState(self.body, j, self._initial.get(j, 0.0), 0.0)
+            self.client.resetJointState(self.body, j, self._initial.get(j, 0.0), 0.0)
         if self.drive is not None:
             self.drive.command(0.0, 0.0, 0.0)
         for group in self.controllers.values():
@@ -210,7 +210,14 @@ class SimRobot:
     def _root_link(self) -> str:
         return next(name for name, index in self.link_index.items() if index == -1)
 
-    def _movable_joint(self, joint: str, what: str) -> int:
+    def scale_reported_angle(self, joint: int, scale: float) -> None:
+        """Report this movable joint's angle and speed times ``scale`` (a virtual omni-wheel
+        turns 1/sqrt(2) as fast as the Mecanum wheel it stands for)."""
+        self._report_scale[self.movable.index(joint)] = scale
+
+    def movable_joint(self, joint: str, what: str) -> int:
+        """The PyBullet index of the movable joint named ``joint`` (WorldError naming ``what``
+        needs it when there is none)."""
         j = self.joint_index.get(joint)
         if j is None or j not in self.movable:
             raise WorldError(f'robot "{self.config.name}": {what}: "{joint}" is not a movable '
@@ -218,14 +225,14 @@ class SimRobot:
         return j
 
     def _start_com(self) -> Tuple[tuple, tuple]:
-        return self._p.multiplyTransforms(self._start_pos, self._start_orn,
-                                          self._inertial_pos, self._inertial_orn)
+        return self.client.multiplyTransforms(self._start_pos, self._start_orn,
+                                              self._inertial_pos, self._inertial_orn)
 
 
 class _DiffDrive:
     def __init__(self, robot: SimRobot, config: DiffDriveConfig) -> None:
         self._robot, self.config = robot, config
-        self.joints = tuple(robot._movable_joint(j, 'drive')
+        self.joints = tuple(robot.movable_joint(j, 'drive')
                             for j in (config.left_wheel_joint, config.right_wheel_joint))
         self.geometry = DiffDriveGeometry(config.wheel_radius, config.wheel_separation)
         self.components = ('linear.x', 'angular.z')
@@ -234,7 +241,7 @@ class _DiffDrive:
     def command(self, vx: float, vy: float, wz: float) -> tuple:
         del vy                                     # a differential drive cannot strafe
         targets = diff_wheel_speeds(vx, wz, self.geometry)
-        p = self._robot._p
+        p = self._robot.client
         for joint, target in zip(self.joints, targets):
             p.setJointMotorControl2(self._robot.body, joint, pybullet.VELOCITY_CONTROL,
                                     targetVelocity=target, force=self.config.wheel_effort)
@@ -253,20 +260,20 @@ class _MecanumDrive:
 
     def __init__(self, robot: SimRobot, config: MecanumConfig) -> None:
         self._robot, self.config = robot, config
-        self.joints = tuple(robot._movable_joint(j, 'drive') for j in config.wheel_joints)
+        self.joints = tuple(robot.movable_joint(j, 'drive') for j in config.wheel_joints)
         self.geometry = MecanumGeometry(config.wheel_radius,
                                         config.sum_of_robot_center_projection_on_X_Y_axis)
         self.components = ('linear.x', 'linear.y', 'angular.z')
         self.targets: tuple = (0.0, 0.0, 0.0, 0.0)
         for joint in self.joints:
             # No friction along the spin axis (link y), which the spin leaves fixed in space.
-            robot._p.changeDynamics(robot.body, joint, anisotropicFriction=(1.0, 0.0, 1.0),
+            robot.client.changeDynamics(robot.body, joint, anisotropicFriction=(1.0, 0.0, 1.0),
                                     lateralFriction=1.0)
-            robot._report_scale[robot.movable.index(joint)] = OMNI_WHEEL_SCALE
+            robot.scale_reported_angle(joint, OMNI_WHEEL_SCALE)
 
     def command(self, vx: float, vy: float, wz: float) -> tuple:
         targets = mecanum_wheel_speeds(vx, vy, wz, self.geometry)
-        p = self._robot._p
+        p = self._robot.client
         for joint, target in zip(self.joints, targets):
             p.setJointMotorControl2(self._robot.body, joint, pybullet.VELOCITY_CONTROL,
                                     targetVelocity=target / OMNI_WHEEL_SCALE,
@@ -281,7 +288,7 @@ class JointGroup:
     def __init__(self, robot: SimRobot, config: ControllerConfig) -> None:
         self._robot, self.config = robot, config
         self.joint_names = config.joints
-        self.joints = [robot._movable_joint(j, f'controller "{config.name}"')
+        self.joints = [robot.movable_joint(j, f'controller "{config.name}"')
                        for j in config.joints]
         limits = [robot.joint_limits(j) for j in config.joints]
         for joint, (_, _, velocity, effort) in zip(config.joints, limits):
@@ -299,7 +306,7 @@ class JointGroup:
 
     def apply(self, t: float) -> None:
         self.desired = state = self.follower.sample(t)
-        p, body = self._robot._p, self._robot.body
+        p, body = self._robot.client, self._robot.body
         c = self.config
         for i, joint in enumerate(self.joints):
             p.setJointMotorControl2(body, joint, pybullet.POSITION_CONTROL,
@@ -385,7 +392,7 @@ class SimWorld:
         return self.step_count * round(self.time_step * 1e9)
 
     @property
-    def materials(self) -> List[Material]:
+    def materials(self) -> List[MaterialBody]:
         return self.source.materials if self.source is not None else []
 
     def step(self) -> None:

@@ -107,6 +107,11 @@ class TeleopNode(Node):
     def subscriber_count(self) -> int:
         return self._pub.get_subscription_count()
 
+    @property
+    def topic(self) -> str:
+        """The resolved name of the topic it publishes on."""
+        return self._pub.topic_name
+
     # --- script mode --------------------------------------------------------------------
     def start_script(self) -> None:
         self._script_start = None
@@ -147,7 +152,7 @@ def _wait_for_subscriber(node: TeleopNode, executor, timeout: float) -> bool:
 def _run_script(node: TeleopNode, executor) -> int:
     if node.wait_for_subscriber > 0 and not _wait_for_subscriber(
             node, executor, node.wait_for_subscriber):
-        node.get_logger().error(f'no subscriber on {node._pub.topic_name} after '
+        node.get_logger().error(f'no subscriber on {node.topic} after '
                                 f'{node.wait_for_subscriber:g} s; is the simulator running?')
         return 1
     node.start_script()

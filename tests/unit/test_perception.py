@@ -8,8 +8,8 @@ import pytest
 from sim_bringup.vision_evaluation import evaluate
 from perception.projection import (CameraModel, cube_silhouette_centroid, locate_cube,
                                    pixel_to_plane)
-from perception.segmentation import DEFAULT_CLASSES, ColorClass, confidence, segment
-from perception.tracker import Observation, Tracker
+from perception.segmentation import ColorClass, confidence, segment
+from perception.tracker import Sighting, Tracker
 from world_description.camera_geometry import look_at_rotation
 
 K = np.array([[290.0, 0.0, 160.0], [0.0, 290.0, 119.0], [0.0, 0.0, 1.0]])
@@ -94,7 +94,7 @@ def test_confidence_falls_with_implausible_size():
 
 
 def _obs(x, color='orange'):
-    return Observation(color, np.array([x, 0.75, 0.425]), 0.0, 0.0, 1.0)
+    return Sighting(color, np.array([x, 0.75, 0.425]), 0.0, 0.0, 1.0)
 
 
 def test_tracker_keeps_one_id_per_material_and_never_reuses_ids():

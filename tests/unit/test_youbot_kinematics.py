@@ -6,7 +6,8 @@ import pytest
 
 from controllers.transforms import (matrix_to_quaternion, pose_matrix, quaternion_to_matrix,
                                     rotation_angle)
-from controllers.youbot_kinematics import YoubotKinematics, in_base_link, motion_duration
+from controllers.arm_model import motion_duration
+from controllers.youbot_kinematics import YoubotKinematics, in_base_link
 
 
 def _random_rotation(rng):
