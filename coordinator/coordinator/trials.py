@@ -15,6 +15,7 @@ import fcntl
 import json
 import os
 import random
+import shlex
 import signal
 import subprocess
 import sys
@@ -26,11 +27,11 @@ from contextlib import contextmanager
 from pathlib import Path
 from typing import Dict, Iterator, List, Optional, Sequence, Tuple
 
+from coordinator.graph import pipeline_graph
 from coordinator.progress import (CampaignBar, TrialProgress, eta_seconds, progress_line,
                                   read_progress, running_figures)
+from world_description import PIPELINE_CELL
 
-WORLD = 'package://world_description/worlds/pipeline_cell.yaml'
-CONTROL_RATE = 30.0
 PROGRESS_FILE = 'progress.json'
 PROGRESS_PERIOD_S = 10.0     # wall seconds between two progress lines
 # The highest DDS domain id (Fast DDS's ports for 233 and above exceed 65535 on Linux).
@@ -69,42 +70,9 @@ def code_version() -> str:
     return commit + ('-dirty' if changed is None or changed else '')
 
 
-def trial_commands(seed: int, belt_speed: float, result_file: Path,
-                   record_dir: Optional[Path] = None, world: str = WORLD
-                   ) -> Dict[str, List[str]]:
-    """The processes of one lock-step trial (executables as installed by the workspace)."""
-    sim = ['sim_node', '--ros-args', '-p', f'world:={world}', '-p', 'synchronous:=true',
-           '-p', f'state_publish_rate:={CONTROL_RATE}',
-           '-p', f'clock_publish_rate:={CONTROL_RATE}', '-p', f'scenario_seed:={seed}',
-           '-p', f'belt_speed:={belt_speed}', '-p', 'max_speed:=0.8', '-p', 'max_turn:=1.5']
-    commands = {}
-    if record_dir is not None:
-        # Camera frames (and the debug image, published only for subscribers) stay out of the
-        # bag: 15 Hz of 230 kB frames would make it about 500 MB per run.
-        commands['recorder'] = ['recorder', '--ros-args', '-p', f'output_dir:={record_dir}',
-                                '-p', 'bag_name:=bag', '-p', 'use_sim_time:=true', '-p',
-                                "exclude:=['/belt_camera/image_raw', '/debug_image']"]
-    commands.update({
-        'sim_node': sim,
-        'vision_node': ['vision_node', '--ros-args', '-r', 'image_raw:=/belt_camera/image_raw',
-                        '-r', 'camera_info:=/belt_camera/camera_info', '-p',
-                        'use_sim_time:=true'],
-        'zu12_kinematics': ['kinematics_node', '--ros-args', '-r', '__ns:=/zu12', '-p',
-                            'arm:=zu12', '-p', 'use_sim_time:=true'],
-        'youbot_kinematics': ['kinematics_node', '--ros-args', '-r', '__ns:=/youbot', '-p',
-                              'arm:=youbot', '-p', 'use_sim_time:=true'],
-        'coordinator_node': ['coordinator_node', '--ros-args', '-p', 'use_sim_time:=true',
-                             '-p', 'synchronous:=true', '-p', f'control_rate:={CONTROL_RATE}',
-                             '-p', f'belt_speed:={belt_speed}', '-p', f'scenario_seed:={seed}',
-                             '-p', f'world:={world}', '-p', f'result_file:={result_file}', '-p',
-                             f'progress_file:={result_file.with_name(PROGRESS_FILE)}'],
-    })
-    return commands
-
-
 def run_trial(trial: int, seed: int, belt_speed: float, domain_id: int, out_dir: Path,
               wall_timeout: float = 900.0, record: bool = False, code: str = '',
-              world: str = WORLD) -> Dict:
+              world: str = PIPELINE_CELL) -> Dict:
     """One trial as a process group; returns its result (or a failure record)."""
     trial_dir = out_dir / f'trial_{trial:03d}'
     trial_dir.mkdir(parents=True, exist_ok=True)
@@ -114,8 +82,10 @@ def run_trial(trial: int, seed: int, belt_speed: float, domain_id: int, out_dir:
     env = {**os.environ, 'ROS_DOMAIN_ID': str(domain_id),
            'ROS_AUTOMATIC_DISCOVERY_RANGE': os.environ.get('ROS_AUTOMATIC_DISCOVERY_RANGE',
                                                            'LOCALHOST')}
-    commands = trial_commands(seed, belt_speed, result_file, trial_dir if record else None,
-                              world)
+    graph = pipeline_graph(seed, belt_speed, world=world, result_file=result_file,
+                           progress_file=result_file.with_name(PROGRESS_FILE),
+                           record_dir=trial_dir if record else None)
+    commands = {node.name: node.command() for node in graph}
     procs: Dict[str, subprocess.Popen] = {}
     cpu: Dict[str, float] = {}
     group: Optional[int] = None
@@ -379,7 +349,7 @@ def _stop_all() -> None:
 # The options that define a campaign's plan, and their defaults. A campaign keeps them in
 # its directory (CAMPAIGN_FILE), so that ``--resume DIR`` needs nothing else.
 PLAN_DEFAULTS = {'trials': 10, 'seed0': 2026, 'seeds': None, 'first_trial': 0,
-                 'belt_speed': [0.10, 0.16], 'world': WORLD}
+                 'belt_speed': [0.10, 0.16], 'world': PIPELINE_CELL}
 CAMPAIGN_FILE = 'campaign.json'
 
 
@@ -429,7 +399,8 @@ def _main(argv: Optional[Sequence[str]]) -> int:
                         help='with --ray --record: copy each bag to --out (else it stays on '
                              'the worker that recorded it, named in the result)')
     parser.add_argument('--world', default=None,
-                        help=f'the cell\'s world file, for sim_node and the coordinator ({WORLD})')
+                        help='the cell\'s world file, for sim_node and the coordinator '
+                             f'({PIPELINE_CELL})')
     parser.add_argument('--wall-timeout', type=float, default=900.0)
     parser.add_argument('--record', action='store_true', help='record a bag per trial')
     parser.add_argument('--out', type=Path, default=None,
@@ -438,6 +409,10 @@ def _main(argv: Optional[Sequence[str]]) -> int:
                         help='wall seconds between progress updates')
     parser.add_argument('--bar', choices=('auto', 'on', 'off'), default='auto',
                         help='a live progress bar (auto: on a terminal; else progress lines)')
+    parser.add_argument('--show-graph', action='store_true',
+                        help="print the processes of the plan's first trial as command lines "
+                             '(what to start by hand, each on the same ROS_DOMAIN_ID), and '
+                             'exit')
     parser.add_argument('--report-only', action='store_true',
                         help='rebuild trials.csv and the report from the results in --out')
     parser.add_argument('--resume', nargs='?', const='', default=None, metavar='DIR',
@@ -472,11 +447,17 @@ def _main(argv: Optional[Sequence[str]]) -> int:
         parser.error('--collect-bags needs --record')
     if args.cpus_per_trial is not None and args.cpus_per_trial <= 0:
         parser.error('--cpus-per-trial must be > 0')
-    args.out.mkdir(parents=True, exist_ok=True)
     plan = trial_plan(opts['trials'], opts['first_trial'], opts['seed0'], (lo, hi))
     if opts['seeds'] is not None:
         plan = [{**item, 'trial': k, 'seed': seed} for k, (item, seed) in enumerate(
             zip(trial_plan(len(opts['seeds']), 0, opts['seed0'], (lo, hi)), opts['seeds']))]
+    if args.show_graph:
+        first = plan[0]
+        print(f"# trial {first['trial']}: seed {first['seed']}, belt {first['belt_speed']} m/s")
+        for node in pipeline_graph(first['seed'], first['belt_speed'], world=opts['world']):
+            print(shlex.join(node.command()))
+        return 0
+    args.out.mkdir(parents=True, exist_ok=True)
     results: List[Dict] = []
     code = code_version()
     if args.resume is not None:

@@ -1,0 +1,106 @@
+"""The node graph of a pipeline run, described once (no ROS): which executables run, in which
+namespaces, with which parameters and remappings.
+
+The trial runner (``trials.py``) starts these processes, the launch file
+(``sim_bringup/launch/pipeline.launch.py``) turns them into launch_ros ``Node`` actions, and
+``run_trials --show-graph`` prints them as command lines.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Dict, List, Optional, Tuple, Union
+
+from world_description import PIPELINE_CELL
+
+# The coordinator's decisions per simulated second; in lock-step also the simulator's state
+# and /clock rates (each /clock message costs every node with sim time about a millisecond).
+CONTROL_RATE = 30.0
+# Camera frames (and the debug image, published only for subscribers) stay out of a recorded
+# bag: 15 Hz of 230 kB frames would make it about 500 MB per run.
+UNRECORDED_TOPICS = ('/belt_camera/image_raw', '/debug_image')
+
+ParameterValue = Union[bool, int, float, str, List[str]]
+
+
+@dataclass(frozen=True)
+class GraphNode:
+    """One process of the graph."""
+    name: str                           # what the run calls it (its log file's name)
+    package: str
+    executable: str
+    namespace: str = ''
+    parameters: Dict[str, ParameterValue] = field(default_factory=dict)
+    remappings: Tuple[Tuple[str, str], ...] = ()
+
+    def ros_args(self) -> List[str]:
+        """The node's arguments as ``ros2 run`` takes them after the executable."""
+        args = ['--ros-args']
+        if self.namespace:
+            args += ['-r', f'__ns:=/{self.namespace}']
+        for source, target in self.remappings:
+            args += ['-r', f'{source}:={target}']
+        for name, value in self.parameters.items():
+            args += ['-p', f'{name}:={parameter_text(value)}']
+        return args
+
+    def command(self) -> List[str]:
+        """The command line with the executable found on PATH (scripts/env.sh puts each
+        package's lib/<package> there, where ``ros2 run`` looks)."""
+        return [self.executable, *self.ros_args()]
+
+
+def parameter_text(value: ParameterValue) -> str:
+    """A parameter value as ``-p name:=value`` takes it (YAML)."""
+    if isinstance(value, bool):
+        return 'true' if value else 'false'
+    if isinstance(value, list):
+        return '[' + ', '.join(repr(str(v)) for v in value) + ']'
+    return str(value)
+
+
+def pipeline_graph(seed: int, belt_speed: float, synchronous: bool = True,
+                   world: str = PIPELINE_CELL, real_time_factor: Optional[float] = None,
+                   result_file: Optional[Path] = None, progress_file: Optional[Path] = None,
+                   record_dir: Optional[Path] = None, bag_name: Optional[str] = 'bag'
+                   ) -> List[GraphNode]:
+    """The processes of one run of the pipeline scenario, in their start order (the recorder,
+    when there is one, first: it must hear the first /clock). A recording goes into
+    ``record_dir``/``bag_name`` (without a name, one with the date and time)."""
+    sim_time = {'use_sim_time': True}
+    sim: Dict[str, ParameterValue] = {
+        'world': world, 'synchronous': synchronous, 'state_publish_rate': CONTROL_RATE,
+        # Lock-step: /clock at the control rate; real time: at every physics step.
+        'clock_publish_rate': CONTROL_RATE if synchronous else 0.0,
+        'scenario_seed': seed, 'belt_speed': belt_speed,
+        # The youBot's base limits (its world file's drive section says the same).
+        'max_speed': 0.8, 'max_turn': 1.5}
+    if real_time_factor is not None:
+        sim['real_time_factor'] = real_time_factor
+    coordinator: Dict[str, ParameterValue] = {
+        **sim_time, 'synchronous': synchronous, 'control_rate': CONTROL_RATE,
+        'belt_speed': belt_speed, 'scenario_seed': seed, 'world': world}
+    if result_file is not None:
+        coordinator['result_file'] = str(result_file)
+    if progress_file is not None:
+        coordinator['progress_file'] = str(progress_file)
+    nodes = []
+    if record_dir is not None:
+        recorder: Dict[str, ParameterValue] = {
+            **sim_time, 'output_dir': str(record_dir), 'exclude': list(UNRECORDED_TOPICS)}
+        if bag_name:
+            recorder['bag_name'] = bag_name
+        nodes.append(GraphNode('recorder', 'recording', 'recorder', parameters=recorder))
+    nodes += [
+        GraphNode('sim_node', 'sim_bridge', 'sim_node', parameters=sim),
+        GraphNode('vision_node', 'perception', 'vision_node', parameters=dict(sim_time),
+                  remappings=(('image_raw', '/belt_camera/image_raw'),
+                              ('camera_info', '/belt_camera/camera_info'))),
+        GraphNode('zu12_kinematics', 'arm_kinematics', 'kinematics_node', namespace='zu12',
+                  parameters={**sim_time, 'arm': 'zu12'}),
+        GraphNode('youbot_kinematics', 'arm_kinematics', 'kinematics_node', namespace='youbot',
+                  parameters={**sim_time, 'arm': 'youbot'}),
+        GraphNode('coordinator_node', 'coordinator', 'coordinator_node',
+                  parameters=coordinator),
+    ]
+    return nodes

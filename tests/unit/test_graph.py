@@ -1,0 +1,40 @@
+"""The pipeline run's node graph, described once (coordinator.graph)."""
+from coordinator.graph import CONTROL_RATE, GraphNode, parameter_text, pipeline_graph
+
+
+def test_a_lock_step_trial_is_five_processes_that_agree_on_the_scenario():
+    graph = pipeline_graph(7, 0.13, world='file:///w.yaml', result_file='/r/result.json')
+    assert [n.name for n in graph] == ['sim_node', 'vision_node', 'zu12_kinematics',
+                                       'youbot_kinematics', 'coordinator_node']
+    by = {n.name: n for n in graph}
+    sim, coordinator = by['sim_node'].parameters, by['coordinator_node'].parameters
+    for key in ('scenario_seed', 'belt_speed', 'world', 'synchronous'):
+        assert sim[key] == coordinator[key], key
+    assert sim['synchronous'] is True and sim['clock_publish_rate'] == CONTROL_RATE
+    assert coordinator['result_file'] == '/r/result.json'
+    # Every node but the simulator (the clock's source) runs on simulated time.
+    assert all(n.parameters.get('use_sim_time') for n in graph if n.name != 'sim_node')
+    assert 'use_sim_time' not in sim
+    assert (by['zu12_kinematics'].namespace, by['youbot_kinematics'].namespace) == (
+        'zu12', 'youbot')
+
+
+def test_real_time_publishes_the_clock_at_every_step_and_a_recorder_starts_first():
+    graph = pipeline_graph(0, 0.12, synchronous=False, real_time_factor=2.0,
+                           record_dir='/bags', bag_name=None)
+    assert graph[0].name == 'recorder' and 'bag_name' not in graph[0].parameters
+    sim = next(n for n in graph if n.name == 'sim_node').parameters
+    assert sim['clock_publish_rate'] == 0.0 and sim['real_time_factor'] == 2.0
+    assert '/belt_camera/image_raw' in graph[0].parameters['exclude']
+
+
+def test_command_lines_are_what_ros2_run_takes():
+    node = GraphNode('k', 'arm_kinematics', 'kinematics_node', namespace='zu12',
+                     parameters={'arm': 'zu12', 'use_sim_time': True, 'rate': 30.0,
+                                 'exclude': ['/a', '/b']},
+                     remappings=(('image_raw', '/cam/image_raw'),))
+    assert node.command() == [
+        'kinematics_node', '--ros-args', '-r', '__ns:=/zu12', '-r', 'image_raw:=/cam/image_raw',
+        '-p', 'arm:=zu12', '-p', 'use_sim_time:=true', '-p', 'rate:=30.0', '-p',
+        "exclude:=['/a', '/b']"]
+    assert parameter_text(False) == 'false' and parameter_text(3) == '3'
