@@ -70,6 +70,7 @@ def _pinocchio_fk_us():
     when pinocchio is not installed."""
     try:
         import pinocchio as pin
+
         from robot_description import urdf_path
     except ImportError:
         return None

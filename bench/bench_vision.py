@@ -9,8 +9,8 @@ from pathlib import Path
 
 import numpy as np
 
-from sim_bringup.vision_evaluation import WORLD, evaluate
 from sim_bridge.world import SimWorld
+from sim_bringup.vision_evaluation import WORLD, evaluate
 from world_description.resources import resolve_resource
 from world_description.world_config import load_world
 

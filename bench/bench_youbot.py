@@ -14,19 +14,19 @@ import numpy as np
 import pybullet
 from pybullet_utils.bullet_client import BulletClient
 
+from controllers.arm_model import motion_duration
 from controllers.base_fidelity import tracking_errors
 from controllers.diff_drive import Pose2D
-from controllers.mecanum import BASE_LINK_HEIGHT_M
 from controllers.joint_trajectory import TrajectoryPoint, TrajectoryRequest
+from controllers.mecanum import BASE_LINK_HEIGHT_M
+from controllers.transforms import yaw_from_quaternion
 from controllers.youbot_arm import theta_from_datasheet
-from controllers.arm_model import motion_duration
 from controllers.youbot_kinematics import REFERENCE_FRAMES, YoubotKinematics
 from robot_description import urdf_path
 from sim_bridge.runner import DriveLimits, NullSink, SimRunner
 from sim_bridge.world import URDF_FLAGS, SimWorld
 from world_description import YOUBOT_WORLD
 from world_description.resources import resolve_resource
-from controllers.transforms import yaw_from_quaternion
 from world_description.world_config import load_world
 
 HERE = Path(__file__).resolve().parent

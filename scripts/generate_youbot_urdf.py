@@ -23,10 +23,16 @@ sys.path.insert(0, str(ROOT / 'scripts'))
 
 import urdf_writer as uw  # noqa: E402
 from controllers.mecanum import BASE_LINK_HEIGHT_M, WHEEL_RADIUS_M  # noqa: E402
-from controllers.youbot_arm import (ARM_BASE_IN_BASE_LINK_M, CRAIG_ROWS_DEG_M,  # noqa: E402
-                                    DATASHEET_LIMITS_DEG, GRIPPER_TCP_OFFSET_M,
-                                    JOINT_NAMES, JOINT_VELOCITY_LIMIT, THETA_OFFSET_RAD,
-                                    THETA_SIGN)
+from controllers.youbot_arm import (  # noqa: E402
+    ARM_BASE_IN_BASE_LINK_M,
+    CRAIG_ROWS_DEG_M,
+    DATASHEET_LIMITS_DEG,
+    GRIPPER_TCP_OFFSET_M,
+    JOINT_NAMES,
+    JOINT_VELOCITY_LIMIT,
+    THETA_OFFSET_RAD,
+    THETA_SIGN,
+)
 
 OUT = ROOT / 'robot_description' / 'urdf' / 'youbot.urdf'
 

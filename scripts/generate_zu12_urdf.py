@@ -20,8 +20,13 @@ sys.path.insert(0, str(ROOT / 'controllers'))
 sys.path.insert(0, str(ROOT / 'scripts'))
 
 import urdf_writer as uw  # noqa: E402
-from controllers.zu12_arm import (JOINT_NAMES, JOINT_VELOCITY_LIMITS, LIMITS_DEG,  # noqa: E402
-                                  SUCTION_TCP_OFFSET_M, flange_offset)
+from controllers.zu12_arm import (  # noqa: E402
+    JOINT_NAMES,
+    JOINT_VELOCITY_LIMITS,
+    LIMITS_DEG,
+    SUCTION_TCP_OFFSET_M,
+    flange_offset,
+)
 
 OUT = ROOT / 'robot_description' / 'urdf' / 'zu12.urdf'
 

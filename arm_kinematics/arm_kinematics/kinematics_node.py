@@ -18,16 +18,16 @@ from geometry_msgs.msg import PoseStamped
 from rcl_interfaces.msg import ParameterDescriptor
 from rclpy.node import Node
 from rclpy.qos import QoSProfile
-from ros_common.node_main import run_node
 from sensor_msgs.msg import JointState
 from sim_interfaces.srv import SolveIK
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
 from controllers.arm_model import motion_duration
-from ros_common.params import float_range
 from controllers.transforms import matrix_to_quaternion, pose_matrix
 from controllers.youbot_kinematics import YoubotKinematics
 from controllers.zu12_kinematics import Zu12Kinematics
+from ros_common.node_main import run_node
+from ros_common.params import float_range
 from ros_common.stamps import duration_from_seconds
 
 ARMS = {'youbot': (YoubotKinematics, 'gripper_tcp'), 'zu12': (Zu12Kinematics, 'suction_tcp')}

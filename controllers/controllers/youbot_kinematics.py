@@ -7,9 +7,15 @@ import numpy as np
 
 from controllers.arm_model import ArmKinematics
 from controllers.transforms import translation
-from controllers.youbot_arm import (ARM_BASE_IN_BASE_LINK_M, GRIPPER_TCP_OFFSET_M, JOINT_NAMES,
-                                    JOINT_VELOCITY_LIMIT, datasheet_from_theta,
-                                    theta_from_datasheet, youbot_arm_chain)
+from controllers.youbot_arm import (
+    ARM_BASE_IN_BASE_LINK_M,
+    GRIPPER_TCP_OFFSET_M,
+    JOINT_NAMES,
+    JOINT_VELOCITY_LIMIT,
+    datasheet_from_theta,
+    theta_from_datasheet,
+    youbot_arm_chain,
+)
 from controllers.youbot_ik import solve_ik
 
 # Tool frames of the description, as transforms from the joint-5 flange (arm_link_5).

@@ -7,8 +7,12 @@ import numpy as np
 
 from controllers.arm_model import ArmKinematics
 from controllers.transforms import translation
-from controllers.zu12_arm import (JOINT_NAMES, JOINT_VELOCITY_LIMITS, SUCTION_TCP_OFFSET_M,
-                                  zu12_chain)
+from controllers.zu12_arm import (
+    JOINT_NAMES,
+    JOINT_VELOCITY_LIMITS,
+    SUCTION_TCP_OFFSET_M,
+    zu12_chain,
+)
 from controllers.zu12_ik import solve_ik
 
 # The base stands on the floor: every joint frame above the shoulder's housing height.

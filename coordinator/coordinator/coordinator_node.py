@@ -33,32 +33,43 @@ from rcl_interfaces.srv import GetParameters, SetParameters
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile
 from sensor_msgs.msg import JointState
-from sim_interfaces.msg import (GripState, MaterialDetectionArray, PipelineEvent,
-                                PipelineState)
+from sim_interfaces.msg import GripState, MaterialDetectionArray, PipelineEvent, PipelineState
 from sim_interfaces.srv import SolveIK, StepSimulation
 from std_srvs.srv import SetBool
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 from visualization_msgs.msg import MarkerArray
 
 from controllers.lockstep import CommandCounter, DueGrid
-from ros_common.params import float_range
 from controllers.path_follower import DriveLead, PathFollower
 from controllers.youbot_arm import JOINT_NAMES as YOUBOT_JOINTS
 from controllers.youbot_arm import JOINT_VELOCITY_LIMIT as YOUBOT_VELOCITY_LIMIT
 from controllers.zu12_arm import JOINT_NAMES as ZU12_JOINTS
 from controllers.zu12_arm import JOINT_VELOCITY_LIMITS as ZU12_VELOCITY_LIMITS
 from coordinator.layout import LayoutError, layout_from_world
-from coordinator.pipeline import (Detection, Event, NodeTimeout, Observation, Pipeline,
-                                  Points, Settings)
+from coordinator.pipeline import (
+    Detection,
+    Event,
+    NodeTimeout,
+    Observation,
+    Pipeline,
+    Points,
+    Settings,
+)
 from coordinator.progress import write_progress
-from coordinator.results import (IdentificationCheck, PeakJointSpeed, at_destination,
-                                 regions_from_world, score)
+from coordinator.results import (
+    IdentificationCheck,
+    PeakJointSpeed,
+    at_destination,
+    regions_from_world,
+    score,
+)
+from ros_common.geometry import yaw_of
+from ros_common.node_main import run_task
+from ros_common.params import float_range
+from ros_common.stamps import duration_from_ns, set_stamp, stamp_from_ns, to_ns
 from world_description import PIPELINE_CELL
 from world_description.resources import resolve_resource
 from world_description.world_config import load_world
-from ros_common.geometry import yaw_of
-from ros_common.stamps import duration_from_ns, set_stamp, stamp_from_ns, to_ns
-from ros_common.node_main import run_task
 
 ARMS = {'zu12': ZU12_JOINTS, 'youbot': YOUBOT_JOINTS}
 CAMERA_TOPIC = '/belt_camera/image_raw'

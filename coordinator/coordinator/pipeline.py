@@ -21,18 +21,30 @@ from typing import Callable, Dict, List, Optional, Protocol, Sequence, Tuple, Un
 
 import numpy as np
 
+from controllers import youbot_arm, zu12_arm
 from controllers.bezier import BezierPath, Pose2D, key_poses_between
-from controllers.path_follower import PDGains, PathFollower, TurnLimits
 from controllers.conveyor import Item, advance, held
+from controllers.path_follower import PathFollower, PDGains, TurnLimits
 from controllers.pick_place import PickTiming, follow_pick
-from controllers.time_optimal import (SAMPLE_PERIOD_S, JointLimits, PlanError, TooLate,
-                                      Waypoint, plan, timed_path)
+from controllers.time_optimal import (
+    SAMPLE_PERIOD_S,
+    JointLimits,
+    PlanError,
+    TooLate,
+    Waypoint,
+    plan,
+    timed_path,
+)
 from controllers.transforms import matrix_to_quaternion
 from controllers.youbot_arm import ARM_BASE_IN_BASE_LINK_M
 from controllers.youbot_kinematics import YoubotKinematics
-from controllers import youbot_arm, zu12_arm
-from coordinator.layout import (PLATE_SLOTS_IN_BASE_M, PLATE_TOP_IN_BASE_M, CellLayout,
-                                slot_in_world, world_to_base)
+from coordinator.layout import (
+    PLATE_SLOTS_IN_BASE_M,
+    PLATE_TOP_IN_BASE_M,
+    CellLayout,
+    slot_in_world,
+    world_to_base,
+)
 
 DOWN = (1.0, 0.0, 0.0, 0.0)                  # tool z pointing down (x, y, z, w)
 # A pick's contact is planned at least this long after the arm could be over the material, and

@@ -114,7 +114,7 @@ class CampaignBar:
     first trial that is nearly done)."""
 
     def __init__(self, total: int, done: int, stream) -> None:
-        from tqdm import tqdm          # (only for a terminal: logs get lines)
+        from tqdm import tqdm  # (only for a terminal: logs get lines)
         # The terminal's size at the start (one that reports none: 120 x 24; tqdm hides a bar
         # below a terminal's last line, and a size of 0 lines would hide it).
         size = shutil.get_terminal_size((120, 24))

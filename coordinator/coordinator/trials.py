@@ -28,8 +28,14 @@ from pathlib import Path
 from typing import Dict, Iterator, List, Optional, Sequence, Tuple
 
 from coordinator.graph import pipeline_graph
-from coordinator.progress import (CampaignBar, TrialProgress, eta_seconds, progress_line,
-                                  read_progress, running_figures)
+from coordinator.progress import (
+    CampaignBar,
+    TrialProgress,
+    eta_seconds,
+    progress_line,
+    read_progress,
+    running_figures,
+)
 from world_description import PIPELINE_CELL
 
 PROGRESS_FILE = 'progress.json'
@@ -472,7 +478,7 @@ def _main(argv: Optional[Sequence[str]]) -> int:
     if args.ray is None:
         pool = LocalPool(args.parallel or 1, args.out, trial_options)
     else:
-        from coordinator.trials_ray import RayPool   # Ray is imported only with --ray
+        from coordinator.trials_ray import RayPool  # Ray is imported only with --ray
         try:
             pool = RayPool(args.ray or None, args.out, trial_options, args.cpus_per_trial,
                            args.collect_bags, args.parallel)

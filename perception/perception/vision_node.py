@@ -18,20 +18,20 @@ import numpy as np
 from rcl_interfaces.msg import ParameterDescriptor
 from rclpy.node import Node
 from rclpy.qos import QoSProfile, qos_profile_sensor_data
-from ros_common.node_main import run_node
 from sensor_msgs.msg import CameraInfo, Image
 from sim_interfaces.msg import MaterialDetection, MaterialDetectionArray
 
-from ros_common.params import float_range
 from perception.projection import CameraModel
 from perception.segmentation import DEFAULT_CLASSES, ColorClass
 from perception.tracker import Tracker
 from perception.vision import MaterialVision
+from ros_common.node_main import run_node
+from ros_common.params import float_range
+from ros_common.stamps import to_seconds
 from world_description import PIPELINE_CELL
 from world_description.camera_geometry import look_at_rotation
 from world_description.resources import resolve_resource
 from world_description.world_config import load_world
-from ros_common.stamps import to_seconds
 
 ENCODINGS = ('rgb8', 'bgr8')
 

@@ -3,8 +3,14 @@ from __future__ import annotations
 
 from typing import List, Sequence
 
-from rosbags.interfaces import (Qos, QosDurability, QosHistory, QosLiveliness, QosReliability,
-                                QosTime)
+from rosbags.interfaces import (
+    Qos,
+    QosDurability,
+    QosHistory,
+    QosLiveliness,
+    QosReliability,
+    QosTime,
+)
 from rosbags.rosbag2.metadata import parse_qos
 
 # The rclpy enum values (rmw_qos_*_policy_t) of the policies that matter here.

@@ -9,13 +9,13 @@ from rcl_interfaces.msg import IntegerRange, ParameterDescriptor
 from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
-from ros_common.node_main import run_node
 from rosbags.rosbag2 import WriterError
 
-from ros_common.params import float_range
 from recording.bag_writer import STORAGES, BagError, BagWriter
 from recording.qos_profiles import adapt_to_publishers, bag_qos
 from recording.types import TypeResolutionError, message_class
+from ros_common.node_main import run_node
+from ros_common.params import float_range
 
 
 class Recorder(Node):

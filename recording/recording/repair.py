@@ -95,7 +95,7 @@ def _scan_chunk(content: bytes, found: Recovered) -> None:
         try:
             from compression import zstd  # Python >= 3.14
         except ImportError:
-            from backports import zstd    # what rosbags itself uses before 3.14
+            from backports import zstd  # what rosbags itself uses before 3.14
         data = zstd.decompress(data)
     elif compression:
         raise RepairError(f'unsupported chunk compression "{compression}"')

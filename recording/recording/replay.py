@@ -11,17 +11,16 @@ from rcl_interfaces.msg import ParameterDescriptor
 from rclpy.duration import Duration
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
-from rosgraph_msgs.msg import Clock
 from rosbags.highlevel import AnyReader, AnyReaderError
 from rosbags.rosbag2 import ReaderError
+from rosgraph_msgs.msg import Clock
 
-from ros_common.params import float_range
 from recording.qos_profiles import replay_policies
 from recording.replay_schedule import ReplaySchedule
 from recording.types import TypeResolutionError, message_class
-from ros_common.stamps import set_stamp
 from ros_common.node_main import run_task
-
+from ros_common.params import float_range
+from ros_common.stamps import set_stamp
 
 SUBSCRIBER_MATCH_SETTLE_S = 0.5
 

@@ -9,8 +9,7 @@ _SOURCE_URDF_DIR = Path(__file__).resolve().parent.parent / 'urdf'
 def share_directory() -> Path:
     """The package's share directory, through the ament index when it is available."""
     try:
-        from ament_index_python.packages import (PackageNotFoundError,
-                                                 get_package_share_directory)
+        from ament_index_python.packages import PackageNotFoundError, get_package_share_directory
         try:
             return Path(get_package_share_directory('robot_description'))
         except (PackageNotFoundError, OSError):  # OSError: AMENT_PREFIX_PATH unset

@@ -9,7 +9,6 @@ from typing import Optional, Sequence, Tuple
 import numpy as np
 
 
-
 def projection_matrix(width: int, height: int, vertical_fov_deg: float, near: float,
                       far: float) -> Tuple[float, ...]:
     """The column-major OpenGL matrix PyBullet's computeProjectionMatrixFOV returns."""

@@ -12,30 +12,30 @@ from nav_msgs.msg import Odometry
 from rcl_interfaces.msg import IntegerRange, ParameterDescriptor, SetParametersResult
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
 from rclpy.clock import Clock, ClockType
-from rclpy.task import Future
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
-from ros_common.node_main import run_node
+from rclpy.task import Future
 from rosgraph_msgs.msg import Clock as ClockMsg
 from sensor_msgs.msg import CameraInfo, Image, JointState
 from sim_interfaces.msg import GripState, JointTrajectoryControllerState
 from sim_interfaces.srv import StepSimulation
-from trajectory_msgs.msg import JointTrajectory
-from visualization_msgs.msg import Marker, MarkerArray
 from std_msgs.msg import Bool
 from std_srvs.srv import SetBool, Trigger
+from trajectory_msgs.msg import JointTrajectory
+from visualization_msgs.msg import Marker, MarkerArray
 
 from controllers.joint_trajectory import TrajectoryPoint, TrajectoryRequest
 from controllers.lockstep import CommandBarrier
-from ros_common.params import float_range
 from controllers.transforms import matrix_to_quaternion
+from ros_common.node_main import run_node
+from ros_common.params import float_range
+from ros_common.stamps import stamp_from_ns, to_seconds
 from sim_bridge.camera import ImageBuffer
 from sim_bridge.pacing import Pacer, RtfMeter
 from sim_bridge.runner import DriveLimits, SimRunner
 from sim_bridge.world import SimWorld, WorldError
 from world_description.resources import resolve_resource
 from world_description.world_config import WorldConfigError, load_world
-from ros_common.stamps import stamp_from_ns, to_seconds
 
 DEFAULT_WORLD = 'package://world_description/worlds/mini_robot.yaml'
 MAX_STEPS_PER_REQUEST = 100_000

@@ -16,11 +16,17 @@ from controllers.joint_trajectory import JointLimits, TrajectoryFollower
 from controllers.mecanum import MecanumGeometry
 from controllers.mecanum import wheel_speeds as mecanum_wheel_speeds
 from sim_bridge.camera import projection_matrix, view_matrix_from_optical
+from sim_bridge.cell import Conveyor, MaterialBody, MaterialSource, Suction
 from world_description.camera_geometry import intrinsics_from_fov, look_at_rotation
 from world_description.resources import resolve_resource
-from sim_bridge.cell import Conveyor, MaterialBody, MaterialSource, Suction
-from world_description.world_config import (CameraConfig, ControllerConfig, DiffDriveConfig,
-                                     MecanumConfig, RobotConfig, WorldConfig)
+from world_description.world_config import (
+    CameraConfig,
+    ControllerConfig,
+    DiffDriveConfig,
+    MecanumConfig,
+    RobotConfig,
+    WorldConfig,
+)
 
 FLOOR_COLOR = (0.82, 0.80, 0.76, 1.0)
 # Inertias as written in the URDF; true cylinders, because the convex hull PyBullet otherwise

@@ -20,9 +20,14 @@ from rclpy.qos import QoSProfile
 from rclpy.signals import SignalHandlerOptions
 
 from ros_common.params import float_range
-from teleop.teleop_core import (HELP, HOLONOMIC_HELP, TeleopError, TeleopScript,
-                                     TeleopState, parse_script)
-
+from teleop.teleop_core import (
+    HELP,
+    HOLONOMIC_HELP,
+    TeleopError,
+    TeleopScript,
+    TeleopState,
+    parse_script,
+)
 
 
 class TeleopNode(Node):

@@ -66,7 +66,7 @@ def test_vision_reports_every_material_once_with_its_colour(cell, start_node, pr
             continue
         ts, markers = before[-1]
         for det in msg.detections:
-            def error(mk):
+            def error(mk, t=t, ts=ts, det=det):
                 moving = 0.2 * (t - ts) if mk.text == 'on_belt' and ts >= moving_from else 0.0
                 return np.hypot(mk.pose.position.x + moving - det.position.x,
                                 mk.pose.position.y - det.position.y)

@@ -4,6 +4,7 @@ for it and the step is the same as with prompt delivery; without, the step runs 
 import time
 
 import pytest
+
 from helpers import LockStepDriver
 
 BATCH = 48                 # steps of 1/240 s: 0.2 s of simulated time

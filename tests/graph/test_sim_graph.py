@@ -13,8 +13,8 @@ from sensor_msgs.msg import CameraInfo, Image, JointState
 from sim_interfaces.srv import StepSimulation
 from std_srvs.srv import Trigger
 
-from helpers import LockStepDriver, stamp_s, wait_for
 from controllers.transforms import yaw_from_quaternion
+from helpers import LockStepDriver, stamp_s, wait_for
 
 RTF = 4.0   # paced, but faster than real time to keep the suite short
 DT = 1.0 / 240.0
@@ -274,7 +274,8 @@ def test_lock_step_advances_exactly_n_steps_per_request(start_node, probe, clock
         assert _ns(reply.sim_time) == _ns(before.sim_time) + n * DT_NS
         # The steps' messages were published before the reply: the last /clock is its time
         # (at the end of every request, on the clock's grid or not).
-        wait_for(lambda: clock[-1][1].clock == reply.sim_time, 5.0, what='the final /clock')
+        wait_for(lambda reply=reply: clock[-1][1].clock == reply.sim_time, 5.0,
+                 what='the final /clock')
         if n <= 7:
             # Well within the publisher's history depth every message arrives: one per step,
             # or one per 10 ms slot and the request's end.

@@ -15,9 +15,9 @@ from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
 from controllers.base_fidelity import tracking_errors
 from controllers.diff_drive import Pose2D
+from controllers.transforms import yaw_from_quaternion
 from controllers.youbot_arm import JOINT_NAMES
 from helpers import NodeProcess, stamp_s, wait_for
-from controllers.transforms import yaw_from_quaternion
 
 WORLD = 'world:=package://world_description/worlds/youbot.yaml'
 RTF = 2.0

@@ -5,8 +5,12 @@ import numpy as np
 import pytest
 
 from controllers.dh_chain import MODIFIED, STANDARD, DHChain, DHRow
-from controllers.youbot_arm import (DATASHEET_LIMITS_DEG, datasheet_from_theta,
-                                    theta_from_datasheet, youbot_arm_chain)
+from controllers.youbot_arm import (
+    DATASHEET_LIMITS_DEG,
+    datasheet_from_theta,
+    theta_from_datasheet,
+    youbot_arm_chain,
+)
 from controllers.zu12_arm import zu12_chain
 
 DEG = math.pi / 180

@@ -3,8 +3,15 @@ import math
 
 import pytest
 
-from controllers.diff_drive import (DiffDriveGeometry, Pose2D, body_twist,
-                                    integrate_unicycle, predict_pose, wheel_speeds, wrap_angle)
+from controllers.diff_drive import (
+    DiffDriveGeometry,
+    Pose2D,
+    body_twist,
+    integrate_unicycle,
+    predict_pose,
+    wheel_speeds,
+    wrap_angle,
+)
 
 # (v, w) -> (wL, wR), the table of ROBOT_MODELS.md section 1.
 TABLE = [

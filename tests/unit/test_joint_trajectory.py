@@ -4,8 +4,12 @@ import math
 import numpy as np
 import pytest
 
-from controllers.joint_trajectory import (JointLimits, TrajectoryFollower, TrajectoryPoint,
-                                          TrajectoryRequest)
+from controllers.joint_trajectory import (
+    JointLimits,
+    TrajectoryFollower,
+    TrajectoryPoint,
+    TrajectoryRequest,
+)
 
 NAMES = ('j1', 'j2', 'j3')
 LIMITS = JointLimits(lower=np.array([-2.0, -1.0, -3.0]), upper=np.array([2.0, 1.5, 3.0]),

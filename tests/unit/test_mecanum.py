@@ -4,8 +4,13 @@ import math
 import numpy as np
 import pytest
 
-from controllers.mecanum import (MecanumGeometry, body_twist, paper_to_forward_positive,
-                                 paper_wheel_speeds, wheel_speeds)
+from controllers.mecanum import (
+    MecanumGeometry,
+    body_twist,
+    paper_to_forward_positive,
+    paper_wheel_speeds,
+    wheel_speeds,
+)
 
 GEOM = MecanumGeometry(0.0475, 0.385)   # the values of the worked table
 

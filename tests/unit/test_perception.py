@@ -5,11 +5,15 @@ import math
 import numpy as np
 import pytest
 
-from sim_bringup.vision_evaluation import evaluate
-from perception.projection import (CameraModel, cube_silhouette_centroid, locate_cube,
-                                   pixel_to_plane)
+from perception.projection import (
+    CameraModel,
+    cube_silhouette_centroid,
+    locate_cube,
+    pixel_to_plane,
+)
 from perception.segmentation import ColorClass, confidence, segment
 from perception.tracker import Sighting, Tracker
+from sim_bringup.vision_evaluation import evaluate
 from world_description.camera_geometry import look_at_rotation
 
 K = np.array([[290.0, 0.0, 160.0], [0.0, 290.0, 119.0], [0.0, 0.0, 1.0]])

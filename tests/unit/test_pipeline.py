@@ -2,7 +2,7 @@
 import dataclasses
 import math
 import re
-from typing import Dict, List
+from typing import Dict, List, Optional
 
 import numpy as np
 import pytest
@@ -10,8 +10,16 @@ import pytest
 from controllers.conveyor import Item, advance
 from controllers.time_optimal import Waypoint
 from coordinator.layout import CellLayout, LayoutError, layout_from_world
-from coordinator.pipeline import (Detection, LoaderState, NodeTimeout, Observation, Pipeline,
-                                  Settings, YOUBOT_CARRY_Q, youbot_tool_quaternion)
+from coordinator.pipeline import (
+    YOUBOT_CARRY_Q,
+    Detection,
+    LoaderState,
+    NodeTimeout,
+    Observation,
+    Pipeline,
+    Settings,
+    youbot_tool_quaternion,
+)
 from world_description.resources import resolve_resource
 from world_description.world_config import load_world
 
@@ -265,11 +273,11 @@ class FakeCell:
 PAPER = ['orange', 'purple', 'orange', 'blue', 'orange', 'orange', 'orange', 'orange']
 
 
-def run(cell: FakeCell, settings: Settings = Settings(), limit: float = 600.0,
+def run(cell: FakeCell, settings: Optional[Settings] = None, limit: float = 600.0,
         lag=None) -> Pipeline:
     """Tick the pipeline on every observation; ``lag(now)``: how many further observations
     the coordinator misses after a tick (it lags the simulator)."""
-    pipeline = Pipeline(cell.layout, cell, settings, 0.0)
+    pipeline = Pipeline(cell.layout, cell, settings or Settings(), 0.0)
     cell.pipeline = pipeline
     obs = cell.step()
     while not pipeline.finished:
@@ -722,7 +730,7 @@ def test_real_time_plans_leave_room_for_the_plan_latency():
     # meets the material where the belt has carried it by then, at least 0.5 s after it.
     picks = [e.time for e in kinds(slow, 'tracking')]
     assert picks
-    for (arm, t, _), a, b in zip(slow.trajectories, first, later):
+    for (_arm, t, _), a, b in zip(slow.trajectories, first, later):
         if t in picks:
             assert b >= 0.5
         else:

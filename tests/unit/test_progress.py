@@ -3,9 +3,17 @@ import io
 
 import pytest
 
-from coordinator.progress import (TYPICAL_COMPLETION_S, CampaignBar, TrialProgress,
-                                  eta_seconds, format_duration, progress_line, read_progress,
-                                  running_figures, write_progress)
+from coordinator.progress import (
+    TYPICAL_COMPLETION_S,
+    CampaignBar,
+    TrialProgress,
+    eta_seconds,
+    format_duration,
+    progress_line,
+    read_progress,
+    running_figures,
+    write_progress,
+)
 
 
 def test_a_running_trial_is_projected_from_its_own_pace():

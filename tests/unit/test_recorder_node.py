@@ -4,11 +4,11 @@ from rclpy.parameter import Parameter
 from rclpy.serialization import serialize_message
 from rosbags.highlevel import AnyReader
 from std_msgs.msg import String
+from test_recording_core import damaged_mid_stream_bag
 
 from recording.bag_writer import BagError
 from recording.recorder import Recorder
 from recording.replay import Replay
-from test_recording_core import damaged_mid_stream_bag
 
 
 def make(context, tmp_path, **overrides):

@@ -16,12 +16,21 @@ from rclpy.serialization import serialize_message
 from rosbags.highlevel import AnyReader
 from std_msgs.msg import String
 
-from recording.analysis import AnalysisError, analyse, main as analysis_main, write_report
+from recording.analysis import AnalysisError, analyse, write_report
+from recording.analysis import main as analysis_main
 from recording.bag_writer import BagError, BagWriter, unique_bag_path
-from recording.qos_profiles import (BEST_EFFORT, RELIABLE, TRANSIENT_LOCAL, VOLATILE,
-                                    adapt_to_publishers, bag_qos, parse_offered_qos,
-                                    replay_policies)
-from recording.repair import RepairError, main as repair_main, repair
+from recording.qos_profiles import (
+    BEST_EFFORT,
+    RELIABLE,
+    TRANSIENT_LOCAL,
+    VOLATILE,
+    adapt_to_publishers,
+    bag_qos,
+    parse_offered_qos,
+    replay_policies,
+)
+from recording.repair import RepairError, repair
+from recording.repair import main as repair_main
 from recording.replay_schedule import ReplaySchedule
 from recording.types import TypeResolutionError, TypeResolver
 

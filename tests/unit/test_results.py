@@ -10,12 +10,17 @@ import pytest
 
 from coordinator.pipeline import RunResult
 from coordinator.report import STATE_COLORS, activity, write_report
-from coordinator.results import (IdentificationCheck, at_destination, match_identification,
-                                 regions_from_world, score, summary_rows)
+from coordinator.results import (
+    IdentificationCheck,
+    at_destination,
+    match_identification,
+    regions_from_world,
+    score,
+    summary_rows,
+)
 from coordinator.trials import trial_plan, write_csv
 from world_description.resources import resolve_resource
 from world_description.world_config import load_world
-
 
 WORLD = load_world(resolve_resource('package://world_description/worlds/pipeline_cell.yaml'))
 
@@ -254,6 +259,7 @@ def test_trials_on_one_machine_never_share_a_dds_domain(tmp_path, monkeypatch):
     and comes free when its holder ends (even a killed one)."""
     import subprocess
     import sys
+
     import coordinator.trials as trials
     monkeypatch.setattr(trials, 'DOMAIN_LOCK_DIR', tmp_path)
     with trials.domain_lease(150) as first, trials.domain_lease(150) as second:

@@ -3,8 +3,15 @@ import numpy as np
 import pytest
 
 from controllers.pick_place import PickTiming, follow_pick
-from controllers.time_optimal import (JointLimits, PlanError, TooLate, Waypoint, plan,
-                                      rest_to_rest_time, timed_path)
+from controllers.time_optimal import (
+    JointLimits,
+    PlanError,
+    TooLate,
+    Waypoint,
+    plan,
+    rest_to_rest_time,
+    timed_path,
+)
 
 LIMITS = JointLimits(np.array([2.0, 2.0, 3.0]), np.array([8.0, 8.0, 12.0]),
                      np.array([80.0, 80.0, 120.0]))

@@ -4,10 +4,10 @@ import math
 import numpy as np
 import pytest
 
+from controllers.transforms import yaw_from_quaternion
 from sim_bridge.runner import DriveLimits, NullSink, SimRunner
 from sim_bridge.world import SimWorld, WorldError
 from world_description.resources import resolve_resource
-from controllers.transforms import yaw_from_quaternion
 from world_description.world_config import load_world, parse_world
 
 DEFAULT = resolve_resource('package://world_description/worlds/mini_robot.yaml')

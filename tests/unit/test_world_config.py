@@ -1,8 +1,8 @@
 """World YAML loading and its error messages."""
 import pytest
 
-from world_description.world_config import WorldConfigError, load_world, parse_world
 from world_description.resources import resolve_resource
+from world_description.world_config import WorldConfigError, load_world, parse_world
 
 ROBOT = {'name': 'r1', 'urdf': 'package://robot_description/urdf/mini_robot.urdf'}
 

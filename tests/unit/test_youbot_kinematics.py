@@ -4,9 +4,13 @@ import math
 import numpy as np
 import pytest
 
-from controllers.transforms import (matrix_to_quaternion, pose_matrix, quaternion_to_matrix,
-                                    rotation_angle)
 from controllers.arm_model import motion_duration
+from controllers.transforms import (
+    matrix_to_quaternion,
+    pose_matrix,
+    quaternion_to_matrix,
+    rotation_angle,
+)
 from controllers.youbot_kinematics import YoubotKinematics, in_base_link
 
 

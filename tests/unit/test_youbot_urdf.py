@@ -11,9 +11,15 @@ import pybullet
 import pytest
 from pybullet_utils.bullet_client import BulletClient
 
-from controllers.youbot_arm import (ARM_BASE_IN_BASE_LINK_M, DATASHEET_LIMITS_DEG,
-                                    GRIPPER_TCP_OFFSET_M, JOINT_NAMES, datasheet_from_theta,
-                                    theta_from_datasheet, youbot_arm_chain)
+from controllers.youbot_arm import (
+    ARM_BASE_IN_BASE_LINK_M,
+    DATASHEET_LIMITS_DEG,
+    GRIPPER_TCP_OFFSET_M,
+    JOINT_NAMES,
+    datasheet_from_theta,
+    theta_from_datasheet,
+    youbot_arm_chain,
+)
 from robot_description import urdf_path
 from sim_bridge.world import URDF_FLAGS
 

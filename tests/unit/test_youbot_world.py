@@ -9,12 +9,12 @@ from controllers.base_fidelity import tracking_errors
 from controllers.diff_drive import Pose2D
 from controllers.joint_trajectory import TrajectoryPoint, TrajectoryRequest
 from controllers.mecanum import MecanumGeometry, wheel_speeds
+from controllers.transforms import yaw_from_quaternion
 from controllers.youbot_arm import JOINT_NAMES
 from sim_bridge.runner import DriveLimits, NullSink, SimRunner
 from sim_bridge.world import SimWorld
 from world_description import YOUBOT_WORLD
 from world_description.resources import resolve_resource
-from controllers.transforms import yaw_from_quaternion
 from world_description.world_config import load_world
 
 HZ = 240

@@ -29,8 +29,7 @@ def package_share(package: str) -> Path:
     """A package's share directory, from the ament index (the workspace sourced); the two
     description packages also from their source trees."""
     try:
-        from ament_index_python.packages import (PackageNotFoundError,
-                                                 get_package_share_directory)
+        from ament_index_python.packages import PackageNotFoundError, get_package_share_directory
         try:
             return Path(get_package_share_directory(package))
         except (PackageNotFoundError, OSError):  # OSError: AMENT_PREFIX_PATH unset

@@ -10,10 +10,11 @@ only turns them into launch_ros Node actions. The result: `ros2 topic echo
 (ros2 launch is not installable from the package index; there `run_trials --seeds 5` starts
 the same processes, and `run_trials --show-graph` prints them.)
 """
-from coordinator.graph import pipeline_graph
 from launch import LaunchDescription
 from launch.actions import DeclareLaunchArgument, OpaqueFunction
 from launch_ros.actions import Node
+
+from coordinator.graph import pipeline_graph
 
 
 def _nodes(context):

@@ -18,10 +18,10 @@ from rclpy.qos import QoSProfile
 from sim_interfaces.msg import JointTrajectoryControllerState
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
-from ros_common.params import float_range
 from controllers.youbot_arm import JOINT_NAMES
-from ros_common.stamps import set_stamp
 from ros_common.node_main import run_task
+from ros_common.params import float_range
+from ros_common.stamps import set_stamp
 
 
 class ArmMove(Node):

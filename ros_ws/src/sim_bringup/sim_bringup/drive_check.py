@@ -20,12 +20,11 @@ from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile
 
 from controllers.diff_drive import Pose2D, predict_pose, wrap_angle
-from ros_common.params import float_range
-from teleop.teleop_core import TeleopError, parse_script
 from controllers.transforms import yaw_from_quaternion
-from ros_common.stamps import to_seconds
 from ros_common.node_main import run_task
-
+from ros_common.params import float_range
+from ros_common.stamps import to_seconds
+from teleop.teleop_core import TeleopError, parse_script
 
 
 class DriveCheck(Node):

@@ -11,8 +11,8 @@ import numpy as np
 
 from perception.projection import CameraModel
 from perception.vision import MaterialVision
-from world_description.camera_geometry import look_at_rotation
 from sim_bridge.world import SimWorld
+from world_description.camera_geometry import look_at_rotation
 from world_description.resources import resolve_resource
 from world_description.world_config import load_world
 
