@@ -1,7 +1,7 @@
 #!/usr/bin/env python3
 """Write robot_description/urdf/youbot.urdf from the published youBot numbers.
 
-The arm's joint frames are the frames of the pipeline paper's MDH table (ROBOT_MODELS.md §3),
+The arm's joint frames are the frames of the pipeline paper's MDH table (docs/robot-models.md §3),
 so the description and controllers/youbot_arm.py describe one arm; the joints themselves use the
 datasheet angles (zero at the straight-up "candle", the convention of the paper's limits).
 Run it after changing the numbers; tests/unit/test_youbot_urdf.py fails if the committed file
@@ -41,12 +41,12 @@ BASE_MASS_KG = 22.0
 WHEEL_MASS_KG = 1.4
 WHEEL_WIDTH_M = 0.05
 WHEEL_X_M, WHEEL_Y_M, WHEEL_Z_M = 0.228, 0.158, -0.034
-# Virtual omni-wheel: the sphere spins about the contact roller's axis (ROBOT_MODELS.md §2b).
+# Virtual omni-wheel: the sphere spins about the contact roller's axis (docs/robot-models.md §2).
 WHEELS = (('fl', 1, 1, -45.0), ('fr', 1, -1, 45.0), ('rr', -1, -1, -45.0),
           ('rl', -1, 1, 45.0))
 ARM_MOUNT_M = (0.143, 0.0, 0.046)
 PLATE_M = (-0.159, 0.0, 0.046)
-# Link masses 0..5 (ROBOT_MODELS.md §3); gripper palm and fingers from the vendor's data.
+# Link masses 0..5 (docs/robot-models.md §3); gripper palm and fingers from the vendor's data.
 ARM_MASSES_KG = (0.961, 1.390, 1.318, 0.821, 0.769, 0.687)
 ARM_EFFORT_NM = (9.5, 9.5, 6.0, 2.0, 1.0)
 PALM_MASS_KG, FINGER_MASS_KG = 0.199, 0.010
@@ -132,10 +132,10 @@ def _gripper() -> list:
 HEADER = f'''<?xml version="1.0"?>
 <!--
   KUKA youBot, written by scripts/generate_youbot_urdf.py from the published numbers
-  (ROBOT_MODELS.md §2-3); do not edit by hand.
+  (docs/robot-models.md §2-3); do not edit by hand.
   base_link: centre of the base box, {BASE_LINK_HEIGHT_M} m above the ground (REP-103: x forward,
   z up).
-  Wheels: "virtual omni-wheels" (ROBOT_MODELS.md §2b): each wheel collides as a sphere of the
+  Wheels: "virtual omni-wheels" (docs/robot-models.md §2): each wheel collides as a sphere of the
   wheel radius whose joint axis (link y) is the contact roller's axis, yawed -45 deg (FL, RR) or
   +45 deg (FR, RL) from the wheel axle; the simulator gives it anisotropic friction [1, 0, 1]
   and drives it at u/sqrt(2) for a forward-positive wheel speed u, and reports sqrt(2) q as the

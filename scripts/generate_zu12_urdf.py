@@ -4,7 +4,7 @@
 Standard DH puts joint i's rotation before the link's fixed part: T(i-1, i) = RotZ(theta_i)
 [TransZ(d_i) TransX(a_i) RotX(alpha_i)]. In the URDF, link_i is frame i-1 turned by theta_i, and
 joint i+1's origin is the fixed part of row i, so `flange` (link_6 plus row 6's fixed part) is
-the table's frame 6 and the joint positions are the table's theta (ROBOT_MODELS.md §4).
+the table's frame 6 and the joint positions are the table's theta (docs/robot-models.md §4).
 tests/unit/test_zu12.py fails if the committed file differs from what this script writes.
 
     python3 scripts/generate_zu12_urdf.py [--check]
@@ -49,7 +49,7 @@ LINK_SHAPES = (
 HEADER = '''<?xml version="1.0"?>
 <!--
   JAKA Zu 12, written by scripts/generate_zu12_urdf.py from the manufacturer's standard DH
-  table (ROBOT_MODELS.md §4); do not edit by hand. base_link on the floor; joint positions are
+  table (docs/robot-models.md §4); do not edit by hand. base_link on the floor; joint positions are
   the table's theta (all offsets 0) with the published ranges and speeds; `flange` is the
   table's frame 6, `suction_tcp` the contact point of the suction tool on the flange's z axis.
   Masses spread the vendor's 41 kg over the links; inertias are solid-shape values.

@@ -5,7 +5,7 @@ import math
 from dataclasses import dataclass
 from typing import Iterable, Tuple
 
-# The report's simulation parameters (ROBOT_MODELS.md section 1).
+# The report's simulation parameters (docs/robot-models.md §1).
 WHEEL_RADIUS_M = 0.03
 WHEEL_SEPARATION_M = 0.113
 

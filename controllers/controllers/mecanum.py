@@ -1,4 +1,5 @@
-"""Mecanum-base kinematics of the KUKA youBot (the pipeline paper's eq. 9, ROBOT_MODELS.md §2)."""
+"""Mecanum-base kinematics of the KUKA youBot (the pipeline paper's eq. 9; docs/robot-models.md
+§2)."""
 from __future__ import annotations
 
 import math

@@ -1,4 +1,4 @@
-"""The youBot arm's MDH table from the pipeline paper, read as ROBOT_MODELS.md §3 explains."""
+"""The youBot arm's MDH table from the pipeline paper, read as docs/robot-models.md §3 explains."""
 from __future__ import annotations
 
 import math

@@ -1,4 +1,5 @@
-"""The JAKA Zu 12's standard DH table (ROBOT_MODELS.md §4), base at the floor, tool at flange."""
+"""The JAKA Zu 12's standard DH table (docs/robot-models.md §4), base at the floor, tool at
+the flange."""
 from __future__ import annotations
 
 import math

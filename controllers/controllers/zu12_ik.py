@@ -1,5 +1,5 @@
 """Analytic inverse kinematics of the JAKA Zu 12 (standard DH, the UR-like geometry of
-ROBOT_MODELS.md §4: joints 2, 3, 4 parallel, a shoulder offset d4, a spherical-free wrist).
+docs/robot-models.md §4: joints 2, 3, 4 parallel, a shoulder offset d4, a spherical-free wrist).
 
 With z1 = (sin q1, -cos q1, 0) the common direction of axes 2-4:
 - the wrist point o5 = p - d6 z6 lies d4 along z1:  o5 . z1 = d4          -> q1 (two values)

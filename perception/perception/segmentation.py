@@ -37,7 +37,7 @@ class ColorClass:
         return (hue & (s >= self.min_saturation) & (v >= self.min_value)).astype(np.uint8)
 
 
-# The scenario's colours (ROBOT_MODELS.md §5): hues of the simulator's materials are 139
+# The scenario's colours (docs/robot-models.md §5): hues of the simulator's materials are 139
 # (purple), 14 (orange) and 112 (blue); the ranges leave room for lighting and colour noise.
 DEFAULT_CLASSES = (
     ColorClass('purple', ((125, 160),)),

@@ -1,4 +1,4 @@
-"""DH chains (modified and standard) and the tables of ROBOT_MODELS.md §3-4."""
+"""DH chains (modified and standard) and the tables of docs/robot-models.md §3-4."""
 import math
 
 import numpy as np

@@ -1,4 +1,4 @@
-"""Kinematics of the mini robot against ROBOT_MODELS.md section 1."""
+"""Kinematics of the mini robot against docs/robot-models.md §1."""
 import math
 
 import pytest
@@ -13,7 +13,7 @@ from controllers.diff_drive import (
     wrap_angle,
 )
 
-# (v, w) -> (wL, wR), the table of ROBOT_MODELS.md section 1.
+# (v, w) -> (wL, wR), the table of docs/robot-models.md §1.
 TABLE = [
     ((0.2, 0.0), (6.666667, 6.666667)),
     ((0.0, 0.2), (-0.376667, 0.376667)),

@@ -1,4 +1,4 @@
-"""youBot Mecanum kinematics against ROBOT_MODELS.md §2 (the paper's eq. 9)."""
+"""youBot Mecanum kinematics against docs/robot-models.md §2 (the paper's eq. 9)."""
 import math
 
 import numpy as np

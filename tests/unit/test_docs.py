@@ -1,0 +1,24 @@
+"""The README stays short, and its links and the docs' links lead somewhere."""
+import re
+
+from helpers import ROOT
+
+LINK = re.compile(r'\]\(([^)#\s]+)(?:#[^)]*)?\)')
+
+
+def _relative_links(path):
+    return [target for target in LINK.findall(path.read_text())
+            if not re.match(r'[a-z]+://|mailto:', target)]
+
+
+def test_the_readme_is_at_most_250_lines():
+    assert len((ROOT / 'README.md').read_text().splitlines()) <= 250
+
+
+def test_every_relative_link_of_the_readme_and_the_docs_resolves():
+    pages = [ROOT / 'README.md', *sorted((ROOT / 'docs').glob('*.md'))]
+    broken = [f'{page.relative_to(ROOT)}: {target}' for page in pages
+              for target in _relative_links(page)
+              if not (page.parent / target).exists()]
+    assert _relative_links(ROOT / 'README.md'), 'the README links to nothing'
+    assert broken == []
