@@ -13,7 +13,7 @@ demo-mini: setup
 	@bash scripts/demo_mini_robot.sh
 
 # The paper's Table 2 over many seeded trials: make trials TRIALS=100 PARALLEL=2; on a Ray
-# cluster: make trials TRIALS=110 RAY=auto (README: "A campaign on a Ray cluster").
+# cluster: make trials TRIALS=110 RAY=auto (docs/pipeline.md: "A campaign on a Ray cluster").
 trials: setup
 	@bash -c 'source scripts/env.sh && run_trials --trials $${TRIALS:-10} \
 	  $${PARALLEL:+--parallel $$PARALLEL} $${RAY:+--ray $$RAY}'

@@ -4,7 +4,7 @@ The coordinator acts on what its sensors tell it; the score does not trust that.
 a run, every material's true resting place (``/cell/materials``) is checked against its
 destination, and every identification against the true colour of the material it was made on.
 
-Definitions (the README repeats them):
+Definitions (docs/pipeline.md repeats them):
 - identification rate: materials whose vision track carried their true colour / materials in
   the batch;
 - grasp success rate: successful grasps / grasp attempts, both arms (first-attempt and retried);

@@ -13,7 +13,7 @@ Then drive it:
     ros2 service call /youbot/solve_ik sim_interfaces/srv/SolveIK "{execute: true, target:
         {header: {frame_id: base_link}, pose: {position: {x: 0.45, y: 0.0, z: 0.05},
         orientation: {y: 1.0, w: 0.0}}}}"
-(ros2 launch is not installable from the package index; the README shows the same nodes
+(ros2 launch is not installable from the package index; docs/nodes.md shows the same nodes
 started one by one.)
 """
 from launch import LaunchDescription
