@@ -9,15 +9,16 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Callable, Dict, Optional, Sequence
+from typing import Callable, Dict, List, Optional, Sequence, Tuple
 
 import numpy as np
 
+from controllers.arrays import Vector
 from controllers.dh_chain import DHChain, IKResult
 from controllers.transforms import pose_distance
 
 Solver = Callable[[np.ndarray, Optional[np.ndarray], DHChain], IKResult]
-Convert = Callable[[Sequence[float]], np.ndarray]
+Convert = Callable[[Vector], np.ndarray]
 
 
 @dataclass
@@ -29,7 +30,7 @@ class ArmSolution:
     rotation_error: float = math.inf
 
 
-def _identity(q: Sequence[float]) -> np.ndarray:
+def _identity(q: Vector) -> np.ndarray:
     return np.asarray(q, float)
 
 
@@ -37,7 +38,7 @@ class ArmKinematics:
     """FK and IK of one arm for one of its tool frames."""
 
     def __init__(self, chain: DHChain, solver: Solver, joint_names: Sequence[str],
-                 velocity_limits: Sequence[float], base: np.ndarray,
+                 velocity_limits: Vector, base: np.ndarray,
                  tool_frames: Dict[str, np.ndarray], tool_frame: str,
                  reference_frames: Dict[str, np.ndarray],
                  to_chain: Convert = _identity, from_chain: Convert = _identity,
@@ -62,11 +63,12 @@ class ArmKinematics:
         ends = np.sort(np.stack([from_chain(lower), from_chain(upper)]), 0)
         self.lower, self.upper = ends[0], ends[1]
 
-    def fk(self, positions: Sequence[float]) -> np.ndarray:
+    def fk(self, positions: Vector) -> np.ndarray:
         """4x4 pose of the tool frame in base_link."""
-        return self._base @ self.chain.fk(self._to_chain(positions)) @ self._tool
+        pose: np.ndarray = self._base @ self.chain.fk(self._to_chain(positions)) @ self._tool
+        return pose
 
-    def ik(self, target: np.ndarray, seed: Optional[Sequence[float]] = None) -> ArmSolution:
+    def ik(self, target: np.ndarray, seed: Optional[Vector] = None) -> ArmSolution:
         """Joint positions that put the tool frame at ``target`` (4x4 in base_link), nearest
         to ``seed``; a failure names why (out of reach, orientation, limits)."""
         target = np.asarray(target, float)
@@ -78,18 +80,22 @@ class ArmKinematics:
         result = self._solver(flange, seed_chain, self.chain)
         if not result.success:
             return ArmSolution(False, reason=result.reason)
-        q = result.q
+        answer = result.q
+        if answer is None:
+            return ArmSolution(False, reason='the solver reported success without a solution')
+        q = answer
         if self.min_frame_height is not None:
             # The solver checked its answer; the others are checked here before use.
             ref = seed_chain if seed_chain is not None else np.zeros(self.chain.dof)
             order = sorted(result.candidates[1:], key=lambda c: float(np.abs(c - ref).sum()))
-            q = next((c for c in [result.q] + order if self.above_floor(c) and (
-                c is result.q or self._reaches(c, flange))), None)
-            if q is None:
+            chosen = next((c for c in [answer] + order if self.above_floor(c) and (
+                c is answer or self._reaches(c, flange))), None)
+            if chosen is None:
                 return ArmSolution(False, reason='every solution puts the arm below '
                                                  f'{self.min_frame_height} m (the floor)')
+            q = chosen
         rows = result.flange_rows
-        if q is result.q and rows is not None and not self.chain.has_tool:
+        if q is answer and rows is not None and not self.chain.has_tool:
             reached = np.array((rows[0:4], rows[4:8], rows[8:12], (0.0, 0.0, 0.0, 1.0)))
         else:
             reached = self.chain.fk(q)
@@ -104,17 +110,18 @@ class ArmKinematics:
     def above_floor(self, q_chain: np.ndarray) -> bool:
         """Every joint frame above frame 1, and the tool frame, at least min_frame_height
         above base_link's floor (the tool's origin: the flange's, plus the chain's tool)."""
+        points: Sequence[Tuple[float, ...]]
         if self.chain.has_tool:
-            points = [f[:3, 3] for f in self.chain.frames(q_chain)[1:]]
+            points = [tuple(f[:3, 3].tolist()) for f in self.chain.frames(q_chain)[1:]]
         else:
-            points = []
-            self.chain.fk_rows(q_chain, points)
-            points = points[1:]
+            origins: List[Tuple[float, float, float]] = []
+            self.chain.fk_rows(q_chain, origins)
+            points = origins[1:]
         b20, b21, b22, b23 = self._base[2].tolist()
-        return min(b20 * x + b21 * y + b22 * z for x, y, z in points) + b23 >= \
-            self.min_frame_height
+        floor = -math.inf if self.min_frame_height is None else self.min_frame_height
+        return bool(min(b20 * x + b21 * y + b22 * z for x, y, z in points) + b23 >= floor)
 
-    def within_limits(self, positions: Sequence[float], tol: float = 1e-9) -> bool:
+    def within_limits(self, positions: Vector, tol: float = 1e-9) -> bool:
         q = np.asarray(positions, float)
         return bool(np.all(q >= self.lower - tol) and np.all(q <= self.upper + tol))
 
@@ -127,11 +134,12 @@ class ArmKinematics:
             known = [prefix + f if f != 'world' else f for f in self.reference_frames]
             raise KeyError(f'unknown frame "{frame}": targets must be given in {known} '
                            '(no tf2 lookup here)')
-        return self.reference_frames[name] @ np.asarray(pose, float)
+        in_base: np.ndarray = self.reference_frames[name] @ np.asarray(pose, float)
+        return in_base
 
 
-def motion_duration(start: Sequence[float], goal: Sequence[float],
-                    velocity_limits: Sequence[float], scaling: float,
+def motion_duration(start: Vector, goal: Vector,
+                    velocity_limits: Vector, scaling: float,
                     min_duration: float = 0.5) -> float:
     """Duration of a rest-to-rest cubic move whose peak joint speed (1.5x the average) stays
     within ``scaling`` times the velocity limits."""

@@ -159,20 +159,24 @@ class MotionProfile:
 def _bezier(c: np.ndarray, u: np.ndarray) -> np.ndarray:
     u = u[:, None]
     v = 1.0 - u
-    return v ** 3 * c[0] + 3 * v * v * u * c[1] + 3 * v * u * u * c[2] + u ** 3 * c[3]
+    points: np.ndarray = (v ** 3 * c[0] + 3 * v * v * u * c[1] + 3 * v * u * u * c[2]
+                          + u ** 3 * c[3])
+    return points
 
 
 def _bezier_derivative(c: np.ndarray, u: float) -> np.ndarray:
     v = 1.0 - u
-    return 3 * v * v * (c[1] - c[0]) + 6 * v * u * (c[2] - c[1]) + 3 * u * u * (c[3] - c[2])
+    tangent: np.ndarray = (3 * v * v * (c[1] - c[0]) + 6 * v * u * (c[2] - c[1])
+                           + 3 * u * u * (c[3] - c[2]))
+    return tangent
 
 
 def key_poses_between(start: Pose2D, goal: Pose2D, via: Sequence[Sequence[float]] = ()
                       ) -> List[Pose2D]:
     """Key poses from ``start`` through ``via`` points ((x, y) or (x, y, yaw)) to ``goal``; a
     via point without a heading takes the start's."""
-    keys = [tuple(start)]
+    keys: List[Pose2D] = [(start[0], start[1], start[2])]
     for p in via:
         keys.append((p[0], p[1], p[2] if len(p) > 2 else start[2]))
-    keys.append(tuple(goal))
+    keys.append((goal[0], goal[1], goal[2]))
     return keys

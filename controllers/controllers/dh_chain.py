@@ -4,9 +4,11 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 from functools import cached_property
-from typing import List, Optional, Sequence, Tuple
+from typing import List, Optional, Tuple
 
 import numpy as np
+
+from controllers.arrays import Vector
 
 MODIFIED, STANDARD = 'modified', 'standard'
 
@@ -91,7 +93,7 @@ class DHChain:
         """The limits as lists of floats, for solvers in float arithmetic (do not modify)."""
         return [r.lower for r in self.rows], [r.upper for r in self.rows]
 
-    def within_limits(self, q: Sequence[float], tol: float = 1e-9) -> bool:
+    def within_limits(self, q: Vector, tol: float = 1e-9) -> bool:
         lower, upper = self.limits
         q = np.asarray(q, float)
         return bool(np.all(q >= lower - tol) and np.all(q <= upper + tol))
@@ -100,11 +102,14 @@ class DHChain:
         """Transform from frame i-1 to frame i at joint value q_i."""
         r = self.rows[i]
         theta = q_i + r.theta_offset
+        transform: np.ndarray
         if self.convention == MODIFIED:
-            return _rot_x(r.alpha) @ _trans(x=r.a) @ _rot_z(theta) @ _trans(z=r.d)
-        return _rot_z(theta) @ _trans(z=r.d) @ _trans(x=r.a) @ _rot_x(r.alpha)
+            transform = _rot_x(r.alpha) @ _trans(x=r.a) @ _rot_z(theta) @ _trans(z=r.d)
+        else:
+            transform = _rot_z(theta) @ _trans(z=r.d) @ _trans(x=r.a) @ _rot_x(r.alpha)
+        return transform
 
-    def frames(self, q: Sequence[float]) -> List[np.ndarray]:
+    def frames(self, q: Vector) -> List[np.ndarray]:
         """Base-frame poses of frames 1..n (joint frames), then the tool frame."""
         q = self._check(q)
         t = np.eye(4)
@@ -115,7 +120,7 @@ class DHChain:
         out.append(t @ np.asarray(self.tool))
         return out
 
-    def fk(self, q: Sequence[float]) -> np.ndarray:
+    def fk(self, q: Vector) -> np.ndarray:
         """4x4 pose of the tool frame in the base frame. In plain float arithmetic (each joint's
         transform multiplied out by hand), about ten times faster than ``frames(q)[-1]``,
         which gives the same pose."""
@@ -124,7 +129,7 @@ class DHChain:
                          (0.0, 0.0, 0.0, 1.0)))
         return pose if not self.has_tool else pose @ self._tool_matrix
 
-    def fk_rows(self, q: Sequence[float], origins: Optional[list] = None
+    def fk_rows(self, q: Vector, origins: Optional[List[Tuple[float, float, float]]] = None
                 ) -> Tuple[float, ...]:
         """The flange's pose (before the tool) as the 12 floats of its top three rows, row by
         row: for callers that do their own float arithmetic (the analytic IK). ``origins``, a
@@ -179,7 +184,7 @@ class DHChain:
         """A tool transform other than the identity follows the last joint."""
         return not np.array_equal(np.asarray(self.tool), np.eye(4))
 
-    def _values(self, q: Sequence[float]) -> List[float]:
+    def _values(self, q: Vector) -> List[float]:
         """``q`` as floats, checked as ``_check`` does (without numpy's overhead)."""
         try:
             values = q.tolist() if isinstance(q, np.ndarray) and q.ndim == 1 else \
@@ -193,7 +198,7 @@ class DHChain:
             raise ValueError(f'joint values must be finite, got {values}')
         return values
 
-    def _check(self, q: Sequence[float]) -> np.ndarray:
+    def _check(self, q: Vector) -> np.ndarray:
         q = np.asarray(q, float)
         if q.shape != (self.dof,):
             raise ValueError(f'expected {self.dof} joint values, got shape {q.shape}')

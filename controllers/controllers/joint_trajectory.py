@@ -21,6 +21,8 @@ from typing import List, Optional, Sequence, Tuple
 
 import numpy as np
 
+from controllers.arrays import Vector
+
 # A position "equals" the current one within this [rad or m] (first point at time 0).
 START_TOLERANCE = 1e-3
 LIMIT_TOLERANCE = 1e-9
@@ -93,7 +95,7 @@ class TrajectoryFollower:
     """Holds the desired state of one joint group and the trajectory it follows."""
 
     def __init__(self, joint_names: Sequence[str], limits: JointLimits,
-                 positions: Sequence[float]) -> None:
+                 positions: Vector) -> None:
         self.joint_names = tuple(joint_names)
         if len(set(self.joint_names)) != len(self.joint_names):
             raise ValueError(f'duplicate joint names {self.joint_names}')
@@ -107,14 +109,14 @@ class TrajectoryFollower:
     def active(self) -> bool:
         return bool(self._active.segments)
 
-    def hold(self, positions: Sequence[float]) -> None:
+    def hold(self, positions: Vector) -> None:
         """Stop following and hold these positions."""
         n = len(self.joint_names)
         self._hold = np.array(positions, float).reshape(n)
         self._active = _Active()
 
     def validate(self, request: TrajectoryRequest, now: float,
-                 current: Optional[Sequence[float]] = None) -> TrajectoryResult:
+                 current: Optional[Vector] = None) -> TrajectoryResult:
         """Check a trajectory; ``current`` is where the joints are (default: desired)."""
         names = request.joint_names
         if not names:
@@ -191,7 +193,7 @@ class TrajectoryFollower:
         return TrajectoryResult(True)
 
     def set_trajectory(self, request: TrajectoryRequest, now: float,
-                       current: Optional[Sequence[float]] = None) -> TrajectoryResult:
+                       current: Optional[Vector] = None) -> TrajectoryResult:
         """Validate and, if valid, follow ``request`` from the desired state at ``now``.
 
         A start stamp in the future holds the desired position until then; points already in
@@ -287,7 +289,8 @@ def _monotone_slopes(t: np.ndarray, q: np.ndarray) -> np.ndarray:
     return v
 
 
-def _poly(T: float, q0, v0, a0, q1, v1, a1) -> np.ndarray:
+def _poly(T: float, q0: Vector, v0: Vector, a0: Optional[Vector], q1: Vector, v1: Vector,
+          a1: Optional[Vector]) -> np.ndarray:
     """Coefficients (6, n) of the cubic (a0, a1 None) or quintic joining two states."""
     q0, v0, q1, v1 = (np.asarray(x, float) for x in (q0, v0, q1, v1))
     c = np.zeros((6, len(q0)))
@@ -296,6 +299,7 @@ def _poly(T: float, q0, v0, a0, q1, v1, a1) -> np.ndarray:
         c[2] = (3 * (q1 - q0) - (2 * v0 + v1) * T) / T ** 2
         c[3] = (-2 * (q1 - q0) + (v0 + v1) * T) / T ** 3
         return c
+    assert a1 is not None               # (a quintic has both ends' accelerations)
     a0, a1 = np.asarray(a0, float), np.asarray(a1, float)
     c[2] = a0 / 2
     dq = q1 - q0 - v0 * T - a0 * T ** 2 / 2

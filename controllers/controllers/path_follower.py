@@ -11,10 +11,11 @@ from __future__ import annotations
 import math
 from collections import deque
 from dataclasses import dataclass
-from typing import Optional, Sequence, Tuple
+from typing import Deque, Dict, List, Optional, Tuple
 
 import numpy as np
 
+from controllers.arrays import Vector
 from controllers.bezier import BezierPath, MotionProfile, wrap_angle
 
 
@@ -93,7 +94,7 @@ class PathFollower:
             yaw_rate = wrap_angle(ahead[2] - pose[2]) / ds * speed
         return pose, velocity, yaw_rate
 
-    def update(self, t: float, pose: Sequence[float], velocity: Sequence[float] = (0.0, 0.0),
+    def update(self, t: float, pose: Vector, velocity: Vector = (0.0, 0.0),
                yaw_rate: float = 0.0, lead: float = 0.0) -> FollowStatus:
         """Command for the robot at ``pose`` (x, y, yaw) moving at world ``velocity`` (vx, vy)
         and ``yaw_rate``, measured at ``t``.
@@ -133,10 +134,10 @@ class PathFollower:
                             yaw_off, finished)
 
 
-def simulate_kinematic(follower: PathFollower, start: Sequence[float], dt: float = 0.02,
+def simulate_kinematic(follower: PathFollower, start: Vector, dt: float = 0.02,
                        lag: float = 0.05, duration: Optional[float] = None,
                        disturbance: Tuple[float, float] = (0.0, 0.0), delay: float = 0.0,
-                       lead: float = 0.0):
+                       lead: float = 0.0) -> Tuple[np.ndarray, List[FollowStatus]]:
     """A pure-kinematic holonomic base (first-order velocity lag ``lag`` [s], a constant world
     velocity ``disturbance``) driven by ``follower``; returns the visited poses and statuses.
     ``delay`` [s]: each command takes effect that long after the pose it was computed from
@@ -147,7 +148,7 @@ def simulate_kinematic(follower: PathFollower, start: Sequence[float], dt: float
     t = follower.start_time
     end = follower.end_time + (duration if duration is not None else 5.0)
     poses, statuses = [pose.copy()], []
-    pending: deque = deque()          # (when it takes effect, command)
+    pending: Deque[Tuple[float, np.ndarray]] = deque()    # (when it takes effect, command)
     command = np.zeros(3)
     while t < end:
         c, s = math.cos(pose[2]), math.sin(pose[2])
@@ -184,14 +185,14 @@ class DriveLead:
 
     def __init__(self, trip: float = 0.1, max_lead: float = 0.3) -> None:
         self.trip, self.max_lead = trip, max_lead
-        self._ages: list = []
+        self._ages: List[float] = []
 
     def lead(self, age: float) -> float:
         age = max(0.0, float(age)) if math.isfinite(age) else 0.0
         self._ages.append(age)
         return min(self.max_lead, self.trip + age)
 
-    def summary(self) -> dict:
+    def summary(self) -> Dict[str, float]:
         """The messages' ages on arrival by the receiver's clock [s]."""
         if not self._ages:
             return {'samples': 0}

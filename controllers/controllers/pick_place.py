@@ -52,7 +52,8 @@ def follow_pick(track: Track, t_contact: float, size: float, timing: PickTiming 
     v_leave[2] = 0.0
 
     def on(t: float) -> np.ndarray:
-        return np.array(track(t), float) + np.array([0.0, 0.0, top])
+        point: np.ndarray = np.array(track(t), float) + np.array([0.0, 0.0, top])
+        return point
 
     def times(t0: float, t1: float) -> List[float]:
         k = max(1, int(np.ceil((t1 - t0) / period - 1e-9)))

@@ -23,7 +23,10 @@ from dataclasses import dataclass
 from typing import List, Optional, Sequence, Tuple
 
 import numpy as np
+from numpy.typing import ArrayLike
 from ruckig import InputParameter, Result, Ruckig, Trajectory
+
+from controllers.arrays import Vector
 
 SAMPLE_PERIOD_S = 0.05
 # Plans stay this far inside the limits: the position motors add a small correction to the
@@ -97,8 +100,9 @@ class Plan:
         return [(s.t, s.q, s.v, s.a) for s in self.samples]
 
 
-def _profile(q0, v0, q1, v1, limits: JointLimits, min_time: float,
-             a0=None, a1=None) -> Optional[Trajectory]:
+def _profile(q0: np.ndarray, v0: np.ndarray, q1: np.ndarray, v1: np.ndarray,
+             limits: JointLimits, min_time: float, a0: Optional[np.ndarray] = None,
+             a1: Optional[np.ndarray] = None) -> Optional[Trajectory]:
     n = len(q0)
     otg = Ruckig(n)
     inp = InputParameter(n)
@@ -119,27 +123,30 @@ def _profile(q0, v0, q1, v1, limits: JointLimits, min_time: float,
     return trajectory if result == Result.Working else None
 
 
-def rest_to_rest_time(q0: Sequence[float], q1: Sequence[float], limits: JointLimits) -> float:
+def rest_to_rest_time(q0: ArrayLike, q1: ArrayLike, limits: JointLimits) -> float:
     """The shortest time from rest at ``q0`` to rest at ``q1``."""
-    n = len(q0)
-    profile = _profile(np.asarray(q0, float), np.zeros(n), np.asarray(q1, float), np.zeros(n),
-                       limits, 0.0)
+    start, goal = np.asarray(q0, float), np.asarray(q1, float)
+    n = len(start)
+    profile = _profile(start, np.zeros(n), goal, np.zeros(n), limits, 0.0)
     if profile is None:
         raise PlanError('no profile between the two positions')
     return float(profile.duration)
 
 
-def _via_velocity(q_prev, q, q_next, limits: JointLimits) -> np.ndarray:
+def _via_velocity(q_prev: np.ndarray, q: np.ndarray, q_next: np.ndarray,
+                  limits: JointLimits) -> np.ndarray:
     d_in, d_out = q - q_prev, q_next - q
     t_in = max(rest_to_rest_time(q_prev, q, limits), 1e-6)
     t_out = max(rest_to_rest_time(q, q_next, limits), 1e-6)
     v = np.minimum(np.abs(d_in) / t_in, np.abs(d_out) / t_out) * np.sign(d_in)
     v[np.sign(d_in) != np.sign(d_out)] = 0.0
-    return np.clip(v, -0.9 * limits.velocity, 0.9 * limits.velocity)
+    return np.asarray(np.clip(v, -0.9 * limits.velocity, 0.9 * limits.velocity), float)
 
 
-def _improve_vias(q0, v0, a0, qs, velocities, accelerations, free, waypoints,
-                  limits: JointLimits) -> None:
+def _improve_vias(q0: np.ndarray, v0: np.ndarray, a0: np.ndarray, qs: List[np.ndarray],
+                  velocities: List[np.ndarray], accelerations: List[Optional[np.ndarray]],
+                  free: List[bool], waypoints: Sequence[Waypoint], limits: JointLimits
+                  ) -> None:
     """Choose, waypoint by waypoint, the speed at each pass-through waypoint (``free``) among
     VIA_SCALES times the first guess: the one with the shortest two segments around it. The
     average speeds of rest-to-rest segments are a cautious guess: a joint that keeps its
@@ -170,9 +177,9 @@ def _improve_vias(q0, v0, a0, qs, velocities, accelerations, free, waypoints,
         velocities[i] = best
 
 
-def plan(q0: Sequence[float], waypoints: Sequence[Waypoint], limits: JointLimits,
+def plan(q0: Vector, waypoints: Sequence[Waypoint], limits: JointLimits,
          t0: float = 0.0, period: float = SAMPLE_PERIOD_S,
-         v0: Optional[Sequence[float]] = None, a0: Optional[Sequence[float]] = None) -> Plan:
+         v0: Optional[Vector] = None, a0: Optional[Vector] = None) -> Plan:
     """The motion from rest at ``q0`` (or moving: velocity ``v0``, acceleration ``a0``)
     through ``waypoints`` (the last one is a stop), starting at ``t0``, sampled every
     ``period`` and at every waypoint."""
@@ -180,13 +187,13 @@ def plan(q0: Sequence[float], waypoints: Sequence[Waypoint], limits: JointLimits
     n = len(q_prev)
     if not waypoints:
         raise PlanError('a motion needs at least one waypoint')
-    v_start = _state(v0, n, 'start velocity')
-    a_start = _state(a0, n, 'start acceleration')
-    v_start = np.zeros(n) if v_start is None else v_start
-    a_start = np.zeros(n) if a_start is None else a_start
+    v_given, a_given = _state(v0, n, 'start velocity'), _state(a0, n, 'start acceleration')
+    v_start = np.zeros(n) if v_given is None else v_given
+    a_start = np.zeros(n) if a_given is None else a_given
     for name in ('velocity', 'acceleration', 'jerk'):
-        value = np.asarray(getattr(limits, name), float)
-        if value.shape != (n,) or not np.all(np.isfinite(value)) or np.any(value <= 0.0):
+        limit_values = np.asarray(getattr(limits, name), float)
+        if (limit_values.shape != (n,) or not np.all(np.isfinite(limit_values))
+                or np.any(limit_values <= 0.0)):
             raise PlanError(f'{name} limits must be {n} positive finite values')
     qs = [np.asarray(w.q, float) for w in waypoints]
     if any(q.shape != (n,) or not np.all(np.isfinite(q)) for q in qs) or not np.all(
@@ -210,10 +217,11 @@ def plan(q0: Sequence[float], waypoints: Sequence[Waypoint], limits: JointLimits
         raise PlanError('a motion ends at rest: the last waypoint cannot have a velocity')
     stops = [w.stop and given_v[i] is None for i, w in enumerate(waypoints)]
     stops[-1] = True
-    velocities = []
+    velocities: List[np.ndarray] = []
     for i, q in enumerate(qs):
-        if given_v[i] is not None:
-            velocities.append(given_v[i])
+        given = given_v[i]
+        if given is not None:
+            velocities.append(given)
         elif stops[i]:
             velocities.append(np.zeros(n))
         else:
@@ -224,8 +232,10 @@ def plan(q0: Sequence[float], waypoints: Sequence[Waypoint], limits: JointLimits
     arrivals = []
     t, v_prev, a_prev = t0, v_start, a_start
     for i, w in enumerate(waypoints):
-        a_here = given_a[i] if given_a[i] is not None else np.zeros(n)
+        a_given_here = given_a[i]
+        a_here = a_given_here if a_given_here is not None else np.zeros(n)
         if w.direct:
+            assert w.at is not None             # (checked above: a direct waypoint has one)
             if w.at <= t + 1e-9:
                 raise PlanError(f'waypoint {i}: a direct waypoint must come after the one '
                                 f'before it ({w.at:.3f} s <= {t:.3f} s)')
@@ -266,7 +276,7 @@ def plan(q0: Sequence[float], waypoints: Sequence[Waypoint], limits: JointLimits
     return Plan(samples, arrivals)
 
 
-def timed_path(qs: Sequence[Sequence[float]], limits: JointLimits, t0: float,
+def timed_path(qs: Sequence[Vector], limits: JointLimits, t0: float,
                period: float = SAMPLE_PERIOD_S, end_speed: float = 0.0,
                min_time: float = 0.0) -> List[Waypoint]:
     """A path the tool must keep to (a straight line, say), given as joint positions at evenly
@@ -277,18 +287,18 @@ def timed_path(qs: Sequence[Sequence[float]], limits: JointLimits, t0: float,
     next waypoint. The path is a cubic in its length fitted to the points, through its ends:
     a tool's straight line is smooth in joint space, and the youBot's 6 cm lift off its plate
     keeps to its points within 0.05 mm."""
-    qs = np.asarray(qs, float)
-    if qs.ndim != 2 or len(qs) < 2 or not np.all(np.isfinite(qs)):
+    points = np.asarray(qs, float)
+    if points.ndim != 2 or len(points) < 2 or not np.all(np.isfinite(points)):
         raise PlanError('a timed path needs two or more points of finite joint positions')
     if not 0.0 <= end_speed <= 1.0:
         raise PlanError(f'the end speed is a fraction within [0, 1], got {end_speed}')
     # A cubic fitted to the points, corrected to pass through the path's ends exactly.
-    fit = np.polynomial.polynomial.polyfit(np.linspace(0.0, 1.0, len(qs)), qs,
-                                           min(len(qs) - 1, 3))
+    fit = np.polynomial.polynomial.polyfit(np.linspace(0.0, 1.0, len(points)), points,
+                                           min(len(points) - 1, 3))
     if len(fit) < 2:
         fit = np.vstack([fit, np.zeros_like(fit)])
-    first = qs[0] - fit[0]
-    last = qs[-1] - np.polynomial.polynomial.polyval(1.0, fit).T
+    first = points[0] - fit[0]
+    last = points[-1] - np.polynomial.polynomial.polyval(1.0, fit).T
     fit[0] += first
     fit[1] += last - first
     coef = [fit]
@@ -345,7 +355,7 @@ def timed_path(qs: Sequence[Sequence[float]], limits: JointLimits, t0: float,
     return waypoints
 
 
-def _state(value, n: int, what: str) -> Optional[np.ndarray]:
+def _state(value: Optional[ArrayLike], n: int, what: str) -> Optional[np.ndarray]:
     if value is None:
         return None
     out = np.asarray(value, float)

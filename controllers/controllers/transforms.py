@@ -6,8 +6,10 @@ from typing import Sequence, Tuple
 
 import numpy as np
 
+from controllers.arrays import Vector
 
-def quaternion_to_matrix(q: Sequence[float]) -> np.ndarray:
+
+def quaternion_to_matrix(q: Vector) -> np.ndarray:
     """3x3 rotation of a quaternion (x, y, z, w); it is normalised first."""
     x, y, z, w = (float(v) for v in q)
     n = math.sqrt(x * x + y * y + z * z + w * w)
@@ -36,20 +38,21 @@ def matrix_to_quaternion(r: np.ndarray) -> Tuple[float, float, float, float]:
     else:
         s = 2.0 * math.sqrt(1.0 + r[2, 2] - r[0, 0] - r[1, 1])
         q = ((r[0, 2] + r[2, 0]) / s, (r[1, 2] + r[2, 1]) / s, s / 4, (r[1, 0] - r[0, 1]) / s)
-    q = np.array(q)
-    q /= np.linalg.norm(q)
-    if q[3] < 0.0:
-        q = -q
-    return tuple(float(v) for v in q)
+    unit = np.array(q)
+    unit /= np.linalg.norm(unit)
+    if unit[3] < 0.0:
+        unit = -unit
+    x, y, z, w = (float(v) for v in unit)
+    return (x, y, z, w)
 
 
-def yaw_from_quaternion(q: Sequence[float]) -> float:
+def yaw_from_quaternion(q: Vector) -> float:
     """The yaw (about z) of a quaternion (x, y, z, w), as REP-103's roll-pitch-yaw has it."""
     x, y, z, w = q
     return math.atan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))
 
 
-def pose_matrix(position: Sequence[float], quaternion: Sequence[float]) -> np.ndarray:
+def pose_matrix(position: Vector, quaternion: Vector) -> np.ndarray:
     t = np.eye(4)
     t[:3, :3] = quaternion_to_matrix(quaternion)
     t[:3, 3] = [float(v) for v in position]
@@ -70,7 +73,7 @@ def rotation_angle(r: np.ndarray) -> float:
     return math.atan2(s, c)
 
 
-def pose_distance(reached: Sequence[Sequence[float]], target: Sequence[Sequence[float]]
+def pose_distance(reached: Sequence[Vector], target: Sequence[Vector]
                   ) -> Tuple[float, float]:
     """Position distance [m] and rotation angle [rad] between two poses given as their top
     three rows (lists of floats, e.g. ``pose.tolist()``), in float arithmetic: a solver's

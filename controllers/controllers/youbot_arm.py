@@ -3,10 +3,11 @@ from __future__ import annotations
 
 import math
 from functools import lru_cache
-from typing import Sequence
+from typing import List, Tuple
 
 import numpy as np
 
+from controllers.arrays import Vector
 from controllers.dh_chain import MODIFIED, DHChain, DHRow
 
 # The paper's Table 1 rows describe the arm only when row i is read as (a_i, alpha_i); in
@@ -34,22 +35,24 @@ ARM_BASE_IN_BASE_LINK_M = (0.167, 0.0, 0.014)
 GRIPPER_TCP_OFFSET_M = 0.2176 - 0.113
 
 
-def theta_from_datasheet(phi: Sequence[float]) -> np.ndarray:
+def theta_from_datasheet(phi: Vector) -> np.ndarray:
     """theta1 = phi1, theta2 = 90 deg - phi2, theta3 = -phi3, theta4 = -90 deg - phi4,
     theta5 = phi5 (radians)."""
-    return THETA_SIGN * np.asarray(phi, float) + THETA_OFFSET_RAD
+    theta: np.ndarray = THETA_SIGN * np.asarray(phi, float) + THETA_OFFSET_RAD
+    return theta
 
 
-def datasheet_from_theta(theta: Sequence[float]) -> np.ndarray:
-    return (np.asarray(theta, float) - THETA_OFFSET_RAD) * THETA_SIGN
+def datasheet_from_theta(theta: Vector) -> np.ndarray:
+    phi: np.ndarray = (np.asarray(theta, float) - THETA_OFFSET_RAD) * THETA_SIGN
+    return phi
 
 
-def _theta_limits() -> list:
+def _theta_limits() -> List[Tuple[float, float]]:
     limits = []
     for i, (lo, hi) in enumerate(DATASHEET_LIMITS_DEG):
-        ends = sorted(float(THETA_SIGN[i] * math.radians(v) + THETA_OFFSET_RAD[i])
+        a, b = sorted(float(THETA_SIGN[i] * math.radians(v) + THETA_OFFSET_RAD[i])
                       for v in (lo, hi))
-        limits.append(tuple(ends))
+        limits.append((a, b))
     return limits
 
 

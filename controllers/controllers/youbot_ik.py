@@ -9,10 +9,11 @@ turned by pi, elbow up or down).
 from __future__ import annotations
 
 import math
-from typing import List, Optional, Sequence
+from typing import List, Optional
 
 import numpy as np
 
+from controllers.arrays import Vector
 from controllers.dh_chain import DHChain, IKResult
 from controllers.youbot_arm import youbot_arm_chain
 
@@ -26,7 +27,7 @@ def _wrap(a: float) -> float:
     return (a + math.pi) % (2 * math.pi) - math.pi
 
 
-def solve_ik(target: np.ndarray, q_seed: Optional[Sequence[float]] = None,
+def solve_ik(target: np.ndarray, q_seed: Optional[Vector] = None,
              chain: Optional[DHChain] = None) -> IKResult:
     """Joint values (table theta) whose flange pose is ``target`` (4x4), nearest to the seed.
     In plain float arithmetic (numpy's per-call overhead was most of a solve)."""
@@ -90,12 +91,12 @@ def solve_ik(target: np.ndarray, q_seed: Optional[Sequence[float]] = None,
     wanted = (r00, r01, r02, px, r10, r11, r12, py, r20, r21, r22, pz)
     pos_err = math.sqrt(sum((reached[k] - wanted[k]) ** 2 for k in (3, 7, 11)))
     rot_err = math.sqrt(sum((reached[k] - wanted[k]) ** 2 for k in (0, 1, 2, 4, 5, 6, 8, 9, 10)))
-    valid = [np.array(q) for q in valid]
-    best = np.array(best)
+    solutions = [np.array(q) for q in valid]
+    answer = np.array(best)
     if pos_err > 1e-6 or rot_err > 1e-6:
-        return IKResult(False, best, 'no exact solution for this pose', pos_err, rot_err,
-                        valid)
-    return IKResult(True, best, '', pos_err, rot_err, valid, reached)
+        return IKResult(False, answer, 'no exact solution for this pose', pos_err, rot_err,
+                        solutions)
+    return IKResult(True, answer, '', pos_err, rot_err, solutions, reached)
 
 
 def _into_limits(q: List[float], lower: List[float], upper: List[float]

@@ -18,10 +18,11 @@ tens of microseconds).
 from __future__ import annotations
 
 import math
-from typing import List, Optional, Sequence, Tuple
+from typing import List, Optional, Set, Tuple
 
 import numpy as np
 
+from controllers.arrays import Vector
 from controllers.dh_chain import DHChain, IKResult
 from controllers.transforms import pose_distance
 from controllers.zu12_arm import DH_ROWS, zu12_chain
@@ -32,7 +33,7 @@ TOLERANCE = 1e-9          # accepted position [m] and rotation [rad] residual
 _TWO_PI = 2 * math.pi
 
 
-def solve_ik(target: np.ndarray, q_seed: Optional[Sequence[float]] = None,
+def solve_ik(target: np.ndarray, q_seed: Optional[Vector] = None,
              chain: Optional[DHChain] = None) -> IKResult:
     """Joint values whose flange pose is ``target`` (4x4 in the base frame), nearest the seed.
     ``candidates``: the closed-form solutions within the limits, the answer first, then the
@@ -51,8 +52,9 @@ def solve_ik(target: np.ndarray, q_seed: Optional[Sequence[float]] = None,
     candidates = [q for q in (_nearest_in_limits(q, seed, lower, upper) for q in raw)
                   if q is not None]
     candidates.sort(key=lambda q: _distance(q, seed))
-    for i, q in enumerate(candidates):
-        q, pos_err, rot_err, reached = _checked(chain, rows, target, q, seed, lower, upper)
+    for i, candidate in enumerate(candidates):
+        q, pos_err, rot_err, reached = _checked(chain, rows, target, candidate, seed, lower,
+                                                upper)
         if q is not None:
             return IKResult(True, np.array(q), '', pos_err, rot_err,
                             [np.array(c) for c in [q] + candidates[i + 1:]], reached)
@@ -62,13 +64,14 @@ def solve_ik(target: np.ndarray, q_seed: Optional[Sequence[float]] = None,
     return IKResult(False, reason='out of reach')
 
 
-def pose_errors(chain: DHChain, q: Sequence[float], target: np.ndarray) -> Tuple[float, float]:
+def pose_errors(chain: DHChain, q: Vector, target: np.ndarray) -> Tuple[float, float]:
     """Position error [m] and rotation angle [rad] of the flange at ``q`` from ``target``."""
-    return _errors(chain, q, np.asarray(target, float).tolist())
+    rows: List[List[float]] = np.asarray(target, float).tolist()
+    return _errors(chain, q, rows)
 
 
 def _closed_form(rows: List[List[float]], seed_q6: float
-                 ) -> Tuple[List[List[float]], set]:
+                 ) -> Tuple[List[List[float]], Set[str]]:
     """The (up to eight) closed-form solutions, not yet brought into the limits, and the
     reasons for the branches that have none."""
     (r00, r01, r02, px), (r10, r11, r12, py), (r20, r21, r22, pz) = rows[:3]
@@ -125,7 +128,8 @@ def _closed_form(rows: List[List[float]], seed_q6: float
 
 
 def _checked(chain: DHChain, rows: List[List[float]], target: np.ndarray, q: List[float],
-             seed: List[float], lower: List[float], upper: List[float]):
+             seed: List[float], lower: List[float], upper: List[float]
+             ) -> Tuple[Optional[List[float]], float, float, Optional[Tuple[float, ...]]]:
     """``q`` with its errors and its flange's rows if it reaches the target, refined (and
     brought back into the limits) when it is close but not exact; (None, inf, inf, None) if it
     does not reach it."""
@@ -147,13 +151,13 @@ def _distance(q: List[float], seed: List[float]) -> float:
     return sum(abs(a - b) for a, b in zip(q, seed))
 
 
-def _errors(chain: DHChain, q: Sequence[float], rows: List[List[float]]):
+def _errors(chain: DHChain, q: Vector, rows: List[List[float]]) -> Tuple[float, float]:
     """Position error [m] and rotation angle [rad] of the flange at ``q`` from the target's
     rows."""
     return _distance_to(chain.fk_rows(q), rows)
 
 
-def _distance_to(reached: Tuple[float, ...], rows: List[List[float]]):
+def _distance_to(reached: Tuple[float, ...], rows: List[List[float]]) -> Tuple[float, float]:
     return pose_distance((reached[0:4], reached[4:8], reached[8:12]), rows)
 
 
@@ -189,8 +193,8 @@ def _pose_error(reached: np.ndarray, target: np.ndarray) -> np.ndarray:
     return np.concatenate([dp, axis * angle / (2 * math.sin(angle))])
 
 
-def _nearest_in_limits(q: Sequence[float], seed: Sequence[float], lower: Sequence[float],
-                       upper: Sequence[float]) -> Optional[List[float]]:
+def _nearest_in_limits(q: Vector, seed: Vector, lower: Vector,
+                       upper: Vector) -> Optional[List[float]]:
     """The representative (each joint shifted by whole turns) within the limits nearest the
     seed, or None: the turn nearest the seed, else the next one towards the limits."""
     out = []

@@ -5,7 +5,7 @@ import math
 import re
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, List, Optional, Tuple, Union
+from typing import Any, Dict, List, Optional, Set, Tuple, Union
 
 import yaml
 
@@ -276,13 +276,14 @@ def _robot(r: '_Reader', item: Any, i: int) -> RobotConfig:
                        suction=suction)
 
 
-def _drive(r: '_Reader', d: Any, dw: str):
+def _drive(r: '_Reader', d: Any, dw: str
+           ) -> Tuple[Union[DiffDriveConfig, MecanumConfig], 'DriveLimitsConfig']:
     common = {'type', 'wheel_radius', 'wheel_effort', 'max_speed', 'max_turn', 'max_accel',
               'max_turn_accel'}
     kind = d.get('type') if isinstance(d, dict) else None
     if kind == 'diff_drive':
         r.only(d, dw, common | {'left_wheel_joint', 'right_wheel_joint', 'wheel_separation'})
-        drive = DiffDriveConfig(
+        drive: Union[DiffDriveConfig, MecanumConfig] = DiffDriveConfig(
             left_wheel_joint=r.string(d, 'left_wheel_joint', dw),
             right_wheel_joint=r.string(d, 'right_wheel_joint', dw),
             wheel_radius=r.number(d, 'wheel_radius', dw, lo=1e-4),
@@ -304,7 +305,7 @@ def _drive(r: '_Reader', d: Any, dw: str):
     else:
         raise WorldConfigError(f'{r.source}: {dw}.type must be "diff_drive" or "mecanum", '
                                f'got {kind!r}')
-    def optional(key, hi):
+    def optional(key: str, hi: float) -> Optional[float]:
         return r.number(d, key, dw, lo=1e-3, hi=hi) if key in d else None
     limits = DriveLimitsConfig(max_speed=optional('max_speed', 10.0),
                                max_turn=optional('max_turn', 20.0),
@@ -335,11 +336,11 @@ def _obstacle(r: '_Reader', item: Any, i: int) -> ObstacleConfig:
     if shape not in sizes:
         raise WorldConfigError(f'{r.source}: {where}.shape must be one of {sorted(sizes)}')
     size = r.vector(item, 'size', where, sizes[shape], lo=1e-4)
-    color = r.vector(item, 'color', where, 4, lo=0.0, hi=1.0, default=(0.6, 0.6, 0.6, 1.0))
+    color = r.rgba(item, 'color', where, default=(0.6, 0.6, 0.6, 1.0))
     collision = item.get('collision', True)
     if not isinstance(collision, bool):
         raise r.fail(where, 'collision', f'must be true or false, got {collision!r}')
-    return ObstacleConfig(shape=shape, size=size, position=r.vector(item, 'position', where, 3),
+    return ObstacleConfig(shape=shape, size=size, position=r.vec3(item, 'position', where),
                           yaw=r.number(item, 'yaw', where, default=0.0), color=color,
                           name=r.string(item, 'name', where, default=''), collision=collision)
 
@@ -350,7 +351,7 @@ def _conveyor(r: '_Reader', item: Any) -> ConveyorConfig:
     end_stop = item.get('end_stop', False)
     if not isinstance(end_stop, bool):
         raise r.fail(where, 'end_stop', f'must be true or false, got {end_stop!r}')
-    return ConveyorConfig(position=r.vector(item, 'position', where, 3),
+    return ConveyorConfig(position=r.vec3(item, 'position', where),
                           length=r.number(item, 'length', where, lo=0.1, hi=50.0),
                           width=r.number(item, 'width', where, lo=0.02, hi=5.0),
                           yaw=r.number(item, 'yaw', where, default=0.0),
@@ -373,9 +374,10 @@ def _materials(r: '_Reader', item: Any) -> MaterialsConfig:
         raise r.fail(where, 'colors', f'has no colour for {missing}')
     count_items = tuple((str(k), int(r.number(counts, k, where + '.counts', lo=0, hi=1000,
                                                   integer=True))) for k in counts)
-    color_items = tuple((str(k), r.vector(colors, k, where + '.colors', 4, lo=0.0, hi=1.0))
+    color_items = tuple((str(k), r.rgba(colors, k, where + '.colors'))
                         for k in colors)
-    gap = r.vector(item, 'gap', where, 2, lo=0.0, default=(0.25, 0.45))
+    lo_gap, hi_gap = r.vector(item, 'gap', where, 2, lo=0.0, default=(0.25, 0.45))
+    gap = (lo_gap, hi_gap)
     if gap[0] > gap[1]:
         raise r.fail(where, 'gap', f'must be [min, max], got {list(gap)}')
     size = r.number(item, 'size', where, default=0.05, lo=0.005, hi=1.0)
@@ -395,16 +397,13 @@ def _camera(r: '_Reader', item: Any, i: int, robots: List[RobotConfig]) -> Camer
                          'rate', 'vertical_fov_deg', 'near', 'far', 'frame_id'})
     name = r.name(item, 'name', where)
     robot = item.get('robot')
-    cam = dict(
-        name=name,
-        width=int(r.number(item, 'width', where, default=320, lo=8, hi=4096, integer=True)),
-        height=int(r.number(item, 'height', where, default=240, lo=8, hi=4096, integer=True)),
-        rate=r.number(item, 'rate', where, default=15.0, lo=1e-3, hi=1000.0),
-        vertical_fov_deg=r.number(item, 'vertical_fov_deg', where, default=60.0, lo=1.0,
-                                  hi=170.0),
-        near=r.number(item, 'near', where, default=0.01, lo=1e-5),
-        far=r.number(item, 'far', where, default=10.0, lo=1e-3))
-    if cam['far'] <= cam['near']:
+    width = int(r.number(item, 'width', where, default=320, lo=8, hi=4096, integer=True))
+    height = int(r.number(item, 'height', where, default=240, lo=8, hi=4096, integer=True))
+    rate = r.number(item, 'rate', where, default=15.0, lo=1e-3, hi=1000.0)
+    fov = r.number(item, 'vertical_fov_deg', where, default=60.0, lo=1.0, hi=170.0)
+    near = r.number(item, 'near', where, default=0.01, lo=1e-5)
+    far = r.number(item, 'far', where, default=10.0, lo=1e-3)
+    if far <= near:
         raise WorldConfigError(f'{r.source}: {where}: far must be greater than near')
     if robot is not None:
         if robot not in {rb.name for rb in robots}:
@@ -412,16 +411,17 @@ def _camera(r: '_Reader', item: Any, i: int, robots: List[RobotConfig]) -> Camer
                                    'this world')
         link = r.string(item, 'link', where)
         prefix = next(rb.frame_prefix for rb in robots if rb.name == robot)
-        return CameraConfig(robot=robot, link=link,
-                            frame_id=r.string(item, 'frame_id', where, default=prefix + link),
-                            **cam)
-    position = r.vector(item, 'position', where, 3)
-    look_at = r.vector(item, 'look_at', where, 3)
+        return CameraConfig(name=name, width=width, height=height, rate=rate,
+                            vertical_fov_deg=fov, near=near, far=far, robot=robot, link=link,
+                            frame_id=r.string(item, 'frame_id', where, default=prefix + link))
+    position = r.vec3(item, 'position', where)
+    look_at = r.vec3(item, 'look_at', where)
     if math.dist(position, look_at) < 1e-6:
         raise WorldConfigError(f'{r.source}: {where}: position and look_at coincide')
-    return CameraConfig(position=position, look_at=look_at,
-                        frame_id=r.string(item, 'frame_id', where,
-                                          default=name + '_optical_frame'), **cam)
+    return CameraConfig(name=name, width=width, height=height, rate=rate,
+                        vertical_fov_deg=fov, near=near, far=far, position=position,
+                        look_at=look_at, frame_id=r.string(item, 'frame_id', where,
+                                                           default=name + '_optical_frame'))
 
 
 class _Reader:
@@ -433,7 +433,7 @@ class _Reader:
     def fail(self, where: str, key: str, what: str) -> WorldConfigError:
         return WorldConfigError(f'{self.source}: {where}.{key} {what}')
 
-    def only(self, data: Any, where: str, allowed: set) -> None:
+    def only(self, data: Any, where: str, allowed: Set[str]) -> None:
         if not isinstance(data, dict):
             raise WorldConfigError(f'{self.source}: {where} must be a mapping')
         unknown = sorted(set(data) - allowed)
@@ -441,13 +441,14 @@ class _Reader:
             raise WorldConfigError(f'{self.source}: {where}: unknown keys {unknown}; '
                                    f'allowed: {sorted(allowed)}')
 
-    def list(self, data: dict, key: str, where: str) -> list:
+    def list(self, data: Dict[str, Any], key: str, where: str) -> List[Any]:
         value = data.get(key, []) or []
         if not isinstance(value, list):
             raise self.fail(where, key, 'must be a list')
         return value
 
-    def string(self, data: dict, key: str, where: str, default: Optional[str] = None) -> str:
+    def string(self, data: Dict[str, Any], key: str, where: str,
+               default: Optional[str] = None) -> str:
         value = data.get(key, default)
         if value is None:
             raise self.fail(where, key, 'is required')
@@ -455,13 +456,13 @@ class _Reader:
             raise self.fail(where, key, f'must be a string, got {value!r}')
         return value
 
-    def name(self, data: dict, key: str, where: str) -> str:
+    def name(self, data: Dict[str, Any], key: str, where: str) -> str:
         value = self.string(data, key, where)
         if not _NAME.match(value):
             raise self.fail(where, key, f'"{value}" must be a ROS name ([A-Za-z][A-Za-z0-9_]*)')
         return value
 
-    def number(self, data: dict, key: str, where: str, default: Optional[float] = None,
+    def number(self, data: Dict[str, Any], key: str, where: str, default: Optional[float] = None,
                lo: float = -math.inf, hi: float = math.inf, integer: bool = False) -> float:
         value = data.get(key, default)
         if value is None:
@@ -474,8 +475,9 @@ class _Reader:
             raise self.fail(where, key, f'must be finite and within [{lo}, {hi}], got {value}')
         return float(value)
 
-    def vector(self, data: dict, key: str, where: str, n: int, lo: float = -math.inf,
-               hi: float = math.inf, default: Optional[tuple] = None) -> tuple:
+    def vector(self, data: Dict[str, Any], key: str, where: str, n: int, lo: float = -math.inf,
+               hi: float = math.inf, default: Optional[Tuple[float, ...]] = None
+               ) -> Tuple[float, ...]:
         value = data.get(key, default)
         if value is None:
             raise self.fail(where, key, 'is required')
@@ -483,3 +485,13 @@ class _Reader:
             raise self.fail(where, key, f'must be a list of {n} numbers, got {value!r}')
         tmp = {str(i): v for i, v in enumerate(value)}
         return tuple(self.number(tmp, str(i), f'{where}.{key}', lo=lo, hi=hi) for i in range(n))
+
+    def vec3(self, data: Dict[str, Any], key: str, where: str) -> Tuple[float, float, float]:
+        x, y, z = self.vector(data, key, where, 3)
+        return (x, y, z)
+
+    def rgba(self, data: Dict[str, Any], key: str, where: str,
+             default: Optional[Tuple[float, ...]] = None
+             ) -> Tuple[float, float, float, float]:
+        r, g, b, a = self.vector(data, key, where, 4, lo=0.0, hi=1.0, default=default)
+        return (r, g, b, a)
