@@ -158,29 +158,29 @@ class KinematicsNode(Node):
             return self._fail(f'bad duration {duration}: must be within [0, {MAX_MOTION_S:g}] s')
         if not (np.isfinite(scaling) and 0.0 <= scaling <= 1.0):
             return self._fail(f'bad velocity_scaling {scaling}: must be within [0, 1]')
-        if execute and self._positions is None:
+        current = self._positions
+        if execute and current is None:
             return self._fail('no joint_states received yet: cannot plan a motion from the '
                               'current position')
+        start: Optional[np.ndarray] = current
         if seed:
             if len(seed) != len(self._kin.joint_names) or not np.all(np.isfinite(seed)):
                 return self._fail(f'bad seed {seed}: needs {len(self._kin.joint_names)} finite '
                                   'values')
             start = np.asarray(seed, float)
-        else:
-            start = self._positions
         solution = self._kin.ik(pose, seed=start)
         if not solution.success:
             xyz = ', '.join(f'{v:.3f}' for v in pose[:3, 3])
             return self._fail(f'no IK solution for ({xyz}) in base_link: {solution.reason}')
         errors = (solution.position_error, solution.rotation_error)
-        if not execute:
+        if not execute or current is None:
             return True, 'solved', solution.positions, errors, None
         scaling = scaling or self.get_parameter('velocity_scaling').value
         # The fastest the joints allow (the simulator refuses a motion faster than that).
-        fastest = motion_duration(self._positions, solution.positions,
+        fastest = motion_duration(current, solution.positions,
                                   self._kin.velocity_limits, 1.0, 0.0)
         if duration == 0.0:
-            duration = motion_duration(self._positions, solution.positions,
+            duration = motion_duration(current, solution.positions,
                                        self._kin.velocity_limits, scaling,
                                        self.get_parameter('min_duration').value)
             if duration > MAX_MOTION_S:

@@ -16,6 +16,7 @@ instead costs a heartbeat period (seconds) per command.
 """
 from __future__ import annotations
 
+import functools
 import json
 import math
 import sys
@@ -54,6 +55,7 @@ from coordinator.pipeline import (
     Pipeline,
     Points,
     Settings,
+    known,
 )
 from coordinator.progress import write_progress
 from coordinator.results import (
@@ -170,9 +172,12 @@ class CoordinatorNode(Node):
         self.regions = regions_from_world(self.world, layout.material_size)
 
         self._lock = threading.Condition()
-        self._joints: Dict[str, Tuple[int, np.ndarray]] = {}
-        self._grip: Dict[str, Tuple[int, bool]] = {}
-        self._odom: Optional[Tuple[int, Tuple, Tuple]] = None
+        # arm: (stamp [ns], positions, velocities if the message has them)
+        self._joints: Dict[str, Tuple[int, np.ndarray, Optional[np.ndarray]]] = {}
+        self._grip: Dict[str, Tuple[int, bool, bool]] = {}      # arm: (stamp, holding, armed)
+        # (stamp, the base's pose in the cell (x, y, yaw), its velocity (vx, vy in the cell, wz))
+        self._odom: Optional[Tuple[int, Tuple[float, float, float],
+                                   Tuple[float, float, float]]] = None
         self._follower: Optional[PathFollower] = None      # real time: the base's drive
         self._drive_lead = DriveLead(float(get('drive_lead')))
         self._detections: Dict[int, List[Detection]] = {}
@@ -189,9 +194,9 @@ class CoordinatorNode(Node):
         qos = QoSProfile(depth=100)
         for arm, names in ARMS.items():
             self.create_subscription(JointState, f'/{arm}/joint_states',
-                                     lambda m, a=arm, n=names: self._on_joints(a, n, m), qos)
+                                     functools.partial(self._on_joints, arm, names), qos)
             self.create_subscription(GripState, f'{GRIP_SERVICES[arm]}/state',
-                                     lambda m, a=arm: self._on_grip(a, m), qos)
+                                     functools.partial(self._on_grip, arm), qos)
         # Real time: the drive acts on the newest odometry only (one the executor could not
         # take in time is stale); lock-step waits for the stamp of every state.
         self.create_subscription(Odometry, '/youbot/odom', self._on_odom,
@@ -519,7 +524,7 @@ class CoordinatorNode(Node):
             # subscriber: nothing is in view yet, so a lost one there changes nothing.
             startup = stamp * 1e-9 - self._start_time < STARTUP_GRACE_S
             with self._lock:
-                if self._lock.wait_for(lambda s=stamp: s in self._detections,
+                if self._lock.wait_for(functools.partial(self._detections.__contains__, stamp),
                                        timeout=1.0 if startup else self.service_timeout):
                     continue
             if not startup:
@@ -535,7 +540,7 @@ class CoordinatorNode(Node):
             dets = [d for f in frames for d in self._detections.pop(f, [])]
             for f in [f for f in self._detections if f <= t_ns]:
                 del self._detections[f]
-            odom = self._odom
+            odom = known(self._odom, 'odometry')
             return Observation(
                 now=t_ns * 1e-9, zu12_q=self._joints['zu12'][1],
                 youbot_q=self._joints['youbot'][1], youbot_pose=odom[1],
@@ -547,7 +552,7 @@ class CoordinatorNode(Node):
     # --- the end ------------------------------------------------------------------------------
     def _final_truth(self) -> list:
         """The materials' true poses after the run (the score's ground truth)."""
-        end = self.pipeline.start_time + self.pipeline.result.completion_time
+        end = self.pipeline.start_time + known(self.pipeline.result, 'the result').completion_time
         if self.synchronous:
             try:
                 for _ in range(12):                  # let dropped materials settle (0.4 s)
@@ -564,7 +569,7 @@ class CoordinatorNode(Node):
             return self._markers[-1][1] if self._markers else []
 
     def _report(self) -> Dict:
-        result = self.pipeline.result
+        result = known(self.pipeline.result, 'the result')
         truth = self._final_truth()
         with self._lock:
             identified = self._identifications.finish()

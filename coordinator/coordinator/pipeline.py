@@ -17,11 +17,12 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 from enum import Enum
-from typing import Callable, Dict, List, Optional, Protocol, Sequence, Tuple, Union
+from typing import Callable, Dict, List, Optional, Protocol, Sequence, Tuple, TypeVar, Union
 
 import numpy as np
 
 from controllers import youbot_arm, zu12_arm
+from controllers.arrays import Vector
 from controllers.bezier import BezierPath, Pose2D, key_poses_between
 from controllers.conveyor import Item, advance, held
 from controllers.path_follower import PathFollower, PDGains, TurnLimits
@@ -69,8 +70,17 @@ RELEASE_HOLD_S = 0.1
 SETTLE_S = 0.05
 # An arm farther than this from where its motion has it now is not following it [rad].
 FOLLOW_TOLERANCE = 0.1
-# (absolute time [s], joint positions[, velocities, accelerations])
-Points = List[Tuple[float, np.ndarray]]
+# A motion's samples: (absolute time [s], joint positions, velocities, accelerations).
+Points = List[Tuple[float, np.ndarray, np.ndarray, np.ndarray]]
+T = TypeVar('T')
+
+
+def known(value: Optional[T], what: str) -> T:
+    """``value``, which the state machine has set by now (a RuntimeError naming ``what`` if
+    a change broke that)."""
+    if value is None:
+        raise RuntimeError(f'{what} is not known in this state')
+    return value
 
 
 class NodeTimeout(RuntimeError):
@@ -113,8 +123,8 @@ class Event:
 
 
 class Ports(Protocol):
-    def solve(self, arm: str, position: Sequence[float], orientation: Sequence[float],
-              frame: str, seed: Sequence[float]) -> Tuple[Optional[np.ndarray], str]:
+    def solve(self, arm: str, position: Vector, orientation: Vector,
+              frame: str, seed: Vector) -> Tuple[Optional[np.ndarray], str]:
         """Joint positions for the tool at a pose, or (None, why). Raises NodeTimeout."""
 
     def trajectory(self, arm: str, points: Points, start: float) -> float:
@@ -205,7 +215,7 @@ class Motion:
 
     def delay(self, seconds: float) -> None:
         """Shift the whole motion later (the port scheduled it later than planned)."""
-        self.points = [(t + seconds, *rest) for t, *rest in self.points]
+        self.points = [(t + seconds, q, v, a) for t, q, v, a in self.points]
         self.start += seconds
 
     @property
@@ -292,7 +302,7 @@ class Machine:
         """Send this machine's arm a motion and enter ``state``, due by the motion's end (as
         the port scheduled it) plus the settle margin."""
         self.run.send(Motion(self.arm, points), start)
-        self.enter(state, obs.now, self.run.motions[self.arm].end - obs.now
+        self.enter(state, obs.now, self.run.motion(self.arm).end - obs.now
                    + self.run.s.settle_margin)
 
     def late(self, now: float) -> bool:
@@ -364,6 +374,8 @@ class Loader(Machine):
     """The Zu 12: picks materials off the running belt (meeting each where it will be, and
     moving with it while the cup is on it); purple onto the ground target once it has ridden
     to the end stop, the rest onto the youBot's plate."""
+
+    state: LoaderState
 
     name, arm = 'loader', 'zu12'
 
@@ -440,16 +452,18 @@ class Loader(Machine):
             return list(waypoints), 0.0
         rise = self.run.s.timing.place_descend
         if edge is not None:
-            first = [Waypoint(self._above_q, stop=False, min_time=rise),
+            first = [Waypoint(known(self._above_q, 'the point above the place'), stop=False,
+                              min_time=rise),
                      Waypoint(edge, stop=False)]
         else:
-            first = [Waypoint(self._then, stop=not waypoints, min_time=rise)]
+            first = [Waypoint(known(self._then, 'the rise from the place'), stop=not waypoints,
+                              min_time=rise)]
         return first + list(waypoints), RELEASE_HOLD_S
 
     def _after_send(self) -> None:
         if self._at_release:
             self._at_release = False
-            self._clear_at = self.run.arrival_time('zu12', self._clear)
+            self._clear_at = self.run.arrival_time('zu12', known(self._clear, 'the clear point'))
 
     def _edge(self, a: np.ndarray, b: np.ndarray, low: float, arc: bool = False) -> np.ndarray:
         """Where the way from ``a`` (over the belt) to ``b`` (beside it) crosses the belt's near
@@ -513,7 +527,7 @@ class Loader(Machine):
         t_contact = max(start + timing.descend + PICK_LEAD_S, run.reaches(m, run.s.pick_x))
         if not math.isfinite(t_contact):
             return self._leave_it(obs, m)   # it does not reach the pick point (belt off)
-        seed = run.motions['zu12'].goal if run.motions['zu12'] is not None else obs.zu12_q
+        seed = run.motion('zu12').goal if run.motions['zu12'] is not None else obs.zu12_q
         # The hover point moves with the contact time: a first guess from a rest-to-rest move
         # there, then later by a little until the arm makes it.
         hover = follow_pick(track, t_contact, size, timing)[0][0][1]
@@ -556,8 +570,8 @@ class Loader(Machine):
             try:
                 points = self._plan(obs, waypoints, start, q_edge)
                 break
-            except TooLate as late:
-                t_contact += max(late.by, 0.0) + PICK_LEAD_S / 2
+            except TooLate as too_late:
+                t_contact += max(too_late.by, 0.0) + PICK_LEAD_S / 2
             except PlanError as exc:
                 return self._pick_failed(obs, m, f'no motion for the pick: {exc}')
         else:
@@ -567,19 +581,19 @@ class Loader(Machine):
         # at the lift point and a plan after it. (A missed grasp stops the arm at the lift
         # point instead: see _pick.)
         self._ahead = None
-        way = self._place_way(m, self._lift, obs.youbot_pose, qs[-1])
-        if not isinstance(way, str):
+        place_way = self._place_way(m, self._lift, obs.youbot_pose, qs[-1])
+        if not isinstance(place_way, str):
             through = waypoints[:-1] + [Waypoint(qs[-1], stop=False, min_time=timing.lift)]
             try:
-                whole = self._plan(obs, through + way.waypoints, start, q_edge)
+                whole = self._plan(obs, through + place_way.waypoints, start, q_edge)
             except PlanError:
                 whole = None            # (the place is planned at the lift point then)
             if whole is not None:
-                self._ahead = Ahead(way, qs[-1], points[-1][0])
+                self._ahead = Ahead(place_way, qs[-1], points[-1][0])
                 points = whole
         self.current, m.status = m, 'picking'
         self.move(LoaderState.PICK, obs, points, start=start)
-        late = run.motions['zu12'].start - start
+        late = run.motion('zu12').start - start
         if late > 1e-9:
             # The port started it later than planned: it would miss the material. This plan
             # took as long as was allowed for it and then ``late``; plan again at once, allowing
@@ -593,7 +607,9 @@ class Loader(Machine):
             # Still late: hold the arm where it is (replacing the late motion before it
             # starts) and plan afresh on the next observation.
             self._replans = 0
-            run.send(Motion('zu12', [(run.now + run.s.plan_latency, obs.zu12_q.copy())]))
+            hold = obs.zu12_q.copy()
+            run.send(Motion('zu12', [(run.now + run.s.plan_latency, hold, np.zeros_like(hold),
+                                      np.zeros_like(hold))]))
             return self._leave_it(obs, m)
         self._replans = 0
         # The cup is switched on (an armed cup seals on what it touches) now, or from a place
@@ -631,7 +647,7 @@ class Loader(Machine):
         self._move(LoaderState.RETREAT, obs, [Waypoint(run.home_q['zu12'].copy())])
 
     def _pick(self, obs: Observation) -> None:
-        run, m, now = self.run, self.current, obs.now
+        run, m, now = self.run, known(self.current, 'the material'), obs.now
         if self._arm_pending:
             if now < self._clear_at:
                 return
@@ -647,13 +663,13 @@ class Loader(Machine):
             if self._ahead is not None:        # on its way to the place already
                 self._adopt(self._ahead.way)
                 self._ahead = None
-                return self.enter(LoaderState.PLACE, now, run.motions['zu12'].end - now
+                return self.enter(LoaderState.PLACE, now, run.motion('zu12').end - now
                                   + run.s.settle_margin)
         elif not m.picked and now >= self._leave and self._ahead is not None:
             # Not held after the dwell: the motion ends at the lift point instead, at rest,
             # where a missed grasp is judged.
             ahead, self._ahead = self._ahead, None
-            points = run.motions['zu12'].points
+            points = run.motion('zu12').points
             q_now = min(points, key=lambda p: abs(p[0] - now))[1]
             after = [p for p in points if p[0] > now + run.s.plan_latency]
             if float(np.max(np.abs(obs.zu12_q - q_now))) > FOLLOW_TOLERANCE or not after:
@@ -664,7 +680,7 @@ class Loader(Machine):
                 t1, q1, v1, a1 = after[0]
                 stop = plan(q1, [Waypoint(ahead.q_lift)], run.limits('zu12'), t1, v0=v1, a0=a1)
                 run.send(Motion('zu12', stop.points()))
-                self.deadline = run.motions['zu12'].end + run.s.settle_margin
+                self.deadline = run.motion('zu12').end + run.s.settle_margin
         arrived = self.arrival(obs)
         if arrived is None:
             return
@@ -697,7 +713,7 @@ class Loader(Machine):
         above it, in one motion; the release and the rise follow once the arm is there. (A
         pick's motion goes on to the place by itself: this is for a material held only once the
         arm was at the lift point.)"""
-        way = self._place_way(m, self._lift, obs.youbot_pose, self.run.motions['zu12'].goal)
+        way = self._place_way(m, self._lift, obs.youbot_pose, self.run.motion('zu12').goal)
         if isinstance(way, str):
             return self._place_failed(obs, m, way)
         self._adopt(way)
@@ -754,7 +770,7 @@ class Loader(Machine):
         self._pick_failed(obs, m, why)
 
     def _place(self, obs: Observation) -> None:
-        run, m, now = self.run, self.current, obs.now
+        run, m, now = self.run, known(self.current, 'the material'), obs.now
         if not obs.zu12_holding:
             return self._place_failed(obs, m, 'dropped on the way to its place')
         arrived = self.arrival(obs)
@@ -812,6 +828,8 @@ class Transport(Machine):
     """The youBot: waits for its load, drives along Bezier paths with a PD follower, unloads
     one material at a time (orange into the pool, blue onto the platform), drives home."""
 
+    state: TransportState
+
     name, arm = 'transport', 'youbot'
 
     def __init__(self, run: 'Pipeline') -> None:
@@ -847,9 +865,9 @@ class Transport(Machine):
 
     def _steer(self, obs: Observation) -> None:
         """The base along its path, with its follower, until it is there or out of time."""
-        run = self.run
-        status = self._follower.update(obs.now, obs.youbot_pose, obs.youbot_velocity[:2],
-                                       obs.youbot_velocity[2])
+        run, follower = self.run, known(self._follower, 'the path follower')
+        status = follower.update(obs.now, obs.youbot_pose, obs.youbot_velocity[:2],
+                                 obs.youbot_velocity[2])
         if not self._followed:
             run.ports.drive(*status.command)
         if not (status.finished or obs.now > self._drive_deadline):
@@ -887,7 +905,8 @@ class Transport(Machine):
     def _drive_to(self, obs: Observation, goal: str) -> None:
         run, lay = self.run, self.run.layout
         target = lay.youbot_home if goal == 'home' else lay.stand(goal).pose
-        start = tuple(obs.youbot_pose)
+        x, y, yaw = (float(v) for v in obs.youbot_pose)
+        start = (x, y, yaw)
         via: Sequence = ()
         if goal == 'home':
             via = lay.via_back
@@ -922,7 +941,7 @@ class Transport(Machine):
             if not self.motion_over(obs, 'carry pose'):
                 return
             run.plan_home('youbot', obs)
-            return self.enter(TransportState.FOLD, obs.now, run.motions['youbot'].end
+            return self.enter(TransportState.FOLD, obs.now, run.motion('youbot').end
                               - obs.now + run.s.settle_margin)
         # Here only when the arm could not be sent down onto the first material it unloads
         # here (_ready_arm): from the carry pose, the unload is planned (or its failure told).
@@ -1014,10 +1033,11 @@ class Transport(Machine):
         run = self.run
         limits = run.limits('youbot')
         others = self._others(m)
+        carry = known(self._carry, 'the unload path')
         for way in ((then, detour) if detour else (then,)):
             best = None
             for speed in (UNLOAD_LIFT_END_SPEEDS if way else (0.0,)):
-                lift = timed_path([obs.youbot_q, *self._carry.lift], limits,
+                lift = timed_path([obs.youbot_q, *carry.lift], limits,
                                   run.now + run.s.plan_latency, end_speed=speed,
                                   min_time=run.s.timing.lift)
                 try:
@@ -1100,7 +1120,8 @@ class Transport(Machine):
                 return self.move(TransportState.CARRY, obs, self._lift(obs, m))
             except PlanError as exc:
                 return self._unload_failed(obs, m, 'failed', f'unload: {exc}')
-        self._carry_out(obs, m, self._carry.over, self._carry.drop, lift=True)
+        self._carry_out(obs, m, known(self._carry, 'the unload path').over,
+                            known(self._carry, 'the unload path').drop, lift=True)
 
     def _carry_out(self, obs: Observation, m: Material, over: np.ndarray, drop: np.ndarray,
                    lift: bool = False) -> None:
@@ -1147,7 +1168,8 @@ class Transport(Machine):
             if not arrived:
                 run.event(now, 'arm_stalled', 'youbot', m, 'the lift off the plate not completed')
             # Over to its drop as the base stands now (the drive ends a little off its goal).
-            path = self._unload_path(m, obs.youbot_pose, obs.youbot_q) or self._carry
+            path = (self._unload_path(m, obs.youbot_pose, obs.youbot_q)
+                    or known(self._carry, 'the unload path'))
             return self._carry_out(obs, m, path.over, path.drop)
         if not arrived:
             run.event(now, 'arm_stalled', 'youbot', m, 'unload motion not completed')
@@ -1264,6 +1286,10 @@ class Pipeline:
         if delay:
             motion.delay(delay)
         self.motions[motion.arm] = motion
+
+    def motion(self, arm: str) -> Motion:
+        """The arm's current motion (one has been sent)."""
+        return known(self.motions[arm], f'a motion of the {arm}')
 
     def arrived(self, arm: str, q: np.ndarray, now: float,
                 dq: Optional[np.ndarray] = None) -> Optional[bool]:
@@ -1400,7 +1426,7 @@ class Pipeline:
         travel = self.layout.belt_speed * self._running_time(d.stamp, now)
         return np.asarray(d.position, float) + np.array([travel, 0.0, 0.0])
 
-    def _on_belt_area(self, position: Sequence[float]) -> bool:
+    def _on_belt_area(self, position: Vector) -> bool:
         """Whether a detection lies on the belt. The camera also sees beside it, and downstream
         of the pick point, where the Zu 12 lifts materials and carries them to their places: a
         material in the cup is not a new one. A new material is confirmed where it enters the
@@ -1460,12 +1486,14 @@ class Pipeline:
         reaches the plate's far slots only leaning outwards, and a material held at one tilt
         stays level only if it is set down at the same tilt."""
         for tilt_deg in range(0, 90, 10):
-            plan, q = [], seed
+            plan: List[np.ndarray] = []
+            q = seed
             for p in points:
-                q, _ = self.ports.solve('youbot', p, youbot_tool_quaternion(
+                solution, _ = self.ports.solve('youbot', p, youbot_tool_quaternion(
                     p, math.radians(tilt_deg)), 'base_link', q)
-                if q is None:
+                if solution is None:
                     break
+                q = solution
                 plan.append(q)
             if len(plan) == len(points):
                 return plan
@@ -1485,7 +1513,7 @@ class Pipeline:
                            np.full(5, youbot_arm.JOINT_ACCELERATION_LIMIT),
                            np.full(5, youbot_arm.JOINT_JERK_LIMIT)).scaled(self.s.youbot_scaling)
 
-    def plan(self, arm: str, q: Sequence[float], waypoints: Sequence[Waypoint],
+    def plan(self, arm: str, q: Vector, waypoints: Sequence[Waypoint],
              wait: float = 0.0, start: Optional[float] = None) -> Points:
         """A time-optimal motion of ``arm`` from rest at ``q`` through ``waypoints``, starting
         ``wait`` after the plan latency from now (the convention of every plan here), or at
@@ -1502,7 +1530,7 @@ class Pipeline:
 
     def arrival_time(self, arm: str, q: np.ndarray) -> float:
         """When the arm's current motion passes closest to ``q`` (as the port scheduled it)."""
-        points = self.motions[arm].points
+        points = self.motion(arm).points
         return min(points, key=lambda p: float(np.max(np.abs(p[1] - q))))[0]
 
 
@@ -1541,7 +1569,7 @@ def clear_of_the_plate(points: Points, others: Sequence[Tuple[float, float]], si
     return True
 
 
-def youbot_tool_quaternion(p: Sequence[float], tilt: float) -> Tuple[float, float, float, float]:
+def youbot_tool_quaternion(p: Vector, tilt: float) -> Tuple[float, float, float, float]:
     """Tool orientation (x, y, z, w in base_link) for the youBot's 5-joint arm at ``p``: the
     approach axis down, leaning ``tilt`` away from the arm's base axis in the arm's vertical
     plane (the only orientations a 5-joint arm reaches at an arbitrary point)."""

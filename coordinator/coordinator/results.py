@@ -24,12 +24,13 @@ from typing import Dict, List, Optional, Sequence, Tuple
 
 import numpy as np
 
+from controllers.arrays import Vector
 from coordinator.pipeline import RunResult
 
 TruePose = Tuple[str, np.ndarray]            # (true colour, centre position)
 
 
-def at_destination(color: str, position: Sequence[float], regions: Dict[str, Tuple]) -> bool:
+def at_destination(color: str, position: Vector, regions: Dict[str, Tuple]) -> bool:
     """Whether a material of ``color`` resting at ``position`` is where it belongs. A region is
     (x_min, x_max, y_min, y_max, z_min, z_max) in the world."""
     key = {'purple': 'ground_target', 'blue': 'platform'}.get(color, 'pool')
@@ -54,7 +55,7 @@ def regions_from_world(world, size: float) -> Dict[str, Tuple]:
             'platform': box('pool_platform', top, top + size)}
 
 
-def nearest_material(position: Sequence[float],
+def nearest_material(position: Vector,
                      truth: Sequence[TruePose]) -> Tuple[Optional[str], float]:
     """The true colour of the material nearest ``position``, and its distance [m]."""
     best, best_d = None, math.inf
@@ -65,7 +66,7 @@ def nearest_material(position: Sequence[float],
     return best, best_d
 
 
-def match_identification(position: Sequence[float], truth: Sequence[TruePose],
+def match_identification(position: Vector, truth: Sequence[TruePose],
                          tolerance: float = 0.04) -> Optional[str]:
     """The true colour of the material nearest ``position`` (within ``tolerance``), or None."""
     color, distance = nearest_material(position, truth)
@@ -96,7 +97,7 @@ class IdentificationCheck:
         del self._snapshots[:-self._keep]
         self._decide(final=False)
 
-    def seen(self, stamp_ns: int, position: Sequence[float], color: str) -> None:
+    def seen(self, stamp_ns: int, position: Vector, color: str) -> None:
         """An identification: ``color`` for the material at ``position`` at ``stamp_ns``."""
         self._pending.append((stamp_ns, np.asarray(position, float).copy(), color))
         self._decide(final=False)
@@ -167,13 +168,13 @@ class PeakJointSpeed:
     published limit (1.0 = at the limit): the proof, from what the simulator reported, that the
     arms kept their limits."""
 
-    def __init__(self, limits: Sequence[float]) -> None:
+    def __init__(self, limits: Vector) -> None:
         self.limits = np.asarray(limits, float)
         self.fraction = 0.0
         self.joint = -1
         self.time = math.nan          # the sample's stamp [s]
 
-    def update(self, velocities: Sequence[float], time: float = math.nan) -> None:
+    def update(self, velocities: Vector, time: float = math.nan) -> None:
         v = np.abs(np.asarray(velocities, float))
         if v.shape != self.limits.shape or not np.all(np.isfinite(v)):
             return

@@ -25,7 +25,7 @@ import time
 from concurrent.futures import FIRST_COMPLETED, ThreadPoolExecutor, wait
 from contextlib import contextmanager
 from pathlib import Path
-from typing import Dict, Iterator, List, Optional, Sequence, Tuple
+from typing import TYPE_CHECKING, Callable, Dict, Iterator, List, Optional, Sequence, Tuple, Union
 
 from coordinator.graph import pipeline_graph
 from coordinator.progress import (
@@ -37,6 +37,9 @@ from coordinator.progress import (
     running_figures,
 )
 from world_description import PIPELINE_CELL
+
+if TYPE_CHECKING:
+    from coordinator.trials_ray import RayPool
 
 PROGRESS_FILE = 'progress.json'
 PROGRESS_PERIOD_S = 10.0     # wall seconds between two progress lines
@@ -103,11 +106,7 @@ def run_trial(trial: int, seed: int, belt_speed: float, domain_id: int, out_dir:
             log = open(trial_dir / f'{name}.log', 'w')
             procs[name] = subprocess.Popen(
                 argv, stdout=log, stderr=subprocess.STDOUT, env=env,
-                # One process group per trial: stopped together, never mixed with another.
-                process_group=0 if group is None else group,
-                # Killed with this thread if the runner is (a Ray worker killed with its node
-                # or its driver): a trial never outlives what started it.
-                preexec_fn=_die_with_parent)
+                preexec_fn=_trial_process(0 if group is None else group))
             log.close()
             group = procs[name].pid if group is None else group
             _ACTIVE_GROUPS.add(group)
@@ -200,8 +199,8 @@ class LocalPool:
         self.running.pop(item['trial'], None)
         return done.result()
 
-    def progress(self) -> Dict[int, Dict]:
-        """The running trials' progress files, by trial."""
+    def progress(self) -> Dict[int, Optional[Dict]]:
+        """The running trials' progress files, by trial (None: none yet)."""
         return {trial: read_progress(self._out / f'trial_{trial:03d}' / PROGRESS_FILE)
                 for trial in self.running}
 
@@ -233,11 +232,18 @@ def _progress(pool, results: List[Dict], pending: int
 _PRCTL = ctypes.CDLL(None, use_errno=True).prctl if sys.platform.startswith('linux') else None
 
 
-def _die_with_parent() -> None:
-    """(In the child, before exec) SIGKILL when the thread that started it ends (Linux's
+def _trial_process(group: int) -> Callable[[], None]:
+    """What a trial's process does in the child before exec: join the trial's process group
+    (``group``, or 0: a new one led by itself), so that a trial's processes are stopped
+    together and never mixed with another's (Popen's process_group, which Python 3.10 lacks);
+    and be killed (SIGKILL) with the thread that started it, so that a trial never outlives
+    what started it, such as a Ray worker killed with its node or its driver (Linux's
     PR_SET_PDEATHSIG, kept across exec)."""
-    if _PRCTL is not None:
-        _PRCTL(1, signal.SIGKILL)                       # 1: PR_SET_PDEATHSIG
+    def setup() -> None:
+        os.setpgid(0, group)
+        if _PRCTL is not None:
+            _PRCTL(1, signal.SIGKILL)                   # 1: PR_SET_PDEATHSIG
+    return setup
 
 
 def _wait_for_line(path: Path, text: str, timeout: float) -> bool:
@@ -475,6 +481,7 @@ def _main(argv: Optional[Sequence[str]]) -> int:
     (args.out / CAMPAIGN_FILE).write_text(json.dumps({'plan': opts, 'code': code}, indent=1))
     trial_options = {'wall_timeout': args.wall_timeout, 'record': args.record, 'code': code,
                      'world': opts['world'], 'domain_base': args.domain_base}
+    pool: Union[LocalPool, 'RayPool']
     if args.ray is None:
         pool = LocalPool(args.parallel or 1, args.out, trial_options)
     else:

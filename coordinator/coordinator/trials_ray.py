@@ -17,6 +17,7 @@ This module is imported only with ``--ray``.
 from __future__ import annotations
 
 import json
+import logging
 import os
 import shutil
 import signal
@@ -25,7 +26,7 @@ import tempfile
 import threading
 import time
 from pathlib import Path
-from typing import Dict, List, Optional, Tuple
+from typing import Any, Dict, List, Optional, Tuple
 
 import ray
 
@@ -40,7 +41,6 @@ PROGRESS_PERIOD_S = 2.0
 CANCEL_GRACE_S = 30.0
 
 
-@ray.remote(num_cpus=0)
 class ProgressBoard:
     """The running trials' progress as their tasks report it (the driver cannot read the
     progress files on the workers)."""
@@ -56,6 +56,10 @@ class ProgressBoard:
 
     def snapshot(self) -> Dict[int, Dict]:
         return dict(self._reports)
+
+
+# The board as a Ray actor (it takes no CPU).
+RemoteProgressBoard = ray.remote(num_cpus=0)(ProgressBoard)
 
 
 def _report_progress(board, trial: int, path: Path, done: threading.Event) -> None:
@@ -115,7 +119,7 @@ class RayPool:
         on_term = signal.getsignal(signal.SIGTERM)
         # Ray starts its workers at niceness 15, and a trial's processes would inherit it: on a
         # node with other work they would crawl (a lock-step trial at a few % of a core).
-        ray.init(address=address, logging_level='warning', log_to_driver=False,
+        ray.init(address=address, logging_level=logging.WARNING, log_to_driver=False,
                  configure_logging=True,
                  runtime_env={'env_vars': {'RAY_worker_niceness': '0'}})
         signal.signal(signal.SIGTERM, on_term)   # (ray.init takes SIGTERM: SIGTERM stops a
@@ -127,7 +131,8 @@ class RayPool:
         self._campaign = f'{out.resolve().name}-{socket.gethostname()}-{time.time_ns()}'
         self._limit = limit
         self._final_capacity: Optional[int] = None     # once disconnected
-        self._board = ProgressBoard.remote()
+        # (An actor handle: Ray's type information does not cover its methods' .remote.)
+        self._board: Any = RemoteProgressBoard.remote()
         self._refs: Dict = {}                          # ObjectRef -> plan item
         self.running: Dict[int, float] = {}            # trial -> when it was submitted
 

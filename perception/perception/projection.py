@@ -4,10 +4,11 @@ away from the top face's centre under perspective)."""
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Sequence, Tuple
+from typing import Tuple
 
 import cv2
 import numpy as np
+from numpy.typing import ArrayLike
 
 
 @dataclass(frozen=True)
@@ -43,7 +44,7 @@ def pixel_to_plane(camera: CameraModel, u: float, v: float, plane_z: float) -> n
     return camera.position + t * d
 
 
-def cube_silhouette_centroid(camera: CameraModel, centre: Sequence[float], size: float,
+def cube_silhouette_centroid(camera: CameraModel, centre: ArrayLike, size: float,
                              yaw: float) -> np.ndarray:
     """Pixel centroid of the projected outline (convex hull) of an upright cube."""
     h = size / 2

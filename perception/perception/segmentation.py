@@ -65,7 +65,8 @@ def segment(rgb: np.ndarray, classes: Sequence[ColorClass] = DEFAULT_CLASSES,
         raise ValueError(f'expected an h x w x 3 uint8 image, got {rgb.shape} {rgb.dtype}')
     hsv = cv2.cvtColor(rgb, cv2.COLOR_RGB2HSV)
     masks = {c.name: c.mask(hsv) for c in classes}
-    claimed = sum(masks.values())
+    # How many classes claim each pixel.
+    claimed: np.ndarray = sum(masks.values(), np.zeros(hsv.shape[:2], np.uint8))
     if roi is not None:
         x, y, w, h = roi
         keep = np.zeros(rgb.shape[:2], np.uint8)

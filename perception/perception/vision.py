@@ -66,6 +66,8 @@ class MaterialVision:
             cv2.drawContours(out, [blob.contour], -1, (255, 255, 255), 1)
         for track in result.tracks:
             obs = track.last
+            if obs is None:
+                continue
             u, v = int(round(obs.u)), int(round(obs.v))
             cv2.drawMarker(out, (u, v), (0, 255, 0), cv2.MARKER_CROSS, 8, 1)
             x, y = track.position[:2]

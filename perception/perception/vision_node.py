@@ -12,7 +12,7 @@ import statistics
 import sys
 import time
 from collections import deque
-from typing import Optional
+from typing import Any, Deque, Dict, Optional, Tuple
 
 import numpy as np
 from rcl_interfaces.msg import ParameterDescriptor
@@ -84,9 +84,9 @@ class VisionNode(Node):
                                 get('track_max_missed'))
         self._frame_id = get('frame_id')
         self._vision: Optional[MaterialVision] = None
-        self._info_key = None
-        self._latencies = deque(maxlen=500)
-        self._warned = {}
+        self._info_key: Optional[Tuple[Any, ...]] = None   # the camera_info in use
+        self._latencies: Deque[float] = deque(maxlen=500)
+        self._warned: Dict[str, float] = {}
         self._last_stats = time.monotonic()
         self._pub = self.create_publisher(MaterialDetectionArray, 'detections',
                                           QoSProfile(depth=10))
@@ -170,8 +170,8 @@ class VisionNode(Node):
         self._info_key = key
 
     def _on_image(self, msg: Image) -> None:
-        frame = self._frame(msg)
-        if frame is None:
+        frame, vision = self._frame(msg), self._vision
+        if frame is None or vision is None:
             # Every frame gets an answer (a lock-step consumer waits for it): none found.
             skipped = MaterialDetectionArray()
             skipped.header.stamp = msg.header.stamp
@@ -180,11 +180,13 @@ class VisionNode(Node):
             return
         start = time.perf_counter()
         t = to_seconds(msg.header.stamp)
-        result = self._vision.process(t, frame)
+        result = vision.process(t, frame)
         out = MaterialDetectionArray()
         out.header.stamp = msg.header.stamp
         out.header.frame_id = self._frame_id
         for track in result.tracks:
+            if track.last is None:          # (a reported track has been seen)
+                continue
             d = MaterialDetection(id=track.id, color=track.color, u=track.last.u,
                                   v=track.last.v, confidence=float(track.confidence),
                                   hits=track.hits)
@@ -194,7 +196,7 @@ class VisionNode(Node):
         self._pub.publish(out)
         self._latencies.append(time.perf_counter() - start)
         if self._debug_pub.get_subscription_count() > 0:
-            debug = self._vision.annotate(frame, result)
+            debug = vision.annotate(frame, result)
             self._debug_pub.publish(Image(header=msg.header, height=debug.shape[0],
                                           width=debug.shape[1], encoding='rgb8',
                                           step=3 * debug.shape[1], data=debug.tobytes()))

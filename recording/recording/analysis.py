@@ -11,7 +11,7 @@ import math
 import sys
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
-from typing import Dict, List, Optional
+from typing import Any, Dict, List, Optional
 
 import numpy as np
 from rosbags.highlevel import AnyReader, AnyReaderError
@@ -108,7 +108,8 @@ def analyse(bag: Path) -> tuple:
                     _add_tracking(reader.deserialize(raw, c.msgtype), tracking.setdefault(
                         c.topic, {}))
                 elif c.msgtype == ODOMETRY:
-                    pose = reader.deserialize(raw, c.msgtype).pose.pose
+                    odometry: Any = reader.deserialize(raw, c.msgtype)    # (nav_msgs/Odometry)
+                    pose = odometry.pose.pose
                     paths.setdefault(c.topic, []).append((pose.position.x, pose.position.y))
                     q = pose.orientation
                     yaws[c.topic] = yaw_from_quaternion((q.x, q.y, q.z, q.w))
@@ -199,9 +200,9 @@ def to_markdown(report: Report) -> str:
         lines += ['', '## Joint tracking (reference - feedback position)', '',
                   '| topic | joint | samples | RMS error | max abs error |',
                   '|---|---|---|---|---|']
-        for t in report.tracking:
-            lines.append(f'| {t.topic} | {t.joint} | {t.samples} | {t.rms_error:.6f} | '
-                         f'{t.max_abs_error:.6f} |')
+        for tr in report.tracking:
+            lines.append(f'| {tr.topic} | {tr.joint} | {tr.samples} | {tr.rms_error:.6f} | '
+                         f'{tr.max_abs_error:.6f} |')
     return '\n'.join(lines) + '\n'
 
 

@@ -1,6 +1,7 @@
 """Records topics to a rosbag2 bag as they appear, writing the serialized bytes as received."""
 from __future__ import annotations
 
+import functools
 import sys
 from pathlib import Path
 from typing import Set
@@ -91,7 +92,7 @@ class Recorder(Node):
         reliability, durability = adapt_to_publishers(policies)
         qos = QoSProfile(depth=self._depth, reliability=ReliabilityPolicy(reliability),
                          durability=DurabilityPolicy(durability))
-        self.create_subscription(msg_class, topic, lambda data, t=topic: self._on_message(t, data),
+        self.create_subscription(msg_class, topic, functools.partial(self._on_message, topic),
                                  qos, raw=True)
         self.get_logger().info(f'recording {topic} [{types[0]}]')
 

@@ -10,6 +10,7 @@ import rclpy
 from rcl_interfaces.msg import ParameterDescriptor
 from rclpy.duration import Duration
 from rclpy.node import Node
+from rclpy.publisher import Publisher
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from rosbags.highlevel import AnyReader, AnyReaderError
 from rosbags.rosbag2 import ReaderError
@@ -75,7 +76,7 @@ class Replay(Node):
                             and not (self.publish_clock and c.topic == '/clock')]
         if not self.connections:
             raise ReplayError(f'{self.bag}: none of the topics {sorted(wanted)} is in the bag')
-        self._topic_pubs: Dict[str, object] = {}
+        self._topic_pubs: Dict[str, Publisher] = {}
         for c in self.connections:
             if c.topic in self._topic_pubs:
                 continue
@@ -166,6 +167,8 @@ class Replay(Node):
         self.get_logger().warn(f'starting without subscribers on {missing}')
 
     def _publish_clock(self, bag_ns: int) -> None:
+        if self.clock_pub is None:
+            return
         msg = Clock()
         set_stamp(msg.clock, bag_ns)
         self.clock_pub.publish(msg)

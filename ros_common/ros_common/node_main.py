@@ -10,7 +10,7 @@ the same thing, a requested shutdown, and are treated alike here.
 from __future__ import annotations
 
 import threading
-from typing import Callable, Optional, Tuple, Type
+from typing import Callable, Optional, Tuple, Type, TypeVar
 
 import rclpy
 from rclpy.exceptions import ParameterException
@@ -34,8 +34,11 @@ def spin(node: Node, executor: Optional[Executor] = None) -> None:
             raise           # a real failure, not the shutdown race
 
 
-def _create(factory: Callable[[], Node], name: str,
-            startup_errors: Tuple[Type[BaseException], ...]) -> Optional[Node]:
+N = TypeVar('N', bound=Node)
+
+
+def _create(factory: Callable[[], N], name: str,
+            startup_errors: Tuple[Type[BaseException], ...]) -> Optional[N]:
     """The node, or None after one fatal line for a configuration error (the context is then
     shut down)."""
     try:
@@ -48,9 +51,9 @@ def _create(factory: Callable[[], Node], name: str,
     return None
 
 
-def run_node(factory: Callable[[], Node], name: str,
+def run_node(factory: Callable[[], N], name: str,
              startup_errors: Tuple[Type[BaseException], ...] = (),
-             on_exit: Optional[Callable[[Node], None]] = None, args=None) -> int:
+             on_exit: Optional[Callable[[N], None]] = None, args=None) -> int:
     """Create the node, spin it until shutdown, and return the process exit code.
 
     A configuration error raised by ``factory`` (one of ``startup_errors``, or a bad parameter)
@@ -71,9 +74,9 @@ def run_node(factory: Callable[[], Node], name: str,
     return 0
 
 
-def run_task(factory: Callable[[], Node], name: str, task: Callable[[Node], int],
+def run_task(factory: Callable[[], N], name: str, task: Callable[[N], int],
              startup_errors: Tuple[Type[BaseException], ...] = (),
-             on_exit: Optional[Callable[[Node], None]] = None, background_spin: bool = False,
+             on_exit: Optional[Callable[[N], None]] = None, background_spin: bool = False,
              interrupted_code: int = 0, args=None) -> int:
     """Create the node and run ``task(node)`` to its end: a node that does a job and exits
     with the task's code (a trial's coordinator, a replay, a check).
@@ -89,7 +92,8 @@ def run_task(factory: Callable[[], Node], name: str, task: Callable[[Node], int]
     node = _create(factory, name, startup_errors)
     if node is None:
         return 1
-    executor, spinner = None, None
+    executor: Optional[SingleThreadedExecutor] = None
+    spinner: Optional[threading.Thread] = None
     if background_spin:
         executor = SingleThreadedExecutor(context=node.context)
         executor.add_node(node)
@@ -108,6 +112,7 @@ def run_task(factory: Callable[[], Node], name: str, task: Callable[[Node], int]
             on_exit(node)
         if executor is not None:
             executor.shutdown(timeout_sec=2.0)
+        if spinner is not None:
             spinner.join(2.0)
         node.destroy_node()
         rclpy.try_shutdown()

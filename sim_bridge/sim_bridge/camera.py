@@ -4,9 +4,11 @@ from __future__ import annotations
 
 import array
 import math
-from typing import Optional, Sequence, Tuple
+from typing import Optional, Tuple
 
 import numpy as np
+
+from controllers.arrays import Vector
 
 
 def projection_matrix(width: int, height: int, vertical_fov_deg: float, near: float,
@@ -20,7 +22,7 @@ def projection_matrix(width: int, height: int, vertical_fov_deg: float, near: fl
             0.0, 0.0, 2.0 * far * near / (near - far), 0.0)
 
 
-def view_matrix_from_optical(position: Sequence[float], rotation: np.ndarray
+def view_matrix_from_optical(position: Vector, rotation: np.ndarray
                              ) -> Tuple[float, ...]:
     """Column-major OpenGL view matrix of a camera whose optical frame has this world pose.
 

@@ -1,6 +1,7 @@
 """One place that advances the physics: applies guarded commands, steps, schedules outputs."""
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass
 from typing import Callable, Dict, List, Protocol
@@ -176,7 +177,7 @@ class SimRunner:
                 if t_ns >= self._camera_next_ns[i]:
                     # Keep the camera's own grid of due times, skipping frames nobody wanted.
                     self._camera_next_ns[i] = next_on_grid(t_ns, self._camera_period_ns[i])
-                    sink.on_camera_due(i, t_ns, lambda cam=cam: world.render(cam))
+                    sink.on_camera_due(i, t_ns, functools.partial(world.render, cam))
 
     def tick_clock(self, sink: StepSink) -> None:
         """/clock now, unless it already shows this time."""

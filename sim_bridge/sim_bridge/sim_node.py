@@ -1,10 +1,11 @@
 """ROS 2 node around SimRunner: parameters, topics, services and real-time pacing."""
 from __future__ import annotations
 
+import functools
 import math
 import sys
 import time
-from typing import List, Optional, Tuple
+from typing import Dict, List, Optional, Tuple
 
 from builtin_interfaces.msg import Time
 from geometry_msgs.msg import Twist, TwistStamped
@@ -141,6 +142,7 @@ class SimNode(Node):
         self._joint_pubs, self._odom_pubs, self._odom_frames = {}, {}, {}
         self._state_pubs = {}
         self._holding_pubs = {}
+        self._suction_services: Dict[str, str] = {}      # robot: its suction service's name
         self._cmd_out_pubs = {}
         for name, robot in self._world.robots.items():
             ns = robot.config.namespace
@@ -150,10 +152,11 @@ class SimNode(Node):
             if not robot.config.fixed_base:
                 self._odom_pubs[name] = self.create_publisher(Odometry, _topic(ns, 'odom'),
                                                               history)
-            if name in self._world.suctions:
-                service = _topic(ns, robot.config.suction.service)
-                self.create_service(SetBool, service,
-                                    lambda req, res, n=name: self._on_suction(n, req, res))
+            suction = robot.config.suction
+            if name in self._world.suctions and suction is not None:
+                service = _topic(ns, suction.service)
+                self._suction_services[name] = suction.service
+                self.create_service(SetBool, service, functools.partial(self._on_suction, name))
                 # The cup's vacuum switch: true while it holds a part; and the same, stamped.
                 self._holding_pubs[name] = (
                     self.create_publisher(Bool, f'{service}/holding', history),
@@ -169,11 +172,11 @@ class SimNode(Node):
                     QoSProfile(depth=100, durability=DurabilityPolicy.TRANSIENT_LOCAL))
                 msg_type = TwistStamped if p['use_stamped_vel'] else Twist
                 self.create_subscription(msg_type, _topic(ns, 'cmd_vel'),
-                                         lambda msg, n=name: self._on_cmd_vel(n, msg), reliable)
+                                         functools.partial(self._on_cmd_vel, name), reliable)
             for controller in robot.controllers:
                 self.create_subscription(
                     JointTrajectory, _topic(ns, f'{controller}/joint_trajectory'),
-                    lambda msg, n=name, c=controller: self._on_trajectory(n, c, msg), reliable)
+                    functools.partial(self._on_trajectory, name, controller), reliable)
                 self._state_pubs[(name, controller)] = self.create_publisher(
                     JointTrajectoryControllerState, _topic(ns, f'{controller}/controller_state'),
                     history)
@@ -323,14 +326,16 @@ class SimNode(Node):
     def on_world_state(self, time_ns: int) -> None:
         if self._materials_pub is None or not _wanted(self._materials_pub):
             return
-        world = self._world
+        world, source, conveyor = self._world, self._world.source, self._world.conveyor
+        if source is None or conveyor is None:
+            return
         held = {s.held.index for s in world.suctions.values() if s.held is not None}
         msg = MarkerArray()
         for m in world.materials:
-            pos, rot = world.source.pose(m)
+            pos, rot = source.pose(m)
             state = ('held' if m.index in held else
-                     'on_belt' if world.conveyor.on_belt(m.body) else 'free')
-            msg.markers.append(_material_marker(m, pos, rot, state, world.source.config,
+                     'on_belt' if conveyor.on_belt(m.body) else 'free')
+            msg.markers.append(_material_marker(m, pos, rot, state, source.config,
                                                 stamp_from_ns(time_ns)))
         self._materials_pub.publish(msg)
 
@@ -402,7 +407,7 @@ class SimNode(Node):
         suction = self._world.suctions[robot]
         response.success, response.message = (suction.switch_on(self._world.source)
                                                if request.data else suction.release())
-        service = self._world.robots[robot].config.suction.service
+        service = self._suction_services[robot]
         text = f'{robot}/{service} {"on" if request.data else "off"}: {response.message}'
         # (rclpy forbids two severities from one logging call site.)
         if response.success:

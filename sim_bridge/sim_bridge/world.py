@@ -4,7 +4,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Dict, List, Optional, Sequence, Tuple
+from typing import Dict, List, Optional, Sequence, Tuple, Union
 
 import numpy as np
 import pybullet
@@ -99,7 +99,7 @@ class SimRobot:
                 client.setJointMotorControl2(self.body, j, pybullet.VELOCITY_CONTROL, force=0.0)
         # Reported wheel angle per joint = scale * PyBullet joint angle (virtual omni-wheels).
         self._report_scale = np.ones(len(self.movable))
-        self.drive = None
+        self.drive: Optional[Union[_DiffDrive, _MecanumDrive]] = None
         if isinstance(config.drive, DiffDriveConfig):
             self.drive = _DiffDrive(self, config.drive)
         elif isinstance(config.drive, MecanumConfig):
@@ -335,17 +335,23 @@ class SimCamera:
                                               config.vertical_fov_deg)
         self._projection = projection_matrix(config.width, config.height,
                                              config.vertical_fov_deg, config.near, config.far)
+        self._link = ''
         if robot is None:
+            if config.position is None or config.look_at is None:
+                raise WorldError(f'camera "{config.name}": a camera on no robot needs a position '
+                                 'and a point to look at')
             self._fixed_view = view_matrix_from_optical(
                 config.position, look_at_rotation(config.position, config.look_at))
-        elif config.link not in robot.link_index:
+        elif config.link is None or config.link not in robot.link_index:
             raise WorldError(f'camera "{config.name}": robot "{robot.config.name}" has no link '
                              f'"{config.link}"')
+        else:
+            self._link = config.link
 
     def view_matrix(self) -> Tuple[float, ...]:
         if self.robot is None:
             return self._fixed_view
-        pos, rot = self.robot.link_world_pose(self.config.link)
+        pos, rot = self.robot.link_world_pose(self._link)
         return view_matrix_from_optical(pos, rot)
 
     @property
@@ -377,8 +383,9 @@ class SimWorld:
         self.cameras: List[SimCamera] = [
             SimCamera(cc, self.robots[cc.robot] if cc.robot else None) for cc in config.cameras]
         self.conveyor = Conveyor(p, config.conveyor) if config.conveyor else None
+        # (The world file's reader holds materials to a conveyor to be placed on.)
         self.source = (MaterialSource(p, self.conveyor, config.materials, scenario_seed)
-                       if config.materials else None)
+                       if config.materials and self.conveyor else None)
         self.suctions: Dict[str, Suction] = {}
         for name, robot in self.robots.items():
             sc = robot.config.suction

@@ -18,11 +18,13 @@ from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.qos import QoSProfile
 from rclpy.signals import SignalHandlerOptions
+from rclpy.time import Time
 
 from ros_common.params import float_range
 from teleop.teleop_core import (
     HELP,
     HOLONOMIC_HELP,
+    ScriptStep,
     TeleopError,
     TeleopScript,
     TeleopState,
@@ -66,8 +68,8 @@ class TeleopNode(Node):
         self.wait_for_subscriber = get('wait_for_subscriber')
         self._pub = self.create_publisher(TwistStamped if self._stamped else Twist, 'cmd_vel',
                                           QoSProfile(depth=10))
-        self._script_start = None
-        self._script_step = None
+        self._script_start: Optional[Time] = None
+        self._script_step: Optional[ScriptStep] = None
         self.finished = False
         self._timer = self.create_timer(1.0 / get('publish_rate'), self._on_timer)
         if self.script is not None:
@@ -123,6 +125,8 @@ class TeleopNode(Node):
         self._timer.reset()
 
     def _script_tick(self) -> None:
+        if self.script is None:
+            return
         now = self.get_clock().now()
         if now.nanoseconds == 0:
             return  # use_sim_time and no /clock yet

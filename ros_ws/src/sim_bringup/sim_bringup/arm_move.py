@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import sys
 import time
+from typing import Optional
 
 import rclpy
 from rcl_interfaces.msg import ParameterDescriptor
@@ -55,9 +56,9 @@ class ArmMove(Node):
         self.create_subscription(JointTrajectoryControllerState,
                                  f'{controller}/controller_state', self._on_state,
                                  QoSProfile(depth=10))
-        self.sent_at = None
+        self.sent_at: Optional[float] = None     # (time.monotonic())
         self.started = False
-        self.result = None
+        self.result: Optional[int] = None
 
     def _on_state(self, msg: JointTrajectoryControllerState) -> None:
         if self.sent_at is None or self.result is not None:
@@ -68,7 +69,7 @@ class ArmMove(Node):
         index = {n: i for i, n in enumerate(msg.joint_names)}
         errors = {n: abs(msg.feedback.positions[index[n]] - t)
                   for n, t in zip(self.names, self.target)}
-        worst = max(errors, key=errors.get)
+        worst = max(errors, key=lambda n: errors[n])
         text = ', '.join(f'{n} {e:.4f}' for n, e in errors.items())
         if errors[worst] <= self.tolerance:
             self.get_logger().info(f'reached the target: errors {text}')
@@ -87,11 +88,11 @@ def _move(node: 'ArmMove') -> int:
             return 1
         rclpy.spin_once(node, timeout_sec=0.05)
     node.pub.publish(node.trajectory)
-    node.sent_at = time.monotonic()
+    node.sent_at = sent = time.monotonic()
     node.get_logger().info(f'sent {node.names} -> {node.target}')
     while rclpy.ok() and node.result is None:
         rclpy.spin_once(node, timeout_sec=0.1)
-        if not node.started and time.monotonic() - node.sent_at > 5.0:
+        if not node.started and time.monotonic() - sent > 5.0:
             node.get_logger().error('the controller did not start the trajectory (rejected?'
                                     ' see the simulator log)')
             return 1

@@ -11,6 +11,7 @@ from __future__ import annotations
 import math
 import sys
 import time
+from typing import List, Optional, Tuple
 
 import rclpy
 from geometry_msgs.msg import Twist, TwistStamped
@@ -61,14 +62,15 @@ class DriveCheck(Node):
         segments = [(max(-max_speed, min(max_speed, s.v)), max(-max_turn, min(max_turn, s.w)),
                      s.duration) for s in script.steps]
         self.predicted = predict_pose(Pose2D(), segments)
-        self._applied = []      # (simulated time it took effect, v, w), as the simulator says
+        # (simulated time it took effect, v, w), as the simulator says
+        self._applied: List[Tuple[float, float, float]] = []
         self.wall_timeout = get('wall_timeout')
         self._tol = (get('position_tolerance'), get('yaw_tolerance'))
         self._settle = get('settle_time')
         self._moving = False
-        self._last_cmd = None   # (sim time, was it zero)
-        self._odom = None
-        self.result = None
+        self._last_cmd: Optional[Tuple[float, bool]] = None   # (sim time, was it zero)
+        self._odom: Optional[Odometry] = None
+        self.result: Optional[bool] = None
         reliable = QoSProfile(depth=10)
         self.create_subscription(Twist, 'cmd_vel', self._on_cmd, reliable)
         self.create_subscription(Odometry, 'odom', self._on_odom, reliable)
@@ -90,13 +92,14 @@ class DriveCheck(Node):
 
     def _on_odom(self, msg: Odometry) -> None:
         self._odom = msg
-        if self.result is not None or not self._moving or not self._last_cmd[1]:
+        last = self._last_cmd
+        if self.result is not None or not self._moving or last is None or not last[1]:
             return
         t = to_seconds(msg.header.stamp)
         twist = msg.twist.twist
-        if (t - self._last_cmd[0] > self._settle and abs(twist.linear.x) < 1e-3
+        if (t - last[0] > self._settle and abs(twist.linear.x) < 1e-3
                 and abs(twist.angular.z) < 1e-3):
-            self.result = self._report()
+            self.result = self._report(msg)
 
     def as_applied(self, until: float) -> Pose2D:
         """The pose the applied commands predict, each from when it took effect until the
@@ -106,8 +109,8 @@ class DriveCheck(Node):
         return predict_pose(Pose2D(), [(v, w, max(0.0, end - t))
                                        for (t, v, w), end in zip(applied, ends)])
 
-    def _report(self) -> bool:
-        p = self._odom.pose.pose
+    def _report(self, odom: Odometry) -> bool:
+        p = odom.pose.pose
         actual = Pose2D(p.position.x, p.position.y, yaw_from_quaternion(
             (p.orientation.x, p.orientation.y, p.orientation.z, p.orientation.w)))
         script = self.predicted
@@ -116,7 +119,7 @@ class DriveCheck(Node):
             f'yaw={math.degrees(script.yaw):+7.2f} deg (as timed, had the teleop switched '
             'exactly on time)')
         if self._applied:
-            stamp = self._odom.header.stamp
+            stamp = odom.header.stamp
             predicted = self.as_applied(to_seconds(stamp))
             basis = f'for the {len(self._applied)} commands as the simulator applied them'
         else:

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass, field
-from typing import Dict, List
+from typing import Dict, List, Set, Tuple
 
 import numpy as np
 
@@ -28,7 +28,8 @@ class Accuracy:
     spurious: int = 0              # observations more than 1 cm from every material
     errors_m: List[float] = field(default_factory=list)
     latencies_s: List[float] = field(default_factory=list)
-    tracks: Dict[int, set] = field(default_factory=dict)    # track id -> material indices
+    # (run, track id) -> the indices of the materials it was nearest to
+    tracks: Dict[Tuple[int, int], Set[int]] = field(default_factory=dict)
 
     @property
     def identification_rate(self) -> float:
@@ -73,17 +74,20 @@ def evaluate(runs: int, frames_per_run: int, seed: int = 0, noise: float = 1.0) 
 
 def _run(world: SimWorld, rng, frames: int, noise: float, acc: Accuracy, run: int) -> None:
     camera = world.cameras[0]
-    c = camera.config
+    c, source, conveyor = camera.config, world.source, world.conveyor
+    if source is None or conveyor is None or c.position is None or c.look_at is None:
+        raise ValueError('the vision evaluation needs a world with a belt, materials and a '
+                         'fixed camera')
     model = CameraModel(np.asarray(camera.intrinsics.k, float).reshape(3, 3),
                         look_at_rotation(c.position, c.look_at), np.asarray(c.position))
-    size = world.source.config.size
-    vision = MaterialVision(model, c.width, c.height, world.conveyor.top[2], size,
-                            yaw=world.conveyor.config.yaw)
-    world.conveyor.speed = float(rng.uniform(0.05, 0.3))
+    size = source.config.size
+    vision = MaterialVision(model, c.width, c.height, conveyor.top[2], size,
+                            yaw=conveyor.config.yaw)
+    conveyor.speed = float(rng.uniform(0.05, 0.3))
     lighting = random_lighting(rng)
     steps = round(1.0 / 15.0 / world.time_step)
     # Run the belt until the first material reaches the view.
-    while not world.materials or world.source.pose(world.materials[0])[0][0] < -0.95:
+    while not world.materials or source.pose(world.materials[0])[0][0] < -0.95:
         world.step()
     for _ in range(frames):
         for _ in range(steps):
@@ -93,13 +97,13 @@ def _run(world: SimWorld, rng, frames: int, noise: float, acc: Accuracy, run: in
         result = vision.process(world.sim_time, rgb)
         acc.latencies_s.append(time.perf_counter() - start)
         acc.frames += 1
-        truth = {m.index: (m.color, world.source.pose(m)[0]) for m in world.materials}
+        truth = {m.index: (m.color, source.pose(m)[0]) for m in world.materials}
         seen = {i for i, (_, p) in truth.items() if _fully_in_view(model, p, size, c)}
         matched = set()
         for obs in result.observations:
             dists = {i: float(np.linalg.norm(p[:2] - obs.position[:2]))
                      for i, (_, p) in truth.items()}
-            nearest = min(dists, key=dists.get)
+            nearest = min(dists, key=lambda i: dists[i])
             if dists[nearest] > 0.01:
                 acc.spurious += 1
                 continue
