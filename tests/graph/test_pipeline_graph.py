@@ -1,15 +1,24 @@
 """The whole pipeline over DDS in lock-step: simulator, vision, two kinematics nodes and the
 coordinator as separate processes (one process group per run, each on its own DDS domain)."""
 import json
+import math
 import os
 import random
 
 import pytest
 
+from coordinator.layout import CellLayout, layout_from_world
 from coordinator.trials import run_trial
 from helpers import cpu_load, wait_for
+from world_description import PIPELINE_CELL
+from world_description.resources import resolve_resource
+from world_description.world_config import load_world
 
 SEED, BELT = 5, 0.12
+
+
+def cell_layout() -> CellLayout:
+    return layout_from_world(load_world(resolve_resource(PIPELINE_CELL)))
 
 
 @pytest.fixture(scope='module')
@@ -50,9 +59,13 @@ def test_a_lock_step_run_delivers_every_material(two_runs):
     peaks = {arm: p['fraction_of_limit'] for arm, p in r['peak_joint_speed'].items()}
     assert set(peaks) == {'zu12', 'youbot'} and all(0.5 < f <= 1.0 for f in peaks.values()), \
         r['peak_joint_speed']
-    path = r['youbot_path']
-    assert max(p[0] for p in path) > 1.6                      # reached the pool
-    assert abs(path[-1][0] - 0.8) < 0.03 and abs(path[-1][1] - 0.05) < 0.03
+    # It stood at both of its stands beside the pool, and ended at home.
+    path, layout = r['youbot_path'], cell_layout()
+    for stand in layout.stands:
+        x, y, _ = stand.pose
+        assert min(math.hypot(p[0] - x, p[1] - y) for p in path) < 0.03, stand.name
+    home_x, home_y, _ = layout.youbot_home
+    assert math.hypot(path[-1][0] - home_x, path[-1][1] - home_y) < 0.03
 
 
 def test_the_same_seed_gives_the_same_events_and_final_state(two_runs):
