@@ -72,9 +72,8 @@ def pipeline_graph(seed: int, belt_speed: float, synchronous: bool = True,
         'world': world, 'synchronous': synchronous, 'state_publish_rate': CONTROL_RATE,
         # Lock-step: /clock at the control rate; real time: at every physics step.
         'clock_publish_rate': CONTROL_RATE if synchronous else 0.0,
-        'scenario_seed': seed, 'belt_speed': belt_speed,
-        # The youBot's base limits (its world file's drive section says the same).
-        'max_speed': 0.8, 'max_turn': 1.5}
+        'scenario_seed': seed, 'belt_speed': belt_speed}
+    # (The bases' speed limits come from the world file's drive sections.)
     if real_time_factor is not None:
         sim['real_time_factor'] = real_time_factor
     coordinator: Dict[str, ParameterValue] = {
