@@ -10,7 +10,7 @@ import sys
 import threading
 import time
 from pathlib import Path
-from typing import Callable, Dict, List, Optional
+from typing import Callable, Dict, List, Optional, Sequence
 
 import rclpy
 from rclpy.executors import SingleThreadedExecutor
@@ -53,6 +53,15 @@ class NodeProcess:
 
     def alive(self) -> bool:
         return self.proc.poll() is None
+
+    def problems(self, also: Sequence[str] = (), limit: int = 40) -> List[str]:
+        """The log's warnings, errors and tracebacks, and the lines that contain one of
+        ``also`` (the last ``limit``), each named after this process: what a failing graph
+        test prints, since its logs are gone after a CI run."""
+        lines = [f'{self.name}: {line}' for line in self.output().splitlines()
+                 if line.startswith(('[WARN]', '[ERROR]', '[FATAL]', 'Traceback'))
+                 or 'Error' in line.split(':', 1)[0] or any(a in line for a in also)]
+        return lines[-limit:]
 
     def stop(self, sig: int = signal.SIGINT, timeout: float = 10.0) -> int:
         if self.proc.poll() is None:

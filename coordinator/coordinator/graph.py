@@ -72,7 +72,12 @@ def pipeline_graph(seed: int, belt_speed: float, synchronous: bool = True,
         'world': world, 'synchronous': synchronous, 'state_publish_rate': CONTROL_RATE,
         # Lock-step: /clock at the control rate; real time: at every physics step.
         'clock_publish_rate': CONTROL_RATE if synchronous else 0.0,
-        'scenario_seed': seed, 'belt_speed': belt_speed}
+        'scenario_seed': seed,
+        # Lock-step: the belt runs from the first step (nothing moves before the coordinator
+        # steps). Real time: it stands until the coordinator starts it, once the vision node
+        # and the kinematics services are up; started with the simulator, it would carry
+        # materials past a camera nobody watches yet.
+        'belt_speed': belt_speed if synchronous else 0.0}
     # (The bases' speed limits come from the world file's drive sections.)
     if real_time_factor is not None:
         sim['real_time_factor'] = real_time_factor

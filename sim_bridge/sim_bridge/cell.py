@@ -225,18 +225,23 @@ class Suction:
         if self.armed and self.held is None and source is not None and source.materials:
             self.grip(source)
 
+    def nearest(self, source: Optional[MaterialSource]
+                ) -> Optional[Tuple[MaterialBody, float]]:
+        """The material nearest the cup, and its distance from the cup's centre [m]."""
+        if source is None or not source.materials:
+            return None
+        tcp, _ = self._robot.link_world_pose(self.link)
+        return min(((m, _distance_to_box(tcp, *source.pose(m), source.config.size / 2))
+                    for m in source.materials), key=lambda md: md[1])
+
     def grip(self, source: Optional[MaterialSource]) -> Tuple[bool, str]:
         if self.held is not None:
             return True, f'already holding material {self.held.index} ({self.held.color})'
         if source is None:
             return False, 'no materials in this world'
         tcp, rot = self._robot.link_world_pose(self.link)
-        best, best_d = None, math.inf
-        for material in source.materials:
-            pos, mrot = source.pose(material)
-            d = _distance_to_box(tcp, pos, mrot, source.config.size / 2)
-            if d < best_d:
-                best, best_d = material, d
+        near = self.nearest(source)
+        best, best_d = near if near else (None, math.inf)
         if best is None or best_d > self.reach:
             near = f'; nearest {best_d * 1000:.1f} mm away' if best is not None else ''
             return False, f'nothing within {self.reach * 1000:.0f} mm of the suction cup{near}'
@@ -254,10 +259,13 @@ class Suction:
         self.held = best
         return True, f'holding material {best.index} ({best.color}), {best_d * 1000:.1f} mm away'
 
-    def release(self) -> Tuple[bool, str]:
+    def release(self, source: Optional[MaterialSource] = None) -> Tuple[bool, str]:
         self.armed = False
         if self.held is None:
-            return True, 'off; nothing held'
+            near = self.nearest(source)
+            return True, 'off; nothing held' + (
+                f' (nearest: material {near[0].index} ({near[0].color}), '
+                f'{near[1] * 1000:.1f} mm from the cup)' if near else '')
         self._p.removeConstraint(self._constraint)
         message = f'released material {self.held.index} ({self.held.color})'
         self.held, self._constraint = None, None

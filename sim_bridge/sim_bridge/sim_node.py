@@ -406,7 +406,7 @@ class SimNode(Node):
     def _on_suction(self, robot: str, request, response):
         suction = self._world.suctions[robot]
         response.success, response.message = (suction.switch_on(self._world.source)
-                                               if request.data else suction.release())
+                                               if request.data else suction.release(self._world.source))
         service = self._suction_services[robot]
         text = f'{robot}/{service} {"on" if request.data else "off"}: {response.message}'
         # (rclpy forbids two severities from one logging call site.)

@@ -20,6 +20,7 @@ def start_node(tmp_path):
         procs.append(proc)
         return proc
 
+    start.procs = procs          # (for a failing test's report: see NodeProcess.problems)
     yield start
     for proc in procs:
         proc.stop()

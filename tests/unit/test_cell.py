@@ -139,10 +139,14 @@ def test_the_armed_cup_grips_on_contact_and_releases(world):
     lifted = world.source.pose(material)[0]
     assert lifted[2] == pytest.approx(centre[2] + 0.275, abs=0.01)
     assert not world.conveyor.on_belt(material.body)
-    ok, message = suction.release()
+    ok, message = suction.release(world.source)
     assert ok and 'released material 0' in message and not suction.armed
     _run(world, 1.0)
     assert world.conveyor.on_belt(material.body)               # dropped back onto the belt
+    # Off with nothing held: where the nearest material was (a missed grasp's first clue).
+    ok, message = suction.release(world.source)
+    assert ok and message.startswith('off; nothing held (nearest: material 0 (')
+    assert 'mm from the cup)' in message
 
 
 def test_cell_sections_are_validated():

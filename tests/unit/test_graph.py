@@ -25,6 +25,9 @@ def test_real_time_publishes_the_clock_at_every_step_and_a_recorder_starts_first
     assert graph[0].name == 'recorder' and 'bag_name' not in graph[0].parameters
     sim = next(n for n in graph if n.name == 'sim_node').parameters
     assert sim['clock_publish_rate'] == 0.0 and sim['real_time_factor'] == 2.0
+    # The belt stands until the coordinator, with its graph up, starts it at the run's speed.
+    coordinator = next(n for n in graph if n.name == 'coordinator_node').parameters
+    assert sim['belt_speed'] == 0.0 and coordinator['belt_speed'] == 0.12
     assert '/belt_camera/image_raw' in graph[0].parameters['exclude']
 
 
