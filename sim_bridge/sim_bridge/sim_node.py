@@ -405,8 +405,9 @@ class SimNode(Node):
 
     def _on_suction(self, robot: str, request, response):
         suction = self._world.suctions[robot]
-        response.success, response.message = (suction.switch_on(self._world.source)
-                                               if request.data else suction.release(self._world.source))
+        source = self._world.source
+        response.success, response.message = (suction.switch_on(source) if request.data
+                                               else suction.release(source))
         service = self._suction_services[robot]
         text = f'{robot}/{service} {"on" if request.data else "off"}: {response.message}'
         # (rclpy forbids two severities from one logging call site.)
