@@ -310,13 +310,16 @@ class CoordinatorNode(Node):
         reply = self._call(self.ik[arm], req, 'IK')
         return (np.array(reply.positions), '') if reply.success else (None, reply.message)
 
-    def trajectory(self, arm: str, points: Points, start: float) -> float:
+    def trajectory(self, arm: str, points: Points, start: float,
+                   continuing: bool = False) -> float:
         """Stamped with its absolute start, so that the simulator runs the plan on its own
         clock. Lock-step: the decision's step time, exactly. Real time: the plan (IK calls) may
         have taken longer than its allowance; then the whole motion starts later, by as much,
-        rather than with a first segment too short for the joints (returns that delay)."""
+        rather than with a first segment too short for the joints (returns that delay). A
+        motion ``continuing`` the running one is never delayed: the simulator skips its points
+        already past and joins it from the running motion."""
         delay = 0.0
-        if not self.synchronous:
+        if not self.synchronous and not continuing:
             delay = max(0.0, self.now() + self.settings.plan_latency - start)
         start_ns = round((start + delay) * 1e9)
         msg = JointTrajectory(joint_names=list(ARMS[arm]))

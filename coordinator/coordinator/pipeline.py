@@ -127,11 +127,14 @@ class Ports(Protocol):
               frame: str, seed: Vector) -> Tuple[Optional[np.ndarray], str]:
         """Joint positions for the tool at a pose, or (None, why). Raises NodeTimeout."""
 
-    def trajectory(self, arm: str, points: Points, start: float) -> float:
+    def trajectory(self, arm: str, points: Points, start: float,
+                   continuing: bool = False) -> float:
         """Send an arm motion whose first segment begins at ``start`` (points: absolute times).
         Returns how much later than planned the port scheduled the whole motion [s]: 0 in
         lock-step; in real time, a plan that took longer than its latency allowance starts
-        later, whole, rather than with a first segment too short for the joints' limits."""
+        later, whole, rather than with a first segment too short for the joints' limits.
+        ``continuing``: the motion goes on from the arm's running one (its first points are
+        that motion's samples, ``start`` may be past): sent as it is, never later (0)."""
 
     def grip(self, arm: str, on: bool) -> Tuple[bool, str]:
         """Arm (on) or release (off) the arm's gripping tool. Raises NodeTimeout."""
@@ -676,10 +679,10 @@ class Loader(Machine):
                 self.deadline = ahead.lift_end + run.s.settle_margin
             else:
                 # From where the motion has the arm at its next sample, moving, to rest at the
-                # lift point (the controller takes over from its desired state there).
+                # lift point: the motion's own samples until then, and the stop from there.
                 t1, q1, v1, a1 = after[0]
                 stop = plan(q1, [Waypoint(ahead.q_lift)], run.limits('zu12'), t1, v0=v1, a0=a1)
-                run.send(Motion('zu12', stop.points()))
+                run.send_continuing('zu12', now, t1, stop.points())
                 self.deadline = run.motion('zu12').end + run.s.settle_margin
         arrived = self.arrival(obs)
         if arrived is None:
@@ -1286,6 +1289,19 @@ class Pipeline:
         if delay:
             motion.delay(delay)
         self.motions[motion.arm] = motion
+
+    def send_continuing(self, arm: str, now: float, t1: float, points: Points) -> None:
+        """Replace the arm's running motion from its sample at ``t1`` on by ``points`` (which
+        begin there, in that sample's state). The message repeats the motion's own samples
+        between ``now`` and ``t1`` and is stamped ``now``: the controller, which skips the
+        points already past when it takes it, joins it from where the running motion has the
+        arm, whenever it arrives. (A new motion starts in the future, from rest: a controller
+        holds its position until then, and from there a point of a motion it was following
+        is out of reach; nor may the port delay it, which would tear it off that motion.)"""
+        kept = [p for p in self.motion(arm).points if now < p[0] < t1 - 1e-9]
+        motion = Motion(arm, kept + list(points), start=now)
+        self.ports.trajectory(arm, motion.points, now, continuing=True)
+        self.motions[arm] = motion
 
     def motion(self, arm: str) -> Motion:
         """The arm's current motion (one has been sent)."""

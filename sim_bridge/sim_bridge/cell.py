@@ -243,8 +243,8 @@ class Suction:
         near = self.nearest(source)
         best, best_d = near if near else (None, math.inf)
         if best is None or best_d > self.reach:
-            near = f'; nearest {best_d * 1000:.1f} mm away' if best is not None else ''
-            return False, f'nothing within {self.reach * 1000:.0f} mm of the suction cup{near}'
+            away = f'; nearest {best_d * 1000:.1f} mm away' if best is not None else ''
+            return False, f'nothing within {self.reach * 1000:.0f} mm of the suction cup{away}'
         if source.config.mass > self.max_payload:
             return False, f'material {best.index} is above the {self.max_payload} kg payload'
         pos, mrot = source.pose(best)

@@ -92,8 +92,8 @@ def test_a_real_time_run_delivers_every_material(start_node, tmp_path):
     start_node('vision_node', '-r', 'image_raw:=/belt_camera/image_raw', '-r',
                'camera_info:=/belt_camera/camera_info', '-p', 'use_sim_time:=true')
     for arm in ('zu12', 'youbot'):
-        start_node('kinematics_node', '-r', f'__ns:=/{arm}', '-p', f'arm:={arm}', '-p',
-                   'use_sim_time:=true', name=f'{arm}_kinematics')
+        start_node('kinematics_node', '-r', f'__ns:=/{arm}', '-p', f'arm:={arm}',
+                   name=f'{arm}_kinematics')
     result = tmp_path / 'result.json'
     coordinator = start_node('coordinator_node', '-p', 'use_sim_time:=true', '-p',
                              f'belt_speed:={BELT}', '-p',

@@ -12,9 +12,11 @@ def test_a_lock_step_trial_is_five_processes_that_agree_on_the_scenario():
         assert sim[key] == coordinator[key], key
     assert sim['synchronous'] is True and sim['clock_publish_rate'] == CONTROL_RATE
     assert coordinator['result_file'] == '/r/result.json'
-    # Every node but the simulator (the clock's source) runs on simulated time.
-    assert all(n.parameters.get('use_sim_time') for n in graph if n.name != 'sim_node')
-    assert 'use_sim_time' not in sim
+    # Every node that reads the clock runs on simulated time; the simulator is its source,
+    # and the IK servers read none (a /clock subscription would only cost them CPU).
+    clockless = {'sim_node', 'zu12_kinematics', 'youbot_kinematics'}
+    assert all(n.parameters.get('use_sim_time') for n in graph if n.name not in clockless)
+    assert not any('use_sim_time' in by[name].parameters for name in clockless)
     assert (by['zu12_kinematics'].namespace, by['youbot_kinematics'].namespace) == (
         'zu12', 'youbot')
 

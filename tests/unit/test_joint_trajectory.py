@@ -160,3 +160,34 @@ def test_inconsistent_limits_are_a_configuration_error():
     with pytest.raises(ValueError):
         TrajectoryFollower(('a', 'a'), JointLimits(np.zeros(2), np.ones(2), np.ones(2),
                                                    np.ones(2)), (0.0, 0.0))
+
+
+def test_a_motion_that_continues_the_running_one_is_joined_where_it_has_the_arm():
+    """A controller takes a new motion a little after it was sent. A motion that begins at a
+    sample of the running one, stamped in the future, is refused: until its stamp the
+    controller holds where the arm was when it arrived, and from there the sample is out of
+    reach. Stamped when it was decided and repeating the running motion's samples until the
+    new part, it is joined where the running motion has the arm (its past points skipped)."""
+    f = follower()
+    times = np.arange(0.0, 2.05, 0.05)
+    samples = [(float(t), (0.9 * t, 0.0, 0.0), (0.9, 0.0, 0.0), (0.0, 0.0, 0.0))
+               for t in times[1:]]
+    assert f.set_trajectory(request(samples, start=0.0), now=0.0).accepted
+    # Decided at 0.5 s: from the sample at 0.8 s, to rest at 0.9 rad by 1.8 s.
+    stop = [(0.8, (0.72, 0.0, 0.0), (0.9, 0.0, 0.0), (0.0, 0.0, 0.0)),
+            (1.8, (0.9, 0.0, 0.0), (0.0, 0.0, 0.0), (0.0, 0.0, 0.0))]
+    late = f.sample(0.75)
+    from_rest = request([(t - 0.8 + 0.05, *rest) for t, *rest in stop], start=0.75)
+    refused = follower()
+    refused.set_trajectory(request(samples, start=0.0), now=0.0)
+    assert not refused.set_trajectory(from_rest, now=0.75 - 0.05).accepted   # 0.65 s from 0.7 s
+    kept = [p for p in samples if 0.5 < p[0] < 0.8 - 1e-9]
+    req = request([(t - 0.5, *rest) for t, *rest in kept + stop], start=0.5)
+    assert f.set_trajectory(req, now=0.74).accepted          # arrives 0.24 s after it was sent
+    for t in np.arange(0.74, 0.8, 0.01):                     # still on the running motion
+        assert f.sample(float(t)).positions[0] == pytest.approx(0.9 * t, abs=1e-6)
+    assert late.positions[0] == pytest.approx(0.675)
+    end = f.sample(1.8)
+    assert end.positions[0] == pytest.approx(0.9) and end.velocities[0] == pytest.approx(0.0)
+    speeds = [abs(f.sample(float(t)).velocities[0]) for t in np.arange(0.74, 1.8, 0.01)]
+    assert max(speeds) <= LIMITS.velocity[0] + 1e-9

@@ -98,6 +98,7 @@ class FakeCell:
         self.events = []
         self.belt_calls: List[float] = []
         self.drive_calls: List[tuple] = []
+        self.continuations: List[tuple] = []
         self.pipeline: Pipeline = None
 
     # --- ports ---
@@ -112,7 +113,17 @@ class FakeCell:
         q[:3] = position
         return q, ''
 
-    def trajectory(self, arm, points, start):
+    def trajectory(self, arm, points, start, continuing=False):
+        if continuing:
+            # Goes on from the running motion: its start lies in the past or now, its first
+            # points are that motion's samples, and it is sent as it is.
+            assert start <= self.now and points[0][0] > self.now
+            self.continuations.append((arm, self.now, start, points))
+            self.goal[arm] = (points[-1][0], np.array(points[-1][1]))
+            self.plans[arm] = (np.array([p[0] for p in points]),
+                               np.array([p[1] for p in points]))
+            self.trajectories.append((arm, self.now, points))
+            return 0.0
         assert start >= self.now
         # The plan took send_lag longer than planned for: a motion due to start before now +
         # send_lag starts that much later, whole.
@@ -571,6 +582,30 @@ def test_a_missed_grasp_is_retried():
     assert min(np.max(np.abs(p[1] - cut[-1][1])) for p in whole) < 0.01     # on its way
     slots = [e.detail for e in kinds(cell, 'loaded')]
     assert len(set(slots)) == len(slots) == 7
+
+
+def test_in_real_time_a_missed_grasp_stops_the_arm_from_its_running_motion():
+    """Real time: the stop at the lift point is sent a plan latency ahead, while the pick's
+    motion runs on. It repeats that motion's samples until the stop begins and is stamped at
+    the decision, so that the controller joins it from where the running motion has the arm
+    (a message starting a second later, from rest, was refused by the simulator: the joints
+    would have had to jump to the running motion's sample; the arm then held still and the
+    pick stalled, in CI)."""
+    cell = FakeCell(cell_layout(), PAPER, grasp_failures={2: 1})
+    p = run(cell, Settings(plan_latency=1.0))
+    assert p.result.status == 'completed'
+    missed = kinds(cell, 'grasp_missed')
+    assert [(e.material, e.detail) for e in missed] == [(2, 'attempt 1')]
+    assert not kinds(cell, 'arm_stalled')
+    (arm, sent_at, start, cut), = cell.continuations
+    whole = [pts for a, t, pts in cell.trajectories if a == 'zu12' and t < sent_at][-1]
+    assert start == sent_at
+    ahead = [q for q in whole if sent_at < q[0] < sent_at + 1.0]
+    assert ahead, 'the running motion had samples within the plan latency'
+    for mine, theirs in zip(cut, ahead):         # the running motion's own samples first
+        assert mine[0] == theirs[0] and np.array_equal(mine[1], theirs[1])
+    assert not np.any(cut[-1][2])                               # to rest, at the lift point
+    assert min(np.max(np.abs(q[1] - cut[-1][1])) for q in whole) < 0.01
 
 
 def test_a_grasp_that_keeps_missing_is_reported_and_the_run_goes_on():

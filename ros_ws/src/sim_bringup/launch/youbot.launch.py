@@ -34,7 +34,7 @@ def generate_launch_description():
                           'real_time_factor': LaunchConfiguration('real_time_factor'),
                           'gui': LaunchConfiguration('gui')}]),
         Node(package='arm_kinematics', executable='kinematics_node', namespace='youbot',
-             output='screen', parameters=[{'use_sim_time': True}]),
+             output='screen'),
         Node(package='recording', executable='recorder', output='screen',
              condition=IfCondition(LaunchConfiguration('record')),
              parameters=[{'output_dir': LaunchConfiguration('bag_dir')}]),
