@@ -359,6 +359,35 @@ class SimCamera:
         return self._projection
 
 
+def build_floor(p: BulletClient, size: float) -> int:
+    """Infinite collision plane, but only a plain finite patch is drawn: PyBullet's large
+    textured plane is the biggest cost of a CPU-rendered frame."""
+    plane = p.createCollisionShape(pybullet.GEOM_PLANE)
+    visual = p.createVisualShape(pybullet.GEOM_BOX, halfExtents=(size / 2, size / 2, 0.0005),
+                                 rgbaColor=FLOOR_COLOR, visualFramePosition=(0.0, 0.0, -0.0005))
+    floor = p.createMultiBody(0.0, plane, visual)
+    p.changeDynamics(floor, -1, lateralFriction=1.0)
+    return floor
+
+
+class FloorBackdrop:
+    """The floor in a fixed camera's frames: the pixels where only the floor shows, and its one
+    colour there (flat, no shadows: the CPU renderer lights a plane in one colour). A frame drawn
+    without the floor gets that colour where the floor would show and nothing else is drawn."""
+
+    FAR = 1.0 - 1e-6          # the depth buffer's value where nothing is drawn
+
+    def __init__(self, mask: np.ndarray, color: np.ndarray) -> None:
+        self.mask = mask
+        # (Written as one 32-bit word per pixel: three times faster than by channel.)
+        self.color = np.ascontiguousarray(color, dtype=np.uint8).view(np.uint32)[0]
+
+    def fill(self, rgba: np.ndarray, depth: np.ndarray) -> np.ndarray:
+        """``rgba`` (height x width x 4, uint8, C-contiguous), filled in place."""
+        np.copyto(rgba.view(np.uint32)[..., 0], self.color, where=self.mask & (depth >= self.FAR))
+        return rgba
+
+
 class SimWorld:
     """Owns one PyBullet client. Every physics step goes through :meth:`step`."""
 
@@ -374,6 +403,11 @@ class SimWorld:
         p.setTimeStep(time_step)
         p.setGravity(0.0, 0.0, config.gravity)
         self._build_floor(config.floor_size)
+        # Fixed cameras' floors in the default light, by camera (None: the floor is drawn in
+        # each frame). False: the floor is drawn in every frame of every camera (a reference).
+        self.floor_backdrops = True
+        self._backdrops: Dict[str, Optional[FloorBackdrop]] = {}
+        self._relit = False            # a frame was rendered with light arguments
         for obstacle in config.obstacles:
             self._add_obstacle(obstacle)
         base_dir = Path(config.source).parent if config.source else None
@@ -435,13 +469,64 @@ class SimWorld:
 
         ``lighting``: getCameraImage's light arguments (lightDirection, lightColor,
         lightAmbientCoeff, lightDiffuseCoeff, lightSpecularCoeff), to vary the lighting.
+
+        A fixed camera's frames in the default light are drawn without the floor, whose pixels
+        are then filled with the floor's colour as lit (see FloorBackdrop): the same image, bit
+        for bit, for half the cost (the floor that fills the belt camera's view was 12 of its
+        21 ms a frame).
         """
+        backdrop = None
+        # PyBullet keeps the light arguments of the last frame that gave any for the frames
+        # after it: once a frame was lit otherwise, the default light is unknown here.
+        self._relit = self._relit or bool(lighting)
+        if camera.robot is None and self.floor_backdrops and not self._relit:
+            key = camera.config.name
+            if key not in self._backdrops:
+                self._backdrops[key] = self._measure_backdrop(camera)
+            backdrop = self._backdrops[key]
+        if backdrop is None:
+            return self._render(camera, lighting)[0]
+        self._show_floor(False)
+        try:
+            rgba, depth = self._render(camera, lighting)
+        finally:
+            self._show_floor(True)
+        return backdrop.fill(rgba, depth)
+
+    def _render(self, camera: SimCamera, lighting: Optional[dict]
+                ) -> Tuple[np.ndarray, np.ndarray]:
         c = camera.config
-        _, _, rgba, _, _ = self._p.getCameraImage(
+        _, _, rgba, depth, _ = self._p.getCameraImage(
             c.width, c.height, camera.view_matrix(), camera.projection, shadow=0,
             renderer=pybullet.ER_TINY_RENDERER, flags=pybullet.ER_NO_SEGMENTATION_MASK,
             **(lighting or {}))
-        return np.asarray(rgba, dtype=np.uint8).reshape(c.height, c.width, 4)
+        return (np.asarray(rgba, dtype=np.uint8).reshape(c.height, c.width, 4),
+                np.asarray(depth, dtype=np.float32).reshape(c.height, c.width))
+
+    def _show_floor(self, shown: bool) -> None:
+        color = FLOOR_COLOR if shown else (*FLOOR_COLOR[:3], 0.0)
+        self._p.changeVisualShape(self.floor, -1, rgbaColor=color)
+
+    def _measure_backdrop(self, camera: SimCamera) -> Optional[FloorBackdrop]:
+        """The floor as this fixed camera sees it in the default light: drawn alone, in a
+        client of its own; None (draw the floor in every frame) unless it shows in one
+        colour."""
+        alone = BulletClient(connection_mode=pybullet.DIRECT)
+        try:
+            build_floor(alone, self.config.floor_size)
+            c = camera.config
+            _, _, rgba, depth, _ = alone.getCameraImage(
+                c.width, c.height, camera.view_matrix(), camera.projection, shadow=0,
+                renderer=pybullet.ER_TINY_RENDERER, flags=pybullet.ER_NO_SEGMENTATION_MASK)
+        finally:
+            alone.disconnect()
+        rgba = np.asarray(rgba, dtype=np.uint8).reshape(c.height, c.width, 4)
+        floor = np.asarray(depth, dtype=np.float32).reshape(c.height, c.width) < \
+            FloorBackdrop.FAR
+        colors = np.unique(rgba[floor].reshape(-1, 4), axis=0)
+        if not floor.any() or len(colors) != 1:
+            return None
+        return FloorBackdrop(floor, colors[0])
 
     def close(self) -> None:
         try:
@@ -450,15 +535,7 @@ class SimWorld:
             pass
 
     def _build_floor(self, size: float) -> None:
-        # Infinite collision plane, but only a plain finite patch is drawn: PyBullet's large
-        # textured plane is the biggest cost of a CPU-rendered frame.
-        p = self._p
-        plane = p.createCollisionShape(pybullet.GEOM_PLANE)
-        visual = p.createVisualShape(pybullet.GEOM_BOX, halfExtents=(size / 2, size / 2, 0.0005),
-                                     rgbaColor=FLOOR_COLOR,
-                                     visualFramePosition=(0.0, 0.0, -0.0005))
-        self.floor = p.createMultiBody(0.0, plane, visual)
-        p.changeDynamics(self.floor, -1, lateralFriction=1.0)
+        self.floor = build_floor(self._p, size)
 
     def _add_obstacle(self, obstacle) -> None:
         p = self._p
