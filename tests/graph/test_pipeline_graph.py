@@ -90,7 +90,7 @@ def test_a_real_time_run_delivers_every_material(start_node, tmp_path):
                f'scenario_seed:={SEED}', '-p', 'belt_speed:=0.0', '-p', 'max_speed:=0.8',
                '-p', 'max_turn:=1.5')
     start_node('vision_node', '-r', 'image_raw:=/belt_camera/image_raw', '-r',
-               'camera_info:=/belt_camera/camera_info', '-p', 'use_sim_time:=true')
+               'camera_info:=/belt_camera/camera_info')
     for arm in ('zu12', 'youbot'):
         start_node('kinematics_node', '-r', f'__ns:=/{arm}', '-p', f'arm:={arm}',
                    name=f'{arm}_kinematics')

@@ -13,8 +13,9 @@ def test_a_lock_step_trial_is_five_processes_that_agree_on_the_scenario():
     assert sim['synchronous'] is True and sim['clock_publish_rate'] == CONTROL_RATE
     assert coordinator['result_file'] == '/r/result.json'
     # Every node that reads the clock runs on simulated time; the simulator is its source,
-    # and the IK servers read none (a /clock subscription would only cost them CPU).
-    clockless = {'sim_node', 'zu12_kinematics', 'youbot_kinematics'}
+    # and the vision node and the IK servers read none (a /clock subscription would only cost
+    # them CPU).
+    clockless = {'sim_node', 'vision_node', 'zu12_kinematics', 'youbot_kinematics'}
     assert all(n.parameters.get('use_sim_time') for n in graph if n.name not in clockless)
     assert not any('use_sim_time' in by[name].parameters for name in clockless)
     assert (by['zu12_kinematics'].namespace, by['youbot_kinematics'].namespace) == (
