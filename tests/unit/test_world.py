@@ -247,8 +247,8 @@ def test_a_fixed_cameras_frames_without_the_floor_drawn_are_the_same_images():
     frames are those with the floor drawn, bit for bit, as materials ride through the view;
     once a frame was lit otherwise (PyBullet keeps light arguments for the frames after), the
     floor is drawn again."""
-    w = SimWorld(load_world(resolve_resource('package://sim_bridge/worlds/pipeline_cell.yaml')),
-                 scenario_seed=3)
+    cell = resolve_resource('package://world_description/worlds/pipeline_cell.yaml')
+    w = SimWorld(load_world(cell), scenario_seed=3)
     try:
         camera = w.cameras[0]
         assert camera.robot is None
