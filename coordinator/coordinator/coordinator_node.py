@@ -33,6 +33,7 @@ from rcl_interfaces.msg import Parameter, ParameterDescriptor, ParameterType, Pa
 from rcl_interfaces.srv import GetParameters, SetParameters
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile
+from rclpy.subscription import Subscription
 from sensor_msgs.msg import JointState
 from sim_interfaces.msg import GripState, MaterialDetectionArray, PipelineEvent, PipelineState
 from sim_interfaces.srv import SolveIK, StepSimulation
@@ -201,7 +202,8 @@ class CoordinatorNode(Node):
         # take in time is stale); lock-step waits for the stamp of every state.
         self.create_subscription(Odometry, '/youbot/odom', self._on_odom,
                                  qos if self.synchronous else QoSProfile(depth=1))
-        self.create_subscription(MaterialDetectionArray, '/detections', self._on_detections, qos)
+        self._detections_sub: Optional[Subscription] = self.create_subscription(
+            MaterialDetectionArray, '/detections', self._on_detections, qos)
         self.create_subscription(MarkerArray, '/cell/materials', self._on_markers, qos)
         reliable = QoSProfile(depth=10)
         self.traj_pubs = {arm: self.create_publisher(
@@ -376,10 +378,20 @@ class CoordinatorNode(Node):
         self.event_pub.publish(msg)
         if e.kind == 'seen':
             self._check_identification(e)
+        if e.kind == 'loading_over':
+            # No material will be seen again: the detections' reader goes, and with it the
+            # vision node's frames (it is lazy) and the simulator's rendering of them.
+            self.camera_grid = None            # lock-step: no frame is waited for any more
+            self._drop_detections()
         if e.kind != 'state':
             what = f' {e.color} material {e.material}' if e.material >= 0 else ''
             self.get_logger().info(f'[{e.time:7.2f} s] {e.robot or "pipeline"}: {e.kind}{what}'
                                    f'{" - " + e.detail if e.detail else ""}')
+
+    def _drop_detections(self) -> None:
+        if self._detections_sub is not None:
+            self.destroy_subscription(self._detections_sub)
+            self._detections_sub = None
 
     def _check_identification(self, e: Event) -> None:
         m = self.pipeline.materials.get(e.material)

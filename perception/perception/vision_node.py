@@ -16,8 +16,10 @@ from typing import Any, Deque, Dict, Optional, Tuple
 
 import numpy as np
 from rcl_interfaces.msg import ParameterDescriptor
+from rclpy.event_handler import PublisherEventCallbacks
 from rclpy.node import Node
 from rclpy.qos import QoSProfile, qos_profile_sensor_data
+from rclpy.subscription import Subscription
 from sensor_msgs.msg import CameraInfo, Image
 from sim_interfaces.msg import MaterialDetection, MaterialDetectionArray
 
@@ -73,6 +75,10 @@ class VisionNode(Node):
             description='Frames without a match before a track ends', read_only=True))
         self.declare_parameter('frame_id', 'world', ro(
             description='Frame of the reported positions', read_only=True))
+        self.declare_parameter('lazy', True, ro(
+            description='Take camera frames only while something reads detections or '
+                        'debug_image (the simulator renders a camera only for its readers)',
+            read_only=True))
         classes = self._classes()
         camera_pose, support, size, yaw = self._geometry()
         self._pose, self._support, self._size, self._yaw = camera_pose, support, size, yaw
@@ -88,16 +94,37 @@ class VisionNode(Node):
         self._latencies: Deque[float] = deque(maxlen=500)
         self._warned: Dict[str, float] = {}
         self._last_stats = time.monotonic()
+        self._lazy = bool(get('lazy'))
+        readers = PublisherEventCallbacks(matched=self._on_readers)
         self._pub = self.create_publisher(MaterialDetectionArray, 'detections',
-                                          QoSProfile(depth=10))
-        self._debug_pub = self.create_publisher(Image, 'debug_image', qos_profile_sensor_data)
+                                          QoSProfile(depth=10), event_callbacks=readers)
+        self._debug_pub = self.create_publisher(Image, 'debug_image', qos_profile_sensor_data,
+                                                event_callbacks=readers)
         self.create_subscription(CameraInfo, 'camera_info', self._on_info,
                                  qos_profile_sensor_data)
-        self.create_subscription(Image, 'image_raw', self._on_image, qos_profile_sensor_data)
+        self._image_sub: Optional[Subscription] = None
+        self._on_readers()
         self.get_logger().info(
             f'looking for {[c.name for c in classes]} materials ({size} m) on z = {support} m '
             f'through {self.resolve_topic_name("image_raw")}; detections on '
             f'{self._pub.topic_name}')
+
+    def _on_readers(self, _matched=None) -> None:
+        """Lazy: watch the camera only while the outputs have readers. Frames nobody's
+        detections need cost the simulator a rendering each (a trial's coordinator stops reading
+        once loading is over and the belt stands)."""
+        wanted = not self._lazy or (self._pub.get_subscription_count()
+                                    + self._debug_pub.get_subscription_count()) > 0
+        if wanted and self._image_sub is None:
+            self._image_sub = self.create_subscription(Image, 'image_raw', self._on_image,
+                                                       qos_profile_sensor_data)
+            if self._lazy:
+                self.get_logger().info('detections have a reader: taking camera frames')
+        elif not wanted and self._image_sub is not None:
+            self.destroy_subscription(self._image_sub)
+            self._image_sub = None
+            self.get_logger().info('no reader of detections or debug_image: not taking camera '
+                                   'frames until one comes (lazy:=false to take them anyway)')
 
     # --- configuration ------------------------------------------------------------------------
     def _classes(self):

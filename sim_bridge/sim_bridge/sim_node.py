@@ -576,8 +576,10 @@ def _material_marker(material, pos, rot, state: str, config, stamp: Time) -> Mar
 
 
 def main(args=None) -> int:
+    # (The step service is a coroutine, which rclpy's EventsExecutor cannot run: node_main.py.)
     return run_node(SimNode, 'sim_node',
-                    (SimConfigError, WorldConfigError, WorldError, FileNotFoundError), args=args)
+                    (SimConfigError, WorldConfigError, WorldError, FileNotFoundError), args=args,
+                    events=False)
 
 
 if __name__ == '__main__':

@@ -94,6 +94,8 @@ def test_unusable_frames_are_rejected_with_a_warning(start_node, probe):
     wait_for(lambda: 'looking for' in vision.output(), 20.0, what='the vision node')
     image_pub = probe.node.create_publisher(Image, 'image_raw', qos_profile_sensor_data)
     info_pub = probe.node.create_publisher(CameraInfo, 'camera_info', qos_profile_sensor_data)
+    # (A reader of its detections first: without one, the node takes no frames.)
+    detections = probe.collect(MaterialDetectionArray, '/detections')
     wait_for(lambda: image_pub.get_subscription_count() and info_pub.get_subscription_count(),
              20.0, what='the vision node subscriptions')
     frame = Image(width=320, height=240, encoding='rgb8', step=960, data=bytes(960 * 240))
@@ -104,7 +106,6 @@ def test_unusable_frames_are_rejected_with_a_warning(start_node, probe):
     wait_for(warned_without_info, 10.0, period=0.2, what='a warning')
     info = CameraInfo(width=320, height=240,
                       k=[290.0, 0.0, 160.0, 0.0, 290.0, 119.0, 0.0, 0.0, 1.0])
-    detections = probe.collect(MaterialDetectionArray, '/detections')
     bad = [(Image(width=320, height=240, encoding='mono8', step=320, data=bytes(320 * 240)),
             'encoding "mono8" rejected'),
            (Image(width=160, height=120, encoding='rgb8', step=480, data=bytes(480 * 120)),
@@ -134,3 +135,25 @@ def test_unusable_frames_are_rejected_with_a_warning(start_node, probe):
         return bool(detections)
     wait_for(processed, 10.0, period=0.2, what='a good frame processed')
     assert detections[-1][1].detections == [] and vision.alive()
+
+
+def test_the_vision_node_takes_frames_only_while_something_reads_its_output(start_node, probe):
+    """Lazy (the default): the simulator renders a camera only for its readers, so frames that
+    no detection is wanted from are not asked for."""
+    vision = start_node('vision_node')
+    wait_for(lambda: 'looking for' in vision.output(), 20.0, what='the vision node')
+    image_pub = probe.node.create_publisher(Image, 'image_raw', qos_profile_sensor_data)
+    for _ in range(2):
+        reader = probe.node.create_subscription(MaterialDetectionArray, '/detections',
+                                                lambda _msg: None, 10)
+        wait_for(lambda: image_pub.get_subscription_count() == 1, 20.0,
+                 what='the vision node on the camera once its detections have a reader')
+        probe.node.destroy_subscription(reader)
+        wait_for(lambda: image_pub.get_subscription_count() == 0, 20.0,
+                 what='the vision node off the camera once the reader is gone')
+    assert 'not taking camera frames' in vision.output() and vision.alive()
+    eager = start_node('vision_node', '-p', 'lazy:=false', '-r', '__node:=eager_vision',
+                       name='eager_vision')
+    wait_for(lambda: image_pub.get_subscription_count() == 1, 20.0,
+             what='a vision node with lazy:=false on the camera without readers')
+    assert eager.alive()

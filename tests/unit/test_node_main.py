@@ -7,23 +7,24 @@ from ros_common.node_main import RCLError, run_node, spin
 
 
 def _raising_spin(shutdown_first):
-    def fake_spin(node, executor=None):
+    def fake_spin(executor, context, stop=None):
         if shutdown_first:
-            node.context.try_shutdown()   # as rclpy's signal handler does, from outside
+            context.try_shutdown()   # as rclpy's signal handler does, from outside
         raise RCLError('failed to initialize wait set: the given context is not valid')
     return fake_spin
 
 
 def test_the_wait_set_race_after_a_signal_is_a_clean_shutdown(context, monkeypatch):
     node = Node('racer', context=context)
-    monkeypatch.setattr(node_main.rclpy, 'spin', _raising_spin(shutdown_first=True))
+    monkeypatch.setattr(node_main, 'spin_until_shutdown', _raising_spin(shutdown_first=True))
     spin(node)          # returns: the context was shut down, so this was the race
     node.destroy_node()
 
 
 def test_an_rcl_error_with_the_context_alive_is_raised(context, monkeypatch):
     node = Node('failing', context=context)
-    monkeypatch.setattr(node_main.rclpy, 'spin', _raising_spin(shutdown_first=False))
+    monkeypatch.setattr(node_main, 'spin_until_shutdown',
+                        _raising_spin(shutdown_first=False))
     with pytest.raises(RCLError):
         spin(node)
     node.destroy_node()
@@ -42,11 +43,62 @@ def test_a_start_up_error_is_one_fatal_line_and_exit_code_1(capfd):
 def test_on_exit_runs_after_a_shutdown(monkeypatch):
     seen = []
 
-    def fake_spin(node, executor=None):
-        node.context.try_shutdown()
+    def fake_spin(executor, context, stop=None):
+        context.try_shutdown()
         raise RCLError('the given context is not valid')
-    monkeypatch.setattr(node_main.rclpy, 'spin', fake_spin)
+    monkeypatch.setattr(node_main, 'spin_until_shutdown', fake_spin)
     code = run_node(lambda: Node('finisher'), 'finisher',
                     on_exit=lambda node: seen.append(node.get_name()), args=[])
     assert code == 0
     assert seen == ['finisher']
+
+
+def test_nodes_spin_on_the_events_executor_unless_told_otherwise(context, monkeypatch):
+    from rclpy.executors import SingleThreadedExecutor
+    node = Node('chooser', context=context)
+    monkeypatch.delenv('ROBOT_SIM_EXECUTOR', raising=False)
+    events = node_main.make_executor(node)
+    assert type(events).__name__ == 'EventsExecutor'
+    assert isinstance(node_main.make_executor(node, events=False), SingleThreadedExecutor)
+    monkeypatch.setenv('ROBOT_SIM_EXECUTOR', 'single')
+    assert isinstance(node_main.make_executor(node), SingleThreadedExecutor)
+    node.destroy_node()
+
+
+def test_an_idle_node_sleeps_while_it_spins(context):
+    """The EventsExecutor's own spin() busy-waits; the project's spin loop must not."""
+    import threading
+    import time
+    node = Node('sleeper', context=context)
+    cpu = []
+
+    def spin_for_a_second():
+        timer = threading.Timer(1.0, context.try_shutdown)
+        timer.start()
+        start = time.thread_time()
+        spin(node)
+        cpu.append(time.thread_time() - start)
+    thread = threading.Thread(target=spin_for_a_second)
+    thread.start()
+    thread.join(10.0)
+    assert cpu and cpu[0] < 0.2, f'{cpu} s of CPU in one second of spinning with nothing to do'
+    node.destroy_node()
+
+
+def test_a_task_with_a_background_spin_gets_its_callbacks_and_ends():
+    from std_msgs.msg import Int32
+    got = []
+
+    def task(node):
+        import time
+        node.create_subscription(Int32, 'node_main_test', got.append, 10)
+        pub = node.create_publisher(Int32, 'node_main_test', 10)
+        deadline = time.monotonic() + 20.0
+        while len(got) < 5 and time.monotonic() < deadline:
+            pub.publish(Int32(data=len(got)))
+            time.sleep(0.02)
+        return 3
+    code = node_main.run_task(lambda: Node('tasker'), 'tasker', task, background_spin=True,
+                              args=[])
+    assert code == 3
+    assert len(got) >= 5
