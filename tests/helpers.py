@@ -138,6 +138,18 @@ def stamp_s(stamp) -> float:
     return stamp.sec + stamp.nanosec * 1e-9
 
 
+class PendingStep:
+    """A step request and its latest call."""
+
+    def __init__(self, client, request) -> None:
+        self.client, self.request = client, request
+        self.pending_replies = 0          # answers that the announced commands were not in yet
+        self.send()
+
+    def send(self) -> None:
+        self.future = self.client.call_async(self.request)
+
+
 class LockStepDriver:
     """Drives a lock-step (``synchronous:=true``) simulator as the coordinator does: a command
     is published, then announced in the next step request, so the simulator waits for it and
@@ -156,13 +168,23 @@ class LockStepDriver:
         assert self.client.wait_for_service(timeout_sec=15.0), 'no /sim_node/step'
         wait_for(lambda: self.pub.get_subscription_count() > 0, 15.0, what='cmd_vel matched')
 
-    def step(self, steps: int, commands: int = 0):
-        """Send a step request; returns its future."""
-        return self.client.call_async(self._request(steps=steps, commands=commands))
+    def step(self, steps: int, commands: int = 0) -> 'PendingStep':
+        """Send a step request; ``reply`` gets its answer."""
+        return PendingStep(self.client, self._request(steps=steps, commands=commands))
 
-    def reply(self, future):
-        wait_for(future.done, 20.0, what='the step reply')
-        return future.result()
+    def reply(self, pending: 'PendingStep', timeout: float = 20.0):
+        """The answer to a step request, asked again while the simulator still waits for the
+        commands announced with it (``commands_pending``), as the coordinator does."""
+        end = time.monotonic() + timeout
+        while True:
+            wait_for(pending.future.done, max(0.1, end - time.monotonic()),
+                     what='the step reply')
+            reply = pending.future.result()
+            if not reply.commands_pending or time.monotonic() > end:
+                return reply
+            pending.pending_replies += 1
+            time.sleep(0.001)
+            pending.send()
 
     def send(self, vx: float, wz: float = 0.0, vy: float = 0.0) -> None:
         msg = self._twist()

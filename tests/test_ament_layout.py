@@ -88,8 +88,8 @@ def test_interface_package_generated_python_bindings():
     assert SolveIK.Request(execute=True).execute
     assert JointTrajectoryControllerState(joint_names=['a']).joint_names == ['a']
     fields = StepSimulation.Response.get_fields_and_field_types()
-    assert fields == {'success': 'boolean', 'message': 'string', 'step_count': 'uint64',
-                      'sim_time': 'builtin_interfaces/Time'}
+    assert fields == {'success': 'boolean', 'message': 'string', 'commands_pending': 'boolean',
+                      'step_count': 'uint64', 'sim_time': 'builtin_interfaces/Time'}
 
 
 def test_launch_file_is_valid_python_for_a_full_install():

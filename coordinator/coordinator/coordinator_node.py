@@ -449,8 +449,18 @@ class CoordinatorNode(Node):
 
     def _step(self, steps: int) -> Tuple[int, int]:
         """Lock-step: advance; returns (step count before, after)."""
-        reply = self._call(self.step_client, StepSimulation.Request(
-            steps=steps, commands=self._commands.take()), 'step')
+        request = StepSimulation.Request(steps=steps, commands=self._commands.take())
+        reply = self._call(self.step_client, request, 'step')
+        # Some announced commands were not in yet (DDS orders only per writer): ask again,
+        # soon at first, then backing off, until they are or the service timeout passes.
+        end, pause = time.monotonic() + self.service_timeout, 0.0002
+        while not reply.success and reply.commands_pending:
+            if time.monotonic() > end:
+                raise NodeTimeout(f'the simulator never got the commands of this step: '
+                                  f'{reply.message}')
+            time.sleep(pause)
+            pause = min(2 * pause, 0.005)
+            reply = self._call(self.step_client, request, 'step')
         if not reply.success:
             raise NodeTimeout(f'the simulator refused to step: {reply.message} (is it running '
                               'with synchronous:=true?)')

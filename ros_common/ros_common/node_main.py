@@ -16,7 +16,9 @@ messages. Two limits of the Jazzy version shape its use here:
 - its ``spin()`` busy-waits (a whole core with nothing to do), so it is spun with
   ``spin_once(timeout)`` in a loop, which sleeps;
 - it cannot run coroutine callbacks (an ``async def`` service answers a coroutine object and
-  rclpy raises TypeError): a node with one passes ``events=False``.
+  rclpy raises TypeError), so no node of the project has one; a node that must passes
+  ``events=False``;
+- it has no guard conditions (``create_guard_condition`` fails at the first spin).
 
 ``ROBOT_SIM_EXECUTOR=single`` in the environment runs every node on the SingleThreadedExecutor
 instead (the same behaviour, more CPU).

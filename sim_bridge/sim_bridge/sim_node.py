@@ -5,17 +5,15 @@ import functools
 import math
 import sys
 import time
-from typing import Dict, List, Optional, Tuple
+from typing import Dict, List
 
 from builtin_interfaces.msg import Time
 from geometry_msgs.msg import Twist, TwistStamped
 from nav_msgs.msg import Odometry
 from rcl_interfaces.msg import IntegerRange, ParameterDescriptor, SetParametersResult
-from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
 from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
-from rclpy.task import Future
 from rosgraph_msgs.msg import Clock as ClockMsg
 from sensor_msgs.msg import CameraInfo, Image, JointState
 from sim_interfaces.msg import GripState, JointTrajectoryControllerState
@@ -101,16 +99,12 @@ class SimNode(Node):
         self.declare_parameter('materials_publish_rate', 10.0, float_range(
             'Rate of the materials\' ground truth on /cell/materials [Hz of simulated time]',
             0.1, 1000.0))
-        self.declare_parameter('command_wait_timeout', 10.0, float_range(
-            'Lock-step: a step waits this long for the commands announced with it [wall s]',
-            0.1, 600.0))
 
         p = {name: self.get_parameter(name).value for name in (
             'world', 'gui', 'time_step', 'real_time_factor', 'synchronous', 'state_publish_rate',
             'clock_publish_rate', 'max_speed', 'max_turn', 'cmd_vel_timeout', 'use_stamped_vel',
             'rtf_log_period', 'max_steps_per_tick', 'belt_speed', 'scenario_seed',
-            'materials_publish_rate', 'command_wait_timeout')}
-        self._command_wait_timeout = p['command_wait_timeout']
+            'materials_publish_rate')}
         if p['state_publish_rate'] * p['time_step'] > 1.0 + 1e-9:
             raise SimConfigError(
                 f'state_publish_rate {p["state_publish_rate"]} Hz exceeds the physics rate '
@@ -216,12 +210,10 @@ class SimNode(Node):
         self.create_service(Trigger, '~/reset', self._on_reset)
         self.create_service(Trigger, '~/pause', self._on_pause)
         self.create_service(Trigger, '~/resume', self._on_resume)
-        # The step service waits for announced commands (lockstep.py): in a group of its own, so
-        # that the subscriptions that bring them run while it waits.
+        # A step runs once the commands announced with it are in (lockstep.py); until then it
+        # is answered at once with commands_pending, and asked again.
         self._barrier = CommandBarrier()
-        self._command_wait: Optional[Tuple[int, Future]] = None
-        self.create_service(StepSimulation, '~/step', self._on_step,
-                            callback_group=MutuallyExclusiveCallbackGroup())
+        self.create_service(StepSimulation, '~/step', self._on_step)
         # The simulator is the time source: it paces itself on the steady wall clock.
         self._steady = Clock(clock_type=ClockType.STEADY_TIME)
         rtf = p['real_time_factor']
@@ -463,24 +455,18 @@ class SimNode(Node):
 
     def _command_arrived(self) -> None:
         self._barrier.arrived()
-        if self._command_wait is not None:
-            expected, arrived = self._command_wait
-            if self._barrier.ready(expected) and not arrived.done():
-                arrived.set_result(True)
 
-    async def _on_step(self, request, response):
+    def _on_step(self, request, response):
         if not (self._synchronous or self._paused):
             response.success = False
             response.message = 'step needs synchronous:=true or a paused simulation'
         elif not (1 <= request.steps <= MAX_STEPS_PER_REQUEST):
             response.success = False
             response.message = f'steps must be within 1..{MAX_STEPS_PER_REQUEST}'
-        elif not await self._commands_in(request.commands):
-            response.success = False
-            response.message = (f'only {self._barrier.received} of the {request.commands} '
-                                f'commands announced for this step arrived within '
-                                f'{self._command_wait_timeout:g} s; not stepped')
-            self.get_logger().error(response.message)
+        elif not self._barrier.ready(request.commands):
+            response.success, response.commands_pending = False, True
+            response.message = (f'{self._barrier.received} of the {request.commands} commands '
+                                'announced for this step have arrived; not stepped, ask again')
         else:
             claim = self._barrier.claim(request.commands)
             if request.commands > 0 and claim.surplus:
@@ -495,21 +481,6 @@ class SimNode(Node):
         response.step_count = self._world.step_count
         response.sim_time = stamp_from_ns(self._world.sim_time_ns)
         return response
-
-    async def _commands_in(self, expected: int) -> bool:
-        """Until every command announced for this step has been received (lockstep.py)."""
-        if self._barrier.ready(expected):
-            return True
-        arrived = Future()
-        self._command_wait = (expected, arrived)
-        timer = self.create_timer(self._command_wait_timeout,
-                                  lambda: arrived.done() or arrived.set_result(False),
-                                  clock=self._steady)
-        try:
-            return bool(await arrived)
-        finally:
-            self._command_wait = None
-            self.destroy_timer(timer)
 
     def destroy_node(self) -> None:
         # Leave no robot driving on a stale command.
@@ -576,10 +547,8 @@ def _material_marker(material, pos, rot, state: str, config, stamp: Time) -> Mar
 
 
 def main(args=None) -> int:
-    # (The step service is a coroutine, which rclpy's EventsExecutor cannot run: node_main.py.)
     return run_node(SimNode, 'sim_node',
-                    (SimConfigError, WorldConfigError, WorldError, FileNotFoundError), args=args,
-                    events=False)
+                    (SimConfigError, WorldConfigError, WorldError, FileNotFoundError), args=args)
 
 
 if __name__ == '__main__':

@@ -18,7 +18,8 @@ class LockStep(LockStepDriver):
     def batch(self, commands: int, late: bool) -> float:
         """x travelled in one batch whose forward command arrives before or after the step
         request; the robot starts at rest."""
-        x0 = self.x_at(self.reply(self.step(1)).sim_time)
+        start = self.reply(self.step(1)).sim_time
+        x0 = self.x_at(start)
         if not late:
             self.send(0.15)
             future = self.step(BATCH, commands)
@@ -26,7 +27,11 @@ class LockStep(LockStepDriver):
             future = self.step(BATCH, commands)
             time.sleep(DELAY_S)                # the delivery delay being simulated
             if commands:
-                assert not future.done(), 'the step ran before its announced command arrived'
+                # Answered without stepping: the announced command is not in yet.
+                early = self.reply(future, timeout=0.0)
+                assert not early.success and early.commands_pending, early.message
+                assert early.sim_time == start, 'the step ran before its command arrived'
+                future.send()
             self.send(0.15)
         reply = self.reply(future)
         assert reply.success, reply.message
@@ -42,7 +47,7 @@ def fresh_sim(start_node, probe):
         for proc in running:
             proc.stop()
         running.append(start_node('sim_node', '-p', 'synchronous:=true', '-p',
-                                  'state_publish_rate:=240.0', '-p', 'command_wait_timeout:=2.0'))
+                                  'state_publish_rate:=240.0'))
         return LockStep(probe)
     return start
 
@@ -60,11 +65,15 @@ def test_a_late_command_not_announced_misses_its_step(fresh_sim):
     assert abs(late) < 1e-4
 
 
-def test_a_step_whose_commands_never_arrive_is_refused_not_run(fresh_sim):
+def test_a_step_whose_commands_are_missing_is_answered_pending_not_run(fresh_sim):
     lockstep = fresh_sim()
     before = lockstep.reply(lockstep.step(1))
     lockstep.send(0.0)
-    reply = lockstep.reply(lockstep.step(BATCH, commands=2))
-    assert not reply.success
-    assert 'only 1 of the 2 commands' in reply.message
+    pending = lockstep.step(BATCH, commands=2)
+    reply = lockstep.reply(pending, timeout=2.0)            # asked again for two seconds
+    assert not reply.success and reply.commands_pending
+    assert '1 of the 2 commands' in reply.message
+    assert pending.pending_replies > 1
     assert reply.step_count == before.step_count           # nothing ran
+    lockstep.send(0.0)                                      # the second one comes after all
+    assert lockstep.reply(pending).success

@@ -85,6 +85,9 @@ def test_base_odometry_follows_cmd_vel(youbot_sim, probe, command):
     start, end = max(held, key=lambda span: span[1] - span[0])
     start, end = start + 0.15, min(end, t_cmd + 2.8)
     assert end - start >= 1.2, (held, command)
+    # (Odometry travels on its own writer: it may come in after cmd_vel_out of a later time.)
+    wait_for(lambda: stamp_s(base.odom[-1][1].header.stamp) >= end, 10.0,
+             what='the odometry up to the end of the stretch')
     window = [m for _, m in list(base.odom) if start <= stamp_s(m.header.stamp) <= end]
     first, last = window[0], window[-1]
     duration = stamp_s(last.header.stamp) - stamp_s(first.header.stamp)
