@@ -22,4 +22,14 @@ for _rs_dir in "$_rs_root"/ros_ws/install/*/lib/*/; do
   fi
 done
 export PATH
-unset _rs_root _rs_dir _rs_pkg _rs_abs _rs_nounset
+# The project's Fast DDS profile (ros_common/config/fastdds.xml: a shared-memory segment that
+# holds camera frames), unless a profile or another middleware is chosen already.
+case "${RMW_IMPLEMENTATION:-rmw_fastrtps_cpp}" in
+  rmw_fastrtps*)
+    _rs_profile="$_rs_root/ros_ws/install/ros_common/share/ros_common/config/fastdds.xml"
+    if [ -z "${FASTRTPS_DEFAULT_PROFILES_FILE:-}${FASTDDS_DEFAULT_PROFILES_FILE:-}" ] \
+        && [ -f "$_rs_profile" ]; then
+      export FASTRTPS_DEFAULT_PROFILES_FILE="$_rs_profile" FASTDDS_DEFAULT_PROFILES_FILE="$_rs_profile"
+    fi ;;
+esac
+unset _rs_root _rs_dir _rs_pkg _rs_abs _rs_nounset _rs_profile

@@ -36,6 +36,7 @@ from coordinator.progress import (
     read_progress,
     running_figures,
 )
+from ros_common.dds import with_profile
 from world_description import PIPELINE_CELL
 
 if TYPE_CHECKING:
@@ -88,9 +89,9 @@ def run_trial(trial: int, seed: int, belt_speed: float, domain_id: int, out_dir:
     result_file = trial_dir / 'result.json'
     result_file.unlink(missing_ok=True)
     (trial_dir / PROGRESS_FILE).unlink(missing_ok=True)
-    env = {**os.environ, 'ROS_DOMAIN_ID': str(domain_id),
-           'ROS_AUTOMATIC_DISCOVERY_RANGE': os.environ.get('ROS_AUTOMATIC_DISCOVERY_RANGE',
-                                                           'LOCALHOST')}
+    env = with_profile({**os.environ, 'ROS_DOMAIN_ID': str(domain_id),
+                        'ROS_AUTOMATIC_DISCOVERY_RANGE': os.environ.get(
+                            'ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')})
     graph = pipeline_graph(seed, belt_speed, world=world, result_file=result_file,
                            progress_file=result_file.with_name(PROGRESS_FILE),
                            record_dir=trial_dir if record else None)

@@ -34,6 +34,8 @@ from rclpy.exceptions import ParameterException
 from rclpy.executors import Executor, ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
 
+from ros_common.memory import keep_large_blocks
+
 try:
     from rclpy._rclpy_pybind11 import RCLError
 except ImportError:  # pragma: no cover - a future rclpy may move it
@@ -102,6 +104,7 @@ def run_node(factory: Callable[[], N], name: str,
     the node is destroyed (a recorder closes its bag there). ``events=False``: the node has
     coroutine callbacks, and spins on the SingleThreadedExecutor.
     """
+    keep_large_blocks()     # (ros_common/memory.py: large messages without page faults)
     rclpy.init(args=args)
     node = _create(factory, name, startup_errors)
     if node is None:
@@ -130,6 +133,7 @@ def run_task(factory: Callable[[], N], name: str, task: Callable[[N], int],
     check or a run that did not finish). ``on_exit`` runs however the task ended, before the
     node is destroyed (a coordinator stops its robots there).
     """
+    keep_large_blocks()     # (ros_common/memory.py: large messages without page faults)
     rclpy.init(args=args)
     node = _create(factory, name, startup_errors)
     if node is None:

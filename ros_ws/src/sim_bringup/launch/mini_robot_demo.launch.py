@@ -7,12 +7,19 @@
 scripts/demo.sh, which starts the same three nodes with the same parameters.)
 """
 from launch import LaunchDescription
-from launch.actions import DeclareLaunchArgument, EmitEvent, RegisterEventHandler
+from launch.actions import (
+    DeclareLaunchArgument,
+    EmitEvent,
+    RegisterEventHandler,
+    SetEnvironmentVariable,
+)
 from launch.event_handlers import OnProcessExit
 from launch.events import Shutdown
 from launch.substitutions import LaunchConfiguration, PathJoinSubstitution
 from launch_ros.actions import Node
 from launch_ros.substitutions import FindPackageShare
+
+from ros_common.dds import profile_environment
 
 LEG = 'speed 0.5, forward 5s, speed 1.0, left 7.854s'
 SQUARE = ', '.join([LEG] * 4) + ', stop'
@@ -25,6 +32,9 @@ def generate_launch_description():
                  remappings=[('cmd_vel', '/mini_robot/cmd_vel'), ('odom', '/mini_robot/odom'),
                              ('cmd_vel_out', '/mini_robot/cmd_vel_out')])
     return LaunchDescription([
+        # The project's Fast DDS profile (ros_common/dds.py), unless one is chosen already.
+        *[SetEnvironmentVariable(name, value)
+          for name, value in profile_environment().items()],
         DeclareLaunchArgument('real_time_factor', default_value='1.0'),
         DeclareLaunchArgument('gui', default_value='false'),
         DeclareLaunchArgument('bag_dir', default_value='bags'),

@@ -11,10 +11,11 @@ only turns them into launch_ros Node actions. The result: `ros2 topic echo
 the same processes, and `run_trials --show-graph` prints them.)
 """
 from launch import LaunchDescription
-from launch.actions import DeclareLaunchArgument, OpaqueFunction
+from launch.actions import DeclareLaunchArgument, OpaqueFunction, SetEnvironmentVariable
 from launch_ros.actions import Node
 
 from coordinator.graph import pipeline_graph
+from ros_common.dds import profile_environment
 
 
 def _nodes(context):
@@ -34,6 +35,9 @@ def _nodes(context):
 
 def generate_launch_description():
     return LaunchDescription([
+        # The project's Fast DDS profile (ros_common/dds.py), unless one is chosen already.
+        *[SetEnvironmentVariable(name, value)
+          for name, value in profile_environment().items()],
         DeclareLaunchArgument('synchronous', default_value='true'),
         DeclareLaunchArgument('scenario_seed', default_value='0'),
         DeclareLaunchArgument('belt_speed', default_value='0.12'),

@@ -17,14 +17,19 @@ Then drive it:
 started one by one.)
 """
 from launch import LaunchDescription
-from launch.actions import DeclareLaunchArgument
+from launch.actions import DeclareLaunchArgument, SetEnvironmentVariable
 from launch.conditions import IfCondition
 from launch.substitutions import LaunchConfiguration
 from launch_ros.actions import Node
 
+from ros_common.dds import profile_environment
+
 
 def generate_launch_description():
     return LaunchDescription([
+        # The project's Fast DDS profile (ros_common/dds.py), unless one is chosen already.
+        *[SetEnvironmentVariable(name, value)
+          for name, value in profile_environment().items()],
         DeclareLaunchArgument('real_time_factor', default_value='1.0'),
         DeclareLaunchArgument('gui', default_value='false'),
         DeclareLaunchArgument('record', default_value='false'),

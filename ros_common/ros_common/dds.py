@@ -1,0 +1,60 @@
+"""The project's Fast DDS profile (``share/ros_common/config/fastdds.xml``) and how a launcher
+hands it to the processes it starts.
+
+Fast DDS reads the file named by ``FASTRTPS_DEFAULT_PROFILES_FILE`` (``FASTDDS_...`` from Fast
+DDS 3) once per process, when the first context is created. The profile gives the
+shared-memory transport a segment that holds several 640x480 rgb8 frames (the default 512 KiB
+holds none). A profile the user chose always wins: nothing here replaces one that is set, and
+a middleware other than Fast DDS gets none.
+"""
+from __future__ import annotations
+
+import os
+from pathlib import Path
+from typing import Dict, Mapping, Optional
+
+PACKAGE = 'ros_common'
+PROFILE_FILE = 'config/fastdds.xml'
+# Fast DDS 2 (Jazzy) reads the first, Fast DDS 3 the second.
+PROFILE_VARIABLES = ('FASTRTPS_DEFAULT_PROFILES_FILE', 'FASTDDS_DEFAULT_PROFILES_FILE')
+# The shared-memory segment the profile asks for, in bytes (a test reads it back from the file
+# and from the segment Fast DDS creates).
+SEGMENT_SIZE = 8 * 1024 * 1024
+
+
+def profile_path() -> Optional[Path]:
+    """The installed profile, or None when ros_common's share directory cannot be found."""
+    try:
+        from ament_index_python.packages import (
+            PackageNotFoundError,
+            get_package_share_directory,
+        )
+    except ImportError:
+        return None
+    try:
+        path = Path(get_package_share_directory(PACKAGE)) / PROFILE_FILE
+    except PackageNotFoundError:
+        return None
+    return path if path.is_file() else None
+
+
+def uses_fastdds(env: Mapping[str, str]) -> bool:
+    return env.get('RMW_IMPLEMENTATION', 'rmw_fastrtps_cpp').startswith('rmw_fastrtps')
+
+
+def profile_environment(env: Optional[Mapping[str, str]] = None) -> Dict[str, str]:
+    """The variables to add to ``env`` (default: this process's) so that a child process runs
+    with the project's profile: none if a profile is already chosen, the middleware is not
+    Fast DDS, or the profile is not installed."""
+    env = os.environ if env is None else env
+    if any(env.get(name) for name in PROFILE_VARIABLES) or not uses_fastdds(env):
+        return {}
+    path = profile_path()
+    if path is None:
+        return {}
+    return {name: str(path) for name in PROFILE_VARIABLES}
+
+
+def with_profile(env: Mapping[str, str]) -> Dict[str, str]:
+    """``env`` plus :func:`profile_environment`'s variables."""
+    return {**env, **profile_environment(env)}
