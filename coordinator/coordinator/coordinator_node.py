@@ -473,9 +473,15 @@ class CoordinatorNode(Node):
         if self.synchronous:
             clients.append(self.step_client)
         end = time.monotonic() + self.service_timeout
-        for client in clients:
-            if not client.wait_for_service(timeout_sec=max(0.1, end - time.monotonic())):
-                raise NodeTimeout(f'{client.srv_name} is not available')
+        # (rclpy's wait_for_service sleeps in quarters of a second, one client after another:
+        # up to two seconds of a trial's start-up for services that were up long before.)
+        while True:
+            missing = [c.srv_name for c in clients if not c.service_is_ready()]
+            if not missing:
+                break
+            if time.monotonic() > end:
+                raise NodeTimeout(f'{", ".join(missing)} not available')
+            time.sleep(0.02)
         while time.monotonic() < end:
             if (self.count_publishers('/detections') > 0
                     and self.count_subscribers(CAMERA_TOPIC) > 0):
