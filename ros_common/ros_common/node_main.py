@@ -62,6 +62,18 @@ def spin_until_shutdown(executor: Executor, context,
         executor.spin_once(timeout_sec=_SPIN_SLICE_S)
 
 
+def _nothing() -> None:
+    pass
+
+
+def wake(executor: Executor) -> None:
+    """End a ``spin_once`` that waits in another thread, now. (Jazzy's EventsExecutor.wake()
+    does not end a waiting ``spin_once``: a task queued does, so a task that does nothing is
+    queued; without it, a run_task's exit waited out the spin slice, up to a second.)"""
+    executor.create_task(_nothing)
+    executor.wake()
+
+
 def spin(node: Node, executor: Optional[Executor] = None, events: bool = True) -> None:
     """Spin ``node`` until the context is shut down, by a signal or by the node itself."""
     if executor is None:
@@ -160,7 +172,7 @@ def run_task(factory: Callable[[], N], name: str, task: Callable[[N], int],
             on_exit(node)
         if executor is not None and spinner is not None:
             stop.set()
-            executor.wake()
+            wake(executor)
             spinner.join(2.0)
             executor.shutdown(timeout_sec=2.0)
         node.destroy_node()

@@ -102,3 +102,33 @@ def test_a_task_with_a_background_spin_gets_its_callbacks_and_ends():
                               args=[])
     assert code == 3
     assert len(got) >= 5
+
+
+@pytest.mark.parametrize('executor', ['events', 'single'])
+def test_a_background_spin_ends_with_its_task_not_at_the_end_of_its_wait(monkeypatch,
+                                                                          executor):
+    import threading
+    monkeypatch.setenv('ROBOT_SIM_EXECUTOR', executor)
+    # A spin slice far longer than the test: the spinner must be woken when the task ends,
+    # before its executor is shut down, not left to wait out its slice.
+    monkeypatch.setattr(node_main, '_SPIN_SLICE_S', 60.0)
+    spinning_at_shutdown = []
+
+    class Watched:
+        def __init__(self, inner):
+            self._inner = inner
+
+        def __getattr__(self, name):
+            return getattr(self._inner, name)
+
+        def shutdown(self, *args, **kwargs):
+            spinning_at_shutdown.append([t.name for t in threading.enumerate()
+                                         if 'spin_until_shutdown' in t.name])
+            return self._inner.shutdown(*args, **kwargs)
+
+    make = node_main.make_executor
+    monkeypatch.setattr(node_main, 'make_executor',
+                        lambda node, events=True: Watched(make(node, events)))
+    assert node_main.run_task(lambda: Node('woken'), 'woken', lambda node: 0,
+                              background_spin=True, args=[]) == 0
+    assert spinning_at_shutdown == [[]]
