@@ -81,8 +81,22 @@ ws_hash="$(cd "$WS/src" && {
   find -L . -type f ! -path '*/__pycache__/*' \( ! -name '*.py' -o -name setup.py \) \
     ! -name '*.pyc' -print0 | LC_ALL=C sort -z | xargs -0 cat
 } | hash_of)"
+# tf2_msgs and control_msgs (ros_ws/src/std_interfaces) are built only where the environment
+# has none: the ROS wheels in .venv, or an install on the AMENT_PREFIX_PATH this ran with.
+provided=()
+for pkg in tf2_msgs control_msgs; do
+  for prefix in "$VENV" $(printf '%s' "${AMENT_PREFIX_PATH:-}" | tr ':' ' '); do
+    case "$prefix" in "$WS"/*) continue ;; esac
+    if [ -f "$prefix/share/$pkg/package.xml" ]; then provided+=("$pkg"); break; fi
+  done
+done
+ws_hash="$(printf '%s %s' "$ws_hash" "${provided[*]:-}" | hash_of)"
 if [ "$(cat "$STAMPS/workspace" 2>/dev/null)" != "$ws_hash" ] || [ ! -f "$WS/install/setup.bash" ]; then
   log "building ros_ws with colcon"
+  if [ ${#provided[@]} -gt 0 ]; then
+    log "the environment provides ${provided[*]}: not building ours"
+    rm -rf "${provided[@]/#/$WS/install/}" "${provided[@]/#/$WS/build/}"
+  fi
   mkdir -p "$WS/log"
   (
     cd "$WS"
@@ -91,6 +105,7 @@ if [ "$(cat "$STAMPS/workspace" 2>/dev/null)" != "$ws_hash" ] || [ ! -f "$WS/ins
     # shellcheck disable=SC1091
     source "$VENV/bin/activate"
     colcon --log-base log build --symlink-install \
+      ${provided[@]:+--packages-skip "${provided[@]}"} \
       --event-handlers console_cohesion+ status- \
       --cmake-args -DBUILD_TESTING=OFF -DPython3_EXECUTABLE="$VENV/bin/python" \
       > "$WS/log/last_build_output.txt" 2>&1 || {
