@@ -12,6 +12,8 @@ from pathlib import Path
 from typing import Dict, List, Optional, Tuple, Union
 
 from world_description import PIPELINE_CELL
+from world_description.resources import resolve_resource
+from world_description.world_config import load_world
 
 # The coordinator's decisions per simulated second; in lock-step also the simulator's state
 # and /clock rates (each /clock message costs every node with sim time about a millisecond).
@@ -88,6 +90,9 @@ def pipeline_graph(seed: int, belt_speed: float, synchronous: bool = True,
         coordinator['result_file'] = str(result_file)
     if progress_file is not None:
         coordinator['progress_file'] = str(progress_file)
+    # The IK servers name their frames as the simulator does (the world's frame prefixes).
+    prefixes = {robot.name: robot.frame_prefix
+                for robot in load_world(resolve_resource(world)).robots}
     nodes = []
     if record_dir is not None:
         recorder: Dict[str, ParameterValue] = {
@@ -105,9 +110,9 @@ def pipeline_graph(seed: int, belt_speed: float, synchronous: bool = True,
                   remappings=(('image_raw', '/belt_camera/image_raw'),
                               ('camera_info', '/belt_camera/camera_info'))),
         GraphNode('zu12_kinematics', 'arm_kinematics', 'kinematics_node', namespace='zu12',
-                  parameters={'arm': 'zu12'}),
+                  parameters={'arm': 'zu12', 'frame_prefix': prefixes.get('zu12', '')}),
         GraphNode('youbot_kinematics', 'arm_kinematics', 'kinematics_node', namespace='youbot',
-                  parameters={'arm': 'youbot'}),
+                  parameters={'arm': 'youbot', 'frame_prefix': prefixes.get('youbot', '')}),
         GraphNode('coordinator_node', 'coordinator', 'coordinator_node',
                   parameters=coordinator),
     ]

@@ -8,7 +8,7 @@ import time
 from typing import Dict, List
 
 from builtin_interfaces.msg import Time
-from geometry_msgs.msg import Twist, TwistStamped
+from geometry_msgs.msg import TransformStamped, Twist, TwistStamped
 from nav_msgs.msg import Odometry
 from rcl_interfaces.msg import IntegerRange, ParameterDescriptor, SetParametersResult
 from rclpy.clock import Clock, ClockType
@@ -20,6 +20,7 @@ from sim_interfaces.msg import GripState, JointTrajectoryControllerState
 from sim_interfaces.srv import StepSimulation
 from std_msgs.msg import Bool
 from std_srvs.srv import SetBool, Trigger
+from tf2_msgs.msg import TFMessage
 from trajectory_msgs.msg import JointTrajectory
 from visualization_msgs.msg import Marker, MarkerArray
 
@@ -30,6 +31,7 @@ from ros_common.node_main import run_node
 from ros_common.params import float_range
 from ros_common.stamps import stamp_from_ns, to_seconds
 from sim_bridge.camera import ImageBuffer
+from sim_bridge.frames import FrameTransform, WorldFrames
 from sim_bridge.pacing import Pacer, RtfMeter
 from sim_bridge.runner import DriveLimits, SimRunner
 from sim_bridge.world import SimWorld, WorldError
@@ -100,11 +102,17 @@ class SimNode(Node):
             'Rate of the materials\' ground truth on /cell/materials [Hz of simulated time]',
             0.1, 1000.0))
 
+        self.declare_parameter('publish_link_tf', True, ro(
+            description='Publish the robots\' link transforms on /tf and /tf_static (off: '
+                        'robot_state_publisher does it from joint_states and '
+                        'robot_description); odom -> base_link and the world\'s anchors are '
+                        'published either way', read_only=True))
+
         p = {name: self.get_parameter(name).value for name in (
             'world', 'gui', 'time_step', 'real_time_factor', 'synchronous', 'state_publish_rate',
             'clock_publish_rate', 'max_speed', 'max_turn', 'cmd_vel_timeout', 'use_stamped_vel',
             'rtf_log_period', 'max_steps_per_tick', 'belt_speed', 'scenario_seed',
-            'materials_publish_rate')}
+            'materials_publish_rate', 'publish_link_tf')}
         if p['state_publish_rate'] * p['time_step'] > 1.0 + 1e-9:
             raise SimConfigError(
                 f'state_publish_rate {p["state_publish_rate"]} Hz exceeds the physics rate '
@@ -204,6 +212,17 @@ class SimNode(Node):
                 p=list(k.p)))
             self._info_msgs[-1].header.frame_id = c.frame_id
 
+        # TF (frames.py): moving frames on /tf at the state rate while someone listens; the
+        # rest once on /tf_static, latched (transient local, as tf2's static broadcaster).
+        self._frames = WorldFrames(self._world)
+        self._link_tf = p['publish_link_tf']
+        self._tf_pub = self.create_publisher(TFMessage, '/tf', history)
+        self._tf_static_pub = self.create_publisher(
+            TFMessage, '/tf_static', QoSProfile(
+                depth=1, reliability=ReliabilityPolicy.RELIABLE,
+                durability=DurabilityPolicy.TRANSIENT_LOCAL))
+        self._publish_static_tf()
+
         self._materials_pub = None
         if self._world.source is not None:
             self._materials_pub = self.create_publisher(MarkerArray, '/cell/materials', history)
@@ -283,6 +302,8 @@ class SimNode(Node):
         # joins gets the next one.
         stamp = stamp_from_ns(time_ns)
         sim_robot = self._world.robots[robot]
+        if _wanted(self._tf_pub):
+            self._publish_tf(robot, stamp)
         if _wanted(self._joint_pubs[robot]):
             js = sim_robot.joint_states()
             msg = JointState(name=js.names, position=js.positions, velocity=js.velocities,
@@ -318,6 +339,22 @@ class SimNode(Node):
         odom.pose.covariance = GROUND_TRUTH_COVARIANCE
         odom.twist.covariance = GROUND_TRUTH_COVARIANCE
         self._odom_pubs[robot].publish(odom)
+
+    def _publish_static_tf(self) -> None:
+        static = self._frames.static()
+        if not self._link_tf:
+            # (robot_state_publisher publishes the fixed joints from the robot_description.)
+            anchors = {f.anchor().child for f in self._frames.robots.values()}
+            cameras = {c.config.frame_id for c in self._world.cameras if c.robot is None}
+            static = [t for t in static if t.child in anchors | cameras]
+        stamp = stamp_from_ns(self._world.sim_time_ns)
+        self._tf_static_pub.publish(TFMessage(transforms=[_transform(t, stamp)
+                                                          for t in static]))
+
+    def _publish_tf(self, robot: str, stamp: Time) -> None:
+        moving = self._frames.moving(robot, links=self._link_tf)
+        if moving:
+            self._tf_pub.publish(TFMessage(transforms=[_transform(t, stamp) for t in moving]))
 
     def on_world_state(self, time_ns: int) -> None:
         if self._materials_pub is None or not _wanted(self._materials_pub):
@@ -506,6 +543,16 @@ def trajectory_request(msg: JointTrajectory) -> TrajectoryRequest:
                                    tuple(p.velocities), tuple(p.accelerations), tuple(p.effort))
                    for p in msg.points)
     return TrajectoryRequest(tuple(msg.joint_names), points, start)
+
+
+def _transform(t: FrameTransform, stamp: Time) -> TransformStamped:
+    out = TransformStamped()
+    out.header.stamp = stamp
+    out.header.frame_id, out.child_frame_id = t.parent, t.child
+    tr, q = out.transform.translation, out.transform.rotation
+    tr.x, tr.y, tr.z = (float(v) for v in t.translation)
+    q.x, q.y, q.z, q.w = (float(v) for v in t.rotation)
+    return out
 
 
 def _wanted(publisher) -> bool:

@@ -213,6 +213,11 @@ class SimRobot:
         for group in self.controllers.values():
             group.hold_current()
 
+    @property
+    def start_pose(self) -> Tuple[Tuple[float, float, float], Tuple[float, float, float, float]]:
+        """base_link's pose in the world at start: the odom frame of a mobile robot."""
+        return self._start_pos, self._start_orn
+
     def _root_link(self) -> str:
         return next(name for name, index in self.link_index.items() if index == -1)
 

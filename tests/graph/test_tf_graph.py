@@ -1,0 +1,77 @@
+"""TF from the simulator as tf2 and RViz take it: /tf_static latched, /tf at the state rate,
+one tree under ``world`` with every robot's frames prefixed. Standard messages only."""
+from __future__ import annotations
+
+from typing import Dict, List, Set
+
+from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+from tf2_msgs.msg import TFMessage
+
+from helpers import wait_for
+from world_description import PIPELINE_CELL
+
+# tf2's own subscriptions: /tf_static transient local (it is published once), /tf volatile.
+STATIC_QOS = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE,
+                        durability=DurabilityPolicy.TRANSIENT_LOCAL)
+TF_QOS = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE)
+
+CELL_CHAINS = [
+    ['world', 'youbot/odom', 'youbot/base_link', 'youbot/arm_link_0', 'youbot/arm_link_1',
+     'youbot/arm_link_2', 'youbot/arm_link_3', 'youbot/arm_link_4', 'youbot/arm_link_5',
+     'youbot/gripper_palm_link', 'youbot/gripper_tcp'],
+    ['youbot/base_link', 'youbot/wheel_link_fl'],
+    ['world', 'zu12/base_link', 'zu12/link_1', 'zu12/link_2', 'zu12/link_3', 'zu12/link_4',
+     'zu12/link_5', 'zu12/link_6', 'zu12/flange', 'zu12/suction_tool', 'zu12/suction_tcp'],
+    ['world', 'belt_camera_optical_frame'],
+]
+
+
+def _edges(batches: List) -> Dict[str, str]:
+    """child: parent, over every TFMessage received."""
+    out: Dict[str, str] = {}
+    for _, msg in batches:
+        for t in msg.transforms:
+            assert out.get(t.child_frame_id, t.header.frame_id) == t.header.frame_id, \
+                f'{t.child_frame_id} has two parents'
+            out[t.child_frame_id] = t.header.frame_id
+    return out
+
+
+def _cell(start_node, probe, *args):
+    static = probe.collect(TFMessage, '/tf_static', STATIC_QOS)
+    moving = probe.collect(TFMessage, '/tf', TF_QOS)
+    start_node('sim_node', '-p', f'world:={PIPELINE_CELL}', '-p', 'real_time_factor:=2.0',
+               '-p', 'state_publish_rate:=30.0', *args)
+    wait_for(lambda: static, 20.0, what='/tf_static')
+    # Both robots' moving frames, a few times over.
+    wait_for(lambda: len(moving) >= 10, 20.0, what='/tf')
+    return static, moving
+
+
+def test_the_cell_is_one_tf_tree_with_both_robots_and_the_camera(start_node, probe):
+    static, moving = _cell(start_node, probe)
+    assert len(static) == 1          # published once, latched
+    edges = _edges(static + moving)
+    for chain in CELL_CHAINS:
+        for parent, child in zip(chain, chain[1:]):
+            assert edges.get(child) == parent, f'{parent} -> {child} missing'
+    roots: Set[str] = set(edges.values()) - set(edges)
+    assert roots == {'world'}
+    static_children = {t.child_frame_id for t in static[0][1].transforms}
+    assert {'youbot/odom', 'zu12/base_link', 'zu12/suction_tcp', 'youbot/gripper_tcp',
+            'belt_camera_optical_frame'} <= static_children
+    moving_children = {t.child_frame_id for _, m in moving for t in m.transforms}
+    assert {'youbot/base_link', 'zu12/link_1', 'youbot/arm_link_1'} <= moving_children
+    assert not moving_children & static_children
+    # Stamped with simulated time, which advances.
+    stamps = sorted({(t.header.stamp.sec, t.header.stamp.nanosec)
+                     for _, m in moving for t in m.transforms})
+    assert len(stamps) >= 3
+
+
+def test_without_link_tf_only_odometry_and_the_anchors_are_published(start_node, probe):
+    static, moving = _cell(start_node, probe, '-p', 'publish_link_tf:=false')
+    assert {t.child_frame_id for t in static[0][1].transforms} == {
+        'youbot/odom', 'zu12/base_link', 'belt_camera_optical_frame'}
+    assert {(t.header.frame_id, t.child_frame_id) for _, m in moving for t in m.transforms} \
+        == {('youbot/odom', 'youbot/base_link')}
