@@ -28,3 +28,26 @@ def urdf_path(robot: str) -> Path:
         known = sorted(p.stem for p in _SOURCE_URDF_DIR.glob('*.urdf'))
         raise FileNotFoundError(f'no URDF for robot "{robot}"; known: {known}')
     return path
+
+
+def with_frame_prefix(urdf: str, prefix: str) -> str:
+    """The URDF text with every link renamed ``<prefix><name>`` (the links themselves and the
+    joints' parent and child links), so that a robot with a frame prefix is drawn from its own
+    frames. Joint names stay: joint_states name the joints without a prefix."""
+    if not prefix:
+        return urdf
+    import xml.etree.ElementTree as ET
+    root = ET.fromstring(urdf)
+    if root.tag != 'robot':
+        raise ValueError(f'not a URDF: the root element is <{root.tag}>, not <robot>')
+    for link in root.iter('link'):
+        if 'name' in link.attrib:
+            link.set('name', prefix + link.get('name', ''))
+    for joint in root.iter('joint'):
+        for end in ('parent', 'child'):
+            for element in joint.findall(end):
+                element.set('link', prefix + element.get('link', ''))
+    for reference in root.iter('gazebo'):
+        if 'reference' in reference.attrib:
+            reference.set('reference', prefix + reference.get('reference', ''))
+    return ET.tostring(root, encoding='unicode')

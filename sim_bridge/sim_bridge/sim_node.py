@@ -18,7 +18,7 @@ from rosgraph_msgs.msg import Clock as ClockMsg
 from sensor_msgs.msg import CameraInfo, Image, JointState
 from sim_interfaces.msg import GripState, JointTrajectoryControllerState
 from sim_interfaces.srv import StepSimulation
-from std_msgs.msg import Bool
+from std_msgs.msg import Bool, String
 from std_srvs.srv import SetBool, Trigger
 from tf2_msgs.msg import TFMessage
 from trajectory_msgs.msg import JointTrajectory
@@ -27,6 +27,7 @@ from visualization_msgs.msg import Marker, MarkerArray
 from controllers.joint_trajectory import TrajectoryPoint, TrajectoryRequest
 from controllers.lockstep import CommandBarrier
 from controllers.transforms import matrix_to_quaternion
+from robot_description import with_frame_prefix
 from ros_common.node_main import run_node
 from ros_common.params import float_range
 from ros_common.stamps import stamp_from_ns, to_seconds
@@ -222,6 +223,17 @@ class SimNode(Node):
                 depth=1, reliability=ReliabilityPolicy.RELIABLE,
                 durability=DurabilityPolicy.TRANSIENT_LOCAL))
         self._publish_static_tf()
+        # Each robot's URDF, its links named with its frame prefix (the frames of /tf), latched
+        # as robot_state_publisher offers it: what RViz and Foxglove draw the robot from.
+        latched = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
+                             durability=DurabilityPolicy.TRANSIENT_LOCAL)
+        self._description_pubs = []
+        for robot in self._world.robots.values():
+            pub = self.create_publisher(String, _topic(robot.config.namespace,
+                                                       'robot_description'), latched)
+            pub.publish(String(data=with_frame_prefix(robot.urdf.read_text(),
+                                                      robot.config.frame_prefix)))
+            self._description_pubs.append(pub)
 
         self._materials_pub = None
         if self._world.source is not None:

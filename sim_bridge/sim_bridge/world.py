@@ -66,6 +66,7 @@ class SimRobot:
         self.client = client
         if not urdf.is_file():
             raise WorldError(f'robot "{config.name}": URDF {urdf} does not exist')
+        self.urdf = urdf
         pose = config.pose
         self._start_pos = (pose.x, pose.y, pose.z)
         self._start_orn = tuple(client.getQuaternionFromEuler((0.0, 0.0, pose.yaw)))

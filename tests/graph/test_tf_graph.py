@@ -2,9 +2,11 @@
 one tree under ``world`` with every robot's frames prefixed. Standard messages only."""
 from __future__ import annotations
 
+import xml.etree.ElementTree as ET
 from typing import Dict, List, Set
 
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+from std_msgs.msg import String
 from tf2_msgs.msg import TFMessage
 
 from helpers import wait_for
@@ -39,6 +41,8 @@ def _edges(batches: List) -> Dict[str, str]:
 
 def _cell(start_node, probe, *args):
     static = probe.collect(TFMessage, '/tf_static', STATIC_QOS)
+    probe.descriptions = {ns: probe.collect(String, f'/{ns}/robot_description', STATIC_QOS)
+                          for ns in ('youbot', 'zu12')}
     moving = probe.collect(TFMessage, '/tf', TF_QOS)
     start_node('sim_node', '-p', f'world:={PIPELINE_CELL}', '-p', 'real_time_factor:=2.0',
                '-p', 'state_publish_rate:=30.0', *args)
@@ -63,6 +67,12 @@ def test_the_cell_is_one_tf_tree_with_both_robots_and_the_camera(start_node, pro
     moving_children = {t.child_frame_id for _, m in moving for t in m.transforms}
     assert {'youbot/base_link', 'zu12/link_1', 'youbot/arm_link_1'} <= moving_children
     assert not moving_children & static_children
+    # Each robot's description, latched, draws it from the frames of the tree.
+    for ns, received in probe.descriptions.items():
+        wait_for(lambda received=received: received, 10.0, what=f'/{ns}/robot_description')
+        links = {link.get('name') for link in ET.fromstring(received[0][1].data).iter('link')}
+        assert links and all(link.startswith(f'{ns}/') for link in links)
+        assert links <= set(edges) | {'world'}
     # Stamped with simulated time, which advances.
     stamps = sorted({(t.header.stamp.sec, t.header.stamp.nanosec)
                      for _, m in moving for t in m.transforms})

@@ -127,3 +127,22 @@ def test_without_link_transforms_only_the_base_moves(cell):
     assert [(t.parent, t.child) for t in frames.moving('youbot', links=False)] == \
         [('youbot/odom', 'youbot/base_link')]
     assert frames.moving('zu12', links=False) == []
+
+
+def test_each_robot_description_names_the_frames_the_tree_publishes(cell):
+    import xml.etree.ElementTree as ET
+
+    from robot_description import with_frame_prefix
+    frames = WorldFrames(cell)
+    for name, robot in cell.robots.items():
+        prefix = robot.config.frame_prefix
+        original = ET.fromstring(robot.urdf.read_text())
+        urdf = ET.fromstring(with_frame_prefix(robot.urdf.read_text(), prefix))
+        links = {link.get('name') for link in urdf.iter('link')}
+        assert links == set(frames.robots[name].link_frames)
+        ends = {e.get('link') for j in urdf.iter('joint') for e in j if e.tag in
+                ('parent', 'child')}
+        assert ends <= links
+        # Joint names as joint_states gives them, without the prefix.
+        assert [j.get('name') for j in urdf.iter('joint')] == \
+            [j.get('name') for j in original.iter('joint')]
