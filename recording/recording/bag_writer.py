@@ -9,12 +9,16 @@ from typing import Dict, Optional, Sequence
 
 from rosbags.interfaces import Connection, Qos
 from rosbags.rosbag2 import StoragePlugin, Writer, WriterError
+from rosbags.rosbag2.enums import CompressionFormat, CompressionMode
 from rosbags.rosbag2.storage_mcap import McapWriter
 from rosbags.rosbag2.storage_sqlite3 import Sqlite3Writer
 
 from recording.types import TypeResolver
 
 STORAGES = {'mcap': StoragePlugin.MCAP, 'sqlite3': StoragePlugin.SQLITE3}
+# 'zstd': MCAP chunks compressed with zstd (the storage-level compression of rosbag2's MCAP
+# plugin, which every MCAP reader decodes).
+COMPRESSIONS = ('none', 'zstd')
 _NAME = re.compile(r'^[A-Za-z0-9][A-Za-z0-9_.-]*$')
 
 
@@ -55,14 +59,23 @@ class BagWriter:
     """
 
     def __init__(self, output_dir: Path, name: Optional[str] = None, storage: str = 'mcap',
-                 resolver: Optional[TypeResolver] = None) -> None:
+                 resolver: Optional[TypeResolver] = None, compression: str = 'none') -> None:
         if storage not in STORAGES:
             raise BagError(f'storage must be one of {sorted(STORAGES)}, got "{storage}"')
+        if compression not in COMPRESSIONS:
+            raise BagError(f'compression must be one of {list(COMPRESSIONS)}, got '
+                           f'"{compression}"')
+        if compression != 'none' and storage != 'mcap':
+            raise BagError(f'compression {compression} compresses MCAP chunks; {storage} bags '
+                           'are written uncompressed (compression:=none)')
+        self.compression = compression
         self.storage = storage
         self.resolver = resolver or TypeResolver()
         for _ in range(100):
             self.path = unique_bag_path(Path(output_dir), name or default_bag_name())
             self._writer = Writer(self.path, version=9, storage_plugin=STORAGES[storage])
+            if compression == 'zstd':
+                self._writer.set_compression(CompressionMode.STORAGE, CompressionFormat.ZSTD)
             try:
                 self._writer.open()
                 break

@@ -35,6 +35,9 @@ class Recorder(Node):
                         'never overwritten: _1, _2, ... is appended', read_only=True))
         self.declare_parameter('storage', 'mcap', text(
             description='Storage plugin: mcap or sqlite3', read_only=True))
+        self.declare_parameter('compression', 'none', text(
+            description='none, or zstd: MCAP chunks compressed with zstd (mcap storage only)',
+            read_only=True))
         self.declare_parameter('flush_period', 0.5, float_range(
             'Wall seconds between durable flushes: what a SIGKILL can lose', 0.05, 10.0))
         self.declare_parameter('discovery_period', 0.1, float_range(
@@ -49,7 +52,8 @@ class Recorder(Node):
         if storage not in STORAGES:
             raise BagError(f'storage must be one of {sorted(STORAGES)}, got "{storage}"')
         self._depth = get('queue_depth')
-        self._writer = BagWriter(Path(get('output_dir')), get('bag_name') or None, storage)
+        self._writer = BagWriter(Path(get('output_dir')), get('bag_name') or None, storage,
+                                 compression=get('compression'))
         self._skipped: Set[str] = set()
         self._receiving: Set[str] = set()  # topics with a message written (or tried)
         self.dropped = 0
@@ -59,7 +63,9 @@ class Recorder(Node):
         self.create_timer(get('flush_period'), self._writer.flush, clock=steady)
         self.get_logger().info(
             f'recording {sorted(self._wanted) if self._wanted else "all topics"} to '
-            f'{self._writer.path} ({storage})')
+            f'{self._writer.path} ({storage}'
+            + (f', {self._writer.compression} compression)' if self._writer.compression != 'none'
+               else ')'))
         self._discover()
 
     @property

@@ -85,3 +85,40 @@ def test_without_link_tf_only_odometry_and_the_anchors_are_published(start_node,
         'youbot/odom', 'zu12/base_link', 'belt_camera_optical_frame'}
     assert {(t.header.frame_id, t.child_frame_id) for _, m in moving for t in m.transforms} \
         == {('youbot/odom', 'youbot/base_link')}
+
+
+def test_a_recorded_bag_of_the_cell_decodes_with_an_independent_reader(start_node, tmp_path):
+    """The recorder's MCAP (zstd chunks) read with the mcap library and its ROS 2 decoder,
+    which share no code with rosbags: the TF tree, both descriptions and the camera frames."""
+    from mcap.reader import make_reader
+    from mcap_ros2.decoder import DecoderFactory
+
+    start_node('sim_node', '-p', f'world:={PIPELINE_CELL}', '-p', 'real_time_factor:=2.0',
+               '-p', 'state_publish_rate:=30.0')
+    rec = start_node('recorder', '-p', f'output_dir:={tmp_path}', '-p', 'bag_name:=cell',
+                     '-p', 'compression:=zstd', name='recorder')
+    for topic in ('/tf', '/tf_static', '/youbot/robot_description',
+                  '/zu12/robot_description', '/belt_camera/image_raw'):
+        wait_for(lambda t=topic: f'receiving {t}\n' in rec.output(), 30.0,
+                 what=f'the recorder to receive {topic}')
+    assert rec.stop() == 0
+    assert 'zstd compression' in rec.output()
+    (path,) = (tmp_path / 'cell').glob('*.mcap')
+    seen: Dict[str, List] = {}
+    with path.open('rb') as stream:
+        reader = make_reader(stream, decoder_factories=[DecoderFactory()])
+        chunks = reader.get_summary().chunk_indexes
+        for _, channel, _, msg in reader.iter_decoded_messages():
+            seen.setdefault(channel.topic, []).append(msg)
+    assert chunks and {c.compression for c in chunks} == {'zstd'}
+    edges = {t.child_frame_id: t.header.frame_id
+             for topic in ('/tf', '/tf_static') for m in seen[topic] for t in m.transforms}
+    for chain in CELL_CHAINS:
+        for parent, child in zip(chain, chain[1:]):
+            assert edges.get(child) == parent, f'{parent} -> {child} missing'
+    for ns in ('youbot', 'zu12'):
+        (description,) = seen[f'/{ns}/robot_description']
+        assert ET.fromstring(description.data).find('link').get('name').startswith(f'{ns}/')
+    frame = seen['/belt_camera/image_raw'][0]
+    assert (frame.width, frame.height, frame.encoding) == (320, 240, 'rgb8')
+    assert len(frame.data) == 320 * 240 * 3

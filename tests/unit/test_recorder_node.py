@@ -46,6 +46,30 @@ def test_bad_storage_fails_at_start(context, tmp_path):
         make(context, tmp_path, storage='bag')
 
 
+def test_compression_is_zstd_chunks_of_mcap_or_none(context, tmp_path):
+    with pytest.raises(BagError, match='compression must be one of'):
+        make(context, tmp_path, compression='gzip')
+    with pytest.raises(BagError, match='sqlite3 bags are written uncompressed'):
+        make(context, tmp_path, storage='sqlite3', compression='zstd')
+    node = make(context, tmp_path, compression='zstd')
+    try:
+        node._writer.add_topic('/t', 'std_msgs/msg/String')
+        node._on_message('/t', serialize_message(String(data='squeezed')))
+        node.finish()
+    finally:
+        node.destroy_node()
+    with AnyReader([tmp_path / 'node']) as reader:
+        assert [reader.deserialize(raw, c.msgtype).data
+                for c, _, raw in reader.messages()] == ['squeezed']
+    # (As rosbag2's MCAP plugin, the compression is in the chunks; metadata.yaml leaves its
+    # compression fields, which are for file and message compression, empty.)
+    from mcap.reader import make_reader
+    (path,) = (tmp_path / 'node').glob('*.mcap')
+    with path.open('rb') as stream:
+        chunks = make_reader(stream).get_summary().chunk_indexes
+    assert chunks and {c.compression for c in chunks} == {'zstd'}
+
+
 def test_replay_of_a_bag_damaged_mid_stream_stops_with_an_error(context, tmp_path):
     node = Replay(context=context, parameter_overrides=[
         Parameter('bag', value=str(damaged_mid_stream_bag(tmp_path))),
