@@ -5,7 +5,7 @@ import functools
 import math
 import sys
 import time
-from typing import Dict, List
+from typing import Dict, List, Optional
 
 from builtin_interfaces.msg import Time
 from geometry_msgs.msg import TransformStamped, Twist, TwistStamped
@@ -15,7 +15,7 @@ from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from rosgraph_msgs.msg import Clock as ClockMsg
-from sensor_msgs.msg import CameraInfo, Image, JointState
+from sensor_msgs.msg import CameraInfo, CompressedImage, Image, JointState
 from sim_interfaces.msg import GripState, JointTrajectoryControllerState
 from sim_interfaces.srv import StepSimulation
 from std_msgs.msg import Bool, String
@@ -109,11 +109,25 @@ class SimNode(Node):
                         'robot_description); odom -> base_link and the world\'s anchors are '
                         'published either way', read_only=True))
 
+        self.declare_parameter('camera_reliability', 'reliable', ro(
+            description='QoS reliability of camera images and camera_info: reliable (the '
+                        'system default, which RViz and rqt ask for; best-effort readers match '
+                        'it too) or best_effort', read_only=True))
+        self.declare_parameter('jpeg_quality', 90, ParameterDescriptor(
+            description='JPEG quality of <camera>/image_raw/compressed',
+            read_only=True, integer_range=[IntegerRange(from_value=1, to_value=100, step=1)]))
+
         p = {name: self.get_parameter(name).value for name in (
             'world', 'gui', 'time_step', 'real_time_factor', 'synchronous', 'state_publish_rate',
             'clock_publish_rate', 'max_speed', 'max_turn', 'cmd_vel_timeout', 'use_stamped_vel',
             'rtf_log_period', 'max_steps_per_tick', 'belt_speed', 'scenario_seed',
-            'materials_publish_rate', 'publish_link_tf')}
+            'materials_publish_rate', 'publish_link_tf', 'camera_reliability', 'jpeg_quality')}
+        reliabilities = {'reliable': ReliabilityPolicy.RELIABLE,
+                         'best_effort': ReliabilityPolicy.BEST_EFFORT}
+        if p['camera_reliability'] not in reliabilities:
+            raise SimConfigError(f'camera_reliability must be reliable or best_effort, got '
+                                 f'"{p["camera_reliability"]}"')
+        self._jpeg_quality = p['jpeg_quality']
         if p['state_publish_rate'] * p['time_step'] > 1.0 + 1e-9:
             raise SimConfigError(
                 f'state_publish_rate {p["state_publish_rate"]} Hz exceeds the physics rate '
@@ -183,7 +197,7 @@ class SimNode(Node):
                 self._state_pubs[(name, controller)] = self.create_publisher(
                     JointTrajectoryControllerState, _topic(ns, f'{controller}/controller_state'),
                     history)
-        self._image_pubs, self._info_pubs = [], []
+        self._image_pubs, self._info_pubs, self._jpeg_pubs = [], [], []
         self._image_msgs: List[Image] = []
         self._info_msgs: List[CameraInfo] = []
         self._buffers: List[ImageBuffer] = []
@@ -195,9 +209,12 @@ class SimNode(Node):
             # RViz's and rqt's defaults) get every frame after a stall of up to a second.
             # Best-effort frames were lost under load (a recorder starved for 0.35 s).
             camera_qos = QoSProfile(depth=max(5, math.ceil(c.rate)),
-                                    reliability=ReliabilityPolicy.RELIABLE)
+                                    reliability=reliabilities[p['camera_reliability']])
             self._image_pubs.append(self.create_publisher(
                 Image, _topic(ns, f'{c.name}/image_raw'), camera_qos))
+            # image_transport's compressed transport: JPEG, encoded only while subscribed.
+            self._jpeg_pubs.append(self.create_publisher(
+                CompressedImage, _topic(ns, f'{c.name}/image_raw/compressed'), camera_qos))
             self._info_pubs.append(self.create_publisher(
                 CameraInfo, _topic(ns, f'{c.name}/camera_info'), camera_qos))
             image = Image(height=c.height, width=c.width, encoding='rgb8', is_bigendian=0,
@@ -387,16 +404,36 @@ class SimNode(Node):
     def on_camera_due(self, index: int, time_ns: int, render) -> None:
         # Rendering dominates the cost of a step: only for image subscribers.
         stamp = stamp_from_ns(time_ns)
-        if self._image_pubs[index].get_subscription_count() > 0:
-            image = self._image_msgs[index]
-            self._buffers[index].fill_from_rgba(render())
-            image.header.stamp = stamp
-            self._image_pubs[index].publish(image)
+        raw = self._image_pubs[index].get_subscription_count() > 0
+        jpeg = self._jpeg_pubs[index].get_subscription_count() > 0
+        if raw or jpeg:
+            rgba = render()
+            if raw:
+                image = self._image_msgs[index]
+                self._buffers[index].fill_from_rgba(rgba)
+                image.header.stamp = stamp
+                self._image_pubs[index].publish(image)
+            compressed = self._jpeg(index, rgba, stamp) if jpeg else None
+            if compressed is not None:
+                self._jpeg_pubs[index].publish(compressed)
         elif self._info_pubs[index].get_subscription_count() == 0:
             return
         info = self._info_msgs[index]
         info.header.stamp = stamp
         self._info_pubs[index].publish(info)
+
+    def _jpeg(self, index: int, rgba, stamp: Time) -> Optional[CompressedImage]:
+        import cv2  # (only for a compressed-image subscriber)
+        ok, data = cv2.imencode('.jpg', cv2.cvtColor(rgba, cv2.COLOR_RGBA2BGR),
+                                [cv2.IMWRITE_JPEG_QUALITY, self._jpeg_quality])
+        if not ok:
+            self.get_logger().error('a camera frame could not be encoded as JPEG',
+                                    throttle_duration_sec=5.0)
+            return None
+        msg = CompressedImage(format='rgb8; jpeg compressed bgr8', data=data.tobytes())
+        msg.header.stamp = stamp
+        msg.header.frame_id = self._image_msgs[index].header.frame_id
+        return msg
 
     def on_command_timeout(self, robot: str) -> None:
         self.get_logger().info(f'{robot}: no cmd_vel for {self._runner.guards[robot].timeout} s;'
