@@ -256,6 +256,11 @@ class TrajectoryFollower:
     def finished(self, t: float) -> bool:
         return not self._active.segments or t >= self._active.end_time
 
+    @property
+    def end_time(self) -> float:
+        """When the trajectory being followed ends (-inf when holding)."""
+        return self._active.end_time
+
 
 def _check_point(point: TrajectoryPoint, k: int, n: int) -> str:
     if len(point.positions) != n:

@@ -35,6 +35,7 @@ from sim_bridge.camera import ImageBuffer
 from sim_bridge.frames import FrameTransform, WorldFrames
 from sim_bridge.pacing import Pacer, RtfMeter
 from sim_bridge.runner import DriveLimits, SimRunner
+from sim_bridge.trajectory_action import TrajectoryActions
 from sim_bridge.world import SimWorld, WorldError
 from world_description.resources import resolve_resource
 from world_description.world_config import WorldConfigError, load_world
@@ -252,6 +253,10 @@ class SimNode(Node):
                                                       robot.config.frame_prefix)))
             self._description_pubs.append(pub)
 
+        self._actions = TrajectoryActions(
+            self, self._world, self._runner, _topic, lambda msg: trajectory_request(msg),
+            lambda: stamp_from_ns(self._world.sim_time_ns))
+
         self._materials_pub = None
         if self._world.source is not None:
             self._materials_pub = self.create_publisher(MarkerArray, '/cell/materials', history)
@@ -333,6 +338,7 @@ class SimNode(Node):
         sim_robot = self._world.robots[robot]
         if _wanted(self._tf_pub):
             self._publish_tf(robot, stamp)
+        self._actions.on_state(robot, time_ns * 1e-9)
         if _wanted(self._joint_pubs[robot]):
             js = sim_robot.joint_states()
             msg = JointState(name=js.names, position=js.positions, velocity=js.velocities,
@@ -479,6 +485,7 @@ class SimNode(Node):
         result = self._runner.set_trajectory(robot, controller, trajectory_request(msg))
         where = f'{robot}/{controller}'
         if result.accepted:
+            self._actions.preempt((robot, controller), 'preempted by a trajectory on the topic')
             self.get_logger().info(f'{where}: following a trajectory of {len(msg.points)} '
                                    f'points for {list(msg.joint_names)}')
         else:

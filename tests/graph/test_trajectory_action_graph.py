@@ -1,0 +1,110 @@
+"""The youBot's arm driven through control_msgs/FollowJointTrajectory with plain rclpy.action,
+as MoveIt and other action clients drive ros2_controllers' joint trajectory controller: success
+within goal tolerances, a path-tolerance abort, a cancel, a preemption and a rejected goal."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from action_msgs.msg import GoalStatus
+from control_msgs.action import FollowJointTrajectory
+from control_msgs.msg import JointTolerance
+from rclpy.action import ActionClient
+from trajectory_msgs.msg import JointTrajectoryPoint
+
+from controllers.youbot_arm import JOINT_NAMES
+from helpers import wait_for
+
+WORLD = 'world:=package://world_description/worlds/youbot.yaml'
+ACTION = '/youbot/arm_controller/follow_joint_trajectory'
+Result = FollowJointTrajectory.Result
+
+
+@pytest.fixture
+def arm(start_node, probe):
+    start_node('sim_node', '-p', WORLD, '-p', 'real_time_factor:=2.0')
+    client = ActionClient(probe.node, FollowJointTrajectory, ACTION)
+    wait_for(lambda: client.server_is_ready(), 30.0, what='the action server')
+    return client
+
+
+def _goal(positions, seconds, path=None, goal=None, goal_time=0.0, names=JOINT_NAMES):
+    point = JointTrajectoryPoint(positions=[float(p) for p in positions])
+    point.time_from_start.sec = int(seconds)
+    point.time_from_start.nanosec = int(round((seconds - int(seconds)) * 1e9))
+    g = FollowJointTrajectory.Goal()
+    g.trajectory.joint_names = list(names)
+    g.trajectory.points = [point]
+    g.path_tolerance = [JointTolerance(name=n, position=path) for n in names] if path else []
+    g.goal_tolerance = [JointTolerance(name=n, position=goal) for n in names] if goal else []
+    g.goal_time_tolerance.sec = int(goal_time)
+    g.goal_time_tolerance.nanosec = int(round((goal_time - int(goal_time)) * 1e9))
+    return g
+
+
+def _send(client, goal, feedback=None):
+    sent = client.send_goal_async(goal, feedback_callback=feedback)
+    wait_for(sent.done, 20.0, what='the goal response')
+    return sent.result()
+
+
+def _result(handle, timeout=60.0):
+    future = handle.get_result_async()
+    wait_for(future.done, timeout, what='the goal result')
+    return future.result()
+
+
+TARGET = (0.4, 0.5, -0.6, 0.7, 0.3)
+
+
+def test_a_goal_succeeds_within_its_goal_tolerance_with_feedback(arm):
+    feedback = []
+    handle = _send(arm, _goal(TARGET, 1.5, goal=0.02, goal_time=2.0), feedback.append)
+    assert handle.accepted
+    done = _result(handle)
+    assert done.status == GoalStatus.STATUS_SUCCEEDED
+    assert done.result.error_code == Result.SUCCESSFUL
+    assert len(feedback) > 10
+    last = feedback[-1].feedback
+    assert list(last.joint_names) == list(JOINT_NAMES)
+    assert np.max(np.abs(np.subtract(last.actual.positions, TARGET))) < 0.02
+
+
+def test_a_path_tolerance_violation_aborts_and_holds_the_arm(arm):
+    # A fast motion followed within a hundredth of a milliradian: impossible.
+    handle = _send(arm, _goal(TARGET, 1.0, path=1e-5))
+    done = _result(handle)
+    assert done.status == GoalStatus.STATUS_ABORTED
+    assert done.result.error_code == Result.PATH_TOLERANCE_VIOLATED
+    assert 'path tolerance violated' in done.result.error_string
+
+
+def test_a_cancel_stops_the_arm_where_it_is(arm):
+    feedback = []
+    handle = _send(arm, _goal(TARGET, 6.0), feedback.append)
+    wait_for(lambda: len(feedback) > 20, 30.0, what='the arm to be moving')
+    cancel = handle.cancel_goal_async()
+    wait_for(cancel.done, 20.0, what='the cancel response')
+    done = _result(handle)
+    assert done.status == GoalStatus.STATUS_CANCELED
+    # Held short of the target (6 s to get there; canceled well before).
+    reference = feedback[-1].feedback.desired.positions
+    assert np.max(np.abs(np.subtract(reference, TARGET))) > 0.1
+
+
+def test_a_new_goal_preempts_the_running_one(arm):
+    first = _send(arm, _goal(TARGET, 6.0))
+    assert first.accepted
+    second = _send(arm, _goal(np.zeros(5), 1.0, goal=0.03, goal_time=2.0))
+    assert second.accepted
+    preempted = _result(first)
+    # (JTC's report of a preempted goal: aborted, INVALID_GOAL, and why.)
+    assert preempted.status == GoalStatus.STATUS_ABORTED
+    assert preempted.result.error_code == Result.INVALID_GOAL
+    assert 'preempted by a new goal' in preempted.result.error_string
+    done = _result(second)
+    assert done.status == GoalStatus.STATUS_SUCCEEDED
+
+
+def test_a_goal_for_other_joints_is_rejected(arm):
+    handle = _send(arm, _goal(TARGET[:4], 1.0, names=JOINT_NAMES[:4]))
+    assert not handle.accepted
