@@ -97,6 +97,20 @@ if [ "$(cat "$STAMPS/workspace" 2>/dev/null)" != "$ws_hash" ] || [ ! -f "$WS/ins
     log "the environment provides ${provided[*]}: not building ours"
     rm -rf "${provided[@]/#/$WS/install/}" "${provided[@]/#/$WS/build/}"
   fi
+  # An interface package whose set of .msg/.srv/.action files changed is built from scratch:
+  # rosidl leaves a removed interface's generated code behind, and the type support then fails
+  # to load ("undefined symbol ..._convert_from_py").
+  interface_lists=()
+  for pkg_dir in "$WS"/src/sim_interfaces "$WS"/src/std_interfaces/*/; do
+    pkg="$(basename "$pkg_dir")"
+    list="$(cd "$pkg_dir" && find . -name '*.msg' -o -name '*.srv' -o -name '*.action' \
+      | LC_ALL=C sort | hash_of)"
+    if [ -f "$STAMPS/interfaces_$pkg" ] && [ "$(cat "$STAMPS/interfaces_$pkg")" != "$list" ]; then
+      log "$pkg: its interfaces changed, building it afresh"
+      rm -rf "$WS/build/$pkg" "$WS/install/$pkg"
+    fi
+    interface_lists+=("$pkg=$list")
+  done
   mkdir -p "$WS/log"
   (
     cd "$WS"
@@ -112,6 +126,9 @@ if [ "$(cat "$STAMPS/workspace" 2>/dev/null)" != "$ws_hash" ] || [ ! -f "$WS/ins
         tail -60 "$WS/log/last_build_output.txt" >&2
         die "colcon build failed (full output: ros_ws/log/last_build_output.txt)"; }
   )
+  for entry in "${interface_lists[@]}"; do
+    echo "${entry#*=}" > "$STAMPS/interfaces_${entry%%=*}"
+  done
   echo "$ws_hash" > "$STAMPS/workspace"
 fi
 log "ready: source scripts/env.sh to use the workspace"

@@ -209,3 +209,9 @@ class LockStepDriver:
             assert reply.success, reply.message
             steps -= n
         return reply
+
+
+def moving(state) -> bool:
+    """A control_msgs/JointTrajectoryControllerState whose reference moves: a trajectory is
+    being followed (holding, the reference velocity is exactly zero)."""
+    return any(v != 0.0 for v in state.reference.velocities)

@@ -77,16 +77,11 @@ def test_every_package_is_in_the_ament_index():
 
 
 def test_interface_package_generated_python_bindings():
-    from sim_interfaces.msg import (
-        JointTrajectoryControllerState,
-        MaterialDetection,
-        MaterialDetectionArray,
-    )
+    from sim_interfaces.msg import MaterialDetection, MaterialDetectionArray
     assert MaterialDetectionArray(detections=[MaterialDetection(id=3)]).detections[0].id == 3
     from sim_interfaces.srv import SolveIK, StepSimulation
     assert StepSimulation.Request(steps=3).steps == 3
     assert SolveIK.Request(execute=True).execute
-    assert JointTrajectoryControllerState(joint_names=['a']).joint_names == ['a']
     fields = StepSimulation.Response.get_fields_and_field_types()
     assert fields == {'success': 'boolean', 'message': 'string', 'commands_pending': 'boolean',
                       'step_count': 'uint64', 'sim_time': 'builtin_interfaces/Time'}

@@ -8,6 +8,7 @@ import time
 from typing import Dict, List, Optional
 
 from builtin_interfaces.msg import Time
+from control_msgs.msg import JointTrajectoryControllerState
 from geometry_msgs.msg import TransformStamped, Twist, TwistStamped
 from nav_msgs.msg import Odometry
 from rcl_interfaces.msg import IntegerRange, ParameterDescriptor, SetParametersResult
@@ -16,7 +17,7 @@ from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from rosgraph_msgs.msg import Clock as ClockMsg
 from sensor_msgs.msg import CameraInfo, CompressedImage, Image, JointState
-from sim_interfaces.msg import GripState, JointTrajectoryControllerState
+from sim_interfaces.msg import GripState
 from sim_interfaces.srv import StepSimulation
 from std_msgs.msg import Bool, String
 from std_srvs.srv import SetBool, Trigger
@@ -358,7 +359,7 @@ class SimNode(Node):
         for name, group in sim_robot.controllers.items():
             if _wanted(self._state_pubs[(robot, name)]):
                 self._state_pubs[(robot, name)].publish(
-                    _controller_state(group, stamp, self._world.sim_time))
+                    _controller_state(group, stamp))
         if robot not in self._odom_pubs or not _wanted(self._odom_pubs[robot]):
             return
         base = sim_robot.base_state()
@@ -616,11 +617,12 @@ def _wanted(publisher) -> bool:
     return publisher.get_subscription_count() > 0
 
 
-def _controller_state(group, stamp: Time, now: float) -> JointTrajectoryControllerState:
+def _controller_state(group, stamp: Time) -> JointTrajectoryControllerState:
+    """control_msgs' state of a joint trajectory controller. reference and feedback are
+    repeated in the deprecated desired and actual (Jazzy's JTC fills both)."""
     desired = group.desired
     position, velocity = group.actual()
-    msg = JointTrajectoryControllerState(joint_names=list(group.joint_names),
-                                         active=not group.follower.finished(now))
+    msg = JointTrajectoryControllerState(joint_names=list(group.joint_names))
     msg.header.stamp = stamp
     msg.reference.positions = desired.positions.tolist()
     msg.reference.velocities = desired.velocities.tolist()
@@ -631,6 +633,7 @@ def _controller_state(group, stamp: Time, now: float) -> JointTrajectoryControll
     msg.error.velocities = (desired.velocities - velocity).tolist()
     msg.output.positions = desired.positions.tolist()
     msg.output.effort = group.limits.effort.tolist()
+    msg.desired, msg.actual = msg.reference, msg.feedback
     return msg
 
 

@@ -6,15 +6,15 @@ import time
 import numpy as np
 import pytest
 import rclpy
+from control_msgs.msg import JointTrajectoryControllerState
 from geometry_msgs.msg import PoseStamped
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.parameter import Parameter
-from sim_interfaces.msg import JointTrajectoryControllerState
 from sim_interfaces.srv import SolveIK
 
 from controllers.transforms import matrix_to_quaternion, rotation_angle
 from controllers.youbot_kinematics import YoubotKinematics
-from helpers import Probe, wait_for
+from helpers import Probe, moving, wait_for
 
 RTF = 2.0
 
@@ -77,8 +77,8 @@ def test_kinematics_node_moves_the_simulated_arm_to_an_ik_target(start_node):
         reply = probe.call(SolveIK, '/youbot/solve_ik', request, timeout=20.0)
         assert reply.success, reply.message
         assert reply.position_error < 1e-4 and len(reply.trajectory.points) == 1
-        wait_for(lambda: states[-1][1].active, 10.0, what='the motion to start')
-        wait_for(lambda: not states[-1][1].active, 30.0, what='the motion to end')
+        wait_for(lambda: moving(states[-1][1]), 10.0, what='the motion to start')
+        wait_for(lambda: not moving(states[-1][1]), 30.0, what='the motion to end')
         time.sleep(0.5 / RTF)
         reached = sim.tcp_in_base_link()
         assert np.linalg.norm(reached[:3, 3] - target[:3, 3]) < 0.005

@@ -5,11 +5,11 @@ import time
 
 import numpy as np
 import pytest
+from control_msgs.msg import JointTrajectoryControllerState
 from geometry_msgs.msg import Twist, TwistStamped
 from nav_msgs.msg import Odometry
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
-from sim_interfaces.msg import JointTrajectoryControllerState
 from std_srvs.srv import Trigger
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
@@ -17,7 +17,7 @@ from controllers.base_fidelity import tracking_errors
 from controllers.diff_drive import Pose2D
 from controllers.transforms import yaw_from_quaternion
 from controllers.youbot_arm import JOINT_NAMES
-from helpers import NodeProcess, stamp_s, wait_for
+from helpers import NodeProcess, moving, stamp_s, wait_for
 
 WORLD = 'world:=package://world_description/worlds/youbot.yaml'
 RTF = 2.0
@@ -123,11 +123,11 @@ def test_arm_trajectory_reaches_its_goal_and_malformed_ones_are_rejected(youbot_
              what='arm topics')
     goal = (0.8, 0.6, 0.9, -0.5, 1.2)
     pub.publish(_trajectory(goal, 2.0))
-    wait_for(lambda: states[-1][1].active, 10.0, what='the trajectory to start')
-    wait_for(lambda: not states[-1][1].active, 20.0, what='the trajectory to end')
+    wait_for(lambda: moving(states[-1][1]), 10.0, what='the trajectory to start')
+    wait_for(lambda: not moving(states[-1][1]), 20.0, what='the trajectory to end')
     time.sleep(0.5 / RTF)
     assert _arm_positions(joints) == pytest.approx(goal, abs=2e-3)
-    tracked = [m for _, m in list(states) if m.active]
+    tracked = [m for _, m in list(states) if moving(m)]
     worst = max(max(abs(e) for e in m.error.positions) for m in tracked)
     assert worst < 0.02                               # rad while moving
     assert list(tracked[0].joint_names) == list(JOINT_NAMES)
@@ -236,11 +236,11 @@ def test_arm_tracking_can_be_analysed_from_a_bag(youbot_sim, probe, tmp_path):
                                           '/youbot/arm_controller/joint_trajectory', 10)
         wait_for(lambda: states and pub.get_subscription_count() > 0, 20.0, what='the arm')
         pub.publish(_trajectory((-0.7, 0.4, 1.0, 0.6, -1.0), 1.5))
-        wait_for(lambda: states[-1][1].active, 10.0, what='the trajectory to start')
-        wait_for(lambda: not states[-1][1].active, 20.0, what='the trajectory to end')
+        wait_for(lambda: moving(states[-1][1]), 10.0, what='the trajectory to start')
+        wait_for(lambda: not moving(states[-1][1]), 20.0, what='the trajectory to end')
         pub.publish(_trajectory(np.zeros(5), 1.5))
-        wait_for(lambda: states[-1][1].active, 10.0, what='the way back to start')
-        wait_for(lambda: not states[-1][1].active, 20.0, what='the way back to end')
+        wait_for(lambda: moving(states[-1][1]), 10.0, what='the way back to start')
+        wait_for(lambda: not moving(states[-1][1]), 20.0, what='the way back to end')
     finally:
         assert rec.stop() == 0
     report = write_report(tmp_path / 'arm', tmp_path / 'report')

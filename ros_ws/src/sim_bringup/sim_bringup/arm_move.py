@@ -13,10 +13,10 @@ import time
 from typing import Optional
 
 import rclpy
+from control_msgs.msg import JointTrajectoryControllerState
 from rcl_interfaces.msg import ParameterDescriptor
 from rclpy.node import Node
 from rclpy.qos import QoSProfile
-from sim_interfaces.msg import JointTrajectoryControllerState
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
 from controllers.youbot_arm import JOINT_NAMES
@@ -63,8 +63,10 @@ class ArmMove(Node):
     def _on_state(self, msg: JointTrajectoryControllerState) -> None:
         if self.sent_at is None or self.result is not None:
             return
-        self.started |= msg.active
-        if not (self.started and not msg.active):
+        # (Following a trajectory, the reference moves; holding, its velocity is exactly 0.)
+        moving = any(v != 0.0 for v in msg.reference.velocities)
+        self.started |= moving
+        if not (self.started and not moving):
             return
         index = {n: i for i, n in enumerate(msg.joint_names)}
         errors = {n: abs(msg.feedback.positions[index[n]] - t)
