@@ -44,6 +44,21 @@ if [ ${#missing[@]} -gt 0 ]; then
   fi
 fi
 
+# --- 1b. a ROS 2 sourced in this shell ---------------------------------------------------------
+# The project installs ROS 2 Jazzy as wheels into .venv. A system ROS 2 (/opt/ros/<distro>)
+# sourced in the same shell would put its own Python packages and libraries beside those:
+# two rclpy builds in one process. Stop, and say what to do, rather than mix them silently.
+sourced=""
+[ -n "${ROS_DISTRO:-}" ] && sourced="ROS_DISTRO=$ROS_DISTRO"
+for var in AMENT_PREFIX_PATH PYTHONPATH LD_LIBRARY_PATH; do
+  case ":${!var:-}:" in
+    *:/opt/ros/*) [ -n "$sourced" ] || sourced="$var has /opt/ros" ;;
+  esac
+done
+if [ -n "$sourced" ] && [ -z "${ROBOT_SIM_IGNORE_SOURCED_ROS:-}" ]; then
+  die "a system ROS 2 is sourced in this shell ($sourced): run this from a shell that has not sourced /opt/ros/*/setup.bash (on a full install, build ros_ws with colcon against it instead: see README, \"On a full ROS 2 install\")"
+fi
+
 # --- 2. virtualenv with exact pins ------------------------------------------------------------
 pyver="$("$PYTHON" -c 'import sys; print("%d.%d" % sys.version_info[:2])')"
 if [ -x "$VENV/bin/python" ]; then

@@ -146,3 +146,16 @@ def test_each_robot_description_names_the_frames_the_tree_publishes(cell):
         # Joint names as joint_states gives them, without the prefix.
         assert [j.get('name') for j in urdf.iter('joint')] == \
             [j.get('name') for j in original.iter('joint')]
+
+
+def test_launches_without_link_tf_give_each_robot_a_state_publisher_of_its_frames():
+    import xml.etree.ElementTree as ET
+
+    from sim_bringup.state_publishers import state_publishers
+    publishers = dict(state_publishers(PIPELINE_CELL))
+    assert sorted(publishers) == ['youbot', 'zu12']
+    for ns, params in publishers.items():
+        links = {link.get('name') for link in
+                 ET.fromstring(params['robot_description']).iter('link')}
+        assert f'{ns}/base_link' in links and all(n.startswith(f'{ns}/') for n in links)
+        assert params['use_sim_time'] is True

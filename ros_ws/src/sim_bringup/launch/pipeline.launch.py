@@ -3,6 +3,7 @@ vision node, the two arms' kinematics nodes and the coordinator, optionally reco
 
     ros2 launch sim_bringup pipeline.launch.py [synchronous:=true] [scenario_seed:=5]
         [belt_speed:=0.12] [real_time_factor:=1.0] [record:=false] [bag_dir:=bags]
+        [publish_link_tf:=true]
 
 The processes and their parameters are the trial runner's (coordinator/graph.py): this file
 only turns them into launch_ros Node actions. The result: `ros2 topic echo
@@ -16,6 +17,7 @@ from launch_ros.actions import Node
 
 from coordinator.graph import pipeline_graph
 from ros_common.dds import profile_environment
+from sim_bringup.state_publishers import state_publishers
 
 
 def _nodes(context):
@@ -27,10 +29,22 @@ def _nodes(context):
         int(arg('scenario_seed')), float(arg('belt_speed')), synchronous=synchronous,
         real_time_factor=None if synchronous else float(arg('real_time_factor')),
         record_dir=arg('bag_dir') if arg('record').lower() == 'true' else None, bag_name=None)
-    return [Node(package=n.package, executable=n.executable, name=None,
-                 namespace=n.namespace or None, output='screen',
-                 parameters=[dict(n.parameters)], remappings=list(n.remappings))
-            for n in graph]
+    link_tf = arg('publish_link_tf').lower() == 'true'
+    nodes = []
+    for n in graph:
+        parameters = dict(n.parameters)
+        if n.executable == 'sim_node':
+            parameters['publish_link_tf'] = link_tf
+        nodes.append(Node(package=n.package, executable=n.executable, name=None,
+                          namespace=n.namespace or None, output='screen',
+                          parameters=[parameters], remappings=list(n.remappings)))
+    if not link_tf:
+        # robot_state_publisher publishes the links from joint_states instead.
+        world = next(n.parameters['world'] for n in graph if n.executable == 'sim_node')
+        nodes += [Node(package='robot_state_publisher', executable='robot_state_publisher',
+                       namespace=ns, output='screen', parameters=[params])
+                  for ns, params in state_publishers(str(world))]
+    return nodes
 
 
 def generate_launch_description():
@@ -44,5 +58,6 @@ def generate_launch_description():
         DeclareLaunchArgument('real_time_factor', default_value='1.0'),
         DeclareLaunchArgument('record', default_value='false'),
         DeclareLaunchArgument('bag_dir', default_value='bags'),
+        DeclareLaunchArgument('publish_link_tf', default_value='true'),
         OpaqueFunction(function=_nodes),
     ])

@@ -2,7 +2,7 @@
 kinematics node, and optionally a recorder.
 
     ros2 launch sim_bringup youbot.launch.py [real_time_factor:=1.0] [gui:=false]
-        [record:=false] [bag_dir:=bags]
+        [record:=false] [bag_dir:=bags] [publish_link_tf:=true]
 
 Then drive it:
     ros2 run teleop teleop --ros-args -r __ns:=/youbot -p holonomic:=true
@@ -17,12 +17,24 @@ Then drive it:
 started one by one.)
 """
 from launch import LaunchDescription
-from launch.actions import DeclareLaunchArgument, SetEnvironmentVariable
+from launch.actions import DeclareLaunchArgument, OpaqueFunction, SetEnvironmentVariable
 from launch.conditions import IfCondition
 from launch.substitutions import LaunchConfiguration
 from launch_ros.actions import Node
 
 from ros_common.dds import profile_environment
+from sim_bringup.state_publishers import state_publishers
+
+WORLD = 'package://world_description/worlds/youbot.yaml'
+
+
+def _state_publishers(context):
+    # publish_link_tf:=false: robot_state_publisher publishes the links from joint_states.
+    if context.launch_configurations['publish_link_tf'].lower() == 'true':
+        return []
+    return [Node(package='robot_state_publisher', executable='robot_state_publisher',
+                 namespace=ns, output='screen', parameters=[params])
+            for ns, params in state_publishers(WORLD)]
 
 
 def generate_launch_description():
@@ -34,10 +46,13 @@ def generate_launch_description():
         DeclareLaunchArgument('gui', default_value='false'),
         DeclareLaunchArgument('record', default_value='false'),
         DeclareLaunchArgument('bag_dir', default_value='bags'),
+        DeclareLaunchArgument('publish_link_tf', default_value='true'),
         Node(package='sim_bridge', executable='sim_node', output='screen',
-             parameters=[{'world': 'package://world_description/worlds/youbot.yaml',
+             parameters=[{'world': WORLD,
                           'real_time_factor': LaunchConfiguration('real_time_factor'),
-                          'gui': LaunchConfiguration('gui')}]),
+                          'gui': LaunchConfiguration('gui'),
+                          'publish_link_tf': LaunchConfiguration('publish_link_tf')}]),
+        OpaqueFunction(function=_state_publishers),
         Node(package='arm_kinematics', executable='kinematics_node', namespace='youbot',
              output='screen'),
         Node(package='recording', executable='recorder', output='screen',
