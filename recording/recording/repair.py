@@ -4,20 +4,27 @@ A recorder killed with SIGKILL leaves no metadata.yaml and, for MCAP, no summary
 it flushed is intact: MCAP chunks that were written completely, SQLite rows that were
 committed. Repair reads exactly those and writes them into a new, complete bag beside the
 original, which is left untouched.
+
+The MCAP file is read with the ``mcap`` library's stream reader, which needs no summary and
+stops at the first incomplete record; SQLite rows are read with a cursor. Messages go to the
+new bag as they are read: nothing is held in memory but the schemas and channels.
 """
 from __future__ import annotations
 
 import argparse
-import io
 import shutil
 import sqlite3
 import struct
 import sys
 import tempfile
-from dataclasses import dataclass, field
+from contextlib import contextmanager
+from dataclasses import dataclass
 from pathlib import Path
-from typing import Dict, Iterator, List, Optional, Tuple
+from typing import Dict, Iterator, Optional, Tuple, Union
 
+from mcap.exceptions import EndOfFile, InvalidMagic, McapError
+from mcap.records import Channel, Message, Schema
+from mcap.stream_reader import StreamReader
 from rosbags.rosbag2 import StoragePlugin, Writer
 from rosbags.typesys import Stores, get_typestore
 
@@ -25,137 +32,106 @@ from recording.bag_writer import unique_bag_path
 from recording.qos_profiles import parse_offered_qos
 from recording.types import register_bag_definition
 
-MCAP_MAGIC = b'\x89MCAP0\r\n'
-OP_SCHEMA, OP_CHANNEL, OP_MESSAGE, OP_CHUNK, OP_FOOTER = 0x03, 0x04, 0x05, 0x06, 0x02
-
 
 class RepairError(RuntimeError):
     """Nothing recoverable, or not a bag directory."""
 
 
-@dataclass
-class Recovered:
-    schemas: Dict[int, Tuple[str, str]] = field(default_factory=dict)   # id -> (type, msgdef)
-    channels: Dict[int, Tuple[str, int, str]] = field(default_factory=dict)  # id -> (topic,
-    #                                                                 schema id, qos yaml)
-    messages: List[Tuple[int, int, bytes]] = field(default_factory=list)  # (channel, t, data)
-    truncated: bool = False
+@dataclass(frozen=True)
+class Topic:
+    """A recovered channel: topic name, message type and definition, offered QoS (YAML)."""
+    channel: int
+    topic: str
+    msgtype: str
+    msgdef: str
+    qos: str
 
 
-def _string(buf: io.BytesIO) -> str:
-    (n,) = struct.unpack('<I', _exact(buf, 4))
-    return _exact(buf, n).decode()
+# What a scan yields, in file order: a topic before the messages on it.
+Item = Union[Topic, Tuple[int, int, bytes]]        # or (channel, log time [ns], data)
 
 
-def _exact(buf, n: int) -> bytes:
-    data = buf.read(n)
-    if len(data) != n:
-        raise EOFError
-    return data
+class Scan:
+    """The recoverable records of one bag file, read lazily; ``truncated`` is set once the
+    scan met an incomplete record."""
+
+    def __init__(self, items: Iterator[Item]) -> None:
+        self._items = items
+        self.truncated = False
+
+    def __iter__(self) -> Iterator[Item]:
+        return self._items
 
 
-def _records(stream) -> Iterator[Tuple[int, bytes]]:
-    """(opcode, content) of each complete record; stops at the first incomplete one."""
-    while True:
-        head = stream.read(9)
-        if len(head) < 9:
-            return
-        op, length = head[0], struct.unpack('<Q', head[1:])[0]
-        content = stream.read(length)
-        if len(content) != length:
-            raise EOFError
-        yield op, content
+def scan_mcap(path: Path) -> Scan:
+    scan = Scan(iter(()))
+
+    def items() -> Iterator[Item]:
+        schemas: Dict[int, Schema] = {}
+        with open(path, 'rb') as stream:
+            try:
+                for record in StreamReader(stream, skip_magic=False).records:
+                    if isinstance(record, Schema):
+                        schemas[record.id] = record
+                    elif isinstance(record, Channel):
+                        schema = schemas.get(record.schema_id)
+                        if schema is not None:
+                            yield Topic(record.id, record.topic, schema.name,
+                                        schema.data.decode(),
+                                        record.metadata.get('offered_qos_profiles', ''))
+                    elif isinstance(record, Message):
+                        yield record.channel_id, record.log_time, record.data
+            except InvalidMagic:
+                raise RepairError(f'{path} is not an MCAP file') from None
+            except (EndOfFile, struct.error):
+                # (The reader raises struct.error when the file ends inside a record's
+                # opcode and length.)
+                scan.truncated = True
+            except McapError as exc:
+                # (A chunk cut short reads as a bad length or a failed decompression.)
+                scan.truncated = True
+                print(f'bag_repair: stopped at a damaged record: {exc}', file=sys.stderr)
+
+    scan._items = items()
+    return scan
 
 
-def scan_mcap(path: Path) -> Recovered:
-    found = Recovered()
-    with open(path, 'rb') as f:
-        if f.read(8) != MCAP_MAGIC:
-            raise RepairError(f'{path} is not an MCAP file')
-        try:
-            for op, content in _records(f):
-                if op == OP_CHUNK:
-                    _scan_chunk(content, found)
-                elif op in (OP_SCHEMA, OP_CHANNEL, OP_MESSAGE):
-                    _scan_record(op, content, found)
-                elif op == OP_FOOTER:
-                    break
-        except EOFError:
-            found.truncated = True
-    return found
-
-
-def _scan_chunk(content: bytes, found: Recovered) -> None:
-    buf = io.BytesIO(content)
-    _exact(buf, 8 + 8 + 8 + 4)  # start, end, uncompressed size, crc
-    compression = _string(buf)
-    (size,) = struct.unpack('<Q', _exact(buf, 8))
-    data = _exact(buf, size)
-    if compression == 'zstd':
-        try:
-            from compression import zstd  # Python >= 3.14
-        except ImportError:
-            from backports import zstd  # what rosbags itself uses before 3.14
-        data = zstd.decompress(data)
-    elif compression:
-        raise RepairError(f'unsupported chunk compression "{compression}"')
-    for op, rec in _records(io.BytesIO(data)):
-        _scan_record(op, rec, found)
-
-
-def _scan_record(op: int, content: bytes, found: Recovered) -> None:
-    buf = io.BytesIO(content)
-    if op == OP_SCHEMA:
-        (sid,) = struct.unpack('<H', _exact(buf, 2))
-        name, _encoding, data = _string(buf), _string(buf), _string(buf)
-        found.schemas[sid] = (name, data)
-    elif op == OP_CHANNEL:
-        cid, sid = struct.unpack('<HH', _exact(buf, 4))
-        topic, _encoding = _string(buf), _string(buf)
-        (meta_len,) = struct.unpack('<I', _exact(buf, 4))
-        meta = io.BytesIO(_exact(buf, meta_len))
-        entries = {}
-        while meta.tell() < meta_len:
-            key = _string(meta)
-            entries[key] = _string(meta)
-        found.channels[cid] = (topic, sid, entries.get('offered_qos_profiles', ''))
-    elif op == OP_MESSAGE:
-        cid, _seq, log_time, _pub_time = struct.unpack('<HIQQ', _exact(buf, 22))
-        found.messages.append((cid, log_time, content[22:]))
-
-
-def scan_sqlite(path: Path) -> Recovered:
+def scan_sqlite(path: Path) -> Scan:
     """What a sqlite3 bag's database holds, as committed. A writer killed in a transaction
     leaves a hot journal (or a write-ahead log) beside it that SQLite must roll back (or check)
     before it reads, and it cannot in a read-only connection ("attempt to write a readonly
     database"): the database is read from a copy made with those files, so the bag is left as
     it was."""
-    found = Recovered()
+    def items() -> Iterator[Item]:
+        with _sqlite_copy(path) as copy:
+            try:
+                db = sqlite3.connect(copy)
+                try:
+                    defs = {row[0]: row[1] for row in db.execute(
+                        'SELECT topic_type, encoded_message_definition FROM '
+                        'message_definitions')}
+                    for tid, name, msgtype, qos in db.execute(
+                            'SELECT id, name, type, offered_qos_profiles FROM topics'):
+                        yield Topic(tid, name, msgtype, defs.get(msgtype, ''), qos)
+                    yield from db.execute(
+                        'SELECT topic_id, timestamp, data FROM messages ORDER BY id')
+                finally:
+                    db.close()
+            except (sqlite3.DatabaseError, sqlite3.OperationalError) as exc:
+                raise RepairError(f'{path}: {exc}') from None
+
+    return Scan(items())
+
+
+@contextmanager
+def _sqlite_copy(path: Path) -> Iterator[Path]:
     with tempfile.TemporaryDirectory(prefix='repair_') as scratch:
         copy = Path(scratch) / path.name
         for suffix in ('', '-journal', '-wal', '-shm'):
             side = path.with_name(path.name + suffix)
             if side.exists():
                 shutil.copyfile(side, copy.with_name(copy.name + suffix))
-        _scan_sqlite_copy(copy, path, found)
-    return found
-
-
-def _scan_sqlite_copy(copy: Path, path: Path, found: Recovered) -> None:
-    try:
-        db = sqlite3.connect(copy)
-        defs = {row[0]: row[1] for row in db.execute(
-            'SELECT topic_type, encoded_message_definition FROM message_definitions')}
-        for tid, name, msgtype, qos in db.execute(
-                'SELECT id, name, type, offered_qos_profiles FROM topics'):
-            sid = len(found.schemas) + 1
-            found.schemas[sid] = (msgtype, defs.get(msgtype, ''))
-            found.channels[tid] = (name, sid, qos)
-        found.messages = list(db.execute(
-            'SELECT topic_id, timestamp, data FROM messages ORDER BY id'))
-        db.close()
-    except (sqlite3.DatabaseError, sqlite3.OperationalError) as exc:
-        raise RepairError(f'{path}: {exc}') from None
+        yield copy
 
 
 def repair(bag: Path, output: Optional[Path] = None) -> Tuple[Path, int, bool]:
@@ -165,31 +141,37 @@ def repair(bag: Path, output: Optional[Path] = None) -> Tuple[Path, int, bool]:
         raise RepairError(f'{bag} is not a bag directory')
     mcaps, dbs = sorted(bag.glob('*.mcap')), sorted(bag.glob('*.db3'))
     if mcaps:
-        found, plugin = scan_mcap(mcaps[0]), StoragePlugin.MCAP
+        scan, plugin = scan_mcap(mcaps[0]), StoragePlugin.MCAP
     elif dbs:
-        found, plugin = scan_sqlite(dbs[0]), StoragePlugin.SQLITE3
+        scan, plugin = scan_sqlite(dbs[0]), StoragePlugin.SQLITE3
     else:
         raise RepairError(f'{bag} holds no .mcap or .db3 file')
-    if not found.channels:
-        raise RepairError(f'{bag}: no topic was flushed before the recorder stopped')
     typestore = get_typestore(Stores.EMPTY)
     out = output or unique_bag_path(bag.parent, bag.name + '_repaired')
     writer = Writer(out, version=9, storage_plugin=plugin)
     writer.open()
     connections = {}
-    for cid, (topic, sid, qos) in sorted(found.channels.items()):
-        msgtype, msgdef = found.schemas[sid]
-        register_bag_definition(typestore, msgtype, msgdef)
-        connections[cid] = writer.add_connection(
-            topic, msgtype, msgdef=msgdef, rihs01=typestore.hash_rihs01(msgtype),
-            offered_qos_profiles=parse_offered_qos(qos))
     count = 0
-    for cid, timestamp, data in found.messages:
-        if cid in connections:
-            writer.write(connections[cid], timestamp, bytes(data))
-            count += 1
+    try:
+        for item in scan:
+            if isinstance(item, Topic):
+                register_bag_definition(typestore, item.msgtype, item.msgdef)
+                connections[item.channel] = writer.add_connection(
+                    item.topic, item.msgtype, msgdef=item.msgdef,
+                    rihs01=typestore.hash_rihs01(item.msgtype),
+                    offered_qos_profiles=parse_offered_qos(item.qos))
+            elif item[0] in connections:
+                writer.write(connections[item[0]], item[1], bytes(item[2]))
+                count += 1
+    except RepairError:
+        writer.close()
+        shutil.rmtree(out, ignore_errors=True)
+        raise
     writer.close()
-    return out, count, found.truncated
+    if not connections:
+        shutil.rmtree(out, ignore_errors=True)
+        raise RepairError(f'{bag}: no topic was flushed before the recorder stopped')
+    return out, count, scan.truncated
 
 
 def main(argv=None) -> int:

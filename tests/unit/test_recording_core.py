@@ -173,6 +173,24 @@ def test_repair_of_a_truncated_mcap_keeps_the_complete_chunks(tmp_path):
     assert len(_read_all(out)) == 100
 
 
+def test_repair_of_a_cut_zstd_bag_keeps_its_complete_chunks(tmp_path):
+    writer = BagWriter(tmp_path, 'cutz', 'mcap', compression='zstd')
+    writer.add_topic('/t', 'std_msgs/msg/String')
+    for i in range(300):
+        writer.write('/t', i, serialize_message(String(data=f'{i:04d}' * 50)))
+        if i % 100 == 99:
+            writer.flush()
+    writer.close()
+    mcap = next(writer.path.glob('*.mcap'))
+    data = mcap.read_bytes()
+    (writer.path / 'metadata.yaml').unlink()
+    mcap.write_bytes(data[:int(len(data) * 0.55)])
+    out, count, truncated = repair(writer.path)
+    assert truncated and count in (100, 200)        # whole chunks only
+    assert [raw for _, _, raw in _read_all(out)] == [
+        serialize_message(String(data=f'{i:04d}' * 50)) for i in range(count)]
+
+
 def test_repair_errors(tmp_path):
     with pytest.raises(RepairError, match='not a bag directory'):
         repair(tmp_path / 'missing')
