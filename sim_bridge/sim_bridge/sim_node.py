@@ -36,7 +36,7 @@ from sim_bridge.camera import ImageBuffer
 from sim_bridge.frames import FrameTransform, WorldFrames
 from sim_bridge.pacing import Pacer, RtfMeter
 from sim_bridge.runner import DriveLimits, SimRunner
-from sim_bridge.trajectory_action import TrajectoryActions
+from sim_bridge.trajectory_action import TrajectoryActions, fill_points
 from sim_bridge.world import SimWorld, WorldError
 from world_description.resources import resolve_resource
 from world_description.world_config import WorldConfigError, load_world
@@ -624,13 +624,8 @@ def _controller_state(group, stamp: Time) -> JointTrajectoryControllerState:
     position, velocity = group.actual()
     msg = JointTrajectoryControllerState(joint_names=list(group.joint_names))
     msg.header.stamp = stamp
-    msg.reference.positions = desired.positions.tolist()
-    msg.reference.velocities = desired.velocities.tolist()
+    fill_points(msg.reference, msg.feedback, msg.error, desired, position, velocity)
     msg.reference.accelerations = desired.accelerations.tolist()
-    msg.feedback.positions = position.tolist()
-    msg.feedback.velocities = velocity.tolist()
-    msg.error.positions = (desired.positions - position).tolist()
-    msg.error.velocities = (desired.velocities - velocity).tolist()
     msg.output.positions = desired.positions.tolist()
     msg.output.effort = group.limits.effort.tolist()
     msg.desired, msg.actual = msg.reference, msg.feedback

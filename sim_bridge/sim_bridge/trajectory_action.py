@@ -174,13 +174,20 @@ def _result(outcome: Outcome):
     return FollowJointTrajectory.Result(error_code=outcome.code, error_string=outcome.message)
 
 
+def fill_points(reference_point, feedback_point, error_point, reference, position,
+                velocity) -> None:
+    """A joint group's reference, feedback and their difference into three
+    trajectory_msgs/JointTrajectoryPoint (what JTC's state and feedback carry)."""
+    reference_point.positions = reference.positions.tolist()
+    reference_point.velocities = reference.velocities.tolist()
+    feedback_point.positions = position.tolist()
+    feedback_point.velocities = velocity.tolist()
+    error_point.positions = (reference.positions - position).tolist()
+    error_point.velocities = (reference.velocities - velocity).tolist()
+
+
 def _feedback(stamp, joint_names, reference, position, velocity):
     fb = FollowJointTrajectory.Feedback(joint_names=list(joint_names))
     fb.header.stamp = stamp
-    fb.desired.positions = reference.positions.tolist()
-    fb.desired.velocities = reference.velocities.tolist()
-    fb.actual.positions = position.tolist()
-    fb.actual.velocities = velocity.tolist()
-    fb.error.positions = (reference.positions - position).tolist()
-    fb.error.velocities = (reference.velocities - velocity).tolist()
+    fill_points(fb.desired, fb.actual, fb.error, reference, position, velocity)
     return fb

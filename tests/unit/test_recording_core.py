@@ -156,25 +156,9 @@ def test_repair_of_a_sqlite_bag_killed_in_a_transaction_reads_what_was_committed
     assert {p.name: p.read_bytes() for p in bag.iterdir()} == before
 
 
-def test_repair_of_a_truncated_mcap_keeps_the_complete_chunks(tmp_path):
-    writer = BagWriter(tmp_path, 'cut', 'mcap')
-    writer.add_topic('/t', 'std_msgs/msg/String')
-    for i in range(300):
-        writer.write('/t', i, serialize_message(String(data=f'{i:04d}' * 50)))
-        if i % 100 == 99:
-            writer.flush()
-    writer.close()
-    mcap = next(writer.path.glob('*.mcap'))
-    data = mcap.read_bytes()
-    (writer.path / 'metadata.yaml').unlink()
-    mcap.write_bytes(data[:int(len(data) * 0.55)])  # cut inside the second chunk
-    out, count, truncated = repair(writer.path)
-    assert truncated and count == 100
-    assert len(_read_all(out)) == 100
-
-
-def test_repair_of_a_cut_zstd_bag_keeps_its_complete_chunks(tmp_path):
-    writer = BagWriter(tmp_path, 'cutz', 'mcap', compression='zstd')
+def _cut_mcap(tmp_path, name, compression='none'):
+    """A bag of 300 messages flushed every 100, its metadata gone and its file cut at 55 %."""
+    writer = BagWriter(tmp_path, name, 'mcap', compression=compression)
     writer.add_topic('/t', 'std_msgs/msg/String')
     for i in range(300):
         writer.write('/t', i, serialize_message(String(data=f'{i:04d}' * 50)))
@@ -185,7 +169,17 @@ def test_repair_of_a_cut_zstd_bag_keeps_its_complete_chunks(tmp_path):
     data = mcap.read_bytes()
     (writer.path / 'metadata.yaml').unlink()
     mcap.write_bytes(data[:int(len(data) * 0.55)])
-    out, count, truncated = repair(writer.path)
+    return writer.path
+
+
+def test_repair_of_a_truncated_mcap_keeps_the_complete_chunks(tmp_path):
+    out, count, truncated = repair(_cut_mcap(tmp_path, 'cut'))  # cut in the second chunk
+    assert truncated and count == 100
+    assert len(_read_all(out)) == 100
+
+
+def test_repair_of_a_cut_zstd_bag_keeps_its_complete_chunks(tmp_path):
+    out, count, truncated = repair(_cut_mcap(tmp_path, 'cutz', compression='zstd'))
     assert truncated and count in (100, 200)        # whole chunks only
     assert [raw for _, _, raw in _read_all(out)] == [
         serialize_message(String(data=f'{i:04d}' * 50)) for i in range(count)]
