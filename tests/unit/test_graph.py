@@ -1,9 +1,10 @@
 """The pipeline run's node graph, described once (coordinator.graph)."""
 from coordinator.graph import CONTROL_RATE, GraphNode, parameter_text, pipeline_graph
+from world_description import PIPELINE_CELL
 
 
 def test_a_lock_step_trial_is_five_processes_that_agree_on_the_scenario():
-    graph = pipeline_graph(7, 0.13, world='file:///w.yaml', result_file='/r/result.json')
+    graph = pipeline_graph(7, 0.13, world=PIPELINE_CELL, result_file='/r/result.json')
     assert [n.name for n in graph] == ['sim_node', 'vision_node', 'zu12_kinematics',
                                        'youbot_kinematics', 'coordinator_node']
     by = {n.name: n for n in graph}
@@ -20,6 +21,9 @@ def test_a_lock_step_trial_is_five_processes_that_agree_on_the_scenario():
     assert not any('use_sim_time' in by[name].parameters for name in clockless)
     assert (by['zu12_kinematics'].namespace, by['youbot_kinematics'].namespace) == (
         'zu12', 'youbot')
+    # The IK servers name their frames as the simulator does: the world's frame prefixes.
+    assert by['zu12_kinematics'].parameters['frame_prefix'] == 'zu12/'
+    assert by['youbot_kinematics'].parameters['frame_prefix'] == 'youbot/'
 
 
 def test_real_time_publishes_the_clock_at_every_step_and_a_recorder_starts_first():
