@@ -8,11 +8,10 @@ from pathlib import Path
 from typing import Dict, Optional, Sequence
 
 from rosbags.interfaces import Connection, Qos
-from rosbags.rosbag2 import StoragePlugin, Writer, WriterError
+from rosbags.rosbag2 import StoragePlugin, WriterError
 from rosbags.rosbag2.enums import CompressionFormat, CompressionMode
-from rosbags.rosbag2.storage_mcap import McapWriter
-from rosbags.rosbag2.storage_sqlite3 import Sqlite3Writer
 
+from recording.storage import DurableWriter
 from recording.types import TypeResolver
 
 STORAGES = {'mcap': StoragePlugin.MCAP, 'sqlite3': StoragePlugin.SQLITE3}
@@ -52,14 +51,15 @@ def default_bag_name() -> str:
 class BagWriter:
     """One open bag. Messages are written as the serialized bytes they arrived in.
 
-    rosbags keeps MCAP messages in a 1 MiB in-memory chunk and commits SQLite only at close, so
-    a killed process would lose everything since the start. :meth:`flush` closes the pending
-    chunk and hands it to the operating system (MCAP), or commits (SQLite): called every half
-    second, a SIGKILL loses at most that much, and ``bag_repair`` restores the index.
+    Messages wait in a 1 MiB chunk in memory (MCAP) or an open transaction (SQLite).
+    :meth:`flush` ends the chunk and hands it to the operating system, or commits
+    (``recording.storage``): called every half second, a SIGKILL loses at most that much, and
+    ``bag_repair`` restores the index.
     """
 
     def __init__(self, output_dir: Path, name: Optional[str] = None, storage: str = 'mcap',
-                 resolver: Optional[TypeResolver] = None, compression: str = 'none') -> None:
+                 resolver: Optional[TypeResolver] = None, compression: str = 'none',
+                 chunk_crc: bool = False) -> None:
         if storage not in STORAGES:
             raise BagError(f'storage must be one of {sorted(STORAGES)}, got "{storage}"')
         if compression not in COMPRESSIONS:
@@ -68,12 +68,15 @@ class BagWriter:
         if compression != 'none' and storage != 'mcap':
             raise BagError(f'compression {compression} compresses MCAP chunks; {storage} bags '
                            'are written uncompressed (compression:=none)')
+        if chunk_crc and storage != 'mcap':
+            raise BagError(f'chunk_crc applies to MCAP chunks; {storage} bags have none')
         self.compression = compression
         self.storage = storage
         self.resolver = resolver or TypeResolver()
         for _ in range(100):
             self.path = unique_bag_path(Path(output_dir), name or default_bag_name())
-            self._writer = Writer(self.path, version=9, storage_plugin=STORAGES[storage])
+            self._writer = DurableWriter(self.path, version=9, storage_plugin=STORAGES[storage],
+                                         chunk_crc=chunk_crc)
             if compression == 'zstd':
                 self._writer.set_compression(CompressionMode.STORAGE, CompressionFormat.ZSTD)
             try:
@@ -103,13 +106,7 @@ class BagWriter:
 
     def flush(self) -> None:
         """Make everything written so far survive a killed process."""
-        storage = self._writer.storage
-        if isinstance(storage, McapWriter):
-            if storage.chunk.msgs:
-                storage.close_chunk()
-            storage.bio.flush()
-        elif isinstance(storage, Sqlite3Writer):
-            storage.conn.commit()
+        self._writer.flush()
 
     def close(self) -> None:
         """Finish the bag: index, summary and metadata.yaml."""

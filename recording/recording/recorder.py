@@ -38,6 +38,9 @@ class Recorder(Node):
         self.declare_parameter('compression', 'none', text(
             description='none, or zstd: MCAP chunks compressed with zstd (mcap storage only)',
             read_only=True))
+        self.declare_parameter('chunk_crc', False, text(
+            description='MCAP chunks carry a CRC-32, so readers tell a damaged chunk (about '
+                        '0.3 ms of CPU per MB)', read_only=True))
         self.declare_parameter('flush_period', 0.5, float_range(
             'Wall seconds between durable flushes: what a SIGKILL can lose', 0.05, 10.0))
         self.declare_parameter('discovery_period', 0.1, float_range(
@@ -53,7 +56,7 @@ class Recorder(Node):
             raise BagError(f'storage must be one of {sorted(STORAGES)}, got "{storage}"')
         self._depth = get('queue_depth')
         self._writer = BagWriter(Path(get('output_dir')), get('bag_name') or None, storage,
-                                 compression=get('compression'))
+                                 compression=get('compression'), chunk_crc=get('chunk_crc'))
         self._skipped: Set[str] = set()
         self._receiving: Set[str] = set()  # topics with a message written (or tried)
         self.dropped = 0

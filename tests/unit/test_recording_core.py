@@ -185,6 +185,39 @@ def test_repair_of_a_cut_zstd_bag_keeps_its_complete_chunks(tmp_path):
         serialize_message(String(data=f'{i:04d}' * 50)) for i in range(count)]
 
 
+def test_mcap_bag_follows_the_ros2_profile_and_checks_chunks_when_asked(tmp_path):
+    from mcap.reader import make_reader
+    from mcap.stream_reader import CRCValidationError
+    writer = BagWriter(tmp_path, 'crc', 'mcap', chunk_crc=True)
+    writer.add_topic('/t', 'std_msgs/msg/String', [bag_qos(RELIABLE, TRANSIENT_LOCAL, 1)])
+    payloads = [serialize_message(String(data=f'message {i:03d}')) for i in range(50)]
+    for i, data in enumerate(payloads):
+        writer.write('/t', i, data)
+    writer.close()
+    mcap = next(writer.path.glob('*.mcap'))
+    with open(mcap, 'rb') as stream:
+        reader = make_reader(stream, validate_crcs=True)
+        assert reader.get_header().profile == 'ros2'
+        assert [m.data for _, _, m in reader.iter_messages()] == payloads
+        summary = reader.get_summary()
+        schema, = summary.schemas.values()
+        channel, = summary.channels.values()
+        assert (schema.name, schema.encoding) == ('std_msgs/msg/String', 'ros2msg')
+        assert channel.message_encoding == 'cdr'
+        assert 'transient_local' in channel.metadata['offered_qos_profiles']
+        assert channel.metadata['topic_type_hash'].startswith('RIHS01_')
+        rosbag2, = reader.iter_metadata()
+        assert 'message_count: 50' in rosbag2.metadata['serialized_metadata']
+    data = bytearray(mcap.read_bytes())
+    at = data.index(b'message 025')
+    data[at + 8] ^= 0x01                       # one bit of one message
+    mcap.write_bytes(bytes(data))
+    with open(mcap, 'rb') as stream, pytest.raises(CRCValidationError):
+        list(make_reader(stream, validate_crcs=True).iter_messages())
+    with pytest.raises(BagError, match='chunk_crc'):
+        BagWriter(tmp_path, 'db', 'sqlite3', chunk_crc=True)
+
+
 def test_repair_errors(tmp_path):
     with pytest.raises(RepairError, match='not a bag directory'):
         repair(tmp_path / 'missing')
