@@ -34,6 +34,7 @@ from ros_common.params import float_range
 from ros_common.stamps import stamp_from_ns, to_seconds
 from sim_bridge.camera import ImageBuffer
 from sim_bridge.frames import FrameTransform, WorldFrames
+from sim_bridge.hold_watch import HoldWatch
 from sim_bridge.pacing import Pacer, RtfMeter
 from sim_bridge.runner import DriveLimits, SimRunner
 from sim_bridge.trajectory_action import TrajectoryActions, fill_points
@@ -254,6 +255,7 @@ class SimNode(Node):
                                                       robot.config.frame_prefix)))
             self._description_pubs.append(pub)
 
+        self._hold_watch = HoldWatch(self._world)
         self._actions = TrajectoryActions(
             self, self._world, self._runner, _topic, lambda msg: trajectory_request(msg),
             lambda: stamp_from_ns(self._world.sim_time_ns))
@@ -340,6 +342,9 @@ class SimNode(Node):
         if _wanted(self._tf_pub):
             self._publish_tf(robot, stamp)
         self._actions.on_state(robot, time_ns * 1e-9)
+        for report in self._hold_watch.update(time_ns * 1e-9):
+            (self.get_logger().warning if report.blocked else self.get_logger().info)(
+                report.text)
         if _wanted(self._joint_pubs[robot]):
             js = sim_robot.joint_states()
             msg = JointState(name=js.names, position=js.positions, velocity=js.velocities,
@@ -519,6 +524,7 @@ class SimNode(Node):
 
     def _on_reset(self, _request, response):
         self._runner.reset()
+        self._hold_watch = HoldWatch(self._world)     # (simulated time starts again)
         for robot in self._cmd_out_pubs:
             self._publish_applied(robot, self._world.sim_time_ns)
         for name in self._world.robots:

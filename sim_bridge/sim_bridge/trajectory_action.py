@@ -162,6 +162,10 @@ class TrajectoryActions:
             if outcome is None:
                 continue
             if not outcome.succeeded:
+                contacts = self._world.contacts_of(group)
+                if contacts:                # (why the arm is off: what it pushes against)
+                    outcome = Outcome(outcome.code,
+                                      f'{outcome.message}; in contact: {", ".join(contacts)}')
                 group.hold_current()        # (JTC holds position when it aborts)
             del self._running[key]
             running.outcome.set_result(outcome)

@@ -149,6 +149,19 @@ class SimRobot:
         for group in self.controllers.values():
             group.apply(t)
 
+    def link_name(self, link: int) -> str:
+        if link < 0:
+            return self._root_link()
+        return self.client.getJointInfo(self.body, link)[12].decode()
+
+    def links_moved_by(self, joints: Sequence[int]) -> frozenset:
+        """The links (PyBullet link indices) downstream of any of these joints."""
+        moved = set(joints)
+        for link in range(self.client.getNumJoints(self.body)):   # (parents come first)
+            if self.client.getJointInfo(self.body, link)[16] in moved:
+                moved.add(link)
+        return frozenset(moved)
+
     def joint_states(self) -> JointStates:
         states = self.client.getJointStates(self.body, self.movable)
         scale = self._report_scale
@@ -309,8 +322,13 @@ class JointGroup:
                                  f'joint "{joint}" needs velocity and effort limits > 0 in the '
                                  'URDF')
         self.limits = JointLimits(*(np.array([lim[i] for lim in limits]) for i in range(4)))
+        self.moved_links = robot.links_moved_by(self.joints)
         self.follower = TrajectoryFollower(config.joints, self.limits, np.zeros(len(limits)))
         self.desired = self.follower.sample(0.0)
+
+    @property
+    def robot(self) -> 'SimRobot':
+        return self._robot
 
     def hold_current(self) -> None:
         self.follower.hold(self._robot.joint_positions(self.joint_names))
@@ -409,6 +427,7 @@ class SimWorld:
         p.setTimeStep(time_step)
         p.setGravity(0.0, 0.0, config.gravity)
         self._build_floor(config.floor_size)
+        self._obstacle_names: Dict[int, str] = {}
         # Fixed cameras' floors in the default light, by camera (None: the floor is drawn in
         # each frame). False: the floor is drawn in every frame of every camera (a reference).
         self.floor_backdrops = True
@@ -538,6 +557,34 @@ class SimWorld:
             return None
         return FloorBackdrop(floor, rgba[floor][0])
 
+    def body_name(self, body: int, link: int = -1) -> str:
+        """What a body of the world is, for messages: 'the floor', 'youbot's arm_link_5', ..."""
+        if body == self.floor:
+            return 'the floor'
+        if body in self._obstacle_names:
+            return self._obstacle_names[body]
+        if self.conveyor is not None and body in (self.conveyor.body,
+                                                  getattr(self.conveyor, 'stop_body', None)):
+            return 'the conveyor'
+        for name, robot in self.robots.items():
+            if body == robot.body:
+                return f"{name}'s {robot.link_name(link)}"
+        for m in self.materials:
+            if body == m.body:
+                return f'material {m.index} ({m.color})'
+        return f'body {body}'
+
+    def contacts_of(self, group: 'JointGroup') -> List[str]:
+        """What the links a joint group moves touch: ['gripper_finger_link_l on the floor']."""
+        robot = group.robot
+        found = []
+        for c in self._p.getContactPoints(bodyA=robot.body):
+            if c[3] in group.moved_links and (c[2], c[4]) != (robot.body, c[3]):
+                text = f'{robot.link_name(c[3])} on {self.body_name(c[2], c[4])}'
+                if text not in found:
+                    found.append(text)
+        return found
+
     def close(self) -> None:
         try:
             self._p.disconnect()
@@ -563,5 +610,8 @@ class SimWorld:
             vis = p.createVisualShape(pybullet.GEOM_SPHERE, radius=s[0], rgbaColor=obstacle.color)
         if not obstacle.collision:
             col = -1
-        p.createMultiBody(0.0, col, vis, basePosition=obstacle.position,
-                          baseOrientation=p.getQuaternionFromEuler((0.0, 0.0, obstacle.yaw)))
+        body = p.createMultiBody(0.0, col, vis, basePosition=obstacle.position,
+                                 baseOrientation=p.getQuaternionFromEuler((0.0, 0.0,
+                                                                          obstacle.yaw)))
+        self._obstacle_names[body] = (f'the {obstacle.name}' if obstacle.name else
+                                      f'an obstacle ({obstacle.shape})')

@@ -213,3 +213,32 @@ def test_reset_returns_the_arm_to_its_start(youbot):
     _run_until(runner, 0.5)
     assert arm.actual()[0] == pytest.approx(np.zeros(5), abs=2e-3)
     assert not arm.follower.active
+
+
+def test_an_arm_pushed_against_the_floor_is_reported_with_what_it_touches(youbot):
+    """A target below the floor: the arm stops on it, off its reference (as arm_joint_4 at
+    0.86 rad against a held 0.72), and the hold watch names the contact; back in free space it
+    reports the arm at its reference again. A free pose is never reported."""
+    from sim_bridge.hold_watch import HoldWatch
+    robot, runner = youbot
+    world = runner.world
+    watch = HoldWatch(world)
+    reports = []
+
+    def move(goal, seconds):
+        request = TrajectoryRequest(JOINT_NAMES, (TrajectoryPoint(seconds, goal),))
+        assert runner.set_trajectory('youbot', 'arm_controller', request).accepted
+        for _ in range(int((seconds + 1.5) * HZ)):
+            runner.advance(1, Sink())
+            reports.extend(watch.update(world.sim_time))
+
+    move((0.0, 0.5, 0.5, 0.72, 0.0), 2.0)                     # free: held at the reference
+    assert reports == []
+    move((0.0, 1.5, 1.65, 0.72, 0.0), 3.0)                    # the fingers reach the floor
+    blocked, = reports
+    assert blocked.blocked and blocked.group == 'youbot/arm_controller'
+    assert 'arm_joint_4' in blocked.text or 'arm_joint_3' in blocked.text
+    assert 'gripper_finger_link' in blocked.text and 'on the floor' in blocked.text
+    move((0.0, 0.0, 0.0, 0.0, 0.0), 3.0)
+    assert [r.blocked for r in reports] == [True, False]
+    assert reports[-1].text == 'youbot/arm_controller is back at its reference'
