@@ -44,6 +44,24 @@ class ActionUser:
                 raise TimeoutError(f'timed out after {timeout} s waiting for {what}')
             self.executor.spin_once(timeout_sec=0.05)
 
+    def handshake(self, timeout: float) -> None:
+        """Wait until the server's answers reach this client. server_is_ready() says the client
+        sees the server; the server may not see the client's response reader yet, and Fast DDS
+        then drops the goal response after 100 ms ('client will not receive response'), which
+        a loaded machine's discovery can take. An empty goal, which the server rejects, is sent
+        until one answer arrives: the path works both ways from then on."""
+        end = time.monotonic() + timeout
+        while True:
+            sent = self.client.send_goal_async(FollowJointTrajectory.Goal())
+            answered = time.monotonic() + 1.0
+            while not sent.done() and time.monotonic() < min(answered, end):
+                self.executor.spin_once(timeout_sec=0.05)
+            if sent.done():
+                assert not sent.result().accepted
+                return
+            if time.monotonic() > end:
+                raise TimeoutError(f'no answer from the action server in {timeout} s')
+
     def close(self) -> None:
         self.executor.shutdown()
         self.node.destroy_node()
@@ -55,6 +73,7 @@ def arm(start_node):
     start_node('sim_node', '-p', WORLD, '-p', 'real_time_factor:=2.0')
     user = ActionUser()
     user.spin_until(user.client.server_is_ready, 30.0, 'the action server')
+    user.handshake(30.0)
     yield user
     user.close()
 
