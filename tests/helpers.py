@@ -13,6 +13,8 @@ from pathlib import Path
 from typing import Callable, Dict, List, Optional, Sequence
 
 import rclpy
+from control_msgs.action import FollowJointTrajectory
+from rclpy.action import ActionClient
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
 
@@ -215,3 +217,63 @@ def moving(state) -> bool:
     """A control_msgs/JointTrajectoryControllerState whose reference moves: a trajectory is
     being followed (holding, the reference velocity is exactly zero)."""
     return any(v != 0.0 for v in state.reference.velocities)
+
+
+class ActionUser:
+    """A FollowJointTrajectory client on a node of its own, spun only from the test's thread:
+    rclpy 7's ActionClient loses a goal response that a spinning thread takes before
+    send_goal_async has recorded the request ("Ignoring unexpected goal response",
+    ros2/rclpy#1123)."""
+
+    def __init__(self, action: str):
+        self.context = rclpy.Context()
+        rclpy.init(context=self.context)
+        self.node = rclpy.create_node('action_user', context=self.context)
+        self.executor = SingleThreadedExecutor(context=self.context)
+        self.executor.add_node(self.node)
+        self.client = ActionClient(self.node, FollowJointTrajectory, action)
+
+    def spin_until(self, condition, timeout: float, what: str) -> None:
+        end = time.monotonic() + timeout
+        while not condition():
+            if time.monotonic() > end:
+                raise TimeoutError(f'timed out after {timeout} s waiting for {what}')
+            self.executor.spin_once(timeout_sec=0.05)
+
+    def handshake(self, timeout: float) -> None:
+        """Wait until the server's answers reach this client. server_is_ready() says the client
+        sees the server; the server may not see the client's response reader yet, and Fast DDS
+        then drops the goal response after 100 ms ('client will not receive response'), which
+        a loaded machine's discovery can take. An empty goal, which the server rejects, is sent
+        until one answer arrives: the path works both ways from then on."""
+        end = time.monotonic() + timeout
+        while True:
+            sent = self.client.send_goal_async(FollowJointTrajectory.Goal())
+            answered = time.monotonic() + 1.0
+            while not sent.done() and time.monotonic() < min(answered, end):
+                self.executor.spin_once(timeout_sec=0.05)
+            if sent.done():
+                assert not sent.result().accepted
+                return
+            if time.monotonic() > end:
+                raise TimeoutError(f'no answer from the action server in {timeout} s')
+
+    def ready(self, timeout: float) -> None:
+        self.spin_until(self.client.server_is_ready, timeout, 'the action server')
+        self.handshake(timeout)
+
+    def send(self, goal, feedback=None):
+        """The goal's handle, once the server has answered."""
+        sent = self.client.send_goal_async(goal, feedback_callback=feedback)
+        self.spin_until(sent.done, 20.0, 'the goal response')
+        return sent.result()
+
+    def result(self, handle, timeout: float = 60.0):
+        future = handle.get_result_async()
+        self.spin_until(future.done, timeout, 'the goal result')
+        return future.result()
+
+    def close(self) -> None:
+        self.executor.shutdown()
+        self.node.destroy_node()
+        rclpy.try_shutdown(context=self.context)

@@ -42,3 +42,22 @@ def test_the_pipeline_demo_runs_the_scenario_prints_its_table_and_records(tmp_pa
     run = next(tmp_path.glob('pipeline-*'))
     assert (run / 'trial_000' / 'bag' / 'metadata.yaml').is_file()
     assert (run / 'report.md').is_file() and (run / 'youbot_paths.png').is_file()
+    # The bag decodes with mcap-ros2-support (no code shared with the writer) and holds the
+    # cell's TF tree, one tree under world, and both robots' descriptions.
+    from mcap.reader import make_reader
+    from mcap_ros2.decoder import DecoderFactory
+    edges, descriptions = set(), {}
+    with open(run / 'trial_000' / 'bag' / 'bag.mcap', 'rb') as stream:
+        reader = make_reader(stream, decoder_factories=[DecoderFactory()])
+        for _, channel, _, msg in reader.iter_decoded_messages(topics=[
+                '/tf', '/tf_static', '/youbot/robot_description', '/zu12/robot_description']):
+            if channel.topic.startswith('/tf'):
+                edges |= {(t.header.frame_id, t.child_frame_id) for t in msg.transforms}
+            else:
+                descriptions[channel.topic] = msg.data
+    parents, children = {p for p, _ in edges}, {c for _, c in edges}
+    assert parents - children == {'world'}
+    assert {('world', 'youbot/odom'), ('youbot/odom', 'youbot/base_link'),
+            ('world', 'zu12/base_link'), ('world', 'belt_camera_optical_frame'),
+            ('zu12/link_6', 'zu12/flange')} <= edges
+    assert all('<robot' in d for d in descriptions.values()) and len(descriptions) == 2

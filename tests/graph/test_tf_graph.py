@@ -1,15 +1,22 @@
 """TF from the simulator as tf2 and RViz take it: /tf_static latched, /tf at the state rate,
-one tree under ``world`` with every robot's frames prefixed. Standard messages only."""
+one tree under ``world`` with every robot's frames prefixed, each robot's description, and an
+arm driven through FollowJointTrajectory moving its frames. Standard messages only."""
 from __future__ import annotations
 
+import math
 import xml.etree.ElementTree as ET
 from typing import Dict, List, Set
 
+import pytest
+from control_msgs.action import FollowJointTrajectory
+from control_msgs.msg import JointTolerance
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+from sensor_msgs.msg import JointState
 from std_msgs.msg import String
 from tf2_msgs.msg import TFMessage
+from trajectory_msgs.msg import JointTrajectoryPoint
 
-from helpers import wait_for
+from helpers import ActionUser, wait_for
 from world_description import PIPELINE_CELL
 
 # tf2's own subscriptions: /tf_static transient local (it is published once), /tf volatile.
@@ -52,7 +59,7 @@ def _cell(start_node, probe, *args):
     return static, moving
 
 
-def test_the_cell_is_one_tf_tree_with_both_robots_and_the_camera(start_node, probe):
+def test_the_cell_is_one_tf_tree_with_both_robots_the_camera_and_an_arm_on_its_action(start_node, probe):
     static, moving = _cell(start_node, probe)
     assert len(static) == 1          # published once, latched
     edges = _edges(static + moving)
@@ -77,6 +84,45 @@ def test_the_cell_is_one_tf_tree_with_both_robots_and_the_camera(start_node, pro
     stamps = sorted({(t.header.stamp.sec, t.header.stamp.nanosec)
                      for _, m in moving for t in m.transforms})
     assert len(stamps) >= 3
+    # The Zu 12 driven through its FollowJointTrajectory action: joint_1 turns 0.3 rad, and
+    # so does zu12/link_1's transform in /tf.
+    joints = probe.collect(JointState, '/zu12/joint_states')
+    wait_for(lambda: joints, 10.0, what='/zu12/joint_states')
+    start = dict(zip(joints[-1][1].name, joints[-1][1].position))
+    before = _rotation(moving, 'zu12/link_1')
+    names = [f'joint_{i}' for i in range(1, 7)]
+    goal = FollowJointTrajectory.Goal()
+    goal.trajectory.joint_names = names
+    target = [start[n] + (0.3 if n == 'joint_1' else 0.0) for n in names]
+    goal.trajectory.points = [JointTrajectoryPoint(positions=target)]
+    goal.trajectory.points[0].time_from_start.sec = 2
+    goal.goal_tolerance = [JointTolerance(name=n, position=0.02) for n in names]
+    goal.goal_time_tolerance.sec = 2
+    arm = ActionUser('/zu12/arm_controller/follow_joint_trajectory')
+    try:
+        arm.ready(30.0)
+        handle = arm.send(goal)
+        assert handle.accepted
+        done = arm.result(handle)
+    finally:
+        arm.close()
+    assert done.result.error_code == FollowJointTrajectory.Result.SUCCESSFUL, \
+        done.result.error_string
+    moving.clear()
+    wait_for(lambda: len(moving) >= 3, 10.0, what='/tf after the motion')
+    turned = _angle_between(before, _rotation(moving, 'zu12/link_1'))
+    assert turned == pytest.approx(0.3, abs=0.03)
+
+
+def _rotation(batches: List, child: str):
+    r = next(t.transform.rotation for _, m in reversed(batches) for t in m.transforms
+             if t.child_frame_id == child)
+    return (r.x, r.y, r.z, r.w)
+
+
+def _angle_between(a, b) -> float:
+    dot = abs(sum(x * y for x, y in zip(a, b)))
+    return 2.0 * math.acos(min(1.0, dot))
 
 
 def test_without_link_tf_only_odometry_and_the_anchors_are_published(start_node, probe):

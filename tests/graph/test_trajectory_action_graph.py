@@ -3,77 +3,27 @@ as MoveIt and other action clients drive ros2_controllers' joint trajectory cont
 within goal tolerances, a path-tolerance abort, a cancel, a preemption and a rejected goal."""
 from __future__ import annotations
 
-import time
-
 import numpy as np
 import pytest
-import rclpy
 from action_msgs.msg import GoalStatus
 from control_msgs.action import FollowJointTrajectory
 from control_msgs.msg import JointTolerance
-from rclpy.action import ActionClient
-from rclpy.executors import SingleThreadedExecutor
 from sensor_msgs.msg import JointState
 from trajectory_msgs.msg import JointTrajectoryPoint
 
 from controllers.youbot_arm import JOINT_NAMES
-from helpers import wait_for
+from helpers import ActionUser, wait_for
 
 WORLD = 'world:=package://world_description/worlds/youbot.yaml'
 ACTION = '/youbot/arm_controller/follow_joint_trajectory'
 Result = FollowJointTrajectory.Result
 
 
-class ActionUser:
-    """An action client on a node of its own, spun only from the test's thread: rclpy 7's
-    ActionClient loses a goal response that a spinning thread takes before send_goal_async has
-    recorded the request ("Ignoring unexpected goal response", ros2/rclpy#1123)."""
-
-    def __init__(self):
-        self.context = rclpy.Context()
-        rclpy.init(context=self.context)
-        self.node = rclpy.create_node('action_user', context=self.context)
-        self.executor = SingleThreadedExecutor(context=self.context)
-        self.executor.add_node(self.node)
-        self.client = ActionClient(self.node, FollowJointTrajectory, ACTION)
-
-    def spin_until(self, condition, timeout: float, what: str) -> None:
-        end = time.monotonic() + timeout
-        while not condition():
-            if time.monotonic() > end:
-                raise TimeoutError(f'timed out after {timeout} s waiting for {what}')
-            self.executor.spin_once(timeout_sec=0.05)
-
-    def handshake(self, timeout: float) -> None:
-        """Wait until the server's answers reach this client. server_is_ready() says the client
-        sees the server; the server may not see the client's response reader yet, and Fast DDS
-        then drops the goal response after 100 ms ('client will not receive response'), which
-        a loaded machine's discovery can take. An empty goal, which the server rejects, is sent
-        until one answer arrives: the path works both ways from then on."""
-        end = time.monotonic() + timeout
-        while True:
-            sent = self.client.send_goal_async(FollowJointTrajectory.Goal())
-            answered = time.monotonic() + 1.0
-            while not sent.done() and time.monotonic() < min(answered, end):
-                self.executor.spin_once(timeout_sec=0.05)
-            if sent.done():
-                assert not sent.result().accepted
-                return
-            if time.monotonic() > end:
-                raise TimeoutError(f'no answer from the action server in {timeout} s')
-
-    def close(self) -> None:
-        self.executor.shutdown()
-        self.node.destroy_node()
-        rclpy.try_shutdown(context=self.context)
-
-
 @pytest.fixture
 def arm(start_node):
     start_node('sim_node', '-p', WORLD, '-p', 'real_time_factor:=2.0')
-    user = ActionUser()
-    user.spin_until(user.client.server_is_ready, 30.0, 'the action server')
-    user.handshake(30.0)
+    user = ActionUser(ACTION)
+    user.ready(30.0)
     yield user
     user.close()
 
@@ -92,27 +42,15 @@ def _goal(positions, seconds, path=None, goal=None, goal_time=0.0, names=JOINT_N
     return g
 
 
-def _send(arm, goal, feedback=None):
-    sent = arm.client.send_goal_async(goal, feedback_callback=feedback)
-    arm.spin_until(sent.done, 20.0, 'the goal response')
-    return sent.result()
-
-
-def _result(arm, handle, timeout=60.0):
-    future = handle.get_result_async()
-    arm.spin_until(future.done, timeout, 'the goal result')
-    return future.result()
-
-
 TARGET = (0.4, 0.5, -0.6, 0.7, 0.3)
 
 
 def test_a_goal_succeeds_within_its_goal_tolerance_with_feedback(arm, probe):
     joints = probe.collect(JointState, '/youbot/joint_states')
     feedback = []
-    handle = _send(arm, _goal(TARGET, 1.5, goal=0.02, goal_time=2.0), feedback.append)
+    handle = arm.send(_goal(TARGET, 1.5, goal=0.02, goal_time=2.0), feedback.append)
     assert handle.accepted
-    done = _result(arm, handle)
+    done = arm.result(handle)
     assert done.status == GoalStatus.STATUS_SUCCEEDED
     assert done.result.error_code == Result.SUCCESSFUL
     # (Feedback and result travel on different topics: feedback may still be on its way.)
@@ -131,8 +69,8 @@ def test_a_goal_succeeds_within_its_goal_tolerance_with_feedback(arm, probe):
 
 def test_a_path_tolerance_violation_aborts_and_holds_the_arm(arm):
     # A fast motion followed within a hundredth of a milliradian: impossible.
-    handle = _send(arm, _goal(TARGET, 1.0, path=1e-5))
-    done = _result(arm, handle)
+    handle = arm.send(_goal(TARGET, 1.0, path=1e-5))
+    done = arm.result(handle)
     assert done.status == GoalStatus.STATUS_ABORTED
     assert done.result.error_code == Result.PATH_TOLERANCE_VIOLATED
     assert 'path tolerance violated' in done.result.error_string
@@ -140,11 +78,11 @@ def test_a_path_tolerance_violation_aborts_and_holds_the_arm(arm):
 
 def test_a_cancel_stops_the_arm_where_it_is(arm):
     feedback = []
-    handle = _send(arm, _goal(TARGET, 6.0), feedback.append)
+    handle = arm.send(_goal(TARGET, 6.0), feedback.append)
     arm.spin_until(lambda: len(feedback) > 20, 30.0, 'the arm to be moving')
     cancel = handle.cancel_goal_async()
     arm.spin_until(cancel.done, 20.0, 'the cancel response')
-    done = _result(arm, handle)
+    done = arm.result(handle)
     assert done.status == GoalStatus.STATUS_CANCELED
     # Held short of the target (6 s to get there; canceled well before).
     reference = feedback[-1].feedback.desired.positions
@@ -152,19 +90,19 @@ def test_a_cancel_stops_the_arm_where_it_is(arm):
 
 
 def test_a_new_goal_preempts_the_running_one(arm):
-    first = _send(arm, _goal(TARGET, 6.0))
+    first = arm.send(_goal(TARGET, 6.0))
     assert first.accepted
-    second = _send(arm, _goal(np.zeros(5), 1.0, goal=0.03, goal_time=2.0))
+    second = arm.send(_goal(np.zeros(5), 1.0, goal=0.03, goal_time=2.0))
     assert second.accepted
-    preempted = _result(arm, first)
+    preempted = arm.result(first)
     # (JTC's report of a preempted goal: aborted, INVALID_GOAL, and why.)
     assert preempted.status == GoalStatus.STATUS_ABORTED
     assert preempted.result.error_code == Result.INVALID_GOAL
     assert 'preempted by a new goal' in preempted.result.error_string
-    done = _result(arm, second)
+    done = arm.result(second)
     assert done.status == GoalStatus.STATUS_SUCCEEDED
 
 
 def test_a_goal_for_other_joints_is_rejected(arm):
-    handle = _send(arm, _goal(TARGET[:4], 1.0, names=JOINT_NAMES[:4]))
+    handle = arm.send(_goal(TARGET[:4], 1.0, names=JOINT_NAMES[:4]))
     assert not handle.accepted
