@@ -59,7 +59,7 @@ def _cell(start_node, probe, *args):
     return static, moving
 
 
-def test_the_cell_is_one_tf_tree_with_both_robots_the_camera_and_an_arm_on_its_action(start_node, probe):
+def test_the_cell_is_one_tf_tree_and_an_arm_moves_on_its_action(start_node, probe):
     static, moving = _cell(start_node, probe)
     assert len(static) == 1          # published once, latched
     edges = _edges(static + moving)
