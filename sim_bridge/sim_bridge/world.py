@@ -323,6 +323,9 @@ class JointGroup:
                                  'URDF')
         self.limits = JointLimits(*(np.array([lim[i] for lim in limits]) for i in range(4)))
         self.moved_links = robot.links_moved_by(self.joints)
+        self._effort = self.limits.effort.tolist()
+        self._max_velocity = self.limits.velocity.tolist()
+        self._motor_targets: Optional[Tuple[list, list]] = None   # as last sent to PyBullet
         self.follower = TrajectoryFollower(config.joints, self.limits, np.zeros(len(limits)))
         self.desired = self.follower.sample(0.0)
 
@@ -333,17 +336,24 @@ class JointGroup:
     def hold_current(self) -> None:
         self.follower.hold(self._robot.joint_positions(self.joint_names))
         self.desired = self.follower.sample(0.0)
+        self._motor_targets = None
 
     def apply(self, t: float) -> None:
         self.desired = state = self.follower.sample(t)
+        # PyBullet keeps a motor's settings until they are set again: a group holding still
+        # is not sent the same targets 240 times a second.
+        targets = (state.positions.tolist(), state.velocities.tolist())
+        if targets == self._motor_targets:
+            return
+        self._motor_targets = targets
         p, body = self._robot.client, self._robot.body
         c = self.config
+        effort, velocity = self._effort, self._max_velocity
         for i, joint in enumerate(self.joints):
             p.setJointMotorControl2(body, joint, pybullet.POSITION_CONTROL,
-                                    targetPosition=state.positions[i],
-                                    targetVelocity=state.velocities[i],
-                                    force=self.limits.effort[i],
-                                    maxVelocity=self.limits.velocity[i],
+                                    targetPosition=targets[0][i],
+                                    targetVelocity=targets[1][i],
+                                    force=effort[i], maxVelocity=velocity[i],
                                     positionGain=c.position_gain, velocityGain=c.velocity_gain)
 
     def actual(self) -> Tuple[np.ndarray, np.ndarray]:
