@@ -68,6 +68,15 @@ class CommandGuard:
         self._stamp = None
 
 
+TWIST_FIELDS = ('linear.x', 'linear.y', 'linear.z', 'angular.x', 'angular.y', 'angular.z')
+
+
+def non_finite_fields(values: Sequence[float], names: Sequence[str] = TWIST_FIELDS) -> str:
+    """The fields of a message that are NaN or infinite, as 'angular.x=nan', or ''. A sender
+    that puts one in any field, even one the robot does not use, is broken: stop."""
+    return ', '.join(f'{n}={v}' for n, v in zip(names, values) if not math.isfinite(v))
+
+
 def rate_limited(current: Sequence[float], target: Sequence[float],
                  max_steps: Sequence[float]) -> Tuple[float, ...]:
     """``target``, reached from ``current`` by at most ``max_steps`` per component (an

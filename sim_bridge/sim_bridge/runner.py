@@ -137,6 +137,11 @@ class SimRunner:
         self._timed_out[robot] = False
         return result
 
+    def reject(self, robot: str) -> None:
+        """A broken command: the robot stops from the next step on, as if it had timed out."""
+        self.guards[robot].stop()
+        self._timed_out[robot] = False
+
     def set_trajectory(self, robot: str, controller: str,
                        request: TrajectoryRequest) -> TrajectoryResult:
         """Validate a trajectory for a joint group and, if valid, follow it from now."""

@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import functools
 import math
+import re
 import sys
 import time
 from typing import Dict, List, Optional
@@ -25,10 +26,12 @@ from tf2_msgs.msg import TFMessage
 from trajectory_msgs.msg import JointTrajectory
 from visualization_msgs.msg import Marker, MarkerArray
 
+from controllers.cmd_guard import non_finite_fields
 from controllers.joint_trajectory import TrajectoryPoint, TrajectoryRequest
 from controllers.lockstep import CommandBarrier
 from controllers.transforms import matrix_to_quaternion
 from robot_description import with_frame_prefix
+from ros_common.log_limit import KeyedLimiter
 from ros_common.node_main import run_node
 from ros_common.params import float_range
 from ros_common.stamps import stamp_from_ns, to_seconds
@@ -256,6 +259,8 @@ class SimNode(Node):
             self._description_pubs.append(pub)
 
         self._hold_watch = HoldWatch(self._world)
+        # Rejected and clamped commands: a line a second per robot, topic and kind.
+        self._rejections = KeyedLimiter(1.0)
         self._actions = TrajectoryActions(
             self, self._world, self._runner, _topic, lambda msg: trajectory_request(msg),
             lambda: stamp_from_ns(self._world.sim_time_ns))
@@ -471,6 +476,13 @@ class SimNode(Node):
     def _on_cmd_vel(self, robot: str, msg) -> None:
         self._command_arrived()
         twist = msg.twist if isinstance(msg, TwistStamped) else msg
+        broken = non_finite_fields((twist.linear.x, twist.linear.y, twist.linear.z,
+                                    twist.angular.x, twist.angular.y, twist.angular.z))
+        if broken:
+            self._runner.reject(robot)
+            self._warn((robot, 'cmd_vel', _NUMBERS.sub('#', broken)),
+                       f'{robot}/cmd_vel rejected: non-finite {broken}; stopping')
+            return
         holonomic = self._runner.holonomic(robot)
         if twist.linear.y != 0.0 and not holonomic:
             self.get_logger().warn(f'{robot}/cmd_vel: linear.y {twist.linear.y:.3f} ignored: a '
@@ -478,13 +490,19 @@ class SimNode(Node):
                                    throttle_duration_sec=5.0)
         result = self._runner.command(robot, twist.linear.x, twist.linear.y, twist.angular.z)
         if not result.accepted:
-            self.get_logger().warn(f'{robot}/cmd_vel: {result.reason}', throttle_duration_sec=1.0)
+            self._warn((robot, 'cmd_vel', 'rejected'), f'{robot}/cmd_vel: {result.reason}')
         elif result.clamped:
             asked = ((twist.linear.x, twist.linear.y, twist.angular.z) if holonomic
                      else (twist.linear.x, twist.angular.z))
-            self.get_logger().warn(
-                f'{robot}/cmd_vel {_fmt(asked)} clamped to {_fmt(result.command)} '
-                f'(limits {_fmt(self._runner.guards[robot].limits)})', throttle_duration_sec=1.0)
+            self._warn((robot, 'cmd_vel', 'clamped'),
+                       f'{robot}/cmd_vel {_fmt(asked)} clamped to {_fmt(result.command)} '
+                       f'(limits {_fmt(self._runner.guards[robot].limits)})')
+
+    def _warn(self, key: tuple, message: str) -> None:
+        """A warning per robot, topic and kind, at most one a second, counting those held."""
+        text = self._rejections.text(key, time.monotonic(), message)
+        if text is not None:
+            self.get_logger().warn(text)
 
     def _on_trajectory(self, robot: str, controller: str, msg: JointTrajectory) -> None:
         self._command_arrived()
@@ -495,8 +513,11 @@ class SimNode(Node):
             self.get_logger().info(f'{where}: following a trajectory of {len(msg.points)} '
                                    f'points for {list(msg.joint_names)}')
         else:
-            self.get_logger().error(f'{where}: trajectory rejected: {result.reason}; holding '
-                                    'position', throttle_duration_sec=0.2)
+            text = self._rejections.text(
+                (robot, controller, _NUMBERS.sub('#', result.reason)), time.monotonic(),
+                f'{where}: trajectory rejected: {result.reason}; holding position')
+            if text is not None:
+                self.get_logger().error(text)
 
     def _on_suction(self, robot: str, request, response):
         suction = self._world.suctions[robot]
@@ -514,12 +535,21 @@ class SimNode(Node):
 
     def _on_set_parameters(self, params):
         for param in params:
-            if param.name == 'belt_speed' and param.value >= 0.0:
-                if self._world.conveyor is None:
-                    return SetParametersResult(successful=False,
-                                               reason='this world has no conveyor')
-                self._world.conveyor.speed = param.value
-                self.get_logger().info(f'belt speed {param.value:.3f} m/s')
+            if param.name != 'belt_speed':
+                continue
+            conveyor = self._world.conveyor
+            if conveyor is None:
+                return SetParametersResult(successful=False, reason='this world has no conveyor')
+            speed = float(param.value)
+            if speed == -1.0:
+                speed = conveyor.config.belt_speed            # the world file's
+            elif not speed >= 0.0:
+                # (The belt runs one way: a negative speed would have been "set" and ignored.)
+                return SetParametersResult(successful=False, reason=(
+                    f'belt_speed {speed} m/s: the belt runs forward only (>= 0, or -1 for the '
+                    "world file's)"))
+            conveyor.speed = speed
+            self.get_logger().info(f'belt speed {speed:.3f} m/s')
         return SetParametersResult(successful=True)
 
     def _on_reset(self, _request, response):
@@ -616,6 +646,10 @@ def _transform(t: FrameTransform, stamp: Time) -> TransformStamped:
     tr.x, tr.y, tr.z = (float(v) for v in t.translation)
     q.x, q.y, q.z, q.w = (float(v) for v in t.rotation)
     return out
+
+
+# Numbers in a rejection's reason: two reasons that differ only in them are of one kind.
+_NUMBERS = re.compile(r'-?\d[\d.e+-]*|nan|inf')
 
 
 def _wanted(publisher) -> bool:

@@ -149,7 +149,8 @@ def test_nan_is_rejected_the_robot_stops_and_the_node_lives(start_node, probe):
     assert sim.alive()
     lockstep.send(0.0, math.inf)
     assert lockstep.reply(lockstep.step(1, commands=1)).success
-    wait_for(lambda: 'non-finite command' in sim.output(), 5.0, what='rejection warning')
+    wait_for(lambda: 'cmd_vel rejected: non-finite angular.z=inf' in sim.output(), 5.0,
+             what='rejection warning')
     again = lockstep.hold(0.1, 0.0, 120)
     assert lockstep.odom_at(again.sim_time).twist.twist.linear.x == pytest.approx(0.1, rel=0.05)
 

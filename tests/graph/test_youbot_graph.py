@@ -274,3 +274,24 @@ def test_arm_move_sends_a_trajectory_and_reports_the_result(youbot_sim, tmp_path
                        name='arm_move_home')
     wait_for(lambda: not home.alive(), 60.0, what='arm_move home')
     assert home.stop() == 0
+
+
+def test_a_nan_in_any_twist_field_stops_the_base(youbot_sim, probe):
+    """Issue 15, finding 8: angular.x NaN beside a valid linear.x was ignored, and the youBot
+    drove on at full speed. A non-finite value in any field means the sender is broken."""
+    base = Base(probe)
+    applied = probe.collect(TwistStamped, '/youbot/cmd_vel_out')
+    assert probe.call(Trigger, '/sim_node/reset', Trigger.Request()).success
+    base.hold((0.3, 0.0, 0.0), 0.5)                      # (ends with a stop: drive again)
+    base.send(0.3, 0.0, 0.0)
+    wait_for(lambda: applied and applied[-1][1].twist.linear.x > 0.25, 10.0,
+             what='the base driving')
+    bad = Twist()
+    bad.linear.x, bad.angular.x = 0.3, math.nan
+    base.pub.publish(bad)
+    wait_for(lambda: applied[-1][1].twist.linear.x == 0.0, 10.0, what='the base stopped')
+    t_stop = stamp_s(applied[-1][1].header.stamp)
+    time.sleep(0.5 / RTF)
+    assert [m.twist.linear.x for _, m in list(applied)
+            if stamp_s(m.header.stamp) > t_stop] == []       # it stays stopped
+    assert 'non-finite angular.x=nan' in youbot_sim.output()

@@ -3,7 +3,7 @@ import math
 
 import pytest
 
-from controllers.cmd_guard import CommandGuard, rate_limited
+from controllers.cmd_guard import CommandGuard, non_finite_fields, rate_limited
 
 
 def make():
@@ -35,6 +35,13 @@ def test_non_finite_is_rejected_and_stops(bad):
     assert not result.accepted
     assert 'non-finite' in result.reason
     assert guard.active_command(0.1) == (0.0, 0.0)
+
+
+def test_a_non_finite_value_in_any_twist_field_is_named():
+    assert non_finite_fields((0.3, 0.0, 0.0, 0.0, 0.0, 0.0)) == ''
+    assert non_finite_fields((0.3, 0.0, 0.0, math.nan, 0.0, 0.0)) == 'angular.x=nan'
+    assert non_finite_fields((0.0, math.inf, 0.0, 0.0, -math.inf, 0.0)) == \
+        'linear.y=inf, angular.y=-inf'
 
 
 def test_timeout_stops_after_silence():
