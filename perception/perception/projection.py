@@ -33,6 +33,29 @@ class CameraModel:
         return uvw[:, :2] / uvw[:, 2:3]
 
 
+def intrinsics_problem(width: int, height: int, k: ArrayLike) -> str:
+    """Why a camera_info cannot be used ('' if it can): a size, and a pinhole K (row-major 3x3)
+    that is finite, with positive focal lengths, the principal point inside the image and
+    (0, 0, 1) as its last row."""
+    values = np.asarray(k, float).ravel()
+    if width <= 0 or height <= 0:
+        return f'size {width}x{height}'
+    if values.size != 9:
+        return f'K has {values.size} values, not 9'
+    if not np.all(np.isfinite(values)):
+        return f'K is not finite: {values.tolist()}'
+    fx, skew, cx, _, fy, cy = values[:6]
+    if not (fx > 0.0 and fy > 0.0):
+        return f'focal lengths fx {fx:g}, fy {fy:g} must be > 0'
+    if not (0.0 < cx < width and 0.0 < cy < height):
+        return f'principal point ({cx:g}, {cy:g}) outside the {width}x{height} image'
+    if values[6:].tolist() != [0.0, 0.0, 1.0]:
+        return f"K's last row is {values[6:].tolist()}, not [0, 0, 1]"
+    if abs(skew) > max(fx, fy):
+        return f'skew {skew:g} exceeds the focal length'
+    return ''
+
+
 def pixel_to_plane(camera: CameraModel, u: float, v: float, plane_z: float) -> np.ndarray:
     """Where the ray through (u, v) meets the horizontal plane z = plane_z (world)."""
     d = camera.ray(u, v)

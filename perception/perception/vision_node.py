@@ -23,7 +23,7 @@ from rclpy.subscription import Subscription
 from sensor_msgs.msg import CameraInfo, Image
 from sim_interfaces.msg import MaterialDetection, MaterialDetectionArray
 
-from perception.projection import CameraModel
+from perception.projection import CameraModel, intrinsics_problem
 from perception.segmentation import DEFAULT_CLASSES, ColorClass
 from perception.tracker import Tracker
 from perception.vision import MaterialVision
@@ -185,11 +185,15 @@ class VisionNode(Node):
         key = (msg.width, msg.height, tuple(msg.k))
         if key == self._info_key:
             return
-        k = np.asarray(msg.k, float).reshape(3, 3)
-        if msg.width == 0 or msg.height == 0 or k[0, 0] <= 0.0 or k[1, 1] <= 0.0:
-            self.get_logger().warn('camera_info without a usable size or K ignored',
-                                   throttle_duration_sec=5.0)
+        problem = intrinsics_problem(msg.width, msg.height, msg.k)
+        if problem:
+            # (A NaN in K used to pass and blind the node until a valid camera_info came.)
+            self.get_logger().warn(
+                f'camera_info ignored: {problem}; '
+                + ('keeping the one in use' if self._vision is not None else 'no frames used'),
+                throttle_duration_sec=5.0)
             return
+        k = np.asarray(msg.k, float).reshape(3, 3)
         position, rotation = self._pose
         camera = CameraModel(k, rotation, position)
         self._vision = MaterialVision(camera, msg.width, msg.height, self._support, self._size,

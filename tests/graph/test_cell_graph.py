@@ -135,6 +135,16 @@ def test_unusable_frames_are_rejected_with_a_warning(start_node, probe):
         return bool(detections)
     wait_for(processed, 10.0, period=0.2, what='a good frame processed')
     assert detections[-1][1].detections == [] and vision.alive()
+    # A camera_info with NaN in K is refused, and the one in use kept (issue 15, finding 7: it
+    # was taken, and the node went blind until a valid one came).
+    nan_info = CameraInfo(width=320, height=240,
+                          k=[float('nan'), 0.0, 160.0, 0.0, 290.0, 119.0, 0.0, 0.0, 1.0])
+
+    def refused():
+        info_pub.publish(nan_info)
+        return 'camera_info ignored: K is not finite' in vision.output()
+    wait_for(refused, 10.0, period=0.2, what='the NaN camera_info refused')
+    assert 'keeping the one in use' in vision.output()
 
 
 def test_the_vision_node_takes_frames_only_while_something_reads_its_output(start_node, probe):

@@ -141,3 +141,20 @@ def test_accuracy_on_simulator_frames_with_noise():
         per_material[key] = per_material.get(key, 0) + 1
     assert set(per_material.values()) == {1}
     assert math.isfinite(np.median(acc.latencies_s))
+
+
+def test_camera_info_that_cannot_be_used_is_named():
+    """Issue 15, finding 7: a camera_info with NaN in K was taken, and the vision node went
+    blind until a valid one came."""
+    from perception.projection import intrinsics_problem
+    good = [500.0, 0.0, 320.0, 0.0, 500.0, 240.0, 0.0, 0.0, 1.0]
+    assert intrinsics_problem(640, 480, good) == ''
+    for width, height, k, why in [
+            (640, 480, [float('nan')] + good[1:], 'not finite'),
+            (640, 480, good[:2] + [float('inf')] + good[3:], 'not finite'),
+            (0, 480, good, 'size'),
+            (640, 480, [-500.0] + good[1:], 'focal lengths'),
+            (640, 480, good[:2] + [700.0] + good[3:], 'principal point'),
+            (640, 480, good[:8] + [0.0], 'last row'),
+            (640, 480, good[:5], '5 values')]:
+        assert why in intrinsics_problem(width, height, k), (k, why)

@@ -48,3 +48,20 @@ def test_cross_parameter_check(context):
 def test_missing_world_file(context, tmp_path):
     with pytest.raises(WorldConfigError, match='does not exist'):
         make(context, world=str(tmp_path / 'nope.yaml'))
+
+
+def test_a_belt_speed_the_belt_cannot_take_is_refused_not_reported_set(context):
+    """Issue 15, finding 7: belt_speed -0.5 answered success while the belt ran on at 0.1."""
+    from world_description import PIPELINE_CELL
+    node = make(context, world=PIPELINE_CELL, belt_speed=0.1)
+    try:
+        conveyor = node._world.conveyor
+        result = node.set_parameters([Parameter('belt_speed', value=-0.5)])[0]
+        assert not result.successful and 'forward only' in result.reason
+        assert conveyor.speed == 0.1 and node.get_parameter('belt_speed').value == 0.1
+        assert node.set_parameters([Parameter('belt_speed', value=0.2)])[0].successful
+        assert conveyor.speed == 0.2
+        assert node.set_parameters([Parameter('belt_speed', value=-1.0)])[0].successful
+        assert conveyor.speed == conveyor.config.belt_speed         # the world file's
+    finally:
+        node.destroy_node()

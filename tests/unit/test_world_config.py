@@ -74,6 +74,10 @@ def test_missing_and_malformed_files(tmp_path):
     bad.write_text('robots: [unclosed')
     with pytest.raises(WorldConfigError, match='not valid YAML'):
         load_world(bad)
+    latin = tmp_path / 'latin.yaml'                # (issue 15, finding 7: was a traceback)
+    latin.write_bytes('robots: []  # caf\xe9\n'.encode('latin-1'))
+    with pytest.raises(WorldConfigError, match='not UTF-8 text'):
+        load_world(latin)
 
 
 def test_the_youbot_has_acceleration_limits_and_the_mini_robot_none():

@@ -182,9 +182,14 @@ def load_world(path: str | Path) -> WorldConfig:
     if not path.is_file():
         raise WorldConfigError(f'world file {path} does not exist')
     try:
-        data = yaml.safe_load(path.read_text())
+        data = yaml.safe_load(path.read_text(encoding='utf-8'))
     except yaml.YAMLError as exc:
         raise WorldConfigError(f'{path}: not valid YAML: {exc}') from None
+    except UnicodeDecodeError as exc:
+        raise WorldConfigError(f'{path}: not UTF-8 text (byte {exc.start}: '
+                               f'{exc.object[exc.start:exc.start + 1]!r})') from None
+    except OSError as exc:
+        raise WorldConfigError(f'{path}: cannot be read ({exc.strerror})') from None
     return parse_world(data, str(path))
 
 
