@@ -39,24 +39,24 @@ class _RenderSink(NullSink):
         render()
 
 
-def in_process_baseline(sim_seconds: float) -> dict:
-    world = SimWorld(load_world(resolve_resource(PIPELINE_CELL)), time_step=DT,
+def in_process_baseline(sim_seconds: float, dt: float = DT) -> dict:
+    world = SimWorld(load_world(resolve_resource(PIPELINE_CELL)), time_step=dt,
                      scenario_seed=SEED)
     world.conveyor.speed = BELT
     runner = SimRunner(world, DriveLimits(0.8, 1.5, 0.5), 30.0)
-    steps = int(round(sim_seconds / DT))
+    steps = int(round(sim_seconds / dt))
     start = time.perf_counter()
     runner.advance(steps, _RenderSink())
     wall = time.perf_counter() - start
     world.close()
-    return {'sim_seconds': steps * DT, 'wall_seconds': wall, 'rtf': steps * DT / wall}
+    return {'sim_seconds': steps * dt, 'wall_seconds': wall, 'rtf': steps * dt / wall}
 
 
-def trials(count: int, parallel: int, out: Path, domain: int) -> dict:
+def trials(count: int, parallel: int, out: Path, domain: int, dt: float = DT) -> dict:
     start = time.perf_counter()
     with ThreadPoolExecutor(parallel) as pool:
         futures = [pool.submit(run_trial, k, SEED, BELT, domain + k % parallel,
-                               out / f'p{parallel}') for k in range(count)]
+                               out / f'p{parallel}', time_step=dt) for k in range(count)]
         results = [f.result() for f in futures]
     wall = time.perf_counter() - start
     return {'trials': count, 'parallel': parallel, 'wall_seconds': wall,
@@ -71,17 +71,20 @@ def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument('--count', type=int, default=2, help='trials per throughput run')
     parser.add_argument('--domain', type=int, default=int(os.environ.get('BENCH_DOMAIN', 150)))
+    parser.add_argument('--time-step', type=float, default=DT,
+                        help='the physics step [s], of the trials and the baseline (1/240)')
     args = parser.parse_args()
+    dt = args.time_step
     with tempfile.TemporaryDirectory() as tmp:
         out = Path(tmp)
-        single = trials(1, 1, out / 'single', args.domain)
+        single = trials(1, 1, out / 'single', args.domain, dt)
         run = single['runs'][0]
         if single['statuses'] != ['completed']:
             print(f'the benchmark run did not complete: {single["statuses"]}', file=sys.stderr)
             return 1
-        base = in_process_baseline(run['completion_time'])
-        seq = trials(args.count, 1, out, args.domain)
-        par = trials(args.count, 2, out, args.domain)
+        base = in_process_baseline(run['completion_time'], dt)
+        seq = trials(args.count, 1, out, args.domain, dt)
+        par = trials(args.count, 2, out, args.domain, dt)
     rtf = run['completion_time'] / run['wall_time']
     cpu = run['cpu_seconds']
     figures = {
@@ -91,8 +94,9 @@ def main() -> int:
         'in_process_baseline': base, 'ratio_rtf_vs_in_process': rtf / base['rtf'],
         'sequential': seq, 'parallel_2': par,
         'parallel_speedup': par['trials_per_hour'] / seq['trials_per_hour'],
-        'cpus': os.cpu_count()}
-    print(f'one lock-step run (seed {SEED}, belt {BELT} m/s, camera 320x240 at 15 Hz): '
+        'cpus': os.cpu_count(), 'time_step': dt}
+    print(f'one lock-step run (seed {SEED}, belt {BELT} m/s, camera 320x240 at 15 Hz, physics '
+          f'step {dt * 1e3:.3f} ms): '
           f'{run["completion_time"]:.1f} s simulated in {run["wall_time"]:.1f} s wall '
           f'(real-time factor {rtf:.2f})')
     # Measured from the simulator's joint states (their velocities), not from the plans.
@@ -122,7 +126,8 @@ def main() -> int:
           f'(x{figures["parallel_speedup"]:.2f} on {os.cpu_count()} CPUs); statuses '
           f'{seq["statuses"] + par["statuses"]}')
     (HERE / 'results').mkdir(exist_ok=True)
-    (HERE / 'results' / 'bench_pipeline.json').write_text(json.dumps(figures, indent=1))
+    name = 'bench_pipeline.json' if dt == DT else f'bench_pipeline_dt{1.0 / dt:.0f}.json'
+    (HERE / 'results' / name).write_text(json.dumps(figures, indent=1))
     return 0
 
 

@@ -18,6 +18,18 @@ from world_description.world_config import load_world
 # The coordinator's decisions per simulated second; in lock-step also the simulator's state
 # and /clock rates (each /clock message costs every node with sim time about a millisecond).
 CONTROL_RATE = 30.0
+# The physics step: PyBullet's default. Trials may take 1/120 s (run_trials --time-step):
+# docs/benchmarks.md compares the two.
+TIME_STEP = 1.0 / 240.0
+
+
+def tick_rate(time_step: float) -> float:
+    """The control rate on whole physics steps, as the simulator counts time (whole
+    nanoseconds per step): at 1/120 s, 30 Hz is 4 steps of 8333333 ns, 33333332 ns, and states
+    published every 33333333 ns would fall a step late. At 1/240 s, 8 steps: 29.9999973 Hz."""
+    dt_ns = round(time_step * 1e9)
+    steps = max(1, round(1e9 / CONTROL_RATE / dt_ns))
+    return 1e9 / (steps * dt_ns)
 # Camera frames (and the debug image, published only for subscribers) stay out of a recorded
 # bag: 15 Hz of 230 kB frames would make it about 500 MB per run.
 UNRECORDED_TOPICS = ('/belt_camera/image_raw', '/debug_image')
@@ -64,16 +76,18 @@ def parameter_text(value: ParameterValue) -> str:
 def pipeline_graph(seed: int, belt_speed: float, synchronous: bool = True,
                    world: str = PIPELINE_CELL, real_time_factor: Optional[float] = None,
                    result_file: Optional[Path] = None, progress_file: Optional[Path] = None,
-                   record_dir: Optional[Path] = None, bag_name: Optional[str] = 'bag'
-                   ) -> List[GraphNode]:
+                   record_dir: Optional[Path] = None, bag_name: Optional[str] = 'bag',
+                   time_step: float = TIME_STEP) -> List[GraphNode]:
     """The processes of one run of the pipeline scenario, in their start order (the recorder,
     when there is one, first: it must hear the first /clock). A recording goes into
     ``record_dir``/``bag_name`` (without a name, one with the date and time)."""
     sim_time = {'use_sim_time': True}
+    rate = tick_rate(time_step) if synchronous else CONTROL_RATE
     sim: Dict[str, ParameterValue] = {
-        'world': world, 'synchronous': synchronous, 'state_publish_rate': CONTROL_RATE,
+        'world': world, 'synchronous': synchronous, 'state_publish_rate': rate,
+        'time_step': time_step,
         # Lock-step: /clock at the control rate; real time: at every physics step.
-        'clock_publish_rate': CONTROL_RATE if synchronous else 0.0,
+        'clock_publish_rate': rate if synchronous else 0.0,
         'scenario_seed': seed,
         # Lock-step: the belt runs from the first step (nothing moves before the coordinator
         # steps). Real time: it stands until the coordinator starts it, once the vision node
@@ -85,6 +99,7 @@ def pipeline_graph(seed: int, belt_speed: float, synchronous: bool = True,
         sim['real_time_factor'] = real_time_factor
     coordinator: Dict[str, ParameterValue] = {
         **sim_time, 'synchronous': synchronous, 'control_rate': CONTROL_RATE,
+        'time_step': time_step, 'state_publish_rate': rate,
         'belt_speed': belt_speed, 'scenario_seed': seed, 'world': world}
     if result_file is not None:
         coordinator['result_file'] = str(result_file)

@@ -27,7 +27,7 @@ from contextlib import contextmanager
 from pathlib import Path
 from typing import TYPE_CHECKING, Callable, Dict, Iterator, List, Optional, Sequence, Tuple, Union
 
-from coordinator.graph import pipeline_graph
+from coordinator.graph import CONTROL_RATE, TIME_STEP, pipeline_graph
 from coordinator.progress import (
     CampaignBar,
     TrialProgress,
@@ -82,7 +82,7 @@ def code_version() -> str:
 
 def run_trial(trial: int, seed: int, belt_speed: float, domain_id: int, out_dir: Path,
               wall_timeout: float = 900.0, record: bool = False, code: str = '',
-              world: str = PIPELINE_CELL) -> Dict:
+              world: str = PIPELINE_CELL, time_step: float = TIME_STEP) -> Dict:
     """One trial as a process group; returns its result (or a failure record)."""
     trial_dir = out_dir / f'trial_{trial:03d}'
     trial_dir.mkdir(parents=True, exist_ok=True)
@@ -94,7 +94,7 @@ def run_trial(trial: int, seed: int, belt_speed: float, domain_id: int, out_dir:
                             'ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')})
     graph = pipeline_graph(seed, belt_speed, world=world, result_file=result_file,
                            progress_file=result_file.with_name(PROGRESS_FILE),
-                           record_dir=trial_dir if record else None)
+                           record_dir=trial_dir if record else None, time_step=time_step)
     commands = {node.name: node.command() for node in graph}
     procs: Dict[str, subprocess.Popen] = {}
     cpu: Dict[str, float] = {}
@@ -160,7 +160,7 @@ def domain_lease(first: int) -> Iterator[int]:
 
 def run_leased_trial(item: Dict, out_dir: Path, options: Dict) -> Dict:
     """``run_trial`` for a plan item on a DDS domain of its own (``options``: domain_base,
-    wall_timeout, record, code, world)."""
+    wall_timeout, record, code, world, time_step)."""
     opts = dict(options)
     with domain_lease(opts.pop('domain_base')) as domain:
         return run_trial(item['trial'], item['seed'], item['belt_speed'], domain, out_dir,
@@ -362,7 +362,7 @@ def _stop_all() -> None:
 # The options that define a campaign's plan, and their defaults. A campaign keeps them in
 # its directory (CAMPAIGN_FILE), so that ``--resume DIR`` needs nothing else.
 PLAN_DEFAULTS = {'trials': 10, 'seed0': 2026, 'seeds': None, 'first_trial': 0,
-                 'belt_speed': [0.10, 0.16], 'world': PIPELINE_CELL}
+                 'belt_speed': [0.10, 0.16], 'world': PIPELINE_CELL, 'time_step': TIME_STEP}
 CAMPAIGN_FILE = 'campaign.json'
 
 
@@ -414,6 +414,9 @@ def _main(argv: Optional[Sequence[str]]) -> int:
     parser.add_argument('--world', default=None,
                         help='the cell\'s world file, for sim_node and the coordinator '
                              f'({PIPELINE_CELL})')
+    parser.add_argument('--time-step', type=float, default=None,
+                        help='the physics step [s] (1/240); 1/120 runs a trial in about 30 %% '
+                             'less CPU (docs/benchmarks.md, "The physics step")')
     parser.add_argument('--wall-timeout', type=float, default=900.0)
     parser.add_argument('--record', action='store_true', help='record a bag per trial')
     parser.add_argument('--out', type=Path, default=None,
@@ -450,6 +453,9 @@ def _main(argv: Optional[Sequence[str]]) -> int:
     lo, hi = opts['belt_speed']
     if not 0.0 < lo <= hi <= 0.5:
         parser.error('--belt-speed needs 0 < LO <= HI <= 0.5')
+    if not 1e-4 <= opts['time_step'] <= 1.0 / CONTROL_RATE:
+        parser.error(f'--time-step must be within [0.0001, {1.0 / CONTROL_RATE:.4f}] s (a '
+                     'physics step at least once per control tick)')
     if not 0 <= args.domain_base <= MAX_DOMAIN:
         parser.error(f'--domain-base must be a DDS domain, 0-{MAX_DOMAIN}')
     if args.ray is None and (args.domain_base + (args.parallel or 1) - 1 > MAX_DOMAIN):
@@ -467,7 +473,8 @@ def _main(argv: Optional[Sequence[str]]) -> int:
     if args.show_graph:
         first = plan[0]
         print(f"# trial {first['trial']}: seed {first['seed']}, belt {first['belt_speed']} m/s")
-        for node in pipeline_graph(first['seed'], first['belt_speed'], world=opts['world']):
+        for node in pipeline_graph(first['seed'], first['belt_speed'], world=opts['world'],
+                                   time_step=opts['time_step']):
             print(shlex.join(node.command()))
         return 0
     args.out.mkdir(parents=True, exist_ok=True)
@@ -481,7 +488,8 @@ def _main(argv: Optional[Sequence[str]]) -> int:
               f'made by this code ({code})', flush=True)
     (args.out / CAMPAIGN_FILE).write_text(json.dumps({'plan': opts, 'code': code}, indent=1))
     trial_options = {'wall_timeout': args.wall_timeout, 'record': args.record, 'code': code,
-                     'world': opts['world'], 'domain_base': args.domain_base}
+                     'world': opts['world'], 'time_step': opts['time_step'],
+                     'domain_base': args.domain_base}
     pool: Union[LocalPool, 'RayPool']
     if args.ray is None:
         pool = LocalPool(args.parallel or 1, args.out, trial_options)

@@ -1,5 +1,13 @@
 """The pipeline run's node graph, described once (coordinator.graph)."""
-from coordinator.graph import CONTROL_RATE, GraphNode, parameter_text, pipeline_graph
+import pytest
+
+from coordinator.graph import (
+    TIME_STEP,
+    GraphNode,
+    parameter_text,
+    pipeline_graph,
+    tick_rate,
+)
 from world_description import PIPELINE_CELL
 
 
@@ -11,7 +19,8 @@ def test_a_lock_step_trial_is_five_processes_that_agree_on_the_scenario():
     sim, coordinator = by['sim_node'].parameters, by['coordinator_node'].parameters
     for key in ('scenario_seed', 'belt_speed', 'world', 'synchronous'):
         assert sim[key] == coordinator[key], key
-    assert sim['synchronous'] is True and sim['clock_publish_rate'] == CONTROL_RATE
+    assert sim['synchronous'] is True and sim['clock_publish_rate'] == tick_rate(TIME_STEP)
+    assert sim['time_step'] == coordinator['time_step'] == TIME_STEP
     assert coordinator['result_file'] == '/r/result.json'
     # Every node that reads the clock runs on simulated time; the simulator is its source,
     # and the vision node and the IK servers read none (a /clock subscription would only cost
@@ -24,6 +33,22 @@ def test_a_lock_step_trial_is_five_processes_that_agree_on_the_scenario():
     # The IK servers name their frames as the simulator does: the world's frame prefixes.
     assert by['zu12_kinematics'].parameters['frame_prefix'] == 'zu12/'
     assert by['youbot_kinematics'].parameters['frame_prefix'] == 'youbot/'
+
+
+@pytest.mark.parametrize('time_step, steps', [(1.0 / 240.0, 8), (1.0 / 120.0, 4), (0.01, 3)])
+def test_lock_step_states_fall_on_the_tick_at_any_physics_step(time_step, steps):
+    """The simulator counts whole nanoseconds per step: at 1/120 s, 4 steps are 33333332 ns,
+    and states every round(1e9 / 30) ns would come a step late, past the tick the coordinator
+    waits for (it refused to start). The graph gives both the tick's own rate."""
+    graph = {n.name: n.parameters for n in pipeline_graph(0, 0.12, time_step=time_step)}
+    sim, coordinator = graph['sim_node'], graph['coordinator_node']
+    dt_ns = round(time_step * 1e9)
+    state_ns = round(1e9 / sim['state_publish_rate'])
+    assert state_ns == steps * dt_ns == round(1e9 / sim['clock_publish_rate'])
+    # The coordinator's own check (coordinator_node: lock-step needs states on its ticks).
+    ticks = max(1, round(1e9 / coordinator['control_rate'] / round(coordinator['time_step']
+                                                                    * 1e9)))
+    assert ticks == steps and round(1e9 / coordinator['state_publish_rate']) <= ticks * dt_ns
 
 
 def test_real_time_publishes_the_clock_at_every_step_and_a_recorder_starts_first():
@@ -48,3 +73,10 @@ def test_command_lines_are_what_ros2_run_takes():
         '-p', 'arm:=zu12', '-p', 'use_sim_time:=true', '-p', 'rate:=30.0', '-p',
         "exclude:=['/a', '/b']"]
     assert parameter_text(False) == 'false' and parameter_text(3) == '3'
+
+
+def test_run_trials_refuses_a_physics_step_longer_than_a_control_tick(capsys):
+    from coordinator.trials import main
+    with pytest.raises(SystemExit) as exit_:
+        main(['--time-step', '0.05', '--out', '/nonexistent/never-made', '--show-graph'])
+    assert exit_.value.code == 2 and '--time-step must be within' in capsys.readouterr().err
