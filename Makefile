@@ -14,9 +14,11 @@ demo-mini: setup
 
 # The paper's Table 2 over many seeded trials: make trials TRIALS=100 PARALLEL=2; on a Ray
 # cluster: make trials TRIALS=110 RAY=auto (docs/pipeline.md: "A campaign on a Ray cluster").
+# TIME_STEP=0.008333333333333333 takes 1/120 s physics steps (docs/benchmarks.md).
 trials: setup
 	@bash -c 'source scripts/env.sh && run_trials --trials $${TRIALS:-10} \
-	  $${PARALLEL:+--parallel $$PARALLEL} $${RAY:+--ray $$RAY}'
+	  $${PARALLEL:+--parallel $$PARALLEL} $${RAY:+--ray $$RAY} \
+	  $${TIME_STEP:+--time-step $$TIME_STEP}'
 
 test: setup
 	@bash scripts/test.sh
