@@ -135,7 +135,8 @@ def _finish(node: Recorder) -> None:
 
 
 def main(args=None) -> int:
-    return run_node(Recorder, 'recorder', (BagError, OSError), on_exit=_finish, args=args)
+    return run_node(Recorder, 'recorder', (BagError, OSError), on_exit=_finish, args=args,
+                    graceful_signals=True)
 
 
 if __name__ == '__main__':

@@ -26,6 +26,7 @@ instead (the same behaviour, more CPU).
 from __future__ import annotations
 
 import os
+import signal
 import threading
 from typing import Callable, Optional, Tuple, Type, TypeVar
 
@@ -33,6 +34,7 @@ import rclpy
 from rclpy.exceptions import ParameterException
 from rclpy.executors import Executor, ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
+from rclpy.signals import SignalHandlerOptions
 
 from ros_common.memory import keep_large_blocks
 
@@ -74,13 +76,15 @@ def wake(executor: Executor) -> None:
     executor.wake()
 
 
-def spin(node: Node, executor: Optional[Executor] = None, events: bool = True) -> None:
-    """Spin ``node`` until the context is shut down, by a signal or by the node itself."""
+def spin(node: Node, executor: Optional[Executor] = None, events: bool = True,
+         stop: Optional[threading.Event] = None) -> None:
+    """Spin ``node`` until the context is shut down, by a signal or by the node itself (or
+    ``stop`` is set)."""
     if executor is None:
         executor = make_executor(node, events)
     try:
         executor.add_node(node)
-        spin_until_shutdown(executor, node.context)
+        spin_until_shutdown(executor, node.context, stop)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     except RCLError:
@@ -108,21 +112,37 @@ def _create(factory: Callable[[], N], name: str,
 def run_node(factory: Callable[[], N], name: str,
              startup_errors: Tuple[Type[BaseException], ...] = (),
              on_exit: Optional[Callable[[N], None]] = None, args=None,
-             events: bool = True) -> int:
+             events: bool = True, graceful_signals: bool = False) -> int:
     """Create the node, spin it until shutdown, and return the process exit code.
 
     A configuration error raised by ``factory`` (one of ``startup_errors``, or a bad parameter)
     is logged as one fatal line and returns 1. ``on_exit`` runs whatever ended the spin, before
     the node is destroyed (a recorder closes its bag there). ``events=False``: the node has
     coroutine callbacks, and spins on the SingleThreadedExecutor.
+
+    ``graceful_signals``: SIGINT and SIGTERM end the spin between two callbacks, never inside
+    one. rclpy's handler raises KeyboardInterrupt wherever the main thread is, and a recorder
+    interrupted inside the mcap library's add_message closed its bag with half a message record
+    in the last chunk (rosbags' reader then failed on it: "unpack requires a buffer of 22
+    bytes"). The node's timers bound how long the spin takes to notice (a recorder's: 0.1 s).
     """
     keep_large_blocks()     # (ros_common/memory.py: large messages without page faults)
-    rclpy.init(args=args)
+    stop: Optional[threading.Event] = None
+    if graceful_signals:
+        rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
+        requested = stop = threading.Event()
+
+        def request_stop(_signum: int, _frame: object) -> None:
+            requested.set()
+        for sig in (signal.SIGINT, signal.SIGTERM):
+            signal.signal(sig, request_stop)
+    else:
+        rclpy.init(args=args)
     node = _create(factory, name, startup_errors)
     if node is None:
         return 1
     try:
-        spin(node, events=events)
+        spin(node, events=events, stop=stop)
     finally:
         if on_exit is not None:
             on_exit(node)

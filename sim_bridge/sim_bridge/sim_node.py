@@ -483,6 +483,19 @@ class SimNode(Node):
             self._warn((robot, 'cmd_vel', _NUMBERS.sub('#', broken)),
                        f'{robot}/cmd_vel rejected: non-finite {broken}; stopping')
             return
+        if isinstance(msg, TwistStamped) and (msg.header.stamp.sec or msg.header.stamp.nanosec):
+            # Judged by its stamp, as diff_drive_controller does (an unset stamp counts as
+            # now): one older than cmd_vel_timeout, or as far ahead, is not a command to act
+            # on now (stamps of -5 s and 2**31 s used to be applied as fresh).
+            stamp, now = to_seconds(msg.header.stamp), self._world.sim_time
+            timeout = self._runner.guards[robot].timeout
+            if abs(now - stamp) > timeout:
+                self._runner.reject(robot)
+                self._warn((robot, 'cmd_vel', 'old stamp' if stamp < now else 'future stamp'), (
+                    f'{robot}/cmd_vel rejected: stamped {stamp:.3f} s, the simulator\'s clock '
+                    f'reads {now:.3f} s (beyond cmd_vel_timeout {timeout:g} s; is the sender '
+                    'on simulated time?); stopping'))
+                return
         holonomic = self._runner.holonomic(robot)
         if twist.linear.y != 0.0 and not holonomic:
             self.get_logger().warn(f'{robot}/cmd_vel: linear.y {twist.linear.y:.3f} ignored: a '

@@ -304,3 +304,32 @@ def test_bad_parameters_fail_at_start_with_a_clear_message(start_node, args, fra
     wait_for(lambda: not proc.alive(), 15.0, what='the node to exit')
     assert proc.proc.returncode == 1
     assert fragment in proc.output()
+
+
+def test_a_stamped_command_too_old_or_from_the_future_is_rejected(start_node, probe):
+    """Issue 15, finding 5: a TwistStamped stamped -5 s or 2**31 - 1 s was applied as fresh. Now
+    its stamp is judged against the simulator's clock, as diff_drive_controller does."""
+    from geometry_msgs.msg import TwistStamped
+    sim = _lock_step_sim(start_node, '-p', 'use_stamped_vel:=true')
+    d = LockStepDriver(probe, stamped=True)
+    moving = d.hold(0.1, 0.0, 120)                       # (unset stamps: taken as now)
+    now = stamp_s(moving.sim_time)
+    assert d.odom_at(moving.sim_time).twist.twist.linear.x == pytest.approx(0.1, rel=0.05)
+    for stamp, why in ((now - 5.0, 'stamped -4'), (2 ** 31 - 1, 'stamped 2147483647.000 s')):
+        msg = TwistStamped()
+        msg.twist.linear.x = 0.1
+        msg.header.stamp.sec, msg.header.stamp.nanosec = int(stamp), 0
+        d.pub.publish(msg)
+        after = d.reply(d.step(60, commands=1))          # 0.25 s: inside the timeout
+        assert abs(d.odom_at(after.sim_time).twist.twist.linear.x) < 2e-3, stamp
+        wait_for(lambda why=why: why in sim.output(), 5.0, what='the rejection')
+        d.hold(0.1, 0.0, 120)                             # a fresh command drives again
+    assert "is the sender on simulated time?" in sim.output()
+    # A stamp of now is taken.
+    msg = TwistStamped()
+    msg.twist.linear.x = 0.1
+    last = d.hold(0.0, 0.0, 24)
+    msg.header.stamp = last.sim_time
+    d.pub.publish(msg)
+    taken = d.reply(d.step(60, commands=1))
+    assert d.odom_at(taken.sim_time).twist.twist.linear.x == pytest.approx(0.1, rel=0.1)

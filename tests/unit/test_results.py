@@ -190,7 +190,7 @@ def test_an_interrupted_campaign_goes_on_where_it_stopped(tmp_path, monkeypatch)
     ran = []
 
     def fake_trial(trial, seed, belt_speed, domain_id, out_dir, wall_timeout, record, code,
-                   world):
+                   world, time_step):
         assert code == 'abc123'
         ran.append(trial)
         return {'trial': trial, 'scenario_seed': seed, 'belt_speed': belt_speed,
@@ -218,7 +218,7 @@ def test_a_campaign_stopped_by_the_user_keeps_a_report_and_resumes_with_its_plan
     ran, reports = [], []
 
     def fake_trial(trial, seed, belt_speed, domain_id, out_dir, wall_timeout, record, code,
-                   world):
+                   world, time_step):
         if trial == 1 and not ran.count(1):
             ran.append(1)
             raise KeyboardInterrupt          # (the user's Ctrl-C, as the pool passes it on)
