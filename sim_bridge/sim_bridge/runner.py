@@ -4,7 +4,7 @@ from __future__ import annotations
 import functools
 import math
 from dataclasses import dataclass
-from typing import Callable, Dict, List, Protocol
+from typing import Callable, Dict, List, Optional, Protocol
 
 import numpy as np
 
@@ -59,9 +59,14 @@ class NullSink:
 
 @dataclass(frozen=True)
 class DriveLimits:
+    """Fallbacks for the bases whose world entry sets none of these; an acceleration of None
+    means no limit."""
+
     max_speed: float = 0.2
     max_turn: float = 0.2
     cmd_vel_timeout: float = 0.5
+    max_accel: Optional[float] = None          # [m/s^2], each of linear.x and linear.y
+    max_turn_accel: Optional[float] = None     # [rad/s^2]
 
 
 class SimRunner:
@@ -105,9 +110,12 @@ class SimRunner:
             # Guarded components: (vx, wz) for a differential drive, (vx, vy, wz) for Mecanum.
             bounds = (speed, turn) if len(robot.drive.components) == 2 else (speed, speed, turn)
             self.guards[name] = CommandGuard(bounds, limits.cmd_vel_timeout)
-            if own.max_accel is not None or own.max_turn_accel is not None:
-                accel = own.max_accel if own.max_accel is not None else math.inf
-                turn_accel = own.max_turn_accel if own.max_turn_accel is not None else math.inf
+            accel = own.max_accel if own.max_accel is not None else limits.max_accel
+            turn_accel = (own.max_turn_accel if own.max_turn_accel is not None
+                          else limits.max_turn_accel)
+            if accel is not None or turn_accel is not None:
+                accel = math.inf if accel is None else accel
+                turn_accel = math.inf if turn_accel is None else turn_accel
                 per_step = ((accel, turn_accel) if len(bounds) == 2
                             else (accel, accel, turn_accel))
                 self._max_change[name] = tuple(a * world.time_step for a in per_step)

@@ -83,6 +83,13 @@ class SimNode(Node):
             1e-3, 10.0))
         self.declare_parameter('max_turn', 0.2, float_range(
             'Turn rate limit of bases whose world entry sets none [rad/s]', 1e-3, 20.0))
+        # diff_drive_controller's names; the world file's max_accel and max_turn_accel win.
+        self.declare_parameter('linear.x.max_acceleration', 0.0, float_range(
+            'Acceleration limit of the applied command (each of linear x and y) of bases whose '
+            'world entry sets none [m/s^2]; 0: no limit', 0.0, 100.0))
+        self.declare_parameter('angular.z.max_acceleration', 0.0, float_range(
+            'Angular acceleration limit of the applied command of bases whose world entry sets '
+            'none [rad/s^2]; 0: no limit', 0.0, 200.0))
         self.declare_parameter('cmd_vel_timeout', 0.5, float_range(
             'Stop a base when its last cmd_vel is older than this [s of simulated time]',
             1e-3, 60.0))
@@ -125,7 +132,8 @@ class SimNode(Node):
 
         p = {name: self.get_parameter(name).value for name in (
             'world', 'gui', 'time_step', 'real_time_factor', 'synchronous', 'state_publish_rate',
-            'clock_publish_rate', 'max_speed', 'max_turn', 'cmd_vel_timeout', 'use_stamped_vel',
+            'clock_publish_rate', 'max_speed', 'max_turn', 'linear.x.max_acceleration',
+            'angular.z.max_acceleration', 'cmd_vel_timeout', 'use_stamped_vel',
             'rtf_log_period', 'max_steps_per_tick', 'belt_speed', 'scenario_seed',
             'materials_publish_rate', 'publish_link_tf', 'camera_reliability', 'jpeg_quality')}
         reliabilities = {'reliable': ReliabilityPolicy.RELIABLE,
@@ -147,7 +155,9 @@ class SimNode(Node):
             self._world.conveyor.speed = p['belt_speed']
         self.add_on_set_parameters_callback(self._on_set_parameters)
         self._runner = SimRunner(self._world, DriveLimits(
-            p['max_speed'], p['max_turn'], p['cmd_vel_timeout']), p['state_publish_rate'],
+            p['max_speed'], p['max_turn'], p['cmd_vel_timeout'],
+            p['linear.x.max_acceleration'] or None, p['angular.z.max_acceleration'] or None),
+            p['state_publish_rate'],
             p['materials_publish_rate'], p['clock_publish_rate'])
         self._synchronous = p['synchronous']
         self._paused = False

@@ -4,7 +4,10 @@ import rclpy
 from rclpy.exceptions import InvalidParameterValueException
 from rclpy.parameter import Parameter
 
+import yaml
+
 from sim_bridge.sim_node import SimConfigError, SimNode
+from world_description.resources import resolve_resource
 from world_description.world_config import WorldConfigError
 
 
@@ -65,3 +68,28 @@ def test_a_belt_speed_the_belt_cannot_take_is_refused_not_reported_set(context):
         assert conveyor.speed == conveyor.config.belt_speed         # the world file's
     finally:
         node.destroy_node()
+
+
+def test_acceleration_limits_as_diff_drive_controller_names_them(context, tmp_path):
+    """linear.x.max_acceleration and angular.z.max_acceleration limit bases whose world entry
+    sets none; a world entry's own max_accel wins."""
+    source = resolve_resource('package://world_description/worlds/mini_robot.yaml')
+    data = yaml.safe_load(open(source))
+    for key in ('max_accel', 'max_turn_accel'):
+        del data['robots'][0]['drive'][key]
+    bare = tmp_path / 'bare.yaml'
+    bare.write_text(yaml.safe_dump(data))
+    dt = 1.0 / 240.0
+    cases = [(str(bare), {}, None),
+             (str(bare), {'linear.x.max_acceleration': 0.5,
+                          'angular.z.max_acceleration': 3.0}, (0.5 * dt, 3.0 * dt)),
+             (str(source), {'linear.x.max_acceleration': 0.5}, (1.0 * dt, 2.0 * dt))]
+    for world, params, expected in cases:
+        node = make(context, world=world, **params)
+        try:
+            assert node._runner._max_change.get('mini_robot') == (
+                None if expected is None else pytest.approx(expected))
+        finally:
+            node.destroy_node()
+    with pytest.raises(InvalidParameterValueException):
+        make(context, **{'linear.x.max_acceleration': -1.0})

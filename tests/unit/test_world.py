@@ -1,4 +1,5 @@
 """The PyBullet world core: contact-driven motion, reset, command safety over sim time."""
+import dataclasses
 import math
 
 import numpy as np
@@ -89,6 +90,8 @@ def test_command_times_out_in_simulated_time(world):
     assert world.robots['mini_robot'].wheel_targets[0] > 0
     runner.advance(round(0.1 / world.time_step), sink)
     assert sink.timeouts == ['mini_robot']
+    # Stopping ramps at the world's 1 m/s^2, as diff_drive_controller brakes: 0.1 s from 0.1.
+    runner.advance(round(0.1 / world.time_step), sink)
     assert world.robots['mini_robot'].wheel_targets == (0.0, 0.0)
 
 
@@ -110,8 +113,44 @@ def test_clamped_command_drives_at_the_limit(world):
     runner, sink = SimRunner(world, DriveLimits(max_speed=0.2), 100.0), Recorder()
     result = runner.command('mini_robot', 5.0, 0.0, 0.0)
     assert result.clamped and result.command == (0.2, 0.0)
-    runner.advance(1, sink)
+    runner.advance(round(0.2 / world.time_step), sink)     # 0.2 s to 0.2 m/s at 1 m/s^2
     assert world.robots['mini_robot'].wheel_targets == pytest.approx((0.2 / 0.03,) * 2)
+
+
+@pytest.mark.parametrize('accel', [None, 1.0])
+def test_reversals_do_not_kick_the_mini_robot_into_a_turn(accel):
+    """Issue 15, finding 4: +-0.2 m/s forward/back at 20 Hz with no turn yawed the body at up
+    to 0.7 rad/s (max_turn 0.2) without acceleration limits; the world's 1 m/s^2 and 2 rad/s^2
+    keep it straight, and random valid commands within max_turn."""
+    config = load_world(DEFAULT)
+    mini = config.robot('mini_robot')
+    assert (mini.limits.max_accel, mini.limits.max_turn_accel) == (1.0, 2.0)
+    if accel is None:
+        mini = dataclasses.replace(mini, limits=dataclasses.replace(
+            mini.limits, max_accel=None, max_turn_accel=None))
+        config = dataclasses.replace(config, robots=[mini])
+    world = SimWorld(config)
+    try:
+        runner, sink = SimRunner(world, DriveLimits(), 100.0), Recorder()
+        _settle(runner, sink)
+        rng = np.random.default_rng(1)
+        yaw_rates = {'flip': [], 'random': []}
+        for kind in yaw_rates:
+            for k in range(200):                # 10 s of commands at 20 Hz
+                vx, wz = ((0.2 if k % 2 else -0.2), 0.0) if kind == 'flip' else \
+                    tuple(rng.uniform(-0.2, 0.2, 2))
+                runner.command('mini_robot', vx, 0.0, wz)
+                for _ in range(12):
+                    runner.advance(1, sink)
+                    yaw_rates[kind].append(abs(world.robots['mini_robot'].base_state().angular[2]))
+        worst = {kind: max(rates) for kind, rates in yaw_rates.items()}
+        if accel is None:                       # the failure the limits remove
+            assert worst['flip'] > 0.4
+        else:
+            assert worst['flip'] < 0.02
+            assert worst['random'] < 0.2 * 1.05
+    finally:
+        world.close()
 
 
 def test_outputs_are_scheduled_by_simulated_time(world):

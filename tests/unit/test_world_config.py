@@ -80,10 +80,11 @@ def test_missing_and_malformed_files(tmp_path):
         load_world(latin)
 
 
-def test_the_youbot_has_acceleration_limits_and_the_mini_robot_none():
+def test_both_bases_have_acceleration_limits():
     for world in ('youbot', 'pipeline_cell'):
         cfg = load_world(resolve_resource(f'package://world_description/worlds/{world}.yaml'))
         limits = cfg.robot('youbot').limits
         assert (limits.max_accel, limits.max_turn_accel) == (1.0, 2.0)
     mini = load_world(resolve_resource('package://world_description/worlds/mini_robot.yaml'))
-    assert mini.robot('mini_robot').limits.max_accel is None
+    limits = mini.robot('mini_robot').limits
+    assert (limits.max_accel, limits.max_turn_accel) == (1.0, 2.0)
