@@ -1,10 +1,9 @@
 """The simulator node in-process: parameters are declared, validated, and fail clearly."""
 import pytest
 import rclpy
+import yaml
 from rclpy.exceptions import InvalidParameterValueException
 from rclpy.parameter import Parameter
-
-import yaml
 
 from sim_bridge.sim_node import SimConfigError, SimNode
 from world_description.resources import resolve_resource
