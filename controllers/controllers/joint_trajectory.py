@@ -3,8 +3,11 @@
 Validation follows ros2_controllers' joint_trajectory_controller (unknown or duplicate joints,
 empty trajectories, size mismatches, time_from_start order, non-finite values, position limits,
 a start stamp so old that the whole trajectory lies in the past) and adds what it lets through:
-a first point at time 0 away from the current position, and segments faster than the joints'
-velocity limits. Interpolation, per segment:
+a first point at time 0 away from the current position, segments faster than the joints'
+velocity limits, given accelerations above the joints' acceleration limits, and an
+interpolation that leaves the position limits or cannot be computed in floating point (a
+first point's acceleration of 1e308 overflowed it into NaN, which reached the physics).
+Interpolation, per segment:
 - positions, velocities and accelerations given: quintic;
 - positions (and optionally velocities): cubic Hermite. Missing velocities are chosen by
   monotone (Fritsch-Carlson) slopes, so an interpolated joint never overshoots its waypoints
@@ -28,16 +31,28 @@ START_TOLERANCE = 1e-3
 LIMIT_TOLERANCE = 1e-9
 
 
+# The interpolated reference may pass a position limit by this share of the joint's range
+# (a cubic from a moving state may round a waypoint at the limit); beyond it, it is refused.
+INTERPOLATION_MARGIN = 0.02
+# Samples per segment at which the interpolation is checked against the position limits.
+CHECK_SAMPLES = 9
+
+
 @dataclass(frozen=True)
 class JointLimits:
     lower: np.ndarray
     upper: np.ndarray
     velocity: np.ndarray
     effort: np.ndarray
+    acceleration: Optional[np.ndarray] = None      # None: no limits (inf)
 
     def __post_init__(self) -> None:
         n = len(self.lower)
-        for name in ('upper', 'velocity', 'effort'):
+        if self.acceleration is None:
+            object.__setattr__(self, 'acceleration', np.full(n, np.inf))
+        if np.any(~(np.asarray(self.acceleration, float) > 0.0)):
+            raise ValueError('limits: acceleration limits must be > 0')
+        for name in ('upper', 'velocity', 'effort', 'acceleration'):
             if len(getattr(self, name)) != n:
                 raise ValueError(f'limits: {name} has {len(getattr(self, name))} values, '
                                  f'lower has {n}')
@@ -137,6 +152,7 @@ class TrajectoryFollower:
         idx = [self._index[n] for n in names]
         lower, upper = self.limits.lower[idx], self.limits.upper[idx]
         vmax = self.limits.velocity[idx]
+        amax = np.asarray(self.limits.acceleration, float)[idx]
         if current is None:
             current = self.sample(now).positions
         start = now if request.start_time is None else request.start_time
@@ -167,6 +183,12 @@ class TrajectoryFollower:
                     j = int(np.argmax(v - vmax))
                     return TrajectoryResult(False, f'point {k}: {names[j]} velocity {v[j]:.4f} '
                                                    f'exceeds its limit {vmax[j]:.4f}')
+            if point.accelerations:
+                a = np.abs(np.asarray(point.accelerations, float))
+                if np.any(a > amax * (1.0 + 1e-9)):
+                    j = int(np.argmax(a - amax))
+                    return TrajectoryResult(False, f'point {k}: {names[j]} acceleration '
+                                                   f'{a[j]:.4g} exceeds its limit {amax[j]:.4g}')
             when = start + t
             if when < now:
                 continue            # already past (an old stamp): skipped when following
@@ -231,14 +253,47 @@ class TrajectoryFollower:
         if not given_vel and len(knots_t) > 1:
             knots_v[1:] = _monotone_slopes(knots_t, knots_q)[1:]
             knots_v[-1] = 0.0
-        segments = [_Segment(knots_t[k], knots_t[k + 1],
-                             _poly(knots_t[k + 1] - knots_t[k], knots_q[k], knots_v[k],
-                                   knots_a[k] if given_acc else None, knots_q[k + 1],
-                                   knots_v[k + 1], knots_a[k + 1] if given_acc else None))
-                    for k in range(len(knots_t) - 1)]
+        with np.errstate(all='ignore'):      # (overflows are found and refused below)
+            segments = [_Segment(knots_t[k], knots_t[k + 1],
+                                 _poly(knots_t[k + 1] - knots_t[k], knots_q[k], knots_v[k],
+                                       knots_a[k] if given_acc else None, knots_q[k + 1],
+                                       knots_v[k + 1], knots_a[k + 1] if given_acc else None))
+                        for k in range(len(knots_t) - 1)]
+        problem = self._interpolation_problem(segments, [-1] + ahead)
+        if problem:
+            return TrajectoryResult(False, problem)
         self._hold = pos[-1].copy()
         self._active = _Active(segments, float(knots_t[-1]))
         return result
+
+    def _interpolation_problem(self, segments: List[_Segment], points: List[int]) -> str:
+        """Why the interpolated reference cannot be followed ('' if it can): not finite, or
+        outside the position limits by more than INTERPOLATION_MARGIN of a joint's range.
+        ``points[k]`` is the request's index of knot k (-1: where the motion starts)."""
+        if not segments:
+            return ''
+        coeffs = np.stack([seg.coeffs for seg in segments])                  # (m, 6, n)
+        span = np.array([seg.t1 - seg.t0 for seg in segments])
+        s = span[:, None] * np.linspace(0.0, 1.0, CHECK_SAMPLES)[None, :]   # (m, k)
+        powers = s[:, :, None] ** np.arange(6)[None, None, :]               # (m, k, 6)
+        with np.errstate(all='ignore'):
+            q = np.einsum('mki,min->mkn', powers, coeffs)                   # (m, k, n)
+        bad = ~np.isfinite(coeffs).all(axis=(1, 2)) | ~np.isfinite(q).all(axis=(1, 2))
+        if np.any(bad):
+            m = int(np.argmax(bad))
+            return (f'the motion from {_knot(points[m])} to {_knot(points[m + 1])} overflows '
+                    'floating point (are its velocities or accelerations finite but huge?)')
+        lower, upper = self.limits.lower, self.limits.upper
+        margin = INTERPOLATION_MARGIN * np.where(np.isfinite(upper - lower), upper - lower, 0.0)
+        out = (q < (lower - margin)) | (q > (upper + margin))
+        if np.any(out):
+            m, _, j = (int(i) for i in np.argwhere(out)[0])
+            reach = q[m, :, j].min() if q[m, :, j].min() < lower[j] else q[m, :, j].max()
+            return (f'between {_knot(points[m])} and {_knot(points[m + 1])} the interpolated '
+                    f'{self.joint_names[j]} reaches {reach:.4g}, outside its limits '
+                    f'[{lower[j]:.4f}, {upper[j]:.4f}] (do the given velocities or '
+                    'accelerations overshoot?)')
+        return ''
 
     def sample(self, t: float) -> DesiredState:
         """The desired state at time ``t``."""
@@ -260,6 +315,10 @@ class TrajectoryFollower:
     def end_time(self) -> float:
         """When the trajectory being followed ends (-inf when holding)."""
         return self._active.end_time
+
+
+def _knot(k: int) -> str:
+    return 'the current state' if k < 0 else f'point {k}'
 
 
 def _check_point(point: TrajectoryPoint, k: int, n: int) -> str:

@@ -4,7 +4,7 @@ from __future__ import annotations
 import functools
 import math
 from dataclasses import dataclass
-from typing import Callable, Dict, List, Optional, Protocol
+from typing import Callable, Dict, List, Optional, Protocol, Sequence
 
 import numpy as np
 
@@ -33,6 +33,13 @@ class StepSink(Protocol):
     def on_world_state(self, time_ns: int) -> None:
         """The world's props (materials) are due; called only for worlds that have them."""
 
+    def on_trajectory_aborted(self, robot: str, controller: str, reason: str) -> None:
+        """A joint group stopped following its trajectory and holds where it is."""
+
+    def on_fault(self, robot: str, reason: str) -> None:
+        """A robot's physics state went non-finite: it was put back at its start pose, at
+        rest, and takes no commands until the runner is reset."""
+
 
 class NullSink:
     """A StepSink that wants nothing: subclass it and override what you need."""
@@ -54,6 +61,12 @@ class NullSink:
         pass
 
     def on_world_state(self, time_ns: int) -> None:
+        pass
+
+    def on_trajectory_aborted(self, robot: str, controller: str, reason: str) -> None:
+        pass
+
+    def on_fault(self, robot: str, reason: str) -> None:
         pass
 
 
@@ -122,6 +135,8 @@ class SimRunner:
         self._applied: Dict[str, tuple] = {name: tuple(0.0 for _ in guard.limits)
                                            for name, guard in self.guards.items()}
         self._timed_out: Dict[str, bool] = {name: False for name in self.guards}
+        # Robots put back after a non-finite physics state, and why: no commands until reset.
+        self.faults: Dict[str, str] = {}
         self._arms = [robot for robot in world.robots.values() if robot.controllers]
         self._camera_period_ns: List[int] = [
             max(dt_ns, round(1e9 / cam.config.rate)) for cam in world.cameras]
@@ -141,6 +156,10 @@ class SimRunner:
         The result's command is (vx, wz) for a differential drive, (vx, vy, wz) for Mecanum.
         """
         command = (vx, vy, wz) if self.holonomic(robot) else (vx, wz)
+        if robot in self.faults:
+            self.guards[robot].stop()
+            return GuardResult(False, tuple(0.0 for _ in command),
+                               reason=f'{self.faults[robot]}; reset the simulator to go on')
         result = self.guards[robot].submit(command, self.world.sim_time)
         self._timed_out[robot] = False
         return result
@@ -150,11 +169,65 @@ class SimRunner:
         self.guards[robot].stop()
         self._timed_out[robot] = False
 
-    def set_trajectory(self, robot: str, controller: str,
-                       request: TrajectoryRequest) -> TrajectoryResult:
-        """Validate a trajectory for a joint group and, if valid, follow it from now."""
+    def set_trajectory(self, robot: str, controller: str, request: TrajectoryRequest,
+                       path_tolerance: Optional[Sequence[float]] = None) -> TrajectoryResult:
+        """Validate a trajectory for a joint group and, if valid, follow it from now, aborting
+        it if a joint lags its reference by more than its path tolerance (per joint, 0: not
+        checked; None: the controller's own, from the world file)."""
+        if robot in self.faults:
+            return TrajectoryResult(False, f'{self.faults[robot]}; reset the simulator to go on')
         group = self.world.robots[robot].controllers[controller]
-        return group.follower.set_trajectory(request, self.world.sim_time)
+        result = group.follower.set_trajectory(request, self.world.sim_time)
+        if result.accepted:
+            group.active_path_tolerance = (group.path_tolerance if path_tolerance is None else
+                                           np.asarray(path_tolerance, float))
+        return result
+
+    def check_robot(self, name: str, sink: 'StepSink') -> bool:
+        """Check a robot's physics state and its joint groups' references against their
+        feedback; False if the robot had to be put back (a fault). Called at the state rate."""
+        robot = self.world.robots[name]
+        problem = robot.state_problem()
+        if problem:
+            repaired = self._fault(name)
+            self.faults[name] = f'{name}: the physics state of {problem} was not finite' + (
+                f' (and the pose of {", ".join(repaired)}, put back)' if repaired else '')
+            sink.on_fault(name, self.faults[name])
+            return False
+        for controller, group in robot.controllers.items():
+            if group.fault:
+                why, group.fault = group.fault, ''
+                sink.on_trajectory_aborted(name, controller, why)
+                continue
+            if not group.follower.active or group.follower.finished(self.world.sim_time):
+                continue
+            tolerance = group.active_path_tolerance
+            if not np.any(tolerance > 0.0):
+                continue
+            error = np.abs(group.desired.positions - group.actual()[0])
+            broken = (tolerance > 0.0) & ~(error <= tolerance)
+            if np.any(broken):
+                j = int(np.argmax(broken))
+                group.hold_current()
+                contacts = self.world.contacts_of(group)
+                sink.on_trajectory_aborted(name, controller, (
+                    f'path tolerance violated: {group.joint_names[j]} is {error[j]:.4f} from its '
+                    f'reference (tolerance {tolerance[j]:.4f})'
+                    + (f'; in contact: {", ".join(contacts)}' if contacts else '')))
+        return True
+
+    def _fault(self, name: str) -> List[str]:
+        """Load a robot again, stopped; the static bodies it poisoned are put back."""
+        robot = self.world.robots[name]
+        suction = self.world.suctions.get(name)
+        if suction is not None:
+            suction.reset()
+        robot.reload()
+        repaired = self.world.repair_static()
+        if name in self.guards:
+            self.guards[name].stop()
+            self._applied[name] = tuple(0.0 for _ in self.guards[name].limits)
+        return repaired
 
     def advance(self, steps: int, sink: StepSink) -> None:
         world = self.world
@@ -182,6 +255,7 @@ class SimRunner:
             if t_ns >= self._state_next_ns:
                 self._state_next_ns = next_on_grid(t_ns, self.state_period_ns)
                 for name in world.robots:
+                    self.check_robot(name, sink)
                     sink.on_state(name, t_ns)
             if world.source is not None and t_ns >= self._world_state_next_ns:
                 self._world_state_next_ns = next_on_grid(t_ns, self.world_state_period_ns)
@@ -200,7 +274,14 @@ class SimRunner:
             sink.on_clock(t_ns)
 
     def reset(self) -> None:
+        """Every robot back at its start pose, at rest (a body whose state is not finite is
+        loaded again), faults cleared."""
+        for robot in self.world.robots.values():
+            if robot.state_problem():
+                robot.reload()
+        self.world.repair_static()
         self.world.reset()
+        self.faults.clear()
         for name, guard in self.guards.items():
             guard.stop()
             self._applied[name] = tuple(0.0 for _ in guard.limits)

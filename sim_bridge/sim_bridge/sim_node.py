@@ -348,6 +348,23 @@ class SimNode(Node):
     def on_clock(self, time_ns: int) -> None:
         self._publish_clock(time_ns)
 
+    def on_trajectory_aborted(self, robot: str, controller: str, reason: str) -> None:
+        self._actions.abort((robot, controller), reason)
+        text = self._rejections.text(
+            (robot, controller, 'aborted'), time.monotonic(),
+            f'{robot}/{controller}: trajectory aborted: {reason}; holding position')
+        if text is not None:
+            self.get_logger().error(text)
+
+    def on_fault(self, robot: str, reason: str) -> None:
+        for controller in self._world.robots[robot].controllers:
+            self._actions.abort((robot, controller), reason)
+        self.get_logger().error(
+            f'{reason}: {robot} was stopped and put back at its start pose, at rest; it takes '
+            'no commands or trajectories until ~/reset')
+        if robot in self._cmd_out_pubs:
+            self._publish_applied(robot, self._world.sim_time_ns)
+
     def on_state(self, robot: str, time_ns: int) -> None:
         # A state nobody reads is not built or sent (as the cameras): each costs about a
         # millisecond in rclpy, and a lock-step trial sends about 20,000 of them. A reader that
@@ -576,13 +593,15 @@ class SimNode(Node):
         return SetParametersResult(successful=True)
 
     def _on_reset(self, _request, response):
-        self._runner.reset()
         self._hold_watch = HoldWatch(self._world)     # (simulated time starts again)
         for robot in self._cmd_out_pubs:
             self._publish_applied(robot, self._world.sim_time_ns)
         for name in self._world.robots:
             self.on_state(name, self._world.sim_time_ns)
-        response.success, response.message = True, 'robots returned to their start poses'
+        faults = list(self._runner.faults)
+        self._runner.reset()
+        response.success, response.message = True, 'robots returned to their start poses' + (
+            f' (faults cleared: {", ".join(faults)})' if faults else '')
         self.get_logger().info('world reset')
         return response
 

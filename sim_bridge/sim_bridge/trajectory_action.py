@@ -24,6 +24,7 @@ import functools
 from dataclasses import dataclass
 from typing import Callable, Dict, List, Tuple
 
+import numpy as np
 from control_msgs.action import FollowJointTrajectory
 from rclpy.action import ActionServer, CancelResponse, GoalResponse
 from rclpy.action.server import ServerGoalHandle
@@ -32,6 +33,7 @@ from rclpy.task import Future
 
 from controllers.trajectory_goal import (
     INVALID_GOAL,
+    PATH_TOLERANCE_VIOLATED,
     SUCCESSFUL,
     GoalMonitor,
     Outcome,
@@ -51,6 +53,20 @@ class _Running:
 
 def _tolerances(msgs) -> List[Tuple[str, Tolerance]]:
     return [(t.name, Tolerance(t.position, t.velocity, t.acceleration)) for t in msgs]
+
+
+def merged_path_tolerance(joint_names, defaults, goal) -> np.ndarray:
+    """The position path tolerance per joint for a goal, as JTC merges them: a goal's value
+    > 0 replaces the controller's default for that joint, -1 erases it (not checked), 0 or a
+    joint left out keeps it."""
+    merged = np.array(defaults, float)
+    for name, tol in goal:
+        i = list(joint_names).index(name)
+        if tol.position > 0.0:
+            merged[i] = tol.position
+        elif tol.position == -1.0:
+            merged[i] = 0.0
+    return merged
 
 
 class TrajectoryActions:
@@ -108,14 +124,17 @@ class TrajectoryActions:
 
     async def _execute(self, key: Tuple[str, str], handle):
         goal = handle.request
-        result = self._runner.set_trajectory(*key, self._request(goal.trajectory))
+        group = self._group(key)
+        result = self._runner.set_trajectory(
+            *key, self._request(goal.trajectory),
+            path_tolerance=merged_path_tolerance(group.joint_names, group.path_tolerance,
+                                                 _tolerances(goal.path_tolerance)))
         if not result.accepted:
             self._node.get_logger().error(f'{key[0]}/{key[1]}: goal aborted: {result.reason}')
             handle.abort()
             return _result(Outcome(INVALID_GOAL, result.reason))
         self._node.get_logger().info(
             f'{key[0]}/{key[1]}: following a goal of {len(goal.trajectory.points)} points')
-        group = self._group(key)
         running = _Running(handle, GoalMonitor(
             group.joint_names, group.follower.end_time, _tolerances(goal.path_tolerance),
             _tolerances(goal.goal_tolerance), to_seconds(goal.goal_time_tolerance)), Future())
@@ -141,6 +160,13 @@ class TrajectoryActions:
             # (An action goal may end canceled only after the client asked: a preempted goal
             # ends aborted, with JTC's INVALID_GOAL code and the reason.)
             running.outcome.set_result(Outcome(INVALID_GOAL, f'current goal canceled: {why}'))
+
+    def abort(self, key: Tuple[str, str], why: str) -> None:
+        """End the running goal of a controller with PATH_TOLERANCE_VIOLATED: the simulator
+        stopped its trajectory (a joint lagged its reference, or the robot faulted)."""
+        running = self._running.pop(key, None)
+        if running is not None and not running.outcome.done():
+            running.outcome.set_result(Outcome(PATH_TOLERANCE_VIOLATED, why))
 
     def on_state(self, robot: str, now: float) -> None:
         """Judge and report the robot's running goals (at the state rate)."""

@@ -18,6 +18,7 @@ from controllers.mecanum import wheel_speeds as mecanum_wheel_speeds
 from sim_bridge.camera import projection_matrix, view_matrix_from_optical
 from sim_bridge.cell import Conveyor, MaterialBody, MaterialSource, Suction
 from world_description.camera_geometry import intrinsics_from_fov, look_at_rotation
+from world_description.joint_limits import JointLimitsError, load_acceleration_limits
 from world_description.resources import resolve_resource
 from world_description.world_config import (
     CameraConfig,
@@ -61,21 +62,28 @@ class BaseState:
 class SimRobot:
     """One URDF body: its joints, its base frame, its drive and its joint-group controllers."""
 
-    def __init__(self, client: BulletClient, config: RobotConfig, urdf: Path) -> None:
+    def __init__(self, client: BulletClient, config: RobotConfig, urdf: Path,
+                 base_dir: Optional[Path] = None) -> None:
         self.config = config
         self.client = client
         if not urdf.is_file():
             raise WorldError(f'robot "{config.name}": URDF {urdf} does not exist')
         self.urdf = urdf
+        self._base_dir = base_dir
         pose = config.pose
         self._start_pos = (pose.x, pose.y, pose.z)
         self._start_orn = tuple(client.getQuaternionFromEuler((0.0, 0.0, pose.yaw)))
+        self._load()
+
+    def _load(self) -> None:
+        """Load the URDF at the start pose and set up its joints, drive and controllers."""
+        client, config = self.client, self.config
         try:
-            self.body = client.loadURDF(str(urdf), self._start_pos, self._start_orn,
+            self.body = client.loadURDF(str(self.urdf), self._start_pos, self._start_orn,
                                         useFixedBase=config.fixed_base, flags=URDF_FLAGS)
         except pybullet.error as exc:
             raise WorldError(
-                f'robot "{config.name}": PyBullet cannot load {urdf}: {exc}') from None
+                f'robot "{config.name}": PyBullet cannot load {self.urdf}: {exc}') from None
         # PyBullet reports the base's inertial frame; keep its offset from base_link.
         info = client.getDynamicsInfo(self.body, -1)
         self._inertial_pos, self._inertial_orn = info[3], info[4]
@@ -107,7 +115,7 @@ class SimRobot:
             self.drive = _MecanumDrive(self, config.drive)
         self.controllers: Dict[str, JointGroup] = {}
         for cc in config.controllers:
-            self.controllers[cc.name] = JointGroup(self, cc)
+            self.controllers[cc.name] = JointGroup(self, cc, self._base_dir)
         self._initial: Dict[int, float] = {}
         for joint, position in config.initial_joint_positions:
             j = self.movable_joint(joint, 'initial_joint_positions')
@@ -117,6 +125,25 @@ class SimRobot:
                                  f'"{joint}" is outside its limits [{lower}, {upper}]')
             self._initial[j] = position
         self.reset()
+
+    def state_problem(self) -> str:
+        """What in the body's state is not finite ('' if all is): PyBullet carries a NaN on
+        from step to step, and resetting the state does not clear it from the body."""
+        p, body = self.client, self.body
+        pos, orn = p.getBasePositionAndOrientation(body)
+        linear, angular = p.getBaseVelocity(body)
+        if not math.isfinite(sum(pos) + sum(orn) + sum(linear) + sum(angular)):
+            return 'its base pose or velocity'
+        states = p.getJointStates(body, self.movable) if self.movable else []
+        bad = [self._joint_names[i] for i, st in enumerate(states)
+               if not math.isfinite(st[0] + st[1])]
+        return f'joints {bad}' if bad else ''
+
+    def reload(self) -> None:
+        """Remove the body from the physics and load it again at its start pose, at rest: the
+        one way back from a non-finite state. Controllers start anew, holding."""
+        self.client.removeBody(self.body)
+        self._load()
 
     @property
     def joint_names(self) -> List[str]:
@@ -310,7 +337,8 @@ class _MecanumDrive:
 class JointGroup:
     """Position-controlled joints following trajectories (PyBullet position motors)."""
 
-    def __init__(self, robot: SimRobot, config: ControllerConfig) -> None:
+    def __init__(self, robot: SimRobot, config: ControllerConfig,
+                 base_dir: Optional[Path] = None) -> None:
         self._robot, self.config = robot, config
         self.joint_names = config.joints
         self.joints = [robot.movable_joint(j, f'controller "{config.name}"')
@@ -321,7 +349,25 @@ class JointGroup:
                 raise WorldError(f'robot "{robot.config.name}": controller "{config.name}": '
                                  f'joint "{joint}" needs velocity and effort limits > 0 in the '
                                  'URDF')
-        self.limits = JointLimits(*(np.array([lim[i] for lim in limits]) for i in range(4)))
+        accelerations = np.full(len(limits), np.inf)
+        if config.joint_limits is not None:
+            source = resolve_resource(config.joint_limits, base_dir)
+            try:
+                given = load_acceleration_limits(source)
+            except JointLimitsError as exc:
+                raise WorldError(f'robot "{robot.config.name}": controller "{config.name}": '
+                                 f'{exc}') from None
+            accelerations = np.array([given.get(j, np.inf) for j in config.joints])
+        lower, upper, velocity, effort = (np.array([lim[i] for lim in limits])
+                                          for i in range(4))
+        self.limits = JointLimits(lower, upper, velocity, effort, accelerations)
+        # Per joint; 0: not checked (JTC's constraints.<joint>.trajectory).
+        self.path_tolerance = np.full(len(limits), config.path_tolerance)
+        # The tolerances of the trajectory being followed (an action goal may set its own).
+        self.active_path_tolerance = self.path_tolerance
+        # Why the group stopped following on its own (a reference that is not finite); the
+        # runner reports and clears it.
+        self.fault = ''
         self.moved_links = robot.links_moved_by(self.joints)
         self._effort = self.limits.effort.tolist()
         self._max_velocity = self.limits.velocity.tolist()
@@ -344,6 +390,11 @@ class JointGroup:
         # is not sent the same targets 240 times a second.
         targets = (state.positions.tolist(), state.velocities.tolist())
         if targets == self._motor_targets:
+            return
+        if not math.isfinite(sum(targets[0]) + sum(targets[1])):
+            # (Validation keeps this out; if it ever comes, it must not reach PyBullet.)
+            self.fault = 'its reference is not finite'
+            self.hold_current()
             return
         self._motor_targets = targets
         p, body = self._robot.client, self._robot.body
@@ -448,13 +499,21 @@ class SimWorld:
         base_dir = Path(config.source).parent if config.source else None
         self.robots: Dict[str, SimRobot] = {}
         for rc in config.robots:
-            self.robots[rc.name] = SimRobot(p, rc, resolve_resource(rc.urdf, base_dir))
+            self.robots[rc.name] = SimRobot(p, rc, resolve_resource(rc.urdf, base_dir), base_dir)
         self.cameras: List[SimCamera] = [
             SimCamera(cc, self.robots[cc.robot] if cc.robot else None) for cc in config.cameras]
         self.conveyor = Conveyor(p, config.conveyor) if config.conveyor else None
         # (The world file's reader holds materials to a conveyor to be placed on.)
         self.source = (MaterialSource(p, self.conveyor, config.materials, scenario_seed)
                        if config.materials and self.conveyor else None)
+        # Where every static body (floor, obstacles, the belt and its stands) belongs: a
+        # non-finite robot state spreads NaN into the static bodies it touches, and a body
+        # loaded again then falls through a floor whose pose is NaN.
+        robot_bodies = {robot.body for robot in self.robots.values()}
+        self._static_poses = {
+            body: p.getBasePositionAndOrientation(body)
+            for body in (p.getBodyUniqueId(i) for i in range(p.getNumBodies()))
+            if body not in robot_bodies and p.getDynamicsInfo(body, -1)[0] == 0.0}
         self.suctions: Dict[str, Suction] = {}
         for name, robot in self.robots.items():
             sc = robot.config.suction
@@ -488,6 +547,16 @@ class SimWorld:
                 self.source.update(self.sim_time)
         self._p.stepSimulation()
         self.step_count += 1
+
+    def repair_static(self) -> List[str]:
+        """Put back every static body whose pose is no longer finite; their names."""
+        repaired = []
+        for body, (pos, orn) in self._static_poses.items():
+            now_pos, now_orn = self._p.getBasePositionAndOrientation(body)
+            if not math.isfinite(sum(now_pos) + sum(now_orn)):
+                self._p.resetBasePositionAndOrientation(body, pos, orn)
+                repaired.append(self.body_name(body))
+        return repaired
 
     def reset(self) -> None:
         """Put every robot back at its start pose, at rest, and start the materials' scenario

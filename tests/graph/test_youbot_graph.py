@@ -295,3 +295,48 @@ def test_a_nan_in_any_twist_field_stops_the_base(youbot_sim, probe):
     assert [m.twist.linear.x for _, m in list(applied)
             if stamp_s(m.header.stamp) > t_stop] == []       # it stays stopped
     assert 'non-finite angular.x=nan' in youbot_sim.output()
+
+
+def test_a_trajectory_of_huge_accelerations_is_refused_and_the_youbot_lives(youbot_sim, probe):
+    """Issue 15, finding 1, as reported: 5 arm joints, two points, positions and velocities 0,
+    the first point's accelerations 1e308 (finite), at 1 s and 2 s. It was accepted, its
+    interpolation overflowed, PyBullet's state went NaN, and after ~/reset nothing moved. Now
+    it is refused (the youBot's joint_limits.yaml: 6 rad/s^2), and so are accelerations of
+    1e3 at the current position (which swung the arm 2.39 rad); odometry and joint states stay
+    finite, the arm follows the next good trajectory and the base drives."""
+    base = Base(probe)
+    assert probe.call(Trigger, '/sim_node/reset', Trigger.Request()).success
+    joints = probe.collect(JointState, '/youbot/joint_states')
+    pub = probe.node.create_publisher(JointTrajectory, '/youbot/arm_controller/joint_trajectory',
+                                      10)
+    wait_for(lambda: joints and pub.get_subscription_count() > 0, 20.0, what='arm topics')
+
+    def accelerating(first, second):
+        msg = JointTrajectory(joint_names=list(JOINT_NAMES))
+        for seconds, acc in ((1, first), (2, second)):
+            point = JointTrajectoryPoint(positions=[0.0] * 5, velocities=[0.0] * 5,
+                                         accelerations=[acc] * 5)
+            point.time_from_start.sec = seconds
+            msg.points.append(point)
+        return msg
+
+    pub.publish(accelerating(1e308, 0.0))
+    wait_for(lambda: 'arm_joint_1 acceleration 1e+308 exceeds its limit 6' in youbot_sim.output(),
+             10.0, what='the rejection')
+    time.sleep(1.1)           # (rejections of one kind are logged a line a second at most)
+    pub.publish(accelerating(1e3, -1e3))
+    wait_for(lambda: 'arm_joint_1 acceleration 1000 exceeds its limit 6' in youbot_sim.output(),
+             10.0, what='the second rejection')
+    time.sleep(1.0 / RTF)
+    odom = base.odom[-1][1].pose.pose.position
+    assert all(math.isfinite(v) for v in (odom.x, odom.y, odom.z))
+    assert np.all(np.isfinite(joints[-1][1].position))
+    assert np.abs(_arm_positions(joints)).max() < 2e-3              # the arm never moved
+    pub.publish(_trajectory((0.3, 0.2, 0.1, 0.0, 0.0), 1.0))
+    wait_for(lambda: np.abs(_arm_positions(joints) - (0.3, 0.2, 0.1, 0.0, 0.0)).max() < 5e-3,
+             20.0, what='the arm at the good trajectory\'s goal')
+    x0 = _pose2d(base.odom[-1][1]).x
+    base.hold((0.3, 0.0, 0.0), 1.0)
+    assert _pose2d(base.odom[-1][1]).x - x0 > 0.2
+    assert 'RuntimeWarning' not in youbot_sim.output() and youbot_sim.alive()
+    pub.publish(_trajectory(np.zeros(5), 1.0))

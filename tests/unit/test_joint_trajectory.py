@@ -191,3 +191,50 @@ def test_a_motion_that_continues_the_running_one_is_joined_where_it_has_the_arm(
     assert end.positions[0] == pytest.approx(0.9) and end.velocities[0] == pytest.approx(0.0)
     speeds = [abs(f.sample(float(t)).velocities[0]) for t in np.arange(0.74, 1.8, 0.01)]
     assert max(speeds) <= LIMITS.velocity[0] + 1e-9
+
+
+ACCEL = JointLimits(lower=LIMITS.lower, upper=LIMITS.upper, velocity=LIMITS.velocity,
+                    effort=LIMITS.effort, acceleration=np.array([6.0, 6.0, 12.0]))
+
+
+@pytest.mark.parametrize('points, reason', [
+    # Issue 15, finding 1: all at rest except the first point's accelerations (finite).
+    ([(1.0, (0.0,) * 3, (0.0,) * 3, (1e308,) * 3), (2.0, (0.0,) * 3, (0.0,) * 3, (0.0,) * 3)],
+     'point 0: j1 acceleration 1e+308 exceeds its limit 6'),
+    # Every waypoint at the current position, accelerations 1e3: drove the reference 17 rad off.
+    ([(1.0, (0.0,) * 3, (0.0,) * 3, (1e3,) * 3), (2.0, (0.0,) * 3, (0.0,) * 3, (-1e3,) * 3)],
+     'point 0: j1 acceleration 1000 exceeds its limit 6'),
+    ([(1.0, (0.1, 0.1, 0.1), (0.0,) * 3, (0.0, 0.0, -12.5))], 'j3 acceleration 12.5 exceeds'),
+])
+def test_accelerations_above_the_limits_are_refused(points, reason):
+    f = TrajectoryFollower(NAMES, ACCEL, (0.0, 0.0, 0.0))
+    result = f.set_trajectory(request(points), now=0.0)
+    assert not result.accepted and reason in result.reason
+    assert not f.active and f.sample(1.0).positions == pytest.approx([0.0, 0.0, 0.0])
+
+
+def test_an_interpolation_that_leaves_the_limits_or_overflows_is_refused():
+    f = TrajectoryFollower(NAMES, ACCEL, (0.0, 0.0, 0.0))
+    # Allowed velocities and accelerations, but quintics from rest at 0 to rest at 1.4
+    # through a velocity of -1 at t = 10 s swing j2 to -1.56, below its lower limit -1.
+    swing = [(10.0, (0.7, 0.0, 0.0), (0.0, -1.0, 0.0), (0.0, 0.0, 0.0)),
+             (20.0, (1.4, 1.4, 0.0), (0.0, 0.0, 0.0), (0.0, 0.0, 0.0))]
+    result = f.set_trajectory(request(swing), now=0.0)
+    assert not result.accepted
+    assert 'the interpolated j2 reaches' in result.reason and 'outside its limits' in result.reason
+    # Without acceleration limits, 1e308 passes the point checks and overflows.
+    g = follower()
+    huge = [(1.0, (0.0,) * 3, (0.0,) * 3, (1e308,) * 3), (2.0, (0.0,) * 3, (0.0,) * 3,
+                                                            (0.0,) * 3)]
+    result = g.set_trajectory(request(huge), now=0.0)
+    assert not result.accepted and 'overflows floating point' in result.reason
+    assert not g.active
+    # A good one is still taken, and limits at the edge are followed to the edge.
+    assert f.set_trajectory(request([(2.0, (2.0, 1.5, 3.0))]), now=0.0).accepted
+    assert f.sample(2.0).positions == pytest.approx([2.0, 1.5, 3.0])
+
+
+def test_acceleration_limits_must_be_positive():
+    with pytest.raises(ValueError, match='acceleration limits must be > 0'):
+        JointLimits(np.zeros(2), np.ones(2), np.ones(2), np.ones(2), np.array([1.0, 0.0]))
+    assert list(LIMITS.acceleration) == [math.inf] * 3

@@ -88,3 +88,34 @@ def test_both_bases_have_acceleration_limits():
     mini = load_world(resolve_resource('package://world_description/worlds/mini_robot.yaml'))
     limits = mini.robot('mini_robot').limits
     assert (limits.max_accel, limits.max_turn_accel) == (1.0, 2.0)
+
+
+def test_the_joint_limits_files_match_what_the_planner_plans_with(tmp_path):
+    """robot_description/config/*_joint_limits.yaml (MoveIt's format) are what the simulator
+    refuses trajectories by; the pipeline plans with controllers' constants: the same."""
+    from controllers import youbot_arm, zu12_arm
+    from world_description.joint_limits import JointLimitsError, load_acceleration_limits
+    youbot = load_acceleration_limits(resolve_resource(
+        'package://robot_description/config/youbot_joint_limits.yaml'))
+    assert [youbot[j] for j in youbot_arm.JOINT_NAMES] == [youbot_arm.JOINT_ACCELERATION_LIMIT] * 5
+    zu12 = load_acceleration_limits(resolve_resource(
+        'package://robot_description/config/zu12_joint_limits.yaml'))
+    assert tuple(zu12[j] for j in zu12_arm.JOINT_NAMES) == zu12_arm.JOINT_ACCELERATION_LIMITS
+    cell = load_world(resolve_resource('package://world_description/worlds/pipeline_cell.yaml'))
+    arms = [c for r in cell.robots for c in r.controllers if c.name == 'arm_controller']
+    assert [c.path_tolerance for c in arms] == [0.25, 0.25] and all(c.joint_limits for c in arms)
+    for text, why in [('joint_limits: 3', 'needs a "joint_limits" mapping'),
+                      ('joint_limits: {a: {has_acceleration_limits: true}}', 'max_acceleration'),
+                      ('joint_limits: {a: {has_acceleration_limits: true, max_acceleration: -1}}',
+                       'finite number > 0'),
+                      ('joint_limits: {a: {has_acceleration_limits: 1}}', 'true or false'),
+                      ('{', 'cannot be read as YAML')]:
+        bad = tmp_path / 'bad.yaml'
+        bad.write_text(text)
+        with pytest.raises(JointLimitsError, match=why):
+            load_acceleration_limits(bad)
+    with pytest.raises(JointLimitsError, match='cannot be read'):
+        load_acceleration_limits(tmp_path / 'missing.yaml')
+    off = tmp_path / 'off.yaml'
+    off.write_text('joint_limits: {a: {has_acceleration_limits: false, max_acceleration: 3}}')
+    assert load_acceleration_limits(off) == {}

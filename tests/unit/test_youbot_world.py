@@ -226,8 +226,10 @@ def test_an_arm_pushed_against_the_floor_is_reported_with_what_it_touches(youbot
     reports = []
 
     def move(goal, seconds):
+        # (No path tolerance, which would stop the arm at the floor: see the next test.)
         request = TrajectoryRequest(JOINT_NAMES, (TrajectoryPoint(seconds, goal),))
-        assert runner.set_trajectory('youbot', 'arm_controller', request).accepted
+        assert runner.set_trajectory('youbot', 'arm_controller', request,
+                                     path_tolerance=[0.0] * 5).accepted
         for _ in range(int((seconds + 1.5) * HZ)):
             runner.advance(1, Sink())
             reports.extend(watch.update(world.sim_time))
@@ -242,3 +244,101 @@ def test_an_arm_pushed_against_the_floor_is_reported_with_what_it_touches(youbot
     move((0.0, 0.0, 0.0, 0.0, 0.0), 3.0)
     assert [r.blocked for r in reports] == [True, False]
     assert reports[-1].text == 'youbot/arm_controller is back at its reference'
+
+
+def test_a_trajectory_the_arm_cannot_follow_is_aborted_and_the_arm_holds(youbot):
+    """JTC's path tolerance (the world file's 0.25 rad): the arm driven into the floor lags
+    its reference; the trajectory is aborted, naming the joint and the contacts, and the arm
+    holds where it stopped (the reference is its position then), so no hold is reported."""
+    from sim_bridge.hold_watch import HoldWatch
+    robot, runner = youbot
+    arm = robot.controllers['arm_controller']
+    assert list(arm.path_tolerance) == [0.25] * 5
+    watch = HoldWatch(runner.world)
+    aborted, reports = [], []
+
+    class Aborts(Sink):
+        def on_trajectory_aborted(self, robot, controller, reason):
+            aborted.append((robot, controller, reason, runner.world.sim_time))
+
+    request = TrajectoryRequest(JOINT_NAMES, (TrajectoryPoint(3.0, (0.0, 1.5, 1.65, 0.72, 0.0)),))
+    start = runner.world.sim_time
+    assert runner.set_trajectory('youbot', 'arm_controller', request).accepted
+    for _ in range(int(4.5 * HZ)):
+        runner.advance(1, Aborts())
+        reports.extend(watch.update(runner.world.sim_time))
+    (who, controller, reason, when), = aborted
+    assert (who, controller) == ('youbot', 'arm_controller') and when - start < 3.0
+    assert 'path tolerance violated' in reason and 'on the floor' in reason
+    assert not arm.follower.active
+    assert np.abs(arm.desired.positions - arm.actual()[0]).max() < 0.05
+    assert reports == []
+
+
+def test_a_non_finite_physics_state_stops_the_robot_and_reset_restores_it():
+    """Issue 15, finding 1: once PyBullet carried a NaN (from NaN motor targets), resetting
+    the state left the body dead: the base sank through the floor and no trajectory moved the
+    arm. The runner finds the NaN at the next state check, loads the body again at its start
+    pose, refuses commands until reset, and after reset the robot drives and the arm moves."""
+    import pybullet
+    world = SimWorld(load_world(resolve_resource(YOUBOT_WORLD)))
+    runner = SimRunner(world, DriveLimits(max_speed=0.5, cmd_vel_timeout=0.5), 100.0)
+    robot = world.robots['youbot']
+    arm = robot.controllers['arm_controller']
+    faults = []
+
+    class Faults(Sink):
+        def on_fault(self, name, reason):
+            faults.append((name, reason))
+
+    try:
+        runner.advance(HZ // 2, Faults())
+        for joint in arm.joints:            # what the overflowing interpolation sent
+            robot.client.setJointMotorControl2(robot.body, joint, pybullet.POSITION_CONTROL,
+                                               targetPosition=math.nan, force=10.0)
+        world.step()
+        assert robot.state_problem()
+        runner.advance(HZ // 50, Faults())           # to the next state check (100 Hz)
+        (name, reason), = faults
+        assert name == 'youbot' and 'not finite' in reason and 'the floor' in reason
+        assert not robot.state_problem()
+        assert robot.base_state().position == pytest.approx((0.0, 0.0, 0.0), abs=1e-3)
+        refused = runner.command('youbot', 0.3, 0.0, 0.0)
+        assert not refused.accepted and 'reset the simulator' in refused.reason
+        move = TrajectoryRequest(JOINT_NAMES, (TrajectoryPoint(1.0, (0.5, 0.3, 0.2, 0.1, 0.0)),))
+        assert 'reset the simulator' in runner.set_trajectory('youbot', 'arm_controller',
+                                                              move).reason
+        runner.reset()
+        assert runner.faults == {}
+        for _ in range(10):                                  # 1 s at 0.3 m/s
+            assert runner.command('youbot', 0.3, 0.0, 0.0).accepted
+            runner.advance(HZ // 10, Faults())
+        assert robot.base_state().position[0] > 0.2
+        assert runner.set_trajectory('youbot', 'arm_controller', move).accepted
+        runner.advance(int(1.5 * HZ), Faults())
+        arm = robot.controllers['arm_controller']            # (a new group after the reload)
+        assert arm.actual()[0] == pytest.approx((0.5, 0.3, 0.2, 0.1, 0.0), abs=0.01)
+        assert len(faults) == 1
+    finally:
+        world.close()
+
+
+def test_reset_reloads_a_body_whose_state_is_not_finite():
+    import pybullet
+    world = SimWorld(load_world(resolve_resource(YOUBOT_WORLD)))
+    runner = SimRunner(world, DriveLimits(max_speed=0.5), 100.0)
+    robot = world.robots['youbot']
+    try:
+        for joint in robot.controllers['arm_controller'].joints:
+            robot.client.setJointMotorControl2(robot.body, joint, pybullet.POSITION_CONTROL,
+                                               targetPosition=math.nan, force=10.0)
+        world.step()
+        assert robot.state_problem()
+        runner.reset()                  # before any state check saw it
+        assert not robot.state_problem()
+        for _ in range(10):
+            runner.command('youbot', 0.3, 0.0, 0.0)
+            runner.advance(HZ // 10, Sink())
+        assert robot.base_state().position[0] > 0.2
+    finally:
+        world.close()

@@ -68,6 +68,13 @@ class ControllerConfig:
     # PyBullet position-motor gains (its constraint solver's kp and kd).
     position_gain: float = 0.3
     velocity_gain: float = 1.0
+    # Limits beyond the URDF's (acceleration), in MoveIt's joint_limits.yaml format: a path or
+    # package:// URI, relative paths from the world file's directory. None: no limits.
+    joint_limits: Optional[str] = None
+    # JTC's constraints.<joint>.trajectory: how far a joint may lag its reference while a
+    # trajectory runs [rad or m] before the trajectory is aborted and the group holds where it
+    # is; 0 checks nothing (an action goal's own path tolerances replace it per joint).
+    path_tolerance: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -320,7 +327,8 @@ def _drive(r: '_Reader', d: Any, dw: str
 
 
 def _controller(r: '_Reader', c: Any, where: str) -> ControllerConfig:
-    r.only(c, where, {'name', 'joints', 'position_gain', 'velocity_gain'})
+    r.only(c, where, {'name', 'joints', 'position_gain', 'velocity_gain', 'joint_limits',
+                      'path_tolerance'})
     joints = c.get('joints')
     if (not isinstance(joints, list) or not joints
             or not all(isinstance(j, str) for j in joints)):
@@ -330,7 +338,9 @@ def _controller(r: '_Reader', c: Any, where: str) -> ControllerConfig:
     return ControllerConfig(
         name=r.name(c, 'name', where), joints=tuple(joints),
         position_gain=r.number(c, 'position_gain', where, default=0.3, lo=1e-4, hi=10.0),
-        velocity_gain=r.number(c, 'velocity_gain', where, default=1.0, lo=0.0, hi=10.0))
+        velocity_gain=r.number(c, 'velocity_gain', where, default=1.0, lo=0.0, hi=10.0),
+        joint_limits=r.string(c, 'joint_limits', where) if 'joint_limits' in c else None,
+        path_tolerance=r.number(c, 'path_tolerance', where, default=0.0, lo=0.0, hi=10.0))
 
 
 def _obstacle(r: '_Reader', item: Any, i: int) -> ObstacleConfig:
