@@ -22,14 +22,23 @@ for _rs_dir in "$_rs_root"/ros_ws/install/*/lib/*/; do
   fi
 done
 export PATH
-# The project's Fast DDS profile (ros_common/config/fastdds.xml: a shared-memory segment that
-# holds camera frames), unless a profile or another middleware is chosen already.
+# The project's Fast DDS profile, unless a profile or another middleware is chosen already:
+# ros_common/config/fastdds.xml (DDS on the loopback interface only, and a shared-memory
+# segment that holds camera frames), or fastdds_network.xml (open to other machines) when
+# ROS_AUTOMATIC_DISCOVERY_RANGE is SUBNET or SYSTEM_DEFAULT or ROS_STATIC_PEERS is set
+# (ros_common/dds.py decides the same for the launchers).
 case "${RMW_IMPLEMENTATION:-rmw_fastrtps_cpp}" in
   rmw_fastrtps*)
     _rs_profile="$_rs_root/ros_ws/install/ros_common/share/ros_common/config/fastdds.xml"
+    case "${ROS_AUTOMATIC_DISCOVERY_RANGE:-}" in
+      [Ss][Uu][Bb][Nn][Ee][Tt]|[Ss][Yy][Ss][Tt][Ee][Mm]_[Dd][Ee][Ff][Aa][Uu][Ll][Tt])
+        _rs_profile="${_rs_profile%.xml}_network.xml" ;;
+      *) _rs_peers="${ROS_STATIC_PEERS:-}"
+         if [ -n "${_rs_peers// /}" ]; then _rs_profile="${_rs_profile%.xml}_network.xml"; fi ;;
+    esac
     if [ -z "${FASTRTPS_DEFAULT_PROFILES_FILE:-}${FASTDDS_DEFAULT_PROFILES_FILE:-}" ] \
         && [ -f "$_rs_profile" ]; then
       export FASTRTPS_DEFAULT_PROFILES_FILE="$_rs_profile" FASTDDS_DEFAULT_PROFILES_FILE="$_rs_profile"
     fi ;;
 esac
-unset _rs_root _rs_dir _rs_pkg _rs_abs _rs_nounset _rs_profile
+unset _rs_root _rs_dir _rs_pkg _rs_abs _rs_nounset _rs_profile _rs_peers

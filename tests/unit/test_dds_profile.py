@@ -3,6 +3,8 @@ applies it (the shared-memory segment a process maps has the profile's size)."""
 from __future__ import annotations
 
 import os
+import socket
+import struct
 import subprocess
 import sys
 import xml.etree.ElementTree as ET
@@ -18,6 +20,7 @@ from ros_common import dds
 NS = {'f': 'http://www.eprosima.com/XMLSchemas/fastRTPS_Profiles'}
 REPO = Path(__file__).resolve().parents[2]
 SOURCE_PROFILE = REPO / 'ros_common' / 'config' / 'fastdds.xml'
+NETWORK_PROFILE = REPO / 'ros_common' / 'config' / 'fastdds_network.xml'
 
 # A node with one publisher, alive until its stdin closes.
 CHILD = '''
@@ -47,8 +50,10 @@ def test_the_profile_gives_shared_memory_a_segment_that_holds_camera_frames():
     assert segment >= 2 * _frame_bytes(1280, 720)
 
 
-def test_the_profile_keeps_udp_so_other_machines_still_connect():
-    root = ET.parse(SOURCE_PROFILE).getroot()
+@pytest.mark.parametrize('source, whitelist', [(SOURCE_PROFILE, ['127.0.0.1']),
+                                               (NETWORK_PROFILE, [])])
+def test_the_profiles_differ_only_in_holding_udp_to_the_loopback_interface(source, whitelist):
+    root = ET.parse(source).getroot()
     types = {d.findtext('f:transport_id', namespaces=NS): d.findtext('f:type', namespaces=NS)
              for d in root.iterfind('f:transport_descriptors/f:transport_descriptor', NS)}
     participant = root.find('f:participant', NS)
@@ -56,12 +61,72 @@ def test_the_profile_keeps_udp_so_other_machines_still_connect():
     used = [t.text for t in participant.iterfind('f:rtps/f:userTransports/f:transport_id', NS)]
     assert sorted(types[t] for t in used) == ['SHM', 'UDPv4']
     assert participant.findtext('f:rtps/f:useBuiltinTransports', namespaces=NS) == 'false'
+    udp, = [d for d in root.iterfind('f:transport_descriptors/f:transport_descriptor', NS)
+            if d.findtext('f:type', namespaces=NS) == 'UDPv4']
+    assert [a.text for a in udp.iterfind('f:interfaceWhiteList/f:address', NS)] == whitelist
+    shm, = [d for d in root.iterfind('f:transport_descriptors/f:transport_descriptor', NS)
+            if d.findtext('f:type', namespaces=NS) == 'SHM']
+    assert int(shm.findtext('f:segment_size', namespaces=NS)) == dds.SEGMENT_SIZE
 
 
-def test_the_installed_profile_is_the_source_file():
-    installed = dds.profile_path()
-    assert installed is not None
-    assert installed.read_bytes() == SOURCE_PROFILE.read_bytes()
+def test_the_network_profile_is_chosen_only_when_the_user_asks_for_other_machines():
+    local, network = dds.profile_path(), dds.profile_path(network=True)
+    assert local.name == 'fastdds.xml' and network.name == 'fastdds_network.xml'
+    for env, chosen in [({}, local), ({'ROS_AUTOMATIC_DISCOVERY_RANGE': 'LOCALHOST'}, local),
+                        ({'ROS_AUTOMATIC_DISCOVERY_RANGE': 'OFF'}, local),
+                        ({'ROS_STATIC_PEERS': ' '}, local),
+                        ({'ROS_AUTOMATIC_DISCOVERY_RANGE': 'SUBNET'}, network),
+                        ({'ROS_AUTOMATIC_DISCOVERY_RANGE': 'system_default'}, network),
+                        ({'ROS_STATIC_PEERS': '192.168.1.7'}, network)]:
+        assert dds.profile_environment(env) == {n: str(chosen) for n in dds.PROFILE_VARIABLES}
+
+
+def _udp_sockets(env: Dict[str, str]) -> List[str]:
+    """The local addresses (ip:port) of the UDP sockets a fresh node process opens."""
+    child = subprocess.Popen([sys.executable, '-c', CHILD], env=env, stdin=subprocess.PIPE,
+                             stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    try:
+        line = child.stdout.readline()
+        assert line.strip() == 'ready', line + child.stdout.read()
+        inodes = set()
+        for fd in Path(f'/proc/{child.pid}/fd').iterdir():
+            try:
+                target = os.readlink(fd)
+            except OSError:
+                continue
+            if target.startswith('socket:['):
+                inodes.add(target[len('socket:['):-1])
+        found = []
+        for row in Path(f'/proc/{child.pid}/net/udp').read_text().splitlines()[1:]:
+            fields = row.split()
+            if fields[9] in inodes:
+                ip, port = fields[1].split(':')
+                found.append(f'{socket.inet_ntoa(struct.pack("<I", int(ip, 16)))}:{int(port, 16)}')
+        return found
+    finally:
+        child.stdin.close()
+        child.wait(timeout=30)
+
+
+@pytest.mark.skipif(not Path('/proc/self/net/udp').exists(), reason='needs /proc')
+def test_a_node_listens_on_no_interface_but_loopback_unless_the_network_is_asked_for():
+    """Issue 15, finding 9: every node bound its DDS sockets on all interfaces, so anyone on
+    the network could drive the robots. With the default profile each socket is bound to
+    127.0.0.1 (or to a multicast group, joined on loopback only)."""
+    base = {k: v for k, v in os.environ.items()
+            if k not in dds.PROFILE_VARIABLES + ('ROS_AUTOMATIC_DISCOVERY_RANGE',
+                                                 'ROS_STATIC_PEERS')}
+    local = _udp_sockets(dds.with_profile(base))
+    assert local and all(a.startswith('127.') or a.startswith('239.') for a in local), local
+    opened = _udp_sockets(dds.with_profile({**base, 'ROS_AUTOMATIC_DISCOVERY_RANGE': 'SUBNET'}))
+    assert any(a.startswith('0.0.0.0:') for a in opened), opened
+
+
+def test_the_installed_profiles_are_the_source_files():
+    for network, source in ((False, SOURCE_PROFILE), (True, NETWORK_PROFILE)):
+        installed = dds.profile_path(network)
+        assert installed is not None
+        assert installed.read_bytes() == source.read_bytes()
 
 
 def test_a_launcher_adds_the_profile_only_where_none_is_chosen():
