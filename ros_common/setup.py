@@ -9,7 +9,8 @@ setup(
     data_files=[
         ('share/ament_index/resource_index/packages', ['resource/' + package_name]),
         ('share/' + package_name, ['package.xml']),
-        ('share/' + package_name + '/config', ['config/fastdds.xml', 'config/fastdds_network.xml']),
+        ('share/' + package_name + '/config',
+         ['config/fastdds.xml', 'config/fastdds_network.xml']),
     ],
     install_requires=['setuptools'],
     zip_safe=True,
