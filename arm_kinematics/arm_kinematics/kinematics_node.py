@@ -28,6 +28,7 @@ from controllers.youbot_kinematics import YoubotKinematics
 from controllers.zu12_kinematics import Zu12Kinematics
 from ros_common.node_main import run_node
 from ros_common.params import float_range
+from ros_common.services import SERVICE_QOS
 from ros_common.stamps import duration_from_seconds
 
 ARMS = {'youbot': (YoubotKinematics, 'gripper_tcp'), 'zu12': (Zu12Kinematics, 'suction_tcp')}
@@ -89,7 +90,7 @@ class KinematicsNode(Node):
         self._status_pub = self.create_publisher(DiagnosticStatus, 'ik_status', reliable)
         self.create_subscription(JointState, 'joint_states', self._on_joint_states, reliable)
         self.create_subscription(PoseStamped, 'goal_pose', self._on_goal_pose, reliable)
-        self.create_service(SolveIK, 'solve_ik', self._on_solve_ik)
+        self.create_service(SolveIK, 'solve_ik', self._on_solve_ik, qos_profile=SERVICE_QOS)
         self.get_logger().info(
             f'{arm} arm, tool frame {self._prefix}{tool}: publishing '
             f'{self._pose_pub.topic_name}; IK on {self.resolve_service_name("solve_ik")} and '

@@ -1,12 +1,14 @@
 """ROS 2 node around SimRunner: parameters, topics, services and real-time pacing."""
 from __future__ import annotations
 
+import collections
 import functools
 import math
 import re
 import sys
 import time
-from typing import Dict, List, Optional
+from dataclasses import dataclass
+from typing import Deque, Dict, List, Optional
 
 from builtin_interfaces.msg import Time
 from control_msgs.msg import JointTrajectoryControllerState
@@ -31,9 +33,11 @@ from controllers.joint_trajectory import TrajectoryPoint, TrajectoryRequest
 from controllers.lockstep import CommandBarrier
 from controllers.transforms import matrix_to_quaternion
 from robot_description import with_frame_prefix
+from ros_common.deferred_reply import DeferredReplies
 from ros_common.log_limit import KeyedLimiter
 from ros_common.node_main import run_node
 from ros_common.params import float_range
+from ros_common.services import SERVICE_QOS
 from ros_common.stamps import stamp_from_ns, to_seconds
 from sim_bridge.camera import ImageBuffer
 from sim_bridge.frames import FrameTransform, WorldFrames
@@ -105,6 +109,12 @@ class SimNode(Node):
             description='Most physics steps run between two rounds of callbacks',
             read_only=True, integer_range=[IntegerRange(from_value=1, to_value=10000, step=1)]))
 
+        self.declare_parameter('step_chunk', 240, ParameterDescriptor(
+            description='Lock-step: a ~/step request of more steps is run this many at a time, '
+                        'the node serving its other callbacks (commands, services) between '
+                        'chunks, and answered after the last',
+            read_only=True, integer_range=[IntegerRange(from_value=1, to_value=100000, step=1)]))
+
         self.declare_parameter('belt_speed', -1.0, float_range(
             'Conveyor belt speed [m/s]; -1 keeps the world file\'s; settable while running',
             -1.0, 2.0, read_only=False))
@@ -134,7 +144,7 @@ class SimNode(Node):
             'world', 'gui', 'time_step', 'real_time_factor', 'synchronous', 'state_publish_rate',
             'clock_publish_rate', 'max_speed', 'max_turn', 'linear.x.max_acceleration',
             'angular.z.max_acceleration', 'cmd_vel_timeout', 'use_stamped_vel',
-            'rtf_log_period', 'max_steps_per_tick', 'belt_speed', 'scenario_seed',
+            'rtf_log_period', 'max_steps_per_tick', 'step_chunk', 'belt_speed', 'scenario_seed',
             'materials_publish_rate', 'publish_link_tf', 'camera_reliability', 'jpeg_quality')}
         reliabilities = {'reliable': ReliabilityPolicy.RELIABLE,
                          'best_effort': ReliabilityPolicy.BEST_EFFORT}
@@ -189,7 +199,8 @@ class SimNode(Node):
             if name in self._world.suctions and suction is not None:
                 service = _topic(ns, suction.service)
                 self._suction_services[name] = suction.service
-                self.create_service(SetBool, service, functools.partial(self._on_suction, name))
+                self.create_service(SetBool, service, functools.partial(self._on_suction, name),
+                                    qos_profile=SERVICE_QOS)
                 # The cup's vacuum switch: true while it holds a part; and the same, stamped.
                 self._holding_pubs[name] = (
                     self.create_publisher(Bool, f'{service}/holding', history),
@@ -278,13 +289,23 @@ class SimNode(Node):
         self._materials_pub = None
         if self._world.source is not None:
             self._materials_pub = self.create_publisher(MarkerArray, '/cell/materials', history)
-        self.create_service(Trigger, '~/reset', self._on_reset)
-        self.create_service(Trigger, '~/pause', self._on_pause)
-        self.create_service(Trigger, '~/resume', self._on_resume)
+        self.create_service(Trigger, '~/reset', self._on_reset, qos_profile=SERVICE_QOS)
+        self.create_service(Trigger, '~/pause', self._on_pause, qos_profile=SERVICE_QOS)
+        self.create_service(Trigger, '~/resume', self._on_resume, qos_profile=SERVICE_QOS)
         # A step runs once the commands announced with it are in (lockstep.py); until then it
         # is answered at once with commands_pending, and asked again.
         self._barrier = CommandBarrier()
-        self.create_service(StepSimulation, '~/step', self._on_step)
+        step = self.create_service(StepSimulation, '~/step', self._on_step,
+                                   qos_profile=SERVICE_QOS)
+        # A request of more than step_chunk steps (or one behind it) is served a chunk at a
+        # time from a timer, the node's other callbacks in between, and answered after its
+        # last chunk: 100000 steps used to leave the node deaf for 40 s.
+        self._step_replies = DeferredReplies(step)
+        self._step_jobs: Deque[_StepJob] = collections.deque()
+        self._step_chunk = p['step_chunk']
+        self._chunk_timer = self.create_timer(0.001, self._on_step_chunk, clock=Clock(
+            clock_type=ClockType.STEADY_TIME))
+        self._chunk_timer.cancel()
         # The simulator is the time source: it paces itself on the steady wall clock.
         self._steady = Clock(clock_type=ClockType.STEADY_TIME)
         rtf = p['real_time_factor']
@@ -635,30 +656,78 @@ class SimNode(Node):
         elif not (1 <= request.steps <= MAX_STEPS_PER_REQUEST):
             response.success = False
             response.message = f'steps must be within 1..{MAX_STEPS_PER_REQUEST}'
-        elif not self._barrier.ready(request.commands):
-            response.success, response.commands_pending = False, True
-            response.message = (f'{self._barrier.received} of the {request.commands} commands '
-                                'announced for this step have arrived; not stepped, ask again')
-        else:
-            claim = self._barrier.claim(request.commands)
-            if request.commands > 0 and claim.surplus:
-                self.get_logger().warn(
-                    f'{claim.received} commands arrived for a step announced with '
-                    f'{claim.expected}: another node commands this lock-step run, which is '
-                    'then not reproducible', throttle_duration_sec=5.0)
+        elif self._step_jobs or request.steps > self._step_chunk:
+            job = _StepJob(request, response, request.steps)
+            self._step_jobs.append(job)
+            self._chunk_timer.reset()
+            return self._step_replies.later(job)
+        elif self._claim_commands(request, response):
             self._runner.advance(request.steps, self)
-            self._runner.tick_clock(self)       # (the batch's end, if off the clock's grid)
-            self._note_progress()
-            response.success = True
+            self._end_step(response)
         response.step_count = self._world.step_count
         response.sim_time = stamp_from_ns(self._world.sim_time_ns)
         return response
+
+    def _claim_commands(self, request, response) -> bool:
+        """Whether the commands announced with a step request are in (taking them if so);
+        if not, ``response`` says so and asks the caller to try again."""
+        if not self._barrier.ready(request.commands):
+            response.success, response.commands_pending = False, True
+            response.message = (f'{self._barrier.received} of the {request.commands} commands '
+                                'announced for this step have arrived; not stepped, ask again')
+            return False
+        claim = self._barrier.claim(request.commands)
+        if request.commands > 0 and claim.surplus:
+            self.get_logger().warn(
+                f'{claim.received} commands arrived for a step announced with '
+                f'{claim.expected}: another node commands this lock-step run, which is '
+                'then not reproducible', throttle_duration_sec=5.0)
+        return True
+
+    def _end_step(self, response) -> None:
+        self._runner.tick_clock(self)       # (the batch's end, if off the clock's grid)
+        self._note_progress()
+        response.success = True
+
+    def _on_step_chunk(self) -> None:
+        """Run the next chunk of the oldest step request waiting; answer it after its last."""
+        if not self._step_jobs:
+            self._chunk_timer.cancel()
+            return
+        job = self._step_jobs[0]
+        done = False
+        if not job.started:
+            job.started = True
+            done = not self._claim_commands(job.request, job.response)
+        if not done:
+            steps = min(job.remaining, self._step_chunk)
+            self._runner.advance(steps, self)
+            job.remaining -= steps
+            done = job.remaining == 0
+            if done:
+                self._end_step(job.response)
+        if done:
+            self._step_jobs.popleft()
+            job.response.step_count = self._world.step_count
+            job.response.sim_time = stamp_from_ns(self._world.sim_time_ns)
+            self._step_replies.send(job, job.response)
+        if not self._step_jobs:
+            self._chunk_timer.cancel()
 
     def destroy_node(self) -> None:
         # Leave no robot driving on a stale command.
         self._runner.stop_all()
         self._world.close()
         super().destroy_node()
+
+
+@dataclass(eq=False)
+class _StepJob:
+    """A ~/step request served in chunks, and the reply it will get."""
+    request: StepSimulation.Request
+    response: StepSimulation.Response
+    remaining: int
+    started: bool = False
 
 
 def _topic(namespace: str, name: str) -> str:

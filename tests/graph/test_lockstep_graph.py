@@ -77,3 +77,47 @@ def test_a_step_whose_commands_are_missing_is_answered_pending_not_run(fresh_sim
     assert reply.step_count == before.step_count           # nothing ran
     lockstep.send(0.0)                                      # the second one comes after all
     assert lockstep.reply(pending).success
+
+
+def test_a_long_step_request_is_served_in_chunks_while_the_node_serves_the_rest(start_node,
+                                                                                 probe):
+    """Issue 15, finding 7: steps: 100000 left the node deaf for 35-45 s, and 50 step
+    requests sent at once by one client got 16 replies. A long request now runs step_chunk
+    steps at a time, the node's other callbacks served in between, and is answered after its
+    last chunk; the services keep a deep queue of requests."""
+    from geometry_msgs.msg import TwistStamped
+    from rosgraph_msgs.msg import Clock
+    from sim_interfaces.srv import StepSimulation
+    from std_srvs.srv import Trigger
+
+    from helpers import stamp_s, wait_for
+    from ros_common.services import SERVICE_QOS
+    start_node('sim_node', '-p', 'synchronous:=true', '-p', 'step_chunk:=240',
+               '-p', 'clock_publish_rate:=20.0')
+    driver = LockStepDriver(probe)
+    clock = probe.collect(Clock, '/clock')
+    applied = probe.collect(TwistStamped, '/mini_robot/cmd_vel_out')
+    before = driver.reply(driver.step(1)).step_count
+    steps = 24000                                     # 100 s of simulated time
+    long = driver.step(steps)
+    wait_for(lambda: clock and stamp_s(clock[-1][1].clock) > 2.0, 60.0, what='stepping')
+    # Another service is answered, and a command takes effect, while the request runs.
+    paused = probe.call(Trigger, '/sim_node/pause', Trigger.Request(), timeout=30.0)
+    assert 'synchronous mode' in paused.message
+    driver.send(0.1)
+    wait_for(lambda: any(m.twist.linear.x > 0.0 for _, m in applied), 30.0,
+             what='the command applied between chunks')
+    assert not long.future.done()
+    reply = driver.reply(long, timeout=300.0)
+    assert reply.success and reply.step_count == before + steps
+    moved = [stamp_s(m.header.stamp) for _, m in applied if m.twist.linear.x > 0.0]
+    assert 2.0 < moved[0] < stamp_s(reply.sim_time)
+    # A burst: 50 requests from one client at once, every one answered, in order. (The
+    # client keeps as many replies as the server: with rclpy's default of 10, a client slow
+    # to take them loses the oldest.)
+    client = probe.node.create_client(StepSimulation, '/sim_node/step', qos_profile=SERVICE_QOS)
+    assert client.wait_for_service(timeout_sec=15.0)
+    burst = [client.call_async(StepSimulation.Request(steps=1)) for _ in range(50)]
+    wait_for(lambda: all(f.done() for f in burst), 60.0, what='50 replies')
+    counts = [f.result().step_count for f in burst]
+    assert counts == list(range(reply.step_count + 1, reply.step_count + 51))
