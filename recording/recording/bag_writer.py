@@ -5,7 +5,7 @@ import re
 import time
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Dict, Optional, Sequence
+from typing import Dict, List, Optional, Sequence
 
 from rosbags.interfaces import Connection, Qos
 from rosbags.rosbag2 import StoragePlugin, WriterError
@@ -59,7 +59,8 @@ class BagWriter:
 
     def __init__(self, output_dir: Path, name: Optional[str] = None, storage: str = 'mcap',
                  resolver: Optional[TypeResolver] = None, compression: str = 'none',
-                 chunk_crc: bool = False) -> None:
+                 chunk_crc: bool = False, max_bag_size: int = 0,
+                 max_bag_duration: float = 0.0) -> None:
         if storage not in STORAGES:
             raise BagError(f'storage must be one of {sorted(STORAGES)}, got "{storage}"')
         if compression not in COMPRESSIONS:
@@ -76,7 +77,8 @@ class BagWriter:
         for _ in range(100):
             self.path = unique_bag_path(Path(output_dir), name or default_bag_name())
             self._writer = DurableWriter(self.path, version=9, storage_plugin=STORAGES[storage],
-                                         chunk_crc=chunk_crc)
+                                         chunk_crc=chunk_crc, max_bag_size=max_bag_size,
+                                         max_bag_duration=max_bag_duration)
             if compression == 'zstd':
                 self._writer.set_compression(CompressionMode.STORAGE, CompressionFormat.ZSTD)
             try:
@@ -113,6 +115,23 @@ class BagWriter:
         if not self._closed:
             self._closed = True
             self._writer.close()
+
+    def close_after_failure(self) -> int:
+        """After a write or flush failed (a full disk): close the bag with what its last
+        flush made durable, metadata.yaml counting exactly that; returns that many messages.
+        The topics' counts are set to what the bag holds."""
+        if self._closed:
+            return self.message_count
+        self._closed = True
+        kept = self._writer.close_after_failure()
+        for record in self.topics.values():
+            record.count = self._writer.counts[record.connection.id]
+        return kept
+
+    @property
+    def files(self) -> List[str]:
+        """The bag's files so far (more than one once it split)."""
+        return [f['path'] for f in self._writer.files] + [self._writer.current_file]
 
     @property
     def message_count(self) -> int:

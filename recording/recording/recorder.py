@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import functools
 import sys
+import threading
 from pathlib import Path
 from typing import Set
 
@@ -43,6 +44,14 @@ class Recorder(Node):
                         '0.3 ms of CPU per MB)', read_only=True))
         self.declare_parameter('flush_period', 0.5, float_range(
             'Wall seconds between durable flushes: what a SIGKILL can lose', 0.05, 10.0))
+        # rosbag2's names and units. A file is closed complete when the next one starts.
+        self.declare_parameter('max_bag_size', 0, ParameterDescriptor(
+            description='Split the bag into a new file once the open one holds this many '
+                        'bytes of messages; 0: no limit', read_only=True,
+            integer_range=[IntegerRange(from_value=0, to_value=2**62, step=1)]))
+        self.declare_parameter('max_bag_duration', 0.0, float_range(
+            'Split the bag into a new file once the open one spans this many seconds of '
+            'message time; 0: no limit', 0.0, 1e9))
         self.declare_parameter('discovery_period', 0.1, float_range(
             'Wall seconds between looks for new topics', 0.01, 10.0))
         self.declare_parameter('queue_depth', 1000, ParameterDescriptor(
@@ -56,14 +65,21 @@ class Recorder(Node):
             raise BagError(f'storage must be one of {sorted(STORAGES)}, got "{storage}"')
         self._depth = get('queue_depth')
         self._writer = BagWriter(Path(get('output_dir')), get('bag_name') or None, storage,
-                                 compression=get('compression'), chunk_crc=get('chunk_crc'))
+                                 compression=get('compression'), chunk_crc=get('chunk_crc'),
+                                 max_bag_size=get('max_bag_size'),
+                                 max_bag_duration=get('max_bag_duration'))
+        # A write that fails (a full disk) closes the bag at its last flush and ends the run
+        # with exit code 1 (ros_common.node_main.run_node).
+        self.exit_request = threading.Event()
+        self.exit_code = 0
+        self._failure = ''
         self._skipped: Set[str] = set()
         self._receiving: Set[str] = set()  # topics with a message written (or tried)
         self.dropped = 0
         # Wall-clock timers: they must run whether or not simulated time advances.
         steady = Clock(clock_type=ClockType.STEADY_TIME)
         self.create_timer(get('discovery_period'), self._discover, clock=steady)
-        self.create_timer(get('flush_period'), self._writer.flush, clock=steady)
+        self.create_timer(get('flush_period'), self._flush, clock=steady)
         self.get_logger().info(
             f'recording {sorted(self._wanted) if self._wanted else "all topics"} to '
             f'{self._writer.path} ({storage}'
@@ -106,25 +122,56 @@ class Recorder(Node):
         self.get_logger().info(f'recording {topic} [{types[0]}]')
 
     def _on_message(self, topic: str, data: bytes) -> None:
+        if self._failure:
+            self.dropped += 1          # (between the failure and the end of the spin)
+            return
         if topic not in self._receiving:
             self._receiving.add(topic)
             self.get_logger().info(f'receiving {topic}')
         try:
             self._writer.write(topic, self.get_clock().now().nanoseconds, data)
         except (OSError, WriterError) as exc:
-            # A full disk must not take down the recorder and what it already flushed.
-            self.dropped += 1
-            self.get_logger().error(f'cannot write {topic} ({exc}); {self.dropped} messages '
-                                    'dropped so far', throttle_duration_sec=1.0)
+            self._fail(f'writing {topic}', exc)
+
+    def _flush(self) -> None:
+        if self._failure:
+            return
+        try:
+            self._writer.flush()
+        except (OSError, WriterError) as exc:
+            self._fail('flushing', exc)
+
+    def _fail(self, doing: str, exc: BaseException) -> None:
+        """A write failed: close the bag where its last flush left it, say so once, and end
+        the run. (A full disk does not empty itself: going on would only drop messages.)"""
+        written = self._writer.message_count
+        try:
+            kept = self._writer.close_after_failure()
+            closed = (f'the bag is closed with the {kept} messages flushed before '
+                      f'(metadata.yaml counts them; {written - kept} written since the last '
+                      'flush are not in it)')
+        except (OSError, WriterError) as second:
+            closed = f'the bag could not be closed either ({second}): run bag_repair on it'
+        self._failure = f'{doing} {self._writer.path} failed: {exc}'
+        self.get_logger().error(f'{self._failure}; {closed}; the recorder stops')
+        self.exit_code = 1
+        self.exit_request.set()
 
     def _skip(self, topic: str, why: str) -> None:
         self._skipped.add(topic)
         self.get_logger().warn(f'not recording {topic}: {why}')
 
     def finish(self) -> str:
-        self._writer.close()
+        if not self._failure:
+            try:
+                self._writer.close()
+            except (OSError, WriterError) as exc:
+                self._fail('closing', exc)
         counts = ', '.join(f'{t}: {r.count}' for t, r in sorted(self._writer.topics.items()))
-        lost = f'; {self.dropped} messages could not be written' if self.dropped else ''
+        lost = ''
+        if self._failure:
+            lost = f'; recording ended early: {self._failure}' + (
+                f'; {self.dropped} messages arrived after it' if self.dropped else '')
         return (f'bag {self._writer.path} closed with {self._writer.message_count} messages '
                 f'({counts}){lost}')
 

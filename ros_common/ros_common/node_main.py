@@ -120,6 +120,10 @@ def run_node(factory: Callable[[], N], name: str,
     the node is destroyed (a recorder closes its bag there). ``events=False``: the node has
     coroutine callbacks, and spins on the SingleThreadedExecutor.
 
+    A node may end its own run: it sets ``node.exit_request`` (a ``threading.Event`` it
+    creates) and ``node.exit_code``, and the spin ends after the callback (a recorder that
+    could not write closes its bag and exits 1).
+
     ``graceful_signals``: SIGINT and SIGTERM end the spin between two callbacks, never inside
     one. rclpy's handler raises KeyboardInterrupt wherever the main thread is, and a recorder
     interrupted inside the mcap library's add_message closed its bag with half a message record
@@ -141,6 +145,14 @@ def run_node(factory: Callable[[], N], name: str,
     node = _create(factory, name, startup_errors)
     if node is None:
         return 1
+    own: Optional[threading.Event] = getattr(node, 'exit_request', None)
+    if own is not None:
+        if stop is None:
+            stop = own
+        else:
+            for sig in (signal.SIGINT, signal.SIGTERM):
+                signal.signal(sig, lambda _signum, _frame: own.set())
+            stop = own
     try:
         spin(node, events=events, stop=stop)
     finally:
@@ -148,7 +160,7 @@ def run_node(factory: Callable[[], N], name: str,
             on_exit(node)
         node.destroy_node()
         rclpy.try_shutdown()
-    return 0
+    return int(getattr(node, 'exit_code', 0))
 
 
 def run_task(factory: Callable[[], N], name: str, task: Callable[[N], int],

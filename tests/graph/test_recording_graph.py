@@ -4,6 +4,7 @@ import time
 
 import numpy as np
 import pytest
+import yaml
 from geometry_msgs.msg import Twist
 from nav_msgs.msg import Odometry
 from rclpy.serialization import deserialize_message
@@ -226,3 +227,54 @@ def test_replay_loops_until_stopped(start_node, probe, tmp_path):
     first_pass = [raw for _, raw in replayed[:len(recorded)]]
     second_pass = [raw for _, raw in replayed[len(recorded):2 * len(recorded)]]
     assert first_pass == second_pass == [raw for _, raw, _ in recorded]
+
+
+@pytest.fixture
+def small_disk(tmp_path):
+    """A 5 MiB tmpfs: a real full disk (ENOSPC), where the tests run as root."""
+    import os
+    import subprocess
+    mount = tmp_path / 'small_disk'
+    mount.mkdir()
+    if os.geteuid() != 0 or subprocess.run(
+            ['mount', '-t', 'tmpfs', '-o', 'size=5m', 'tmpfs', str(mount)],
+            capture_output=True).returncode != 0:
+        pytest.skip('mounting a small tmpfs needs root (the injected-ENOSPC unit tests cover '
+                    'the same path)')
+    yield mount
+    subprocess.run(['umount', '-l', str(mount)], check=False)
+
+
+@pytest.mark.parametrize('storage', ['mcap', 'sqlite3'])
+def test_a_full_disk_closes_the_bag_with_what_is_on_disk_and_one_clear_error(
+        start_node, probe, small_disk, storage):
+    """Issue 15, finding 3, as reported: a 5 MiB tmpfs as output_dir. MCAP: the recorder
+    exited 1 after two tracebacks and wrote no metadata.yaml. SQLite: metadata.yaml said 689
+    messages over a database holding 453. Now: one error line, the bag closed at its last
+    flush, metadata.yaml counting exactly what the bag holds, exit code 1."""
+    from std_msgs.msg import String
+    rec = start_node('recorder', '-p', f'output_dir:={small_disk}', '-p', 'bag_name:=full',
+                     '-p', f'storage:={storage}', '-p', "topics:=['/bulk']",
+                     '-p', 'flush_period:=0.1', name=f'recorder_full_{storage}')
+    pub = probe.node.create_publisher(String, '/bulk', 100)
+    wait_for(lambda: pub.get_subscription_count() > 0, 20.0, what='the recorder subscribed')
+    payload = 'z' * 100_000                          # 5 MiB is about 50 of them
+    deadline = time.monotonic() + 60.0
+    sent = 0
+    while rec.proc.poll() is None and time.monotonic() < deadline:
+        pub.publish(String(data=f'{sent:06d}' + payload))
+        sent += 1
+        time.sleep(0.01)
+    assert rec.proc.wait(30.0) == 1, rec.output()
+    log = rec.output()
+    errors = [line for line in log.splitlines() if line.startswith('[ERROR]')]
+    assert len(errors) == 1, log
+    assert ('No space left on device' in errors[0] or 'disk is full' in errors[0]), errors
+    assert 'the recorder stops' in errors[0] and 'Traceback' not in log
+    bag = small_disk / 'full'
+    info = yaml.safe_load((bag / 'metadata.yaml').read_text())['rosbag2_bagfile_information']
+    with AnyReader([bag]) as reader:
+        held = [reader.deserialize(raw, c.msgtype).data[:6] for c, _, raw in reader.messages()]
+    assert info['message_count'] == len(held) > 5
+    assert held == [f'{i:06d}' for i in range(len(held))]       # in order, none missing
+    assert not (bag / '.close_reserve').exists()

@@ -1,5 +1,8 @@
 """The recording nodes in-process: parameters, and failures that must end clearly."""
+import errno
+
 import pytest
+import yaml
 from rclpy.parameter import Parameter
 from rclpy.serialization import serialize_message
 from rosbags.highlevel import AnyReader
@@ -18,27 +21,46 @@ def make(context, tmp_path, **overrides):
         Parameter(k, value=v) for k, v in params.items()])
 
 
-def test_a_failing_write_is_logged_and_counted_and_the_bag_survives(context, tmp_path):
-    node = make(context, tmp_path)
+@pytest.mark.parametrize('storage', ['mcap', 'sqlite3'])
+@pytest.mark.parametrize('where', ['write', 'flush'])
+def test_a_failing_write_closes_the_bag_at_its_last_flush_and_ends_the_run(context, tmp_path,
+                                                                          storage, where):
+    """Issue 15, finding 3, with an injected ENOSPC (a real full disk: the graph test). The
+    recorder crashed with two tracebacks (MCAP), or reported 689 messages in metadata.yaml
+    over a database holding 453 (SQLite). Now the bag is closed where its last flush left it,
+    metadata.yaml counts exactly that, one error says so, and the run ends with exit code 1."""
+    node = make(context, tmp_path, storage=storage)
     try:
         node._writer.add_topic('/t', 'std_msgs/msg/String')
         node._on_message('/t', serialize_message(String(data='kept')))
-        node._writer.flush()
+        node._flush()
+        node._on_message('/t', serialize_message(String(data='written, not flushed')))
 
         def full_disk(*_):
-            raise OSError(28, 'No space left on device')
+            raise OSError(errno.ENOSPC, 'No space left on device')
 
-        node._writer._writer.write = full_disk
-        node._on_message('/t', serialize_message(String(data='lost')))
-        node._on_message('/t', serialize_message(String(data='lost too')))
-        assert node.dropped == 2
+        if where == 'write':
+            node._writer._writer.storage.write = full_disk
+            node._on_message('/t', serialize_message(String(data='refused')))
+        else:
+            node._writer._writer.storage.flush = full_disk
+            node._flush()
+        assert node.exit_request.is_set() and node.exit_code == 1
+        node._on_message('/t', serialize_message(String(data='after the failure')))
+        assert node.dropped == 1
         summary = node.finish()
-        assert '2 messages could not be written' in summary
+        assert 'closed with 1 messages' in summary and 'No space left on device' in summary
+        assert '1 messages arrived after it' in summary
     finally:
         node.destroy_node()
-    with AnyReader([tmp_path / 'node']) as reader:
+    bag = tmp_path / 'node'
+    with AnyReader([bag]) as reader:
         assert [reader.deserialize(raw, c.msgtype).data
                 for c, _, raw in reader.messages()] == ['kept']
+    info = yaml.safe_load((bag / 'metadata.yaml').read_text())['rosbag2_bagfile_information']
+    assert info['message_count'] == 1
+    assert info['topics_with_message_count'][0]['message_count'] == 1
+    assert not (bag / '.close_reserve').exists()
 
 
 def test_bad_storage_fails_at_start(context, tmp_path):

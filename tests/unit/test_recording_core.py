@@ -11,6 +11,7 @@ import textwrap
 import cv2
 import numpy as np
 import pytest
+import yaml
 from nav_msgs.msg import Odometry
 from rclpy.serialization import serialize_message
 from rosbags.highlevel import AnyReader
@@ -415,3 +416,55 @@ def test_analysis_reports_joint_tracking_of_controller_states(tmp_path, monkeypa
     assert by_joint['joint_1'].rms_error == pytest.approx(np.sqrt(np.mean(errors[:, 0] ** 2)))
     assert by_joint['joint_2'].max_abs_error == pytest.approx(0.04)
     assert by_joint['joint_1'].samples == 4
+
+
+@pytest.mark.parametrize('storage', STORAGES)
+@pytest.mark.parametrize('split', ['size', 'duration'])
+def test_a_bag_splits_by_size_or_duration_into_complete_files(tmp_path, storage, split):
+    """rosbag2's max_bag_size and max_bag_duration: every file but the last is closed
+    complete when the next starts (an MCAP one with its summary), metadata.yaml lists each
+    with its own counts, and the bag reads back whole, in order."""
+    from mcap.reader import make_reader
+    kwargs = {'max_bag_size': 40_000} if split == 'size' else {'max_bag_duration': 0.25}
+    writer = BagWriter(tmp_path, 'split', storage, **kwargs)
+    writer.add_topic('/text', 'std_msgs/msg/String')
+    written = []
+    for i in range(400):                    # 400 x ~220 bytes, 1 s of message time
+        data = serialize_message(String(data=f'{i:04d}' + 'x' * 200))
+        writer.write('/text', 2_500_000 * i, data)
+        written.append(('/text', 2_500_000 * i, data))
+    files = writer.files
+    writer.close()
+    assert len(files) >= 3 and files[0] == f'split_0.{"mcap" if storage == "mcap" else "db3"}'
+    info = yaml.safe_load((writer.path / 'metadata.yaml').read_text())[
+        'rosbag2_bagfile_information']
+    assert info['relative_file_paths'] == files
+    assert [f['path'] for f in info['files']] == files
+    assert sum(f['message_count'] for f in info['files']) == info['message_count'] == 400
+    for entry in info['files'][:-1]:
+        if split == 'duration':
+            assert entry['duration']['nanoseconds'] < 250_000_000
+        if storage == 'mcap':
+            with open(writer.path / entry['path'], 'rb') as stream:
+                summary = make_reader(stream).get_summary()
+            assert summary is not None
+            assert summary.statistics.message_count == entry['message_count']
+    assert _read_all(writer.path) == written
+    assert not (writer.path / '.close_reserve').exists()
+
+
+@pytest.mark.parametrize('storage', STORAGES)
+def test_a_bag_closed_after_a_failure_holds_what_its_metadata_says(tmp_path, storage):
+    """close_after_failure: the MCAP file is cut back to its last flush and ended there, the
+    SQLite transaction rolled back; metadata.yaml counts exactly what the file holds."""
+    writer = BagWriter(tmp_path, 'cut', storage)
+    writer.add_topic('/text', 'std_msgs/msg/String')
+    for i in range(300):
+        writer.write('/text', i, serialize_message(String(data=f'{i}' + 'y' * 3000)))
+        if i == 199:
+            writer.flush()
+    assert writer.close_after_failure() == 200
+    info = yaml.safe_load((writer.path / 'metadata.yaml').read_text())[
+        'rosbag2_bagfile_information']
+    assert info['message_count'] == 200 and info['files'][0]['message_count'] == 200
+    assert [t for _, t, _ in _read_all(writer.path)] == list(range(200))
