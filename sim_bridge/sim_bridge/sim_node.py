@@ -12,6 +12,7 @@ from typing import Deque, Dict, List, Optional
 
 from builtin_interfaces.msg import Time
 from control_msgs.msg import JointTrajectoryControllerState
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from geometry_msgs.msg import TransformStamped, Twist, TwistStamped
 from nav_msgs.msg import Odometry
 from rcl_interfaces.msg import IntegerRange, ParameterDescriptor, SetParametersResult
@@ -34,6 +35,7 @@ from controllers.lockstep import CommandBarrier
 from controllers.transforms import matrix_to_quaternion
 from robot_description import with_frame_prefix
 from ros_common.deferred_reply import DeferredReplies
+from ros_common.input_report import InputReport
 from ros_common.log_limit import KeyedLimiter
 from ros_common.node_main import run_node
 from ros_common.params import float_range
@@ -282,6 +284,12 @@ class SimNode(Node):
         self._hold_watch = HoldWatch(self._world)
         # Rejected and clamped commands: a line a second per robot, topic and kind.
         self._rejections = KeyedLimiter(1.0)
+        # The senders' side of it: every rejection and clamp, counted per input, on
+        # /diagnostics once a second (wall time) once there has been one.
+        self._input_report = InputReport()
+        self._diagnostics_pub = self.create_publisher(DiagnosticArray, '/diagnostics', 10)
+        self.create_timer(1.0, self._publish_input_report,
+                          clock=Clock(clock_type=ClockType.STEADY_TIME))
         self._actions = TrajectoryActions(
             self, self._world, self._runner, _topic, lambda msg: trajectory_request(msg),
             lambda: stamp_from_ns(self._world.sim_time_ns))
@@ -371,6 +379,7 @@ class SimNode(Node):
 
     def on_trajectory_aborted(self, robot: str, controller: str, reason: str) -> None:
         self._actions.abort((robot, controller), reason)
+        self._input_report.add(robot, f'{controller}/joint_trajectory', 'aborted', reason)
         text = self._rejections.text(
             (robot, controller, 'aborted'), time.monotonic(),
             f'{robot}/{controller}: trajectory aborted: {reason}; holding position')
@@ -529,7 +538,7 @@ class SimNode(Node):
         if broken:
             self._runner.reject(robot)
             self._warn((robot, 'cmd_vel', _NUMBERS.sub('#', broken)),
-                       f'{robot}/cmd_vel rejected: non-finite {broken}; stopping')
+                       f'{robot}/cmd_vel rejected: non-finite {broken}; stopping', 'non-finite')
             return
         if isinstance(msg, TwistStamped) and (msg.header.stamp.sec or msg.header.stamp.nanosec):
             # Judged by its stamp, as diff_drive_controller does (an unset stamp counts as
@@ -559,11 +568,25 @@ class SimNode(Node):
                        f'{robot}/cmd_vel {_fmt(asked)} clamped to {_fmt(result.command)} '
                        f'(limits {_fmt(self._runner.guards[robot].limits)})')
 
-    def _warn(self, key: tuple, message: str) -> None:
-        """A warning per robot, topic and kind, at most one a second, counting those held."""
+    def _warn(self, key: tuple, message: str, kind: str = '') -> None:
+        """A warning per robot, topic and kind, at most one a second, counting those held;
+        every one counted for /diagnostics (under ``kind``, default the key's)."""
+        self._input_report.add(key[0], key[1], kind or key[2], message)
         text = self._rejections.text(key, time.monotonic(), message)
         if text is not None:
             self.get_logger().warn(text)
+
+    def _publish_input_report(self) -> None:
+        if not self._input_report:
+            return
+        msg = DiagnosticArray()
+        msg.header.stamp = stamp_from_ns(self._world.sim_time_ns)
+        for status in self._input_report.statuses():
+            msg.status.append(DiagnosticStatus(
+                level=bytes([status.level]), name=f'{self.get_name()}: {status.name}',
+                hardware_id=status.hardware_id, message=status.message,
+                values=[KeyValue(key=k, value=v) for k, v in status.values]))
+        self._diagnostics_pub.publish(msg)
 
     def _on_trajectory(self, robot: str, controller: str, msg: JointTrajectory) -> None:
         self._command_arrived()
@@ -574,6 +597,8 @@ class SimNode(Node):
             self.get_logger().info(f'{where}: following a trajectory of {len(msg.points)} '
                                    f'points for {list(msg.joint_names)}')
         else:
+            self._input_report.add(robot, f'{controller}/joint_trajectory', 'rejected',
+                                   result.reason)
             text = self._rejections.text(
                 (robot, controller, _NUMBERS.sub('#', result.reason)), time.monotonic(),
                 f'{where}: trajectory rejected: {result.reason}; holding position')

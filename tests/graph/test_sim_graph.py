@@ -143,7 +143,9 @@ def test_silence_past_the_timeout_stops_the_robot(start_node, probe):
 
 
 def test_nan_is_rejected_the_robot_stops_and_the_node_lives(start_node, probe):
+    from diagnostic_msgs.msg import DiagnosticArray
     sim = start_node('sim_node', '-p', 'synchronous:=true', '-p', 'state_publish_rate:=240.0')
+    diagnostics = probe.collect(DiagnosticArray, '/diagnostics')
     lockstep = LockStepDriver(probe)
     lockstep.hold(0.1, 0.0, 120)
     lockstep.send(math.nan, 0.0)
@@ -158,6 +160,22 @@ def test_nan_is_rejected_the_robot_stops_and_the_node_lives(start_node, probe):
              what='rejection warning')
     again = lockstep.hold(0.1, 0.0, 120)
     assert lockstep.odom_at(again.sim_time).twist.twist.linear.x == pytest.approx(0.1, rel=0.05)
+    # The sender is told too (issue 15, finding 6): /diagnostics, once a second, counts every
+    # rejection per input and kind and gives the last reason.
+    def cmd_vel_status():
+        found = [st for _, m in diagnostics for st in m.status
+                 if st.name == 'sim_node: mini_robot/cmd_vel']
+        return found[-1] if found else None
+    def values():
+        status = cmd_vel_status()
+        return {kv.key: kv.value for kv in status.values} if status else {}
+    wait_for(lambda: values().get('non-finite') == '2', 5.0, what='/diagnostics')
+    status = cmd_vel_status()
+    assert status.hardware_id == 'mini_robot'
+    assert values() == {'non-finite': '2',
+                      'last reason': 'mini_robot/cmd_vel rejected: non-finite angular.z=inf; '
+                                     'stopping'}
+    wait_for(lambda: cmd_vel_status().level == b'\x00', 5.0, what='OK once quiet')
 
 
 def test_sideways_velocity_on_a_diff_drive_is_ignored_with_a_warning(start_node, probe):
