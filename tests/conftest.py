@@ -10,3 +10,14 @@ import random
 os.environ['ROS_DOMAIN_ID'] = os.environ.get('TEST_ROS_DOMAIN_ID') or str(random.randint(1, 99))
 os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
 os.environ.pop('ROS_STATIC_PEERS', None)
+
+
+def pytest_terminal_summary(terminalreporter):
+    """The counts some tests report (tests/helpers.py REPORT): the fuzz tests'."""
+    import sys
+    helpers = sys.modules.get('helpers')
+    lines = getattr(helpers, 'REPORT', [])
+    if lines:
+        terminalreporter.section('reported by the tests')
+        for line in lines:
+            terminalreporter.write_line(line)

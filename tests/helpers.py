@@ -18,6 +18,10 @@ from rclpy.action import ActionClient
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
 
+# Lines a test adds to the end of the run's report (tests/conftest.py prints them): the fuzz
+# tests' counts.
+REPORT: List[str] = []
+
 ROOT = Path(__file__).resolve().parents[1]
 
 

@@ -22,7 +22,7 @@ from sensor_msgs.msg import JointState
 from sim_interfaces.srv import SolveIK
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
-from controllers.arm_model import motion_duration
+from controllers.arm_model import plan_ik
 from controllers.transforms import matrix_to_quaternion, pose_matrix
 from controllers.youbot_kinematics import YoubotKinematics
 from controllers.zu12_kinematics import Zu12Kinematics
@@ -36,10 +36,6 @@ ARMS = {'youbot': (YoubotKinematics, 'gripper_tcp'), 'zu12': (Zu12Kinematics, 's
 
 class KinematicsConfigError(ValueError):
     """Parameters the node cannot run with."""
-
-
-# The longest motion a request may ask for [s] (a duration is sent as whole nanoseconds).
-MAX_MOTION_S = 3600.0
 
 
 class KinematicsNode(Node):
@@ -153,48 +149,17 @@ class KinematicsNode(Node):
             pose = self._kin.in_base_link(target.header.frame_id, pose, self._prefix)
         except (KeyError, ValueError) as exc:
             return self._fail(f'bad target: {exc.args[0]}')
-        if not np.all(np.isfinite(pose)):
-            return self._fail('bad target: non-finite pose')
-        if not (np.isfinite(duration) and 0.0 <= duration <= MAX_MOTION_S):
-            return self._fail(f'bad duration {duration}: must be within [0, {MAX_MOTION_S:g}] s')
-        if not (np.isfinite(scaling) and 0.0 <= scaling <= 1.0):
-            return self._fail(f'bad velocity_scaling {scaling}: must be within [0, 1]')
-        current = self._positions
-        if execute and current is None:
-            return self._fail('no joint_states received yet: cannot plan a motion from the '
-                              'current position')
-        start: Optional[np.ndarray] = current
-        if seed:
-            if len(seed) != len(self._kin.joint_names) or not np.all(np.isfinite(seed)):
-                return self._fail(f'bad seed {seed}: needs {len(self._kin.joint_names)} finite '
-                                  'values')
-            start = np.asarray(seed, float)
-        solution = self._kin.ik(pose, seed=start)
-        if not solution.success:
-            xyz = ', '.join(f'{v:.3f}' for v in pose[:3, 3])
-            return self._fail(f'no IK solution for ({xyz}) in base_link: {solution.reason}')
-        errors = (solution.position_error, solution.rotation_error)
-        if not execute or current is None:
-            return True, 'solved', solution.positions, errors, None
-        scaling = scaling or self.get_parameter('velocity_scaling').value
-        # The fastest the joints allow (the simulator refuses a motion faster than that).
-        fastest = motion_duration(current, solution.positions,
-                                  self._kin.velocity_limits, 1.0, 0.0)
-        if duration == 0.0:
-            duration = motion_duration(current, solution.positions,
-                                       self._kin.velocity_limits, scaling,
-                                       self.get_parameter('min_duration').value)
-            if duration > MAX_MOTION_S:
-                return self._fail(f'the motion would take {duration:.3g} s at velocity_scaling '
-                                  f'{scaling:g} (at most {MAX_MOTION_S:g} s)')
-        elif duration < fastest:
-            return self._fail(f'duration {duration:g} s is too short: the joints\' velocity '
-                              f'limits need at least {fastest:.3f} s for this motion')
-        trajectory = _trajectory(self._kin.joint_names, solution.positions, duration)
+        plan = plan_ik(self._kin, pose, execute, duration, scaling, self._positions, seed,
+                       self.get_parameter('velocity_scaling').value,
+                       self.get_parameter('min_duration').value)
+        if not plan.success:
+            return self._fail(plan.message)
+        if plan.duration is None or plan.positions is None:
+            return True, plan.message, plan.positions, plan.errors, None
+        trajectory = _trajectory(self._kin.joint_names, plan.positions, plan.duration)
         self._traj_pub.publish(trajectory)
-        message = f'solved; moving there in {duration:.2f} s'
-        self.get_logger().info(f'IK: {message}')
-        return True, message, solution.positions, errors, trajectory
+        self.get_logger().info(f'IK: {plan.message}')
+        return True, plan.message, plan.positions, plan.errors, trajectory
 
     def _fail(self, message: str):
         self.get_logger().error(f'IK failed: {message}')

@@ -147,3 +147,65 @@ def motion_duration(start: Vector, goal: Vector,
         raise ValueError(f'velocity scaling must be within (0, 1], got {scaling}')
     step = np.abs(np.subtract(goal, start))
     return max(min_duration, float(np.max(1.5 * step / (np.asarray(velocity_limits) * scaling))))
+
+
+# The longest motion an IK request may ask for [s] (a duration is sent as whole nanoseconds).
+MAX_MOTION_S = 3600.0
+
+
+@dataclass
+class IKPlan:
+    """What an IK request comes to: the joint positions and, to execute it, the duration of
+    a rest-to-rest motion there that the joints' velocity limits allow; or why not."""
+    success: bool
+    message: str
+    positions: Optional[np.ndarray] = None
+    errors: Tuple[float, float] = (math.inf, math.inf)
+    duration: Optional[float] = None
+
+
+def plan_ik(kin: ArmKinematics, pose: np.ndarray, execute: bool, duration: float,
+            scaling: float, current: Optional[Vector], seed: Optional[Sequence[float]] = None,
+            default_scaling: float = 0.5, min_duration: float = 0.5) -> IKPlan:
+    """Check an IK request (``pose``: 4x4 in base_link; ``duration`` 0: from ``scaling``, or
+    ``default_scaling`` for 0; ``seed``: where to start the search, else ``current``) and
+    solve it. Whatever the numbers, it answers: no request raises, and a motion it plans is
+    one the simulator takes (never faster than the velocity limits, at most MAX_MOTION_S)."""
+    def fail(message: str) -> IKPlan:
+        return IKPlan(False, message)
+    pose = np.asarray(pose, float)
+    if pose.shape != (4, 4) or not np.all(np.isfinite(pose)):
+        return fail('bad target: non-finite pose')
+    if not (math.isfinite(duration) and 0.0 <= duration <= MAX_MOTION_S):
+        return fail(f'bad duration {duration}: must be within [0, {MAX_MOTION_S:g}] s')
+    if not (math.isfinite(scaling) and 0.0 <= scaling <= 1.0):
+        return fail(f'bad velocity_scaling {scaling}: must be within [0, 1]')
+    if execute and current is None:
+        return fail('no joint_states received yet: cannot plan a motion from the current '
+                    'position')
+    start = None if current is None else np.asarray(current, float)
+    if seed:
+        if len(seed) != len(kin.joint_names) or not np.all(np.isfinite(seed)):
+            return fail(f'bad seed {list(seed)}: needs {len(kin.joint_names)} finite values')
+        start = np.asarray(seed, float)
+    solution = kin.ik(pose, seed=start)
+    if not solution.success or solution.positions is None:
+        xyz = ', '.join(f'{v:.3f}' for v in pose[:3, 3])
+        return fail(f'no IK solution for ({xyz}) in base_link: {solution.reason}')
+    errors = (solution.position_error, solution.rotation_error)
+    if not execute or current is None:
+        return IKPlan(True, 'solved', solution.positions, errors)
+    scaling = scaling or default_scaling
+    # The fastest the joints allow (the simulator refuses a motion faster than that).
+    fastest = motion_duration(current, solution.positions, kin.velocity_limits, 1.0, 0.0)
+    if duration == 0.0:
+        duration = motion_duration(current, solution.positions, kin.velocity_limits, scaling,
+                                   min_duration)
+        if duration > MAX_MOTION_S:
+            return fail(f'the motion would take {duration:.3g} s at velocity_scaling '
+                        f'{scaling:g} (at most {MAX_MOTION_S:g} s)')
+    elif duration < fastest:
+        return fail(f'duration {duration:g} s is too short: the joints\' velocity limits need '
+                    f'at least {fastest:.3f} s for this motion')
+    return IKPlan(True, f'solved; moving there in {duration:.2f} s', solution.positions,
+                  errors, duration)

@@ -316,7 +316,7 @@ class _PointCheck:
             bad |= ~np.isfinite(a).all(axis=1)
         if any(p.effort for p in points):
             bad |= np.array([not all(math.isfinite(e) for e in p.effort) for p in points])
-        with np.errstate(invalid='ignore', divide='ignore'):
+        with np.errstate(invalid='ignore', divide='ignore', over='ignore'):
             bad |= t < 0.0
             bad[1:] |= t[1:] <= t[:-1]
             bad |= ((q < self.lower - LIMIT_TOLERANCE)
@@ -428,17 +428,18 @@ def _check_point(point: TrajectoryPoint, k: int, n: int) -> str:
 
 def _monotone_slopes(t: np.ndarray, q: np.ndarray) -> np.ndarray:
     """Fritsch-Carlson slopes at the knots: zero at local extrema, so no overshoot."""
-    h = np.diff(t)[:, None]
-    delta = np.diff(q, axis=0) / h
     v = np.zeros_like(q)
-    if len(t) > 2:
-        d0, d1 = delta[:-1], delta[1:]
-        h0, h1 = h[:-1], h[1:]
-        w0 = 2 * h1 + h0
-        w1 = h1 + 2 * h0
-        with np.errstate(divide='ignore', invalid='ignore'):
+    # (Knots a hair apart overflow here; what that makes of the motion is refused after.)
+    with np.errstate(all='ignore'):
+        h = np.diff(t)[:, None]
+        delta = np.diff(q, axis=0) / h
+        if len(t) > 2:
+            d0, d1 = delta[:-1], delta[1:]
+            h0, h1 = h[:-1], h[1:]
+            w0 = 2 * h1 + h0
+            w1 = h1 + 2 * h0
             harmonic = (w0 + w1) / (w0 / d0 + w1 / d1)
-        v[1:-1] = np.where(d0 * d1 > 0.0, harmonic, 0.0)
+            v[1:-1] = np.where(d0 * d1 > 0.0, harmonic, 0.0)
     return v
 
 

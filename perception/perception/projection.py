@@ -3,6 +3,7 @@ model-based correction for a cube's silhouette (its visible sides shift the blob
 away from the top face's centre under perspective)."""
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from typing import Tuple
 
@@ -33,10 +34,15 @@ class CameraModel:
         return uvw[:, :2] / uvw[:, 2:3]
 
 
+# The widest half field of view a pinhole camera_info may describe [degrees].
+_HALF_FOV_LIMIT_DEG = 89.5
+_WIDEST = math.tan(math.radians(_HALF_FOV_LIMIT_DEG))
+
+
 def intrinsics_problem(width: int, height: int, k: ArrayLike) -> str:
     """Why a camera_info cannot be used ('' if it can): a size, and a pinhole K (row-major 3x3)
-    that is finite, with positive focal lengths, the principal point inside the image and
-    (0, 0, 1) as its last row."""
+    that is finite, with positive focal lengths, the principal point inside the image,
+    (0, 0, 1) as its last row and a field of view under 179 degrees."""
     values = np.asarray(k, float).ravel()
     if width <= 0 or height <= 0:
         return f'size {width}x{height}'
@@ -51,6 +57,10 @@ def intrinsics_problem(width: int, height: int, k: ArrayLike) -> str:
         return f'principal point ({cx:g}, {cy:g}) outside the {width}x{height} image'
     if values[6:].tolist() != [0.0, 0.0, 1.0]:
         return f"K's last row is {values[6:].tolist()}, not [0, 0, 1]"
+    # A focal length of 1e-300 pixels passed the checks above and made every ray sideways.
+    if (max(cx, width - cx) / fx > _WIDEST or max(cy, height - cy) / fy > _WIDEST):
+        return (f'focal lengths fx {fx:g}, fy {fy:g} give a {width}x{height} image a field of '
+                f'view of {2 * _HALF_FOV_LIMIT_DEG:g} degrees or more')
     if abs(skew) > max(fx, fy):
         return f'skew {skew:g} exceeds the focal length'
     return ''
