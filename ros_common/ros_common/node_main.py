@@ -28,7 +28,7 @@ from __future__ import annotations
 import os
 import signal
 import threading
-from typing import Callable, Optional, Tuple, Type, TypeVar
+from typing import Callable, List, Optional, Tuple, Type, TypeVar
 
 import rclpy
 from rclpy.exceptions import ParameterException
@@ -132,12 +132,16 @@ def run_node(factory: Callable[[], N], name: str,
     """
     keep_large_blocks()     # (ros_common/memory.py: large messages without page faults)
     stop: Optional[threading.Event] = None
+    # Set by SIGINT and SIGTERM (graceful_signals): the spin's own event, and the node's.
+    stop_events: List[threading.Event] = []
     if graceful_signals:
         rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
-        requested = stop = threading.Event()
+        stop = threading.Event()
+        stop_events.append(stop)
 
         def request_stop(_signum: int, _frame: object) -> None:
-            requested.set()
+            for event in list(stop_events):
+                event.set()
         for sig in (signal.SIGINT, signal.SIGTERM):
             signal.signal(sig, request_stop)
     else:
@@ -147,12 +151,11 @@ def run_node(factory: Callable[[], N], name: str,
         return 1
     own: Optional[threading.Event] = getattr(node, 'exit_request', None)
     if own is not None:
-        if stop is None:
-            stop = own
-        else:
-            for sig in (signal.SIGINT, signal.SIGTERM):
-                signal.signal(sig, lambda _signum, _frame: own.set())
-            stop = own
+        if stop is not None:
+            stop_events.append(own)
+            if stop.is_set():               # (a signal while the node was being made)
+                own.set()
+        stop = own
     try:
         spin(node, events=events, stop=stop)
     finally:

@@ -132,3 +132,35 @@ def test_a_background_spin_ends_with_its_task_not_at_the_end_of_its_wait(monkeyp
     assert node_main.run_task(lambda: Node('woken'), 'woken', lambda node: 0,
                               background_spin=True, args=[]) == 0
     assert spinning_at_shutdown == [[]]
+
+
+NODE_THAT_ENDS_ITSELF = '''
+import os, signal, sys, threading
+from rclpy.node import Node
+from ros_common.node_main import run_node
+
+class Ending(Node):
+    def __init__(self):
+        super().__init__('ending')
+        self.exit_request = threading.Event()
+        self.exit_code = int(sys.argv[1])
+        if sys.argv[2] == 'signal':      # SIGINT while the node is still being made
+            os.kill(os.getpid(), signal.SIGINT)
+        else:                            # the node ends its own run from a callback
+            self.create_timer(0.05, self.exit_request.set)
+
+sys.exit(run_node(Ending, 'ending', graceful_signals=True))
+'''
+
+
+@pytest.mark.parametrize('how, code, expected', [('signal', 3, 3), ('itself', 1, 1)])
+def test_a_node_ends_its_own_run_and_a_signal_while_it_is_made_is_not_lost(how, code,
+                                                                          expected):
+    """run_node: a node that sets its exit_request ends the spin with its exit_code; a SIGINT
+    that came while the node was being made (before its event was known) still ends it (the
+    recorder once missed it and hung until killed)."""
+    import subprocess
+    import sys
+    out = subprocess.run([sys.executable, '-c', NODE_THAT_ENDS_ITSELF, str(code), how],
+                         capture_output=True, text=True, timeout=60)
+    assert out.returncode == expected, out.stdout + out.stderr
