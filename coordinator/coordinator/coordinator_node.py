@@ -506,6 +506,19 @@ class CoordinatorNode(Node):
                 raise NodeTimeout('no joint_states, grip states and odometry from the '
                                   'simulator (is sim_node running with the cell world?)')
             time.sleep(0.01)
+        # Real time: the belt starts with the first decision, so not before the camera's frames
+        # reach this node through the vision node. The graph being up does not say that: the
+        # vision node subscribes to the camera only once it sees this node's reader (lazy), and
+        # then the simulator and the vision node have to match each other. On a busy machine
+        # that took seconds of simulated time, in which the first two materials rode past the
+        # camera unseen (the purple, held at the end stop behind one of them, was then picked
+        # where that one stood). A detections message is answered for a frame: they flow.
+        with self._lock:
+            if not self._lock.wait_for(lambda: bool(self._detections),
+                                       timeout=max(0.0, end - time.monotonic())):
+                raise NodeTimeout(f'no detections from the vision node: no camera frame reached '
+                                  f'it through {CAMERA_TOPIC}, or its answers did not reach '
+                                  f'this node')
         return self._observe(round(self.now() * 1e9), None)
 
     def _next_observation(self, obs: Observation) -> Observation:

@@ -6,6 +6,9 @@ import os
 import random
 
 import pytest
+from rcl_interfaces.srv import GetParameters
+from rclpy.qos import qos_profile_sensor_data
+from sensor_msgs.msg import Image
 
 from coordinator.layout import CellLayout, layout_from_world
 from coordinator.trials import run_trial
@@ -75,6 +78,35 @@ def test_the_same_seed_gives_the_same_events_and_final_state(two_runs):
     assert a['youbot_path'] == b['youbot_path']
     assert a['completion_time'] == b['completion_time']
     assert a['final_materials'] == b['final_materials']
+
+
+def test_real_time_the_belt_waits_for_frames_to_reach_the_coordinator(start_node, probe,
+                                                                      tmp_path):
+    """A CI run's vision node saw no frame for its first 7 s of simulated time (a busy machine's
+    discovery), while the coordinator, seeing the graph up, had started the belt: two of eight
+    materials rode past the camera unseen. Here the vision node never gets a frame (its camera
+    topic is remapped away) while something else reads the camera, so the graph looks up: the
+    coordinator must not start the belt, and must say why it stops."""
+    world = 'world:=package://world_description/worlds/pipeline_cell.yaml'
+    start_node('sim_node', '-p', world, '-p', 'belt_speed:=0.0')
+    start_node('vision_node', '-r', 'image_raw:=/nowhere/image_raw', '-r',
+               'camera_info:=/belt_camera/camera_info')
+    for arm in ('zu12', 'youbot'):
+        start_node('kinematics_node', '-r', f'__ns:=/{arm}', '-p', f'arm:={arm}',
+                   name=f'{arm}_kinematics')
+    probe.collect(Image, '/belt_camera/image_raw', qos=qos_profile_sensor_data)
+    result = tmp_path / 'result.json'
+    coordinator = start_node('coordinator_node', '-p', 'use_sim_time:=true', '-p',
+                             f'belt_speed:={BELT}', '-p', 'service_timeout:=8.0', '-p',
+                             f'result_file:={result}')
+    wait_for(lambda: not coordinator.alive(), 60.0, what='the coordinator to give up')
+    r = json.loads(result.read_text())
+    assert r['status'] == 'node_timeout', r['status']
+    assert 'no detections from the vision node' in r['message'], r['message']
+    assert 'belt_started' not in [e[1] for e in r['events']]
+    reply = probe.call(GetParameters, '/sim_node/get_parameters',
+                       GetParameters.Request(names=['belt_speed']))
+    assert reply.values[0].double_value == 0.0
 
 
 def test_a_real_time_run_delivers_every_material(start_node, tmp_path):
