@@ -1,0 +1,1 @@
+"""A Foxglove live bridge for the running graph (``live_view``)."""

@@ -1,0 +1,239 @@
+"""``live_view``: a Foxglove live bridge. Serves the Foxglove WebSocket protocol (through the
+foxglove-sdk package) on ``ws://127.0.0.1:8765`` and streams every topic of the graph, or a
+chosen list, with its ``ros2msg`` schema and the CDR bytes as received.
+
+Topics are advertised as they appear (a publisher and one type) and dropped as they go. A ROS
+subscription is made only while a Foxglove client subscribes to the topic, so a camera nobody
+watches is not rendered for the bridge. A slow client never stalls the graph: the SDK drops
+that client's oldest messages, and the node counts and logs how often (bridge.py).
+"""
+from __future__ import annotations
+
+import collections
+import functools
+import logging
+import sys
+from dataclasses import dataclass, field
+from typing import Deque, Dict, Optional, Set, Tuple
+
+import foxglove
+from rcl_interfaces.msg import IntegerRange, ParameterDescriptor
+from rclpy.clock import Clock, ClockType
+from rclpy.node import Node
+from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+from rclpy.subscription import Subscription
+
+from live_view.bridge import SEND_LOSSY_LOGGER, SlowClients, TopicFilter, graph_change
+from recording.qos_profiles import adapt_to_publishers
+from recording.types import TypeResolutionError, TypeResolver, message_class
+from ros_common.node_main import run_node
+from ros_common.params import float_range
+
+
+class LiveViewError(RuntimeError):
+    """The bridge cannot serve (a bad parameter, the port taken)."""
+
+
+@dataclass
+class _Topic:
+    msgtype: str
+    channel: foxglove.Channel
+    clients: Set[int] = field(default_factory=set)
+    subscription: Optional[Subscription] = None
+    forwarded: int = 0
+
+
+class _RosLog(logging.Handler):
+    """The SDK's own log lines (clients connecting and leaving, errors) in the node's log."""
+
+    def __init__(self, node: Node) -> None:
+        super().__init__(level=logging.INFO)
+        self._logger = node.get_logger()
+
+    def emit(self, record: logging.LogRecord) -> None:
+        text = f'foxglove: {record.getMessage()}'
+        if record.levelno >= logging.ERROR:
+            self._logger.error(text)
+        elif record.levelno >= logging.WARNING:
+            self._logger.warn(text)
+        else:
+            self._logger.info(text)
+
+
+class _Listener:
+    """The SDK's server listener: called on the SDK's threads, it only queues what clients
+    asked for; the node's timer acts on it (rclpy entities are made in the executor's thread)."""
+
+    def __init__(self, requests: Deque[Tuple[str, int, int, str]]) -> None:
+        self._requests = requests
+
+    def on_subscribe(self, client, channel) -> None:
+        self._requests.append(('subscribe', client.id, channel.id, channel.topic))
+
+    def on_unsubscribe(self, client, channel) -> None:
+        self._requests.append(('unsubscribe', client.id, channel.id, channel.topic))
+
+
+class LiveView(Node):
+
+    def __init__(self, **kwargs) -> None:
+        super().__init__('live_view', **kwargs)
+        text = ParameterDescriptor
+        self.declare_parameter('host', '127.0.0.1', text(
+            description='Address to serve on; the loopback interface unless told otherwise '
+                        '(0.0.0.0: every interface, so anyone who reaches it sees the graph)',
+            read_only=True))
+        self.declare_parameter('port', 8765, text(
+            description='TCP port of the Foxglove WebSocket server (0: any free port)',
+            read_only=True, integer_range=[IntegerRange(from_value=0, to_value=65535, step=1)]))
+        self.declare_parameter('topics', [''], text(
+            description='Topics to stream; empty: every topic, as it appears', read_only=True))
+        self.declare_parameter('exclude', [''], text(
+            description='Topics never streamed', read_only=True))
+        self.declare_parameter('discovery_period', 0.2, float_range(
+            'Wall seconds between looks for topics that appeared or went', 0.02, 10.0))
+        self.declare_parameter('message_backlog_size', 256, text(
+            description='Messages queued per client; past that its oldest are dropped',
+            read_only=True, integer_range=[IntegerRange(from_value=1, to_value=100000, step=1)]))
+        self.declare_parameter('queue_depth', 10, text(
+            description='History depth of the ROS subscriptions', read_only=True,
+            integer_range=[IntegerRange(from_value=1, to_value=10000, step=1)]))
+        self.declare_parameter('report_period', 5.0, float_range(
+            'Wall seconds between reports of clients that fell behind', 0.1, 3600.0))
+        get = lambda name: self.get_parameter(name).value  # noqa: E731
+        try:
+            self._filter = TopicFilter(get('topics'), get('exclude'))
+        except ValueError as exc:
+            raise LiveViewError(str(exc)) from None
+        self._depth = int(get('queue_depth'))
+        self._types = TypeResolver()
+        self._topics: Dict[str, _Topic] = {}
+        self._skipped: Dict[str, str] = {}          # topic: the type it could not be streamed as
+        self._requests: Deque[Tuple[str, int, int, str]] = collections.deque()
+        self.slow_clients = SlowClients()
+        self._log_handlers = [(logging.getLogger(SEND_LOSSY_LOGGER), self.slow_clients),
+                              (logging.getLogger('foxglove'), _RosLog(self))]
+        for logger, handler in self._log_handlers:
+            logger.addHandler(handler)
+            logger.setLevel(logging.INFO)
+        logging.getLogger('foxglove').propagate = False     # (the node's log only)
+        foxglove.set_log_level(logging.INFO)
+        host, port = get('host'), int(get('port'))
+        try:
+            self._server = foxglove.start_server(
+                name='robot-sim live_view', host=host, port=port,
+                server_listener=_Listener(self._requests), supported_encodings=['cdr'],
+                message_backlog_size=int(get('message_backlog_size')))
+        except Exception as exc:  # noqa: BLE001 - the SDK raises its own error types
+            self._detach_logs()
+            raise LiveViewError(f'cannot serve on {host}:{port}: {exc}') from None
+        self.url = f'ws://{host}:{self._server.port}'
+        # Wall-clock timers: the bridge runs whether or not simulated time advances.
+        steady = Clock(clock_type=ClockType.STEADY_TIME)
+        self.create_timer(get('discovery_period'), self._update, clock=steady)
+        self.create_timer(get('report_period'), self._report, clock=steady)
+        self.get_logger().info(
+            f'serving the Foxglove WebSocket protocol on {self.url} ({self._filter.describe()}); '
+            f'in Foxglove: Open connection > Foxglove WebSocket > {self.url}')
+        self._update()
+
+    # --- the graph --------------------------------------------------------------------------
+    def _update(self) -> None:
+        graph = [(topic, types, self.count_publishers(topic))
+                 for topic, types in self.get_topic_names_and_types()]
+        change = graph_change({t: s.msgtype for t, s in self._topics.items()}, graph,
+                              self._filter)
+        for topic in change.drop:
+            self._drop(topic)
+        for topic, msgtype in change.advertise:
+            if self._skipped.get(topic) != msgtype:
+                self._advertise(topic, msgtype)
+        while self._requests:
+            op, client, channel_id, topic = self._requests.popleft()
+            entry = self._topics.get(topic)
+            if entry is None or entry.channel.id() != channel_id:
+                continue                    # (a channel dropped since)
+            if op == 'subscribe':
+                entry.clients.add(client)
+            else:
+                entry.clients.discard(client)
+            self._follow(topic, entry)
+
+    def _advertise(self, topic: str, msgtype: str) -> None:
+        try:
+            message_class(msgtype)
+            msgdef, _ = self._types.definition(msgtype)
+        except (TypeResolutionError, OSError, ValueError) as exc:
+            self._skipped[topic] = msgtype
+            self.get_logger().warn(f'not streaming {topic}: {exc}')
+            return
+        schema = foxglove.Schema(name=msgtype, encoding='ros2msg', data=msgdef.encode())
+        channel = foxglove.Channel(topic, schema=schema, message_encoding='cdr')
+        self._topics[topic] = _Topic(msgtype, channel)
+        self._skipped.pop(topic, None)
+        self.get_logger().info(f'advertising {topic} [{msgtype}]')
+
+    def _drop(self, topic: str) -> None:
+        entry = self._topics.pop(topic)
+        if entry.subscription is not None:
+            self.destroy_subscription(entry.subscription)
+        entry.channel.close()
+        self.get_logger().info(f'{topic} is gone: no longer advertised '
+                               f'({entry.forwarded} messages streamed)')
+
+    def _follow(self, topic: str, entry: _Topic) -> None:
+        """A ROS subscription while a client subscribes, none otherwise."""
+        if entry.clients and entry.subscription is None:
+            publishers = self.get_publishers_info_by_topic(topic)
+            reliability, durability = adapt_to_publishers(
+                [(int(p.qos_profile.reliability), int(p.qos_profile.durability))
+                 for p in publishers])
+            qos = QoSProfile(depth=self._depth, reliability=ReliabilityPolicy(reliability),
+                             durability=DurabilityPolicy(durability))
+            entry.subscription = self.create_subscription(
+                message_class(entry.msgtype), topic,
+                functools.partial(self._forward, entry), qos, raw=True)
+            self.get_logger().info(f'streaming {topic} to {len(entry.clients)} client(s)')
+        elif not entry.clients and entry.subscription is not None:
+            self.destroy_subscription(entry.subscription)
+            entry.subscription = None
+            self.get_logger().info(f'{topic}: no client left, unsubscribed')
+
+    def _forward(self, entry: _Topic, data: bytes) -> None:
+        # The SDK copies the bytes into each subscribed client's outbox and returns at once.
+        entry.channel.log(data, log_time=self.get_clock().now().nanoseconds)
+        entry.forwarded += 1
+
+    # --- reports ------------------------------------------------------------------------------
+    def _report(self) -> None:
+        for client, new, total in self.slow_clients.news():
+            self.get_logger().warn(
+                f'client {client} fell behind: its outbox was full {new} time(s) since the last '
+                f'report ({total} in all); its oldest messages were dropped, the graph was not '
+                'held up')
+
+    def streamed(self) -> Dict[str, int]:
+        return {t: e.forwarded for t, e in self._topics.items()}
+
+    def _detach_logs(self) -> None:
+        for logger, handler in self._log_handlers:
+            logger.removeHandler(handler)
+
+    def finish(self) -> str:
+        self._detach_logs()         # (the context may be shut down already: no ROS log now)
+        self._server.stop()
+        counts = self.slow_clients.counts()
+        behind = (f'; clients that fell behind: {counts}' if counts else '')
+        return f'served {self.url}; messages streamed per topic: {self.streamed()}{behind}'
+
+
+def _finish(node: LiveView) -> None:
+    print(f'[live_view] {node.finish()}', flush=True)
+
+
+def main(args=None) -> int:
+    return run_node(LiveView, 'live_view', (LiveViewError,), on_exit=_finish, args=args)
+
+
+if __name__ == '__main__':
+    sys.exit(main())
