@@ -40,8 +40,8 @@ class FoxgloveClient:
         sub = self._next
         self._next += 1
         self.subscriptions[sub] = channel['id']
-        await self.ws.send(json.dumps({'op': 'subscribe',
-                                       'subscriptions': [{'id': sub, 'channelId': channel['id']}]}))
+        await self.ws.send(json.dumps({
+            'op': 'subscribe', 'subscriptions': [{'id': sub, 'channelId': channel['id']}]}))
 
     def _decode(self, channel, payload):
         decoder = self._decoders.get(channel['id'])
@@ -116,7 +116,8 @@ def test_a_client_sees_the_robot_drive_and_its_camera_live(start_node, probe):
                 return pose.x > 0.05
             await live.pump(moved, 60)
             last = live.received[odom][-1][1]
-            assert last.header.frame_id.endswith('odom') and math.isfinite(last.pose.pose.position.y)
+            assert last.header.frame_id.endswith('odom')
+            assert math.isfinite(last.pose.pose.position.y)
             cmd.publish(Twist())
 
             # A client that subscribes to the camera and never reads: the bridge drops its
