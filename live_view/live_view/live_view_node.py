@@ -17,6 +17,7 @@ from dataclasses import dataclass, field
 from typing import Deque, Dict, Optional, Set, Tuple
 
 import foxglove
+from foxglove.websocket import ChannelView, Client
 from rcl_interfaces.msg import IntegerRange, ParameterDescriptor
 from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
@@ -60,17 +61,17 @@ class _RosLog(logging.Handler):
             self._logger.info(text)
 
 
-class _Listener:
+class _Listener(foxglove.ServerListener):
     """The SDK's server listener: called on the SDK's threads, it only queues what clients
     asked for; the node's timer acts on it (rclpy entities are made in the executor's thread)."""
 
     def __init__(self, requests: Deque[Tuple[str, int, int, str]]) -> None:
         self._requests = requests
 
-    def on_subscribe(self, client, channel) -> None:
+    def on_subscribe(self, client: Client, channel: ChannelView) -> None:
         self._requests.append(('subscribe', client.id, channel.id, channel.topic))
 
-    def on_unsubscribe(self, client, channel) -> None:
+    def on_unsubscribe(self, client: Client, channel: ChannelView) -> None:
         self._requests.append(('unsubscribe', client.id, channel.id, channel.topic))
 
 
