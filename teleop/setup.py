@@ -6,6 +6,7 @@ setup(
     name=package_name,
     version='0.1.0',
     packages=find_packages(exclude=['test']),
+    package_data={'teleop': ['web/*.html', 'web/*.js', 'web/*.css']},
     data_files=[
         ('share/ament_index/resource_index/packages', ['resource/' + package_name]),
         ('share/' + package_name, ['package.xml']),
@@ -19,6 +20,7 @@ setup(
     entry_points={
         'console_scripts': [
             'teleop = teleop.teleop_node:main',
+            'control_panel = teleop.control_panel:main',
         ],
     },
 )

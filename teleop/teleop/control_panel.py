@@ -1,0 +1,482 @@
+"""``control_panel``: the mini robot report's interface as a web page, served on
+``http://127.0.0.1:8080``.
+
+The page (``teleop/web/``) has the report's buttons and speed slider, the teleop node's keys,
+strafe buttons for a holonomic base, the live camera image, an odometry readout with the path
+drawn and, when the pipeline coordinator runs, each material's status, the robots' states and
+the elapsed time. The robot is chosen on the page, from the simulator's world.
+
+HTTP and the page's WebSocket (``/ws``) are served by the ``websockets`` package on an asyncio
+loop in a thread of its own; the ROS side (publishing ``cmd_vel``, reading odometry, camera and
+coordinator) runs in the node's executor. The dead-man rule is ``panel_core.DeadMan``.
+"""
+from __future__ import annotations
+
+import asyncio
+import collections
+import functools
+import http
+import itertools
+import json
+import math
+import sys
+import threading
+import time
+from pathlib import Path
+from typing import Any, Callable, Deque, Dict, List, Optional, Tuple
+
+import cv2
+import numpy as np
+from geometry_msgs.msg import Twist, TwistStamped
+from nav_msgs.msg import Odometry
+from rcl_interfaces.msg import IntegerRange, ParameterDescriptor, ParameterType
+from rcl_interfaces.srv import GetParameters
+from rclpy.clock import Clock, ClockType
+from rclpy.node import Node
+from rclpy.qos import QoSProfile, qos_profile_sensor_data
+from rclpy.subscription import Subscription
+from sensor_msgs.msg import Image
+from sim_interfaces.msg import PipelineEvent, PipelineState
+from websockets.asyncio.server import ServerConnection, serve
+from websockets.datastructures import Headers
+from websockets.exceptions import ConnectionClosed
+from websockets.http11 import Request, Response
+
+from ros_common.geometry import yaw_of
+from ros_common.node_main import run_node
+from ros_common.params import float_range
+from ros_common.stamps import to_seconds
+from teleop.panel_core import DeadMan, PanelInputError, PanelRobot, parse_command, robots_of_world
+from world_description.resources import resolve_resource
+from world_description.world_config import WorldConfigError, load_world
+
+WEB = Path(__file__).resolve().parent / 'web'
+STATIC = {'/': ('index.html', 'text/html; charset=utf-8'),
+          '/index.html': ('index.html', 'text/html; charset=utf-8'),
+          '/panel.js': ('panel.js', 'text/javascript; charset=utf-8'),
+          '/panel.css': ('panel.css', 'text/css; charset=utf-8')}
+PATH_POINTS = 2000          # odometry points kept for the drawn path
+PATH_STEP_M = 0.005         # a new path point once the robot moved this far
+
+
+class ControlPanelError(RuntimeError):
+    """The panel cannot serve (the port taken, the page's files missing)."""
+
+
+class ControlPanel(Node):
+
+    def __init__(self, **kwargs) -> None:
+        super().__init__('control_panel', **kwargs)
+        text = ParameterDescriptor
+        self.declare_parameter('host', '127.0.0.1', text(
+            description='Address to serve the page on; loopback unless told otherwise (anyone '
+                        'who reaches it can drive the robots)', read_only=True))
+        self.declare_parameter('port', 8080, text(
+            description='TCP port of the page (0: any free port)', read_only=True,
+            integer_range=[IntegerRange(from_value=0, to_value=65535, step=1)]))
+        self.declare_parameter('simulator', '/sim_node', text(
+            description='The simulator node whose world lists the robots', read_only=True))
+        self.declare_parameter('namespace', '', text(
+            description='The robot driven at start (its namespace); empty: the first base '
+                        'of the world', read_only=True))
+        self.declare_parameter('speed', 0.5, float_range(
+            "The slider's start: a fraction of max_speed (the report's buttons: 0.5)",
+            0.0, 1.0))
+        self.declare_parameter('report_turns', False, text(
+            description="The report's turn buttons: wheels at +-speed*max_speed/r (a diff "
+                        'drive turns at 2*speed*max_speed/wheel_separation) instead of '
+                        'speed*max_turn', read_only=True))
+        self.declare_parameter('deadman_timeout', 0.3, float_range(
+            'Wall seconds without word from the page that holds a button before the robot '
+            'is stopped (the page repeats every 0.1 s)', 0.05, 5.0))
+        self.declare_parameter('publish_rate', 20.0, float_range(
+            'Rate of cmd_vel while a button is held [Hz]', 1.0, 200.0))
+        self.declare_parameter('stamped', False, text(
+            description='Publish geometry_msgs/TwistStamped instead of Twist', read_only=True))
+        self.declare_parameter('camera_rate', 5.0, float_range(
+            'Camera frames sent to the page per second', 0.1, 30.0))
+        self.declare_parameter('max_speed', 0.2, float_range(
+            'Speed at 100 % where neither the world nor the simulator says [m/s]', 1e-3, 10.0))
+        self.declare_parameter('max_turn', 0.2, float_range(
+            'Turn rate at 100 % where neither the world nor the simulator says [rad/s]',
+            1e-3, 20.0))
+        get = lambda name: self.get_parameter(name).value  # noqa: E731
+        for name in STATIC.values():
+            if not (WEB / name[0]).is_file():
+                raise ControlPanelError(f'the page is missing: {WEB / name[0]}')
+        self._lock = threading.Lock()
+        self._wanted_ns = get('namespace')
+        self._speed0, self._report_turns0 = float(get('speed')), bool(get('report_turns'))
+        self._deadman_timeout = float(get('deadman_timeout'))
+        self._stamped = bool(get('stamped'))
+        self._fallback = (float(get('max_speed')), float(get('max_turn')))
+        self._camera_period = 1.0 / float(get('camera_rate'))
+        self.robots: List[PanelRobot] = []
+        self.drive: Optional[DeadMan] = None
+        self._pub: Any = None
+        self._odom_sub: Optional[Subscription] = None
+        self._camera_sub: Optional[Subscription] = None
+        self._odom: Optional[Dict[str, float]] = None
+        self._path: List[Tuple[float, float]] = []
+        self._jpeg: Optional[bytes] = None
+        self._jpeg_at = -math.inf
+        self._coordinator: Optional[Dict[str, Any]] = None
+        self._materials: Dict[int, Dict[str, Any]] = {}
+        self.last_error = ''
+        self._calls: Deque[Callable[[], None]] = collections.deque()
+        # Pages: id -> (connection); the asyncio loop owns them.
+        self._pages: Dict[int, ServerConnection] = {}
+        self._page_ids = itertools.count(1)
+        self._loop = asyncio.new_event_loop()
+        self._server_ready = threading.Event()
+        self._server_error: Optional[BaseException] = None
+        self._host, self._port = get('host'), int(get('port'))
+        self._thread = threading.Thread(target=self._serve, name='control_panel_http',
+                                        daemon=True)
+        self._thread.start()
+        self._server_ready.wait(10.0)
+        if self._server_error is not None or not self._server_ready.is_set():
+            raise ControlPanelError(f'cannot serve on {self._host}:{self._port}: '
+                                    f'{self._server_error or "no answer"}')
+        self.url = f'http://{self._host}:{self._port}/'
+        # The world, from the simulator: asked until it answers.
+        self._sim = get('simulator')
+        self._params = self.create_client(GetParameters, f'{self._sim}/get_parameters')
+        self._asking = False
+        steady = Clock(clock_type=ClockType.STEADY_TIME)
+        self._ask_timer = self.create_timer(1.0, self._ask_world, clock=steady)
+        self.create_timer(1.0 / float(get('publish_rate')), self._tick, clock=steady)
+        self.create_timer(0.1, self._telemetry, clock=steady)
+        self.create_subscription(PipelineState, '/coordinator_node/state', self._on_state,
+                                 QoSProfile(depth=1, durability=1))
+        self.create_subscription(PipelineEvent, '/coordinator_node/events', self._on_event,
+                                 QoSProfile(depth=100))
+        self.get_logger().info(f'serving the control panel on {self.url}; waiting for the '
+                               f'world of {self._sim}')
+        self._ask_world()
+
+    # --- the robots ---------------------------------------------------------------------------
+    def _ask_world(self) -> None:
+        if self.robots or self._asking or not self._params.service_is_ready():
+            return
+        self._asking = True
+        future = self._params.call_async(GetParameters.Request(
+            names=['world', 'max_speed', 'max_turn']))
+        future.add_done_callback(self._on_world)
+
+    def _on_world(self, future) -> None:
+        self._asking = False
+        values = future.result().values if future.result() is not None else []
+        if len(values) != 3 or values[0].type != ParameterType.PARAMETER_STRING:
+            self._error(f'{self._sim} has no world parameter')
+            return
+        max_speed = (values[1].double_value if values[1].type == ParameterType.PARAMETER_DOUBLE
+                     else self._fallback[0])
+        max_turn = (values[2].double_value if values[2].type == ParameterType.PARAMETER_DOUBLE
+                    else self._fallback[1])
+        try:
+            world = load_world(resolve_resource(values[0].string_value))
+        except (WorldConfigError, OSError, ValueError) as exc:
+            self._error(f'cannot read the world of {self._sim}: {exc}')
+            return
+        robots = robots_of_world(world, max_speed, max_turn)
+        if not robots:
+            self._error(f'the world {values[0].string_value} has no driven base')
+            return
+        self._ask_timer.cancel()
+        with self._lock:
+            self.robots = robots
+        chosen = next((r for r in robots if r.namespace == '/' + self._wanted_ns.strip('/')),
+                      robots[0])
+        if self._wanted_ns and chosen.namespace != '/' + self._wanted_ns.strip('/'):
+            self.get_logger().warn(f'no base in namespace {self._wanted_ns}; driving '
+                                   f'{chosen.namespace}')
+        self.get_logger().info('robots: ' + ', '.join(
+            f'{r.name} ({r.namespace}, {"holonomic" if r.holonomic else "differential"})'
+            for r in robots))
+        self._select(chosen)
+
+    def _select(self, robot: PanelRobot) -> None:
+        """Drive ``robot`` from now on: the previous one is stopped first."""
+        with self._lock:
+            old = self.drive
+            speed = old.speed_fraction if old else self._speed0
+            report = old.report_turns if old else self._report_turns0
+            if old is not None and self._pub is not None:
+                old.release(None, 'another robot was chosen')
+                self._publish(old.tick(time.monotonic()))
+            self.drive = DeadMan(robot, self._deadman_timeout, speed, report)
+            self._odom, self._path, self._jpeg = None, [], None
+        if self._pub is not None:
+            self.destroy_publisher(self._pub)
+        if self._odom_sub is not None:
+            self.destroy_subscription(self._odom_sub)
+        self._drop_camera()
+        self._pub = self.create_publisher(TwistStamped if self._stamped else Twist,
+                                          robot.cmd_vel, 10)
+        self._odom_sub = self.create_subscription(Odometry, robot.odom, self._on_odom,
+                                                  QoSProfile(depth=5))
+        self.get_logger().info(f'driving {robot.name} on {robot.cmd_vel}')
+        self._broadcast(self._hello())
+
+    def _error(self, text: str) -> None:
+        if text != self.last_error:
+            self.last_error = text
+            self.get_logger().error(text)
+            self._broadcast({'op': 'error', 'text': text})
+
+    # --- commands -----------------------------------------------------------------------------
+    def command(self, page: int, text: Any) -> Optional[str]:
+        """A page's message; the reason it was refused, or None."""
+        try:
+            cmd = parse_command(text)
+            with self._lock:
+                drive = self.drive
+                if drive is None:
+                    raise PanelInputError('no robot yet: waiting for the simulator')
+                now = time.monotonic()
+                if cmd.op == 'hold':
+                    drive.hold(cmd.motion, page, now)
+                elif cmd.op == 'release':
+                    drive.release(page, 'released')
+                elif cmd.op == 'stop':
+                    drive.release(None, 'stop pressed')
+                elif cmd.op == 'speed':
+                    drive.set_speed(cmd.fraction)
+                elif cmd.op == 'report_turns':
+                    drive.set_report_turns(cmd.on)
+                robot = next((r for r in self.robots if r.namespace == cmd.namespace), None)
+            if cmd.op == 'select':
+                if robot is None:
+                    raise PanelInputError(f'no base in namespace {cmd.namespace!r}')
+                self.executor_call(functools.partial(self._select, robot))
+            elif cmd.op in ('speed', 'report_turns'):
+                self._broadcast(self._hello())
+            elif cmd.op in ('release', 'stop'):
+                self.executor_call(self._tick)
+            return None
+        except PanelInputError as exc:
+            self.get_logger().warn(f'page {page}: refused: {exc}', throttle_duration_sec=1.0)
+            return str(exc)
+
+    def executor_call(self, fn: Callable[[], None]) -> None:
+        """Run ``fn`` in the node's executor (rclpy entities are made there), at its next
+        tick."""
+        self._calls.append(fn)
+
+    def page_gone(self, page: int) -> None:
+        with self._lock:
+            if self.drive is not None:
+                self.drive.gone(page)
+        self.executor_call(self._tick)
+
+    def _tick(self) -> None:
+        while self._calls:
+            self._calls.popleft()()
+        with self._lock:
+            if self.drive is None:
+                return
+            twist = self.drive.tick(time.monotonic())
+            stops, self.drive.stops = self.drive.stops, []
+        for why in stops:
+            self.get_logger().info(f'stopped: {why}')
+        self._publish(twist)
+
+    def _publish(self, twist: Optional[Tuple[float, float, float]]) -> None:
+        if twist is None or self._pub is None:
+            return
+        msg = Twist()
+        msg.linear.x, msg.linear.y, msg.angular.z = (float(v) for v in twist)
+        if self._stamped:
+            stamped = TwistStamped(twist=msg)
+            stamped.header.stamp = self.get_clock().now().to_msg()
+            self._pub.publish(stamped)
+        else:
+            self._pub.publish(msg)
+
+    # --- what the page shows ------------------------------------------------------------------
+    def _on_odom(self, msg: Odometry) -> None:
+        p, t = msg.pose.pose, msg.twist.twist
+        odom = {'t': to_seconds(msg.header.stamp), 'x': p.position.x, 'y': p.position.y,
+                'yaw': yaw_of(p.orientation), 'vx': t.linear.x, 'vy': t.linear.y,
+                'wz': t.angular.z}
+        with self._lock:
+            self._odom = odom
+            last = self._path[-1] if self._path else None
+            if last is None or math.hypot(odom['x'] - last[0], odom['y'] - last[1]) >= PATH_STEP_M:
+                self._path.append((round(odom['x'], 4), round(odom['y'], 4)))
+                del self._path[:-PATH_POINTS]
+
+    def _on_image(self, msg: Image) -> None:
+        now = time.monotonic()
+        if now - self._jpeg_at < self._camera_period:
+            return
+        channels = {'rgb8': 3, 'bgr8': 3, 'mono8': 1}.get(msg.encoding)
+        if channels is None or msg.height * msg.step > len(msg.data) or msg.width == 0:
+            return
+        frame: np.ndarray = np.frombuffer(msg.data, np.uint8, msg.height * msg.step).reshape(
+            msg.height, msg.step)[:, :msg.width * channels].reshape(
+            msg.height, msg.width, channels)
+        if msg.encoding == 'rgb8':
+            frame = cv2.cvtColor(frame, cv2.COLOR_RGB2BGR)
+        ok, jpeg = cv2.imencode('.jpg', frame, [cv2.IMWRITE_JPEG_QUALITY, 80])
+        if ok:
+            self._jpeg_at = now
+            with self._lock:
+                self._jpeg = jpeg.tobytes()
+
+    def _on_state(self, msg: PipelineState) -> None:
+        with self._lock:
+            self._coordinator = {
+                'status': msg.status, 'loader': msg.loader_state,
+                'transport': msg.transport_state, 'elapsed': round(msg.elapsed, 2),
+                'total': msg.total, 'identified': msg.identified, 'picked': msg.picked,
+                'delivered': msg.delivered, 'missed': msg.missed, 'failed': msg.failed}
+
+    def _on_event(self, msg: PipelineEvent) -> None:
+        if msg.material_id < 0:
+            return
+        with self._lock:
+            entry = self._materials.setdefault(msg.material_id, {'id': msg.material_id})
+            entry.update({'color': msg.color or entry.get('color', ''), 'status': msg.kind,
+                          'robot': msg.robot, 'detail': msg.detail,
+                          't': round(to_seconds(msg.header.stamp), 2)})
+
+    def _camera_wanted(self) -> None:
+        """The camera is read only while a page is open (the simulator renders it for us)."""
+        robot = self.drive.robot if self.drive else None
+        if self._pages and robot is not None and robot.camera and self._camera_sub is None:
+            self._camera_sub = self.create_subscription(Image, robot.camera, self._on_image,
+                                                        qos_profile_sensor_data)
+        elif not self._pages and self._camera_sub is not None:
+            self._drop_camera()
+
+    def _drop_camera(self) -> None:
+        if self._camera_sub is not None:
+            self.destroy_subscription(self._camera_sub)
+            self._camera_sub = None
+
+    def _hello(self) -> Dict[str, Any]:
+        with self._lock:
+            drive = self.drive
+            return {'op': 'hello', 'robots': [r.describe() for r in self.robots],
+                    'namespace': drive.robot.namespace if drive else '',
+                    'speed': drive.speed_fraction if drive else self._speed0,
+                    'report_turns': drive.report_turns if drive else False,
+                    'deadman_timeout': self._deadman_timeout, 'error': self.last_error}
+
+    def _telemetry(self) -> None:
+        self._camera_wanted()
+        if not self._pages:
+            return
+        with self._lock:
+            drive = self.drive
+            state = {'op': 'state', 'odom': self._odom, 'path': list(self._path),
+                     'motion': drive.motion if drive else 'stop',
+                     'command': list(drive.twist()) if drive and drive.motion != 'stop'
+                     else [0.0, 0.0, 0.0],
+                     'coordinator': self._coordinator,
+                     'materials': sorted(self._materials.values(), key=lambda m: m['id'])}
+            jpeg, self._jpeg = self._jpeg, None
+        self._broadcast(state)
+        if jpeg is not None:
+            self._broadcast(jpeg)
+
+    # --- the web server (its own thread and asyncio loop) -----------------------------------
+    def _serve(self) -> None:
+        asyncio.set_event_loop(self._loop)
+        try:
+            self._loop.run_until_complete(self._start())
+        except OSError as exc:
+            self._server_error = exc
+            return
+        self._server_ready.set()
+        self._loop.run_forever()
+
+    async def _start(self) -> None:
+        self._server = await serve(self._page, self._host, self._port,
+                                   process_request=self._http, max_size=MAX_FRAME,
+                                   ping_interval=1.0, ping_timeout=2.0)
+        self._port = self._server.sockets[0].getsockname()[1] if self._port == 0 else self._port
+
+    def _http(self, connection: ServerConnection, request: Request) -> Optional[Response]:
+        path = request.path.split('?', 1)[0]
+        if path == '/ws':
+            return None                         # the page's WebSocket
+        if path not in STATIC:
+            return connection.respond(http.HTTPStatus.NOT_FOUND, 'not found\n')
+        name, kind = STATIC[path]
+        body = (WEB / name).read_bytes()
+        return Response(200, 'OK', Headers([('Content-Type', kind),
+                                            ('Content-Length', str(len(body))),
+                                            ('Cache-Control', 'no-store')]), body)
+
+    async def _page(self, connection: ServerConnection) -> None:
+        page = next(self._page_ids)
+        self._pages[page] = connection
+        self.get_logger().info(f'page {page} connected from {connection.remote_address[0]}')
+        try:
+            await connection.send(json.dumps(self._hello()))
+            async for text in connection:
+                refused = self.command(page, text)
+                if refused is not None:
+                    await connection.send(json.dumps({'op': 'refused', 'text': refused}))
+        except ConnectionClosed:
+            pass
+        finally:
+            del self._pages[page]
+            self.page_gone(page)
+            self.get_logger().info(f'page {page} left')
+
+    def _broadcast(self, message: Any) -> None:
+        data = message if isinstance(message, bytes) else json.dumps(message)
+        pages = list(self._pages.values())
+        if pages and not self._loop.is_closed():
+            self._loop.call_soon_threadsafe(_send_all, pages, data)
+
+    def finish(self) -> str:
+        with self._lock:
+            if self.drive is not None:
+                self.drive.release(None, 'the panel stopped')
+                twist = self.drive.tick(time.monotonic())
+            else:
+                twist = None
+        if self.context.ok():
+            self._publish(twist)
+        if not self._loop.is_closed():
+            self._loop.call_soon_threadsafe(self._loop.stop)
+            self._thread.join(2.0)
+        return f'served {self.url}'
+
+
+MAX_FRAME = 64 * 1024           # what a page may send in one message
+
+
+def _send_all(pages: List[ServerConnection], data: Any) -> None:
+    for connection in pages:
+        # A page that cannot keep up misses frames rather than holding the others up.
+        if connection.transport is not None and \
+                connection.transport.get_write_buffer_size() > 4 * 1024 * 1024:
+            continue
+        asyncio.ensure_future(_send(connection, data))
+
+
+async def _send(connection: ServerConnection, data: Any) -> None:
+    try:
+        await connection.send(data)
+    except ConnectionClosed:
+        pass
+
+
+def _finish(node: ControlPanel) -> None:
+    print(f'[control_panel] {node.finish()}', flush=True)
+
+
+def main(args=None) -> int:
+    return run_node(ControlPanel, 'control_panel', (ControlPanelError,), on_exit=_finish,
+                    args=args)
+
+
+if __name__ == '__main__':
+    sys.exit(main())
+

@@ -1,0 +1,200 @@
+"""The control panel's logic without ROS: the robots a page can drive, what a page may send,
+and the dead-man rule.
+
+The panel is the mini robot report's interface: buttons forward, backward, left, right and
+stop, and a speed slider that sets the fraction of ``max_speed`` (and of ``max_turn`` for turns,
+as the teleop node's speed level does). The report's own turn buttons run the wheels at
+±0.5·max_speed/r, a turn rate of max_speed/wheel_separation at the slider's middle
+(``report_turns``). A holonomic base (the youBot's Mecanum drive) adds strafing.
+
+Dead man: a page drives only while it holds a button, and says so at least every
+``heartbeat`` seconds. A release, a stop, a silent page (``deadman_timeout``) or a page that goes
+away stops the robot with one zero twist; past that the simulator's ``cmd_vel_timeout`` stops
+it even if the panel itself dies.
+"""
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import dataclass
+from typing import Any, Dict, List, Optional, Tuple
+
+from teleop.teleop_core import HOLONOMIC_MOTIONS, MOTIONS, TeleopState
+from world_description.world_config import DiffDriveConfig, MecanumConfig, WorldConfig
+
+MAX_MESSAGE_BYTES = 4096
+
+
+class PanelInputError(ValueError):
+    """A message from a page that is not one the panel takes."""
+
+
+@dataclass(frozen=True)
+class PanelRobot:
+    """A base the panel can drive: its namespace and the limits its buttons use."""
+
+    name: str
+    namespace: str
+    holonomic: bool
+    max_speed: float
+    max_turn: float
+    wheel_separation: Optional[float] = None      # diff drive: the report's turn buttons
+    camera: str = ''                              # image topic shown beside it ('' none)
+
+    @property
+    def cmd_vel(self) -> str:
+        return f'{self.namespace}/cmd_vel'
+
+    @property
+    def odom(self) -> str:
+        return f'{self.namespace}/odom'
+
+    def describe(self) -> Dict[str, Any]:
+        return {'name': self.name, 'namespace': self.namespace, 'holonomic': self.holonomic,
+                'max_speed': self.max_speed, 'max_turn': self.max_turn,
+                'report_turns': self.wheel_separation is not None, 'camera': self.camera}
+
+
+def _ns(namespace: str) -> str:
+    return '/' + namespace.strip('/') if namespace.strip('/') else ''
+
+
+def robots_of_world(world: WorldConfig, max_speed: float, max_turn: float) -> List[PanelRobot]:
+    """Every driven base of a world, with the simulator's limits where its entry sets none,
+    and the camera it carries (else the world's first fixed camera)."""
+    fixed = [c for c in world.cameras if c.robot is None]
+    robots = []
+    for robot in world.robots:
+        if robot.drive is None:
+            continue
+        ns = _ns(robot.namespace)
+        own = [c for c in world.cameras if c.robot == robot.name]
+        camera = (f'{ns}/{own[0].name}/image_raw' if own else
+                  f'/{fixed[0].name}/image_raw' if fixed else '')
+        separation = (robot.drive.wheel_separation if isinstance(robot.drive, DiffDriveConfig)
+                      else None)
+        robots.append(PanelRobot(
+            robot.name, ns, isinstance(robot.drive, MecanumConfig),
+            robot.limits.max_speed or max_speed, robot.limits.max_turn or max_turn,
+            separation, camera))
+    return robots
+
+
+@dataclass(frozen=True)
+class PanelCommand:
+    op: str                         # hold, release, stop, speed, select, report_turns
+    motion: str = ''
+    fraction: float = 0.0
+    namespace: str = ''
+    on: bool = False
+
+
+_OPS = ('hold', 'release', 'stop', 'speed', 'select', 'report_turns')
+
+
+def parse_command(text: Any) -> PanelCommand:
+    """A page's message (JSON text) as a command; raises PanelInputError with the reason."""
+    if not isinstance(text, str):
+        raise PanelInputError('messages are JSON text')
+    if len(text) > MAX_MESSAGE_BYTES:
+        raise PanelInputError(f'message of {len(text)} characters (at most {MAX_MESSAGE_BYTES})')
+    try:
+        data = json.loads(text)
+    except ValueError as exc:
+        raise PanelInputError(f'not JSON: {exc}') from None
+    if not isinstance(data, dict) or data.get('op') not in _OPS:
+        raise PanelInputError(f'expected {{"op": one of {list(_OPS)}, ...}}')
+    op = data['op']
+    if op == 'hold':
+        motion = data.get('motion')
+        if motion not in MOTIONS or motion == 'stop':
+            raise PanelInputError(f'unknown motion {motion!r}')
+        return PanelCommand(op, motion=motion)
+    if op == 'speed':
+        fraction = data.get('fraction')
+        if (isinstance(fraction, bool) or not isinstance(fraction, (int, float))
+                or not math.isfinite(fraction) or not 0.0 <= fraction <= 1.0):
+            raise PanelInputError(f'speed fraction must be a number within 0..1, got {fraction!r}')
+        return PanelCommand(op, fraction=float(fraction))
+    if op == 'select':
+        namespace = data.get('namespace')
+        if not isinstance(namespace, str):
+            raise PanelInputError('select needs a namespace')
+        return PanelCommand(op, namespace=namespace)
+    if op == 'report_turns':
+        return PanelCommand(op, on=bool(data.get('on')))
+    return PanelCommand(op)
+
+
+class DeadMan:
+    """The command a panel publishes: a held motion while the page keeps saying so."""
+
+    def __init__(self, robot: PanelRobot, deadman_timeout: float,
+                 speed_fraction: float = 0.5, report_turns: bool = False) -> None:
+        if not (math.isfinite(deadman_timeout) and deadman_timeout > 0.0):
+            raise PanelInputError(f'deadman_timeout must be > 0, got {deadman_timeout}')
+        self.timeout = deadman_timeout
+        self.robot = robot
+        self.state = TeleopState(robot.max_speed, robot.max_turn, speed_fraction,
+                                 holonomic=robot.holonomic)
+        self.report_turns = report_turns and robot.wheel_separation is not None
+        self.holder: Optional[int] = None          # the page that holds a button
+        self._deadline = -math.inf
+        self._stop_due = False                     # a zero twist owed to the robot
+        self.stops: List[str] = []                 # why it stopped, latest last
+
+    @property
+    def motion(self) -> str:
+        return self.state.motion
+
+    @property
+    def speed_fraction(self) -> float:
+        return self.state.speed_fraction
+
+    def hold(self, motion: str, page: int, now: float) -> None:
+        if motion in HOLONOMIC_MOTIONS and not self.robot.holonomic:
+            raise PanelInputError(f'{motion} needs a holonomic base; '
+                                  f'{self.robot.name} has a differential drive')
+        self.state.motion, self.holder = motion, page
+        self._deadline = now + self.timeout
+
+    def release(self, page: Optional[int], why: str) -> None:
+        """Stop (from any page, or the holder going away: ``page`` None stops regardless)."""
+        if page is not None and self.holder not in (None, page) and why == 'released':
+            return                      # (another page's release does not end this hold)
+        if self.state.motion != 'stop' or self.holder is not None:
+            self._stop_due = True
+            self.stops.append(why)
+        self.state.motion, self.holder = 'stop', None
+        self._deadline = -math.inf
+
+    def gone(self, page: int) -> None:
+        if self.holder == page:
+            self.release(None, 'the page went away')
+
+    def set_speed(self, fraction: float) -> None:
+        self.state.speed_fraction = round(min(1.0, max(0.0, fraction)), 6)
+
+    def set_report_turns(self, on: bool) -> None:
+        self.report_turns = on and self.robot.wheel_separation is not None
+
+    def twist(self) -> Tuple[float, float, float]:
+        vx, vy, wz = self.state.twist()
+        if self.report_turns and self.state.motion in ('left', 'right'):
+            # The report: each wheel at ±f·max_speed/r, so wz = 2·f·max_speed/separation.
+            separation = self.robot.wheel_separation or 1.0
+            sign = 1.0 if self.state.motion == 'left' else -1.0
+            wz = sign * 2.0 * self.state.speed_fraction * self.robot.max_speed / separation
+        return vx, vy, wz
+
+    def tick(self, now: float) -> Optional[Tuple[float, float, float]]:
+        """The twist to publish now, or None for nothing: a held motion while the page keeps
+        saying so, one zero twist after it stops (for any reason)."""
+        if self.state.motion != 'stop' and now > self._deadline:
+            self.release(None, f'no word from the page for {self.timeout:g} s')
+        if self.state.motion != 'stop':
+            return self.twist()
+        if self._stop_due:
+            self._stop_due = False
+            return (0.0, 0.0, 0.0)
+        return None
