@@ -203,7 +203,7 @@ class ControlPanel(Node):
             speed = old.speed_fraction if old else self._speed0
             report = old.report_turns if old else self._report_turns0
             if old is not None and self._pub is not None:
-                old.release(None, 'another robot was chosen')
+                old.stop('another robot was chosen')
                 self._publish(old.tick(time.monotonic()))
             self.drive = DeadMan(robot, self._deadman_timeout, speed, report)
             self._odom, self._path, self._jpeg = None, [], None
@@ -238,9 +238,9 @@ class ControlPanel(Node):
                 if cmd.op == 'hold':
                     drive.hold(cmd.motion, page, now)
                 elif cmd.op == 'release':
-                    drive.release(page, 'released')
+                    drive.release(page)
                 elif cmd.op == 'stop':
-                    drive.release(None, 'stop pressed')
+                    drive.stop('stop pressed')
                 elif cmd.op == 'speed':
                     drive.set_speed(cmd.fraction)
                 elif cmd.op == 'report_turns':
@@ -437,7 +437,7 @@ class ControlPanel(Node):
     def finish(self) -> str:
         with self._lock:
             if self.drive is not None:
-                self.drive.release(None, 'the panel stopped')
+                self.drive.stop('the panel stopped')
                 twist = self.drive.tick(time.monotonic())
             else:
                 twist = None

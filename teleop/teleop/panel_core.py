@@ -158,10 +158,14 @@ class DeadMan:
         self.state.motion, self.holder = motion, page
         self._deadline = now + self.timeout
 
-    def release(self, page: Optional[int], why: str) -> None:
-        """Stop (from any page, or the holder going away: ``page`` None stops regardless)."""
-        if page is not None and self.holder not in (None, page) and why == 'released':
-            return                      # (another page's release does not end this hold)
+    def release(self, page: int) -> None:
+        """A page let go of its button: the holder's release stops the robot, another
+        page's does not end the hold."""
+        if self.holder in (None, page):
+            self.stop('released')
+
+    def stop(self, why: str) -> None:
+        """Stop, whoever holds (the stop button, a silent page, another robot chosen)."""
         if self.state.motion != 'stop' or self.holder is not None:
             self._stop_due = True
             self.stops.append(why)
@@ -170,7 +174,7 @@ class DeadMan:
 
     def gone(self, page: int) -> None:
         if self.holder == page:
-            self.release(None, 'the page went away')
+            self.stop('the page went away')
 
     def set_speed(self, fraction: float) -> None:
         self.state.speed_fraction = round(min(1.0, max(0.0, fraction)), 6)
@@ -191,7 +195,7 @@ class DeadMan:
         """The twist to publish now, or None for nothing: a held motion while the page keeps
         saying so, one zero twist after it stops (for any reason)."""
         if self.state.motion != 'stop' and now > self._deadline:
-            self.release(None, f'no word from the page for {self.timeout:g} s')
+            self.stop(f'no word from the page for {self.timeout:g} s')
         if self.state.motion != 'stop':
             return self.twist()
         if self._stop_due:
