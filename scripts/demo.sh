@@ -18,11 +18,19 @@ if [ "${DEMO_RECORD:-1}" != 0 ]; then RECORD=(--record); fi
 
 echo "[demo] the pipeline run (scenario seed $SEED, belt $BELT m/s, DDS domain $DOMAIN);"
 echo "[demo] sim_node + vision_node + 2 kinematics_nodes + coordinator_node, lock-step"
+# A live window onto the run (scripts/live_view.sh): the Foxglove bridge on the trial's domain.
+# shellcheck disable=SC1091
+source "$ROOT/scripts/live_view.sh"
+mkdir -p "$RUN_DIR"
+trap stop_live_view EXIT
+ROS_DOMAIN_ID="$DOMAIN" start_live_view "$RUN_DIR/live_view.log" \
+  "live_view/layouts/pipeline_cell.json"
 set +e
 run_trials --seeds "$SEED" --belt-speed "$BELT" "$BELT" --domain-base "$DOMAIN" \
   "${RECORD[@]}" --out "$RUN_DIR"
 code=$?
 set -e
+stop_live_view
 echo
 sed -n '/^| /p' "$RUN_DIR/report.md"
 echo

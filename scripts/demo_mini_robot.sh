@@ -22,7 +22,10 @@ echo "[demo] ROS_DOMAIN_ID=$ROS_DOMAIN_ID, real-time factor $RTF, logs in ${RUN_
 echo "[demo] teleop script: $SCRIPT"
 
 pids=()
+# shellcheck disable=SC1091
+source "$ROOT/scripts/live_view.sh"
 cleanup() {
+  stop_live_view
   for pid in "${pids[@]}"; do kill -INT "$pid" 2>/dev/null || true; done
   for pid in "${pids[@]}"; do wait "$pid" 2>/dev/null || true; done
 }
@@ -31,6 +34,7 @@ trap cleanup EXIT
 sim_node --ros-args -p real_time_factor:="$RTF" -p rtf_log_period:=10.0 \
   > "$RUN_DIR/sim_node.log" 2>&1 &
 pids+=($!)
+start_live_view "$RUN_DIR/live_view.log"
 # Every run is recorded (DEMO_RECORD=0 turns it off): all topics, MCAP, into the run directory.
 if [ "${DEMO_RECORD:-1}" != 0 ]; then
   recorder --ros-args -p output_dir:="$RUN_DIR" -p bag_name:=bag > "$RUN_DIR/recorder.log" 2>&1 &

@@ -44,6 +44,21 @@ if [ ${#missing[@]} -gt 0 ]; then
   fi
 fi
 
+# --- 1a. a browser for the control panel's test -------------------------------------------
+# The browser test (tests/graph/test_control_panel_graph.py) drives Debian's chromium through
+# its chromium-driver with Selenium; nothing downloads a browser. Installed where we can.
+if ! command -v chromium >/dev/null || ! command -v chromedriver >/dev/null; then
+  if command -v apt-get >/dev/null && [ "$(id -u)" = 0 ]; then
+    log "installing chromium and chromium-driver (the control panel's browser test)"
+    { apt-get update -qq && DEBIAN_FRONTEND=noninteractive \
+        apt-get install -y -qq chromium chromium-driver >/dev/null; } \
+      || log "warning: apt-get could not install chromium chromium-driver: the browser test will fail"
+  else
+    log "note: no chromium/chromedriver; the browser test is skipped (install them with:" \
+        "sudo apt-get install chromium chromium-driver)"
+  fi
+fi
+
 # --- 1b. a ROS 2 sourced in this shell ---------------------------------------------------------
 # The project installs ROS 2 Jazzy as wheels into .venv. A system ROS 2 (/opt/ros/<distro>)
 # sourced in the same shell would put its own Python packages and libraries beside those:

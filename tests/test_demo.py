@@ -6,16 +6,24 @@ import subprocess
 from helpers import ROOT
 
 
+def _assert_live_view(text, run, topic):
+    """The demo started the Foxglove bridge on its graph, said where, and ended it."""
+    assert re.search(r'\[demo\] live view: in Foxglove, .* ws://127\.0\.0\.1:\d+', text), text
+    log = (run / 'live_view.log').read_text()
+    assert f'advertising {topic}' in log and '[live_view] served' in log, log[-2000:]
+
+
 def test_demo_drives_the_square_records_and_passes(tmp_path):
     # The demo's own pace (real time): the scripted teleop is open loop, so its segment
     # switches lag by its /clock latency times the real-time factor.
-    env = {**os.environ, 'DEMO_RUNS_DIR': str(tmp_path)}
+    env = {**os.environ, 'DEMO_RUNS_DIR': str(tmp_path), 'DEMO_LIVE_VIEW_PORT': '0'}
     env.pop('ROS_DOMAIN_ID', None)  # the demo picks its own
     out = subprocess.run(['bash', str(ROOT / 'scripts' / 'demo_mini_robot.sh')], env=env,
                          capture_output=True, text=True, timeout=600)
     text = out.stdout + out.stderr
     assert out.returncode == 0, text[-1500:]
     assert '[demo] PASS' in text
+    _assert_live_view(text, next(tmp_path.glob('demo-*')), '/mini_robot/odom')
     error = re.search(r'error: position ([0-9.]+) mm', text)
     assert error and float(error.group(1)) < 50.0
     # The run was recorded and analysed.
@@ -26,13 +34,14 @@ def test_demo_drives_the_square_records_and_passes(tmp_path):
 
 
 def test_the_pipeline_demo_runs_the_scenario_prints_its_table_and_records(tmp_path):
-    env = {**os.environ, 'DEMO_RUNS_DIR': str(tmp_path)}
+    env = {**os.environ, 'DEMO_RUNS_DIR': str(tmp_path), 'DEMO_LIVE_VIEW_PORT': '0'}
     env.pop('ROS_DOMAIN_ID', None)
     out = subprocess.run(['bash', str(ROOT / 'scripts' / 'demo.sh')], env=env,
                          capture_output=True, text=True, timeout=900)
     text = out.stdout + out.stderr
     assert out.returncode == 0, text[-2500:]
     assert '[demo] PASS' in text
+    _assert_live_view(text, next(tmp_path.glob('pipeline-*')), '/belt_camera/image_raw')
     # The results table beside the paper's rows, with every material delivered.
     row = re.search(r'\| \*\*these trials\*\* \| 1 \| ([0-9.]+) .*\| ([0-9.]+) \| ([0-9.]+) \| '
                     r'([0-9.]+) \|', text)
