@@ -1,6 +1,6 @@
 # The two commands: `make demo` runs the main job, `make test` runs the tests.
 # Both create .venv and build ros_ws first when needed (scripts/setup.sh is idempotent).
-.PHONY: setup demo demo-mini trials test bench clean
+.PHONY: setup demo demo-mini panel trials test bench clean
 
 setup:
 	@bash scripts/setup.sh
@@ -11,6 +11,11 @@ demo: setup
 # The mini robot drives a square from the scripted teleop (the first source document).
 demo-mini: setup
 	@bash scripts/demo_mini_robot.sh
+
+# Drive a robot from the browser (the report's control panel) and watch it in Foxglove, until
+# Ctrl-C: make panel, or make panel WORLD=youbot.
+panel: setup
+	@bash scripts/panel.sh
 
 # The paper's Table 2 over many seeded trials: make trials TRIALS=100 PARALLEL=2; on a Ray
 # cluster: make trials TRIALS=110 RAY=auto (docs/pipeline.md: "A campaign on a Ray cluster").

@@ -20,9 +20,9 @@ start_live_view() {
     sleep 0.1
   done
   if [ -n "$url" ]; then
-    echo "[demo] live view: in Foxglove, Open connection > Foxglove WebSocket > $url${layout:+ (layout: $layout)}"
+    echo "[${LIVE_VIEW_TAG:-demo}] live view: in Foxglove, Open connection > Foxglove WebSocket > $url${layout:+ (layout: $layout)}"
   else
-    echo "[demo] live view not started: $(grep -m1 -E 'FATAL|ERROR|cannot' "$log" || echo "see $log")"
+    echo "[${LIVE_VIEW_TAG:-demo}] live view not started: $(grep -m1 -E 'FATAL|ERROR|cannot' "$log" || echo "see $log")"
     LIVE_VIEW_PID=""
   fi
 }

@@ -19,6 +19,8 @@ EXECUTABLES = [
     ('arm_kinematics', 'kinematics_node', ['-r', '__ns:=/youbot'], 'IK on /youbot/solve_ik'),
     ('perception', 'vision_node', [], 'looking for'),
     ('coordinator', 'coordinator_node', ['-p', 'service_timeout:=60.0'], 'real-time at'),
+    ('live_view', 'live_view', ['-p', 'port:=0'], 'serving the Foxglove WebSocket protocol'),
+    ('teleop', 'control_panel', ['-p', 'port:=0'], 'serving the control panel'),
 ]
 COMMAND_LINE_TOOLS = [('recording', 'bag_analysis'), ('recording', 'bag_repair'),
                       ('coordinator', 'run_trials')]
@@ -61,11 +63,13 @@ def test_command_line_tool_resolves_and_runs(package, executable):
 def test_every_package_is_in_the_ament_index():
     for package in ('sim_bridge', 'controllers', 'perception', 'robot_description',
                     'sim_bringup', 'sim_interfaces', 'recording', 'arm_kinematics',
-                    'coordinator', 'ros_common', 'world_description', 'teleop'):
+                    'coordinator', 'ros_common', 'world_description', 'teleop', 'live_view'):
         share = Path(get_package_share_directory(package))
         assert (share / 'package.xml').is_file()
     assert (Path(get_package_share_directory('robot_description')) / 'urdf' /
             'mini_robot.urdf').is_file()
+    assert (Path(get_package_share_directory('live_view')) / 'layouts' /
+            'pipeline_cell.json').is_file()
     for world in ('mini_robot', 'youbot', 'pipeline_cell'):
         assert (Path(get_package_share_directory('world_description')) / 'worlds' /
                 f'{world}.yaml').is_file()

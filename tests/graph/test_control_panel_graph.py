@@ -99,6 +99,7 @@ def test_the_reports_panel_drives_the_robot_in_a_browser(start_node, probe, brow
     assert not find(By.ID, 'strafe_left').is_displayed()
     assert find(By.ID, 'report_turns_option').is_displayed()
     assert text('speed_value') == '50 %'
+    assert not find(By.ID, 'cell').is_displayed()           # (no coordinator runs)
 
     # 1. Hold forward for 2 s of simulated time, at the slider's 50 %: 0.1 m/s.
     forward = find(By.ID, 'forward')

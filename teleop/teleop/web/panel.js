@@ -61,6 +61,8 @@ function showRobot(namespace) {
   $('strafe_keys').hidden = !holonomic;
   $('report_turns_option').hidden = !(current && current.report_turns);
   $('camera_topic').textContent = current && current.camera ? current.camera : 'no camera';
+  $('camera').style.visibility = current && current.camera ? 'visible' : 'hidden';
+  $('camera').removeAttribute('src');
 }
 
 function onHello(msg) {
