@@ -160,3 +160,58 @@ def test_the_reports_panel_drives_the_robot_in_a_browser(start_node, probe, brow
     wait_for(lambda: 'page 1 left' in panel.output(), 10.0, what='the panel to see it go')
     assert panel.alive()
     assert (tmp_path / 'control_panel.png').stat().st_size > 10000
+
+
+def test_the_panel_shows_a_holonomic_base_and_the_pipelines_state(start_node, probe, browser):
+    """The youBot: strafe buttons and no report turn option; what the coordinator publishes
+    (its latched state and its events, here from the test) appears on the page."""
+    from rclpy.qos import DurabilityPolicy, QoSProfile
+    from selenium.webdriver.common.action_chains import ActionChains
+    from selenium.webdriver.common.by import By
+    from sim_interfaces.msg import PipelineEvent, PipelineState
+
+    start_node('sim_node', '-p', 'world:=package://world_description/worlds/youbot.yaml')
+    panel = start_node('control_panel', '-p', 'port:=0')
+    wait_for(lambda: re.search(r'on (http://127\.0\.0\.1:\d+/)', panel.output())
+             or not panel.alive(), 30.0, what='the panel to serve')
+    url = re.search(r'on (http://127\.0\.0\.1:\d+/)', panel.output()).group(1)
+    odom = probe.collect(Odometry, '/youbot/odom', qos=1000)
+    latched = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL)
+    state_pub = probe.node.create_publisher(PipelineState, '/coordinator_node/state', latched)
+    event_pub = probe.node.create_publisher(PipelineEvent, '/coordinator_node/events', 100)
+    browser.get(url)
+    find = browser.find_element
+    wait_for(lambda: find(By.ID, 'status').text == 'connected'
+             and 'holonomic' in find(By.ID, 'robot').text, 30.0, what='the youBot on the page')
+    assert find(By.ID, 'strafe_left').is_displayed() and find(By.ID, 'strafe_right').is_displayed()
+    assert not find(By.ID, 'report_turns_option').is_displayed()
+
+    # Strafe left: the base moves along +y in its odometry, not along x.
+    strafe = find(By.ID, 'strafe_left')
+    ActionChains(browser).click_and_hold(strafe).perform()
+    wait_for(lambda: odom and odom[-1][1].pose.pose.position.y > 0.05, 20.0,
+             what='the youBot to strafe 5 cm')
+    ActionChains(browser).release(strafe).perform()
+    wait_for(lambda: abs(odom[-1][1].twist.twist.linear.y) < 0.005, 20.0,
+             what='the youBot to stop')
+    pose = odom[-1][1].pose.pose.position
+    assert pose.y > 0.05 and abs(pose.x) < 0.02 * pose.y + 0.005
+
+    state = PipelineState(loader_state='PICK', transport_state='WAIT', status='running',
+                          total=8, identified=3, picked=2, delivered=1, elapsed=12.5)
+    state_pub.publish(state)
+    for kind, material, color in (('seen', 4, 'purple'), ('picked', 2, 'orange'),
+                                  ('delivered', 2, 'orange')):
+        event = PipelineEvent(kind=kind, robot='zu12', material_id=material, color=color,
+                              detail=f'{kind} detail')
+        event.header.stamp.sec = 12
+        event_pub.publish(event)
+    wait_for(lambda: find(By.ID, 'cell').is_displayed(), 20.0, what='the pipeline section')
+    wait_for(lambda: find(By.ID, 'cell_elapsed').text == '12.5'
+             and len(find(By.ID, 'materials').find_elements(By.TAG_NAME, 'tr')) == 3, 20.0,
+             what="the coordinator's state and two materials")
+    assert find(By.ID, 'cell_loader').text == 'PICK'
+    assert find(By.ID, 'cell_transport').text == 'WAIT'
+    assert '3 identified, 2 picked, 1 delivered' in find(By.ID, 'cell_counts').text
+    rows = [r.text for r in find(By.ID, 'materials').find_elements(By.TAG_NAME, 'tr')[1:]]
+    assert rows[0].startswith('2 orange delivered zu12') and rows[1].startswith('4 purple seen')
