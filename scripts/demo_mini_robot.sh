@@ -21,25 +21,19 @@ mkdir -p "$RUN_DIR"
 echo "[demo] ROS_DOMAIN_ID=$ROS_DOMAIN_ID, real-time factor $RTF, logs in ${RUN_DIR#"$ROOT"/}"
 echo "[demo] teleop script: $SCRIPT"
 
-pids=()
 # shellcheck disable=SC1091
 source "$ROOT/scripts/live_view.sh"
-cleanup() {
-  stop_live_view
-  for pid in "${pids[@]}"; do kill -INT "$pid" 2>/dev/null || true; done
-  for pid in "${pids[@]}"; do wait "$pid" 2>/dev/null || true; done
-}
-trap cleanup EXIT
+trap stop_demo EXIT
 
 sim_node --ros-args -p real_time_factor:="$RTF" -p rtf_log_period:=10.0 \
   > "$RUN_DIR/sim_node.log" 2>&1 &
-pids+=($!)
+DEMO_PIDS+=($!)
 start_live_view "$RUN_DIR/live_view.log"
 # Every run is recorded (DEMO_RECORD=0 turns it off): all topics, MCAP, into the run directory.
 if [ "${DEMO_RECORD:-1}" != 0 ]; then
   recorder --ros-args -p output_dir:="$RUN_DIR" -p bag_name:=bag > "$RUN_DIR/recorder.log" 2>&1 &
   recorder_pid=$!
-  pids+=("$recorder_pid")
+  DEMO_PIDS+=("$recorder_pid")
   for _ in $(seq 100); do  # wait until it records the simulator's topics
     grep -q "recording /mini_robot/odom" "$RUN_DIR/recorder.log" && break
     sleep 0.1
@@ -49,7 +43,7 @@ drive_check --ros-args -p use_sim_time:=true -p wall_timeout:=600.0 -p script:="
   -r cmd_vel:=/mini_robot/cmd_vel -r odom:=/mini_robot/odom -r cmd_vel_out:=/mini_robot/cmd_vel_out \
   2>&1 | tee "$RUN_DIR/drive_check.log" &
 check_pid=$!
-pids+=("$check_pid")
+DEMO_PIDS+=("$check_pid")
 teleop --ros-args -p use_sim_time:=true -p script:="$SCRIPT" -p wait_for_subscriber:=30.0 \
   -p publish_rate:=50.0 \
   -r __ns:=/mini_robot 2>&1 | tee "$RUN_DIR/teleop.log"

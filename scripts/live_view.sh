@@ -1,13 +1,15 @@
 #!/usr/bin/env bash
-# Sourced by the demos: start_live_view LOG_FILE [LAYOUT] starts the Foxglove live bridge
-# (live_view) on this shell's DDS domain and prints the URL to open in Foxglove; the demo
-# ends it with stop_live_view. DEMO_LIVE_VIEW=0 leaves it out; DEMO_LIVE_VIEW_PORT picks the
-# port (default 8765; 0: any free one). A bridge that cannot start (the port taken) is said
-# in one line and the demo goes on without it.
+# Sourced by the demos. start_live_view LOG_FILE [LAYOUT] starts the Foxglove live bridge
+# (live_view) on this shell's DDS domain and prints the URL to open in Foxglove; stop_live_view
+# ends it, and stop_demo ends it and the processes a demo put in DEMO_PIDS (SIGINT, then a
+# wait). DEMO_LIVE_VIEW=0 leaves the bridge out; DEMO_LIVE_VIEW_PORT picks its port (default
+# 8765; 0: any free one); LIVE_VIEW_TAG is the lines' prefix. A bridge that cannot start (the
+# port taken) is said in one line and the demo goes on without it.
 LIVE_VIEW_PID=""
+DEMO_PIDS=()
 
 start_live_view() {
-  local log="$1" layout="${2:-}"
+  local log="$1" layout="${2:-}" tag="${LIVE_VIEW_TAG:-demo}"
   [ "${DEMO_LIVE_VIEW:-1}" != 0 ] || return 0
   live_view --ros-args -p port:="${DEMO_LIVE_VIEW_PORT:-8765}" -p use_sim_time:=true \
     > "$log" 2>&1 &
@@ -20,9 +22,9 @@ start_live_view() {
     sleep 0.1
   done
   if [ -n "$url" ]; then
-    echo "[${LIVE_VIEW_TAG:-demo}] live view: in Foxglove, Open connection > Foxglove WebSocket > $url${layout:+ (layout: $layout)}"
+    echo "[$tag] live view: in Foxglove, Open connection > Foxglove WebSocket > $url${layout:+ (layout: $layout)}"
   else
-    echo "[${LIVE_VIEW_TAG:-demo}] live view not started: $(grep -m1 -E 'FATAL|ERROR|cannot' "$log" || echo "see $log")"
+    echo "[$tag] live view not started: $(grep -m1 -E 'FATAL|ERROR|cannot' "$log" || echo "see $log")"
     LIVE_VIEW_PID=""
   fi
 }
@@ -33,4 +35,11 @@ stop_live_view() {
     wait "$LIVE_VIEW_PID" 2>/dev/null || true
     LIVE_VIEW_PID=""
   fi
+}
+
+stop_demo() {
+  stop_live_view
+  local pid
+  for pid in "${DEMO_PIDS[@]}"; do kill -INT "$pid" 2>/dev/null || true; done
+  for pid in "${DEMO_PIDS[@]}"; do wait "$pid" 2>/dev/null || true; done
 }

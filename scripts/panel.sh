@@ -13,22 +13,16 @@ export ROS_DOMAIN_ID="${ROS_DOMAIN_ID:-$((RANDOM % 40 + 160))}"   # (demos: 160-
 WORLD="${WORLD:-mini_robot}"
 RUN_DIR="${DEMO_RUNS_DIR:-$ROOT/runs}/panel-$(date +%Y%m%d-%H%M%S)-$$"
 mkdir -p "$RUN_DIR"
-pids=()
 # shellcheck disable=SC1091
 source "$ROOT/scripts/live_view.sh"
-cleanup() {
-  stop_live_view
-  for pid in "${pids[@]}"; do kill -INT "$pid" 2>/dev/null || true; done
-  for pid in "${pids[@]}"; do wait "$pid" 2>/dev/null || true; done
-}
-trap cleanup EXIT
+trap stop_demo EXIT
 
 echo "[panel] world $WORLD, DDS domain $ROS_DOMAIN_ID, logs in ${RUN_DIR#"$ROOT"/}"
 sim_node --ros-args -p world:="package://world_description/worlds/$WORLD.yaml" \
   > "$RUN_DIR/sim_node.log" 2>&1 &
-pids+=($!)
+DEMO_PIDS+=($!)
 control_panel --ros-args -p port:="${PANEL_PORT:-8080}" > "$RUN_DIR/control_panel.log" 2>&1 &
-pids+=($!)
+DEMO_PIDS+=($!)
 LIVE_VIEW_TAG=panel DEMO_LIVE_VIEW_PORT="${LIVE_PORT:-8765}" start_live_view "$RUN_DIR/live_view.log"
 url=""
 for _ in $(seq 100); do
@@ -41,4 +35,4 @@ if [ -z "$url" ]; then
   echo "[panel] the control panel did not start:"; tail -5 "$RUN_DIR/control_panel.log"; exit 1
 fi
 echo "[panel] control panel: open $url in a browser (hold a button or key to drive; Ctrl-C here to stop)"
-wait "${pids[0]}"
+wait "${DEMO_PIDS[0]}"

@@ -27,7 +27,6 @@ from typing import Any, Callable, Deque, Dict, List, Optional, Tuple
 
 import cv2
 import numpy as np
-from geometry_msgs.msg import Twist, TwistStamped
 from nav_msgs.msg import Odometry
 from rcl_interfaces.msg import IntegerRange, ParameterDescriptor, ParameterType
 from rcl_interfaces.srv import GetParameters
@@ -47,6 +46,7 @@ from ros_common.node_main import run_node
 from ros_common.params import float_range
 from ros_common.stamps import to_seconds
 from teleop.panel_core import DeadMan, PanelInputError, PanelRobot, parse_command, robots_of_world
+from teleop.twist_out import TwistOut
 from world_description.resources import resolve_resource
 from world_description.world_config import WorldConfigError, load_world
 
@@ -113,7 +113,7 @@ class ControlPanel(Node):
         self._camera_period = 1.0 / float(get('camera_rate'))
         self.robots: List[PanelRobot] = []
         self.drive: Optional[DeadMan] = None
-        self._pub: Any = None
+        self._out: Optional[TwistOut] = None
         self._odom_sub: Optional[Subscription] = None
         self._camera_sub: Optional[Subscription] = None
         self._odom: Optional[Dict[str, float]] = None
@@ -202,18 +202,17 @@ class ControlPanel(Node):
             old = self.drive
             speed = old.speed_fraction if old else self._speed0
             report = old.report_turns if old else self._report_turns0
-            if old is not None and self._pub is not None:
+            if old is not None and self._out is not None:
                 old.stop('another robot was chosen')
                 self._publish(old.tick(time.monotonic()))
             self.drive = DeadMan(robot, self._deadman_timeout, speed, report)
             self._odom, self._path, self._jpeg = None, [], None
-        if self._pub is not None:
-            self.destroy_publisher(self._pub)
+        if self._out is not None:
+            self._out.destroy()
         if self._odom_sub is not None:
             self.destroy_subscription(self._odom_sub)
         self._drop_camera()
-        self._pub = self.create_publisher(TwistStamped if self._stamped else Twist,
-                                          robot.cmd_vel, 10)
+        self._out = TwistOut(self, robot.cmd_vel, self._stamped)
         self._odom_sub = self.create_subscription(Odometry, robot.odom, self._on_odom,
                                                   QoSProfile(depth=5))
         self.get_logger().info(f'driving {robot.name} on {robot.cmd_vel}')
@@ -283,16 +282,8 @@ class ControlPanel(Node):
         self._publish(twist)
 
     def _publish(self, twist: Optional[Tuple[float, float, float]]) -> None:
-        if twist is None or self._pub is None:
-            return
-        msg = Twist()
-        msg.linear.x, msg.linear.y, msg.angular.z = (float(v) for v in twist)
-        if self._stamped:
-            stamped = TwistStamped(twist=msg)
-            stamped.header.stamp = self.get_clock().now().to_msg()
-            self._pub.publish(stamped)
-        else:
-            self._pub.publish(msg)
+        if twist is not None and self._out is not None:
+            self._out.publish(*twist)
 
     # --- what the page shows ------------------------------------------------------------------
     def _on_odom(self, msg: Odometry) -> None:

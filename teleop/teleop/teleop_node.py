@@ -11,12 +11,10 @@ import tty
 from typing import Optional
 
 import rclpy
-from geometry_msgs.msg import Twist, TwistStamped
 from rcl_interfaces.msg import ParameterDescriptor
 from rclpy.duration import Duration
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
-from rclpy.qos import QoSProfile
 from rclpy.signals import SignalHandlerOptions
 from rclpy.time import Time
 
@@ -30,6 +28,7 @@ from teleop.teleop_core import (
     TeleopState,
     parse_script,
 )
+from teleop.twist_out import TwistOut
 
 
 class TeleopNode(Node):
@@ -64,10 +63,9 @@ class TeleopNode(Node):
         if get('script').strip():
             self.script = parse_script(get('script'), get('max_speed'), get('max_turn'),
                                        get('speed'), self.holonomic)
-        self._stamped = get('stamped')
         self.wait_for_subscriber = get('wait_for_subscriber')
-        self._pub = self.create_publisher(TwistStamped if self._stamped else Twist, 'cmd_vel',
-                                          QoSProfile(depth=10))
+        self._out = TwistOut(self, 'cmd_vel', get('stamped'))
+        self._pub = self._out.publisher
         self._script_start: Optional[Time] = None
         self._script_step: Optional[ScriptStep] = None
         self.finished = False
@@ -98,14 +96,7 @@ class TeleopNode(Node):
         self.publish_twist(vx, wz, vy)
 
     def publish_twist(self, v: float, w: float, vy: float = 0.0) -> None:
-        twist = Twist()
-        twist.linear.x, twist.linear.y, twist.angular.z = float(v), float(vy), float(w)
-        if self._stamped:
-            msg = TwistStamped(twist=twist)
-            msg.header.stamp = self.get_clock().now().to_msg()
-            self._pub.publish(msg)
-        else:
-            self._pub.publish(twist)
+        self._out.publish(v, vy, w)
 
     def wait_for_delivery(self, timeout_sec: float) -> bool:
         """Wait until reliable subscribers acknowledged what was published (before exit)."""
