@@ -22,6 +22,7 @@ import math
 import sys
 import threading
 import time
+import urllib.parse
 from pathlib import Path
 from typing import Any, Callable, Deque, Dict, List, Optional, Tuple
 
@@ -393,6 +394,16 @@ class ControlPanel(Node):
     def _http(self, connection: ServerConnection, request: Request) -> Optional[Response]:
         path = request.path.split('?', 1)[0]
         if path == '/ws':
+            # Only the panel's own page may drive: a browser sends the page's origin, and a
+            # page of another site (open in the same browser) must not reach the robots
+            # through it. (Clients that are not browsers send no Origin.)
+            origin = request.headers.get('Origin')
+            if origin is not None and urllib.parse.urlsplit(origin).netloc != \
+                    request.headers.get('Host'):
+                self.get_logger().warn(f'refused a WebSocket from the page of {origin}',
+                                       throttle_duration_sec=1.0)
+                return connection.respond(http.HTTPStatus.FORBIDDEN,
+                                          'only the panel\'s own page may connect\n')
             return None                         # the page's WebSocket
         if path not in STATIC:
             return connection.respond(http.HTTPStatus.NOT_FOUND, 'not found\n')

@@ -215,3 +215,43 @@ def test_the_panel_shows_a_holonomic_base_and_the_pipelines_state(start_node, pr
     assert '3 identified, 2 picked, 1 delivered' in find(By.ID, 'cell_counts').text
     rows = [r.text for r in find(By.ID, 'materials').find_elements(By.TAG_NAME, 'tr')[1:]]
     assert rows[0].startswith('2 orange delivered zu12') and rows[1].startswith('4 purple seen')
+
+
+def test_only_the_panels_own_page_may_drive(start_node):
+    """A page of another site, open in the same browser, must not reach the robots: its
+    WebSocket carries that site's Origin and is refused. A plain HTTP request for the page, a
+    request for anything else and a message that is not a command get what they should."""
+    import asyncio
+    import json
+    import urllib.request
+
+    import websockets
+    from websockets.exceptions import InvalidStatus
+
+    start_node('sim_node')
+    panel = start_node('control_panel', '-p', 'port:=0')
+    wait_for(lambda: re.search(r'on (http://127\.0\.0\.1:\d+/)', panel.output())
+             or not panel.alive(), 30.0, what='the panel to serve')
+    url = re.search(r'on (http://127\.0\.0\.1:\d+/)', panel.output()).group(1)
+    with urllib.request.urlopen(url) as page:
+        assert page.status == 200 and b'Control panel' in page.read()
+    with pytest.raises(urllib.error.HTTPError, match='404'):
+        urllib.request.urlopen(url + 'etc/passwd')
+    ws_url = url.replace('http', 'ws') + 'ws'
+
+    async def session():
+        with pytest.raises(InvalidStatus, match='403'):
+            async with websockets.connect(ws_url, origin='http://evil.example'):
+                pass
+        async with websockets.connect(ws_url, origin=url.rstrip('/')) as ws:
+            hello = json.loads(await ws.recv())
+            assert hello['op'] == 'hello'
+            await ws.send('{"op": "hold", "motion": "fly"}')
+            while True:
+                reply = json.loads(await ws.recv())
+                if reply['op'] == 'refused':
+                    return reply['text']
+
+    assert 'unknown motion' in asyncio.run(session())
+    assert 'refused a WebSocket from the page of http://evil.example' in panel.output()
+    assert panel.alive()
