@@ -216,9 +216,15 @@ def test_clock_advances_at_the_paced_rate(sim, probe):
 def test_camera_info_matches_the_image(sim, probe):
     images = probe.collect(Image, '/mini_robot/camera/image_raw', qos_profile_sensor_data)
     infos = probe.collect(CameraInfo, '/mini_robot/camera/camera_info', qos_profile_sensor_data)
-    wait_for(lambda: len(images) >= 5 and len(infos) >= 5, 20.0, what='camera frames')
-    img, info = images[-1][1], next(m for _, m in reversed(infos)
-                                    if m.header.stamp == images[-1][1].header.stamp)
+
+    def pairs():
+        # An image and the camera_info of the same stamp. The two topics are delivered
+        # independently (best effort): the info of the latest image may not be in yet, or lost.
+        by_stamp = {stamp_s(m.header.stamp): m for _, m in list(infos)}
+        return [(m, by_stamp[stamp_s(m.header.stamp)]) for _, m in list(images)
+                if stamp_s(m.header.stamp) in by_stamp]
+    wait_for(lambda: len(images) >= 5 and len(pairs()) >= 3, 20.0, what='camera frames')
+    img, info = pairs()[-1]
     assert (img.width, img.height, img.encoding) == (320, 240, 'rgb8')
     assert (info.width, info.height) == (img.width, img.height)
     assert img.step == 3 * img.width and len(img.data) == img.step * img.height
