@@ -69,6 +69,7 @@ from coordinator.results import (
 from ros_common.geometry import yaw_of
 from ros_common.node_main import run_task
 from ros_common.params import float_range
+from ros_common.services import NoAnswer, call_and_wait
 from ros_common.stamps import duration_from_ns, set_stamp, stamp_from_ns, to_ns
 from world_description import PIPELINE_CELL
 from world_description.resources import resolve_resource
@@ -76,6 +77,7 @@ from world_description.world_config import load_world
 
 ARMS = {'zu12': ZU12_JOINTS, 'youbot': YOUBOT_JOINTS}
 CAMERA_TOPIC = '/belt_camera/image_raw'
+RESEND_S = 1.0            # wall seconds before an unanswered idempotent request is sent again
 STARTUP_GRACE_S = 1.0      # simulated seconds in which a lost camera frame is tolerated
 GRIP_SERVICES = {'zu12': '/zu12/suction', 'youbot': '/youbot/gripper/grasp'}
 
@@ -290,18 +292,17 @@ class CoordinatorNode(Node):
     def now(self) -> float:
         return self.get_clock().now().nanoseconds * 1e-9
 
-    def _call(self, client, request, what: str):
+    def _call(self, client, request, what: str, idempotent: bool = True):
+        """A service call, waited for. An idempotent one (IK, the grips, the parameters; not a
+        step) is sent again every RESEND_S until answered: a reply Fast DDS dropped right after
+        discovery must not end the run (ros_common.services.call_and_wait)."""
         if not client.wait_for_service(timeout_sec=self.service_timeout):
             raise NodeTimeout(f'{client.srv_name} is not available ({what})')
-        future = client.call_async(request)
-        answered = threading.Event()
-        future.add_done_callback(lambda _: answered.set())
-        # (An event, not polling: in lock-step every decision waits on a few of these, and
-        # polling would take CPU from the simulator on a small machine.)
-        if not answered.wait(self.service_timeout) or not rclpy.ok():
-            raise NodeTimeout(f'{client.srv_name} did not answer within '
-                              f'{self.service_timeout} s ({what})')
-        return future.result()
+        try:
+            return call_and_wait(client, request, self.service_timeout,
+                                 resend=RESEND_S if idempotent else 0.0, ok=rclpy.ok)
+        except NoAnswer as exc:
+            raise NodeTimeout(f'{exc} ({what})') from None
 
     def solve(self, arm, position, orientation, frame, seed):
         req = SolveIK.Request(execute=False, seed=[float(v) for v in seed])
@@ -450,7 +451,7 @@ class CoordinatorNode(Node):
     def _step(self, steps: int) -> Tuple[int, int]:
         """Lock-step: advance; returns (step count before, after)."""
         request = StepSimulation.Request(steps=steps, commands=self._commands.take())
-        reply = self._call(self.step_client, request, 'step')
+        reply = self._call(self.step_client, request, 'step', idempotent=False)
         # Some announced commands were not in yet (DDS orders only per writer): ask again,
         # soon at first, then backing off, until they are or the service timeout passes.
         end, pause = time.monotonic() + self.service_timeout, 0.0002
@@ -460,7 +461,7 @@ class CoordinatorNode(Node):
                                   f'{reply.message}')
             time.sleep(pause)
             pause = min(2 * pause, 0.005)
-            reply = self._call(self.step_client, request, 'step')
+            reply = self._call(self.step_client, request, 'step', idempotent=False)
         if not reply.success:
             raise NodeTimeout(f'the simulator refused to step: {reply.message} (is it running '
                               'with synchronous:=true?)')
