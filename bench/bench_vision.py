@@ -24,7 +24,7 @@ def render_cost(frames: int) -> dict:
         world.step()
     timings = {}
     for backdrop in (False, True):          # the floor drawn in every frame: the baseline
-        world.floor_backdrops = backdrop
+        world.backdrops = backdrop
         world.render(camera)
         t0 = time.perf_counter()
         for _ in range(frames):

@@ -3,6 +3,7 @@ import dataclasses
 import math
 
 import numpy as np
+import pybullet
 import pytest
 
 from controllers.transforms import yaw_from_quaternion
@@ -281,33 +282,84 @@ def test_the_clock_is_due_every_step_or_on_its_own_grid(world, rate, period_ms):
     assert sink.clock[-1] == world.sim_time_ns and sink.clock.count(world.sim_time_ns) == 1
 
 
-def test_a_fixed_cameras_frames_without_the_floor_drawn_are_the_same_images():
-    """The belt camera's floor is filled in from its one lit colour instead of drawn: the
-    frames are those with the floor drawn, bit for bit, as materials ride through the view;
-    once a frame was lit otherwise (PyBullet keeps light arguments for the frames after), the
-    floor is drawn again."""
+def test_a_fixed_cameras_frames_over_its_static_backdrop_are_the_same_images():
+    """The belt camera draws only what moves, over its static scene drawn once: the frames are
+    those drawn whole, bit for bit, as materials ride through the view and the Zu 12's arm
+    sweeps through it; once a frame was lit otherwise (PyBullet keeps light arguments for the
+    frames after), every frame is drawn whole again."""
     cell = resolve_resource('package://world_description/worlds/pipeline_cell.yaml')
     w = SimWorld(load_world(cell), scenario_seed=3)
     try:
         camera = w.cameras[0]
         assert camera.robot is None
-        seen = 0
-        for k in range(60):
+        w.conveyor.speed = 0.15
+        arm = w.robots['zu12']
+        joints = [j for j in range(w._p.getNumJoints(arm.body))
+                  if w._p.getJointInfo(arm.body, j)[2] == pybullet.JOINT_REVOLUTE]
+        rng = np.random.default_rng(1)
+        materials = arm_frames = 0
+        for k in range(90):
             for _ in range(24):
                 w.step()
-            w.floor_backdrops = True
+            if k % 3 == 0:
+                for j in joints:
+                    w._p.resetJointState(arm.body, j, rng.uniform(-2.0, 2.0))
+            w.backdrops = True
             fast = w.render(camera)
-            w.floor_backdrops = False
+            w.backdrops = False
             drawn = w.render(camera)
             assert np.array_equal(fast, drawn), f'frame {k} differs'
-            seen += int(((drawn[..., 0] > 200) & (drawn[..., 2] < 80)).sum() > 20)  # orange
-        assert seen > 5, 'no material rode through the view: the comparison proved little'
-        w.floor_backdrops = True
+            materials += int(((drawn[..., 0] > 200) & (drawn[..., 2] < 80)).sum() > 20)  # orange
+            # The arm in view: the frame differs from the static scene beyond the materials.
+            backdrop = w._backdrops[camera.config.name]
+            moved = drawn.view(np.uint32)[..., 0] != backdrop.words
+            arm_frames += int(moved.sum() > 2000)
+        assert materials > 5, 'no material rode through the view: the comparison proved little'
+        assert arm_frames > 5, 'the arm never came into view: the comparison proved little'
+        w.backdrops = True
         lit = w.render(camera, {'lightColor': (1.0, 0.9, 0.8), 'lightAmbientCoeff': 0.5})
         after = w.render(camera)
-        w.floor_backdrops = False
+        w.backdrops = False
         assert np.array_equal(after, w.render(camera))
         assert np.array_equal(lit, w.render(camera, {'lightColor': (1.0, 0.9, 0.8),
                                                      'lightAmbientCoeff': 0.5}))
+    finally:
+        w.close()
+
+
+def test_a_backdrop_of_cylinders_spheres_and_turned_boxes_is_the_same_image(tmp_path):
+    """Every static shape a world file can give (box, turned box, cylinder, sphere) is drawn
+    again alike in the backdrop's own client: a robot moving among them, in front of and
+    behind them, gives the frames drawn whole."""
+    data = {
+        'robots': [{'name': 'r', 'urdf': str(resolve_resource(
+            'package://robot_description/urdf/mini_robot.urdf'))}],
+        'obstacles': [
+            {'shape': 'box', 'size': [0.3, 0.05, 0.08], 'position': [0.3, 0.1, 0.04],
+             'yaw': 0.6, 'color': [0.2, 0.6, 0.3, 1]},
+            {'shape': 'cylinder', 'size': [0.06, 0.15], 'position': [-0.2, 0.2, 0.075],
+             'color': [0.9, 0.8, 0.2, 1]},
+            {'shape': 'sphere', 'size': [0.05], 'position': [0.0, -0.25, 0.05],
+             'color': [0.7, 0.2, 0.6, 1]}],
+        'cameras': [{'name': 'fixed', 'position': [0.6, 0.0, 0.5], 'look_at': [0.0, 0.0, 0.0],
+                     'width': 160, 'height': 120, 'rate': 10.0}]}
+    w = SimWorld(parse_world(data, str(tmp_path / 'w.yaml')))
+    try:
+        camera, robot = w.cameras[0], w.robots['r']
+        for x in np.linspace(-0.5, 0.5, 21):
+            w._p.resetBasePositionAndOrientation(robot.body, (x, 0.15 - 0.5 * x, 0.03),
+                                                 (0.0, 0.0, 0.0, 1.0))
+            w.backdrops = True
+            fast = w.render(camera)
+            w.backdrops = False
+            assert np.array_equal(fast, w.render(camera)), f'robot at x = {x:.2f}: differs'
+        backdrop = w._backdrops['fixed']
+        assert backdrop is not None
+        # The sphere and the cylinder are in the backdrop (their colours are in view).
+        for rgb in ((0.7, 0.2, 0.6), (0.9, 0.8, 0.2)):
+            hue = np.array(rgb) / max(rgb)
+            pixels = backdrop.words.view(np.uint8).reshape(*backdrop.words.shape, 4)[..., :3]
+            lit = pixels / np.maximum(pixels.max(axis=2, keepdims=True), 1)
+            assert (np.abs(lit - hue).max(axis=2) < 0.05).sum() > 30, rgb
     finally:
         w.close()
