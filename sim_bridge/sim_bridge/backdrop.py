@@ -18,6 +18,8 @@ import numpy as np
 import pybullet
 from pybullet_utils.bullet_client import BulletClient
 
+from sim_bridge.client import Client
+
 # Static visual shapes this module can draw again in a client of its own.
 _SHAPES = (pybullet.GEOM_BOX, pybullet.GEOM_SPHERE, pybullet.GEOM_CYLINDER)
 
@@ -81,7 +83,7 @@ class StaticBackdrop:
     @classmethod
     def measure(cls, visuals: Sequence[StaticVisual], render: Renderer) -> 'StaticBackdrop':
         """Draw ``visuals`` alone, in a client of their own, with ``render``."""
-        alone = BulletClient(connection_mode=pybullet.DIRECT)
+        alone = Client(connection_mode=pybullet.DIRECT)
         try:
             for v in visuals:
                 alone.createMultiBody(0.0, -1, _visual_shape(alone, v), basePosition=v.position,

@@ -46,6 +46,8 @@ class Conveyor:
         self.direction = np.array([math.cos(config.yaw), math.sin(config.yaw), 0.0])
         self.lateral = np.array([-math.sin(config.yaw), math.cos(config.yaw), 0.0])
         self.top = np.asarray(config.position, float)
+        self._direction, self._lateral, self._top = (
+            tuple(float(v) for v in a) for a in (self.direction, self.lateral, self.top))
         self._speed = config.belt_speed
         self.travel = 0.0                     # belt travel since the start [m]
         orn = client.getQuaternionFromEuler((0.0, 0.0, config.yaw))
@@ -104,15 +106,23 @@ class Conveyor:
                 return True
         return False
 
+    def resting(self, bodies: Sequence[int]) -> List[int]:
+        """Those of ``bodies`` that rest on the belt (as :meth:`on_belt`, with one query for
+        them all)."""
+        down = {c[2] for c in self._p.getContactPoints(bodyA=self.body) if c[7][2] < -0.7}
+        return [body for body in bodies if body in down]
+
     def item(self, body: int) -> Item:
         """A body as the accumulation rule sees it: its centre and extents along and across."""
-        lo, hi = (np.asarray(c, float) for c in self._p.getAABB(body))
-        centre, extent = (lo + hi) / 2, hi - lo
-        rel = centre - self.top
-        return Item(along=float(rel @ self.direction) + self.config.length / 2,
-                    across=float(rel @ self.lateral),
-                    length=float(np.abs(self.direction) @ extent),
-                    width=float(np.abs(self.lateral) @ extent))
+        lo, hi = self._p.getAABB(body)
+        # (Plain floats: numpy's overhead on 3-vectors was most of a step's conveyor work.)
+        rel = [(a + b) / 2 - t for a, b, t in zip(lo, hi, self._top)]
+        extent = [b - a for a, b in zip(lo, hi)]
+        d, n = self._direction, self._lateral
+        return Item(along=rel[0] * d[0] + rel[1] * d[1] + rel[2] * d[2] + self.config.length / 2,
+                    across=rel[0] * n[0] + rel[1] * n[1] + rel[2] * n[2],
+                    length=abs(d[0]) * extent[0] + abs(d[1]) * extent[1] + abs(d[2]) * extent[2],
+                    width=abs(n[0]) * extent[0] + abs(n[1]) * extent[1] + abs(n[2]) * extent[2])
 
     def in_lane(self, body: int) -> bool:
         """Whether ``body`` (off the belt: being lifted from it) is still low enough over the
@@ -129,13 +139,14 @@ class Conveyor:
         a gripper) holds it, and no further; advance the belt's travel."""
         travel = self._speed * dt
         self.travel += travel
-        resting = [body for body in bodies if self.on_belt(body)]
+        resting = self.resting(bodies)
         items = [self.item(b) for b in resting]
         obstacles = [self.item(b) for b in lifted if self.in_lane(b)]
         ahead = advance(items, self.stop_along, travel, obstacles)
         for body, it, along in zip(resting, items, ahead):
             v, _ = self._p.getBaseVelocity(body)
-            vx, vy, _ = (along - it.along) / dt * self.direction
+            speed = (along - it.along) / dt
+            vx, vy = speed * self._direction[0], speed * self._direction[1]
             self._p.resetBaseVelocity(body, (vx, vy, min(v[2], 0.0)), (0.0, 0.0, 0.0))
 
 

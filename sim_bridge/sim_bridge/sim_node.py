@@ -466,11 +466,12 @@ class SimNode(Node):
         if source is None or conveyor is None:
             return
         held = {s.held.index for s in world.suctions.values() if s.held is not None}
+        resting = set(conveyor.resting([m.body for m in world.materials]))
         msg = MarkerArray()
         for m in world.materials:
             pos, rot = source.pose(m)
             state = ('held' if m.index in held else
-                     'on_belt' if conveyor.on_belt(m.body) else 'free')
+                     'on_belt' if m.body in resting else 'free')
             msg.markers.append(_material_marker(m, pos, rot, state, source.config,
                                                 stamp_from_ns(time_ns)))
         self._materials_pub.publish(msg)

@@ -18,6 +18,7 @@ from controllers.mecanum import wheel_speeds as mecanum_wheel_speeds
 from sim_bridge.backdrop import StaticBackdrop, static_visuals
 from sim_bridge.camera import projection_matrix, view_matrix_from_optical
 from sim_bridge.cell import Conveyor, MaterialBody, MaterialSource, Suction
+from sim_bridge.client import Client
 from world_description.camera_geometry import intrinsics_from_fov, look_at_rotation
 from world_description.joint_limits import JointLimitsError, load_acceleration_limits
 from world_description.resources import resolve_resource
@@ -466,7 +467,7 @@ class SimWorld:
         self.config = config
         self.time_step = time_step
         self.step_count = 0
-        self._p = BulletClient(connection_mode=pybullet.GUI if gui else pybullet.DIRECT)
+        self._p = Client(connection_mode=pybullet.GUI if gui else pybullet.DIRECT)
         p = self._p
         p.setTimeStep(time_step)
         p.setGravity(0.0, 0.0, config.gravity)
