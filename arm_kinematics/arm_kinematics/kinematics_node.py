@@ -62,6 +62,12 @@ class KinematicsNode(Node):
             'Shortest IK motion [s]', 0.01, 60.0))
         self.declare_parameter('trajectory_topic', 'arm_controller/joint_trajectory', ro(
             description='Where IK motions go (relative: in the node namespace)', read_only=True))
+        self.declare_parameter('track_joint_states', True, ro(
+            description='Take joint_states: the current position (the default IK seed, the start '
+                        'of a motion that execute plans) and end_effector_pose. false: serve '
+                        'only requests that give a seed and plan no motion (a client that '
+                        'knows the arm\'s state, as the pipeline coordinator; 30 messages a '
+                        'second less to take)', read_only=True))
         arm = self.get_parameter('arm').value
         if arm not in ARMS:
             raise KinematicsConfigError(f'arm "{arm}" unknown; known: {sorted(ARMS)}')
@@ -84,7 +90,10 @@ class KinematicsNode(Node):
         traj_topic = self.get_parameter('trajectory_topic').value
         self._traj_pub = self.create_publisher(JointTrajectory, traj_topic, reliable)
         self._status_pub = self.create_publisher(DiagnosticStatus, 'ik_status', reliable)
-        self.create_subscription(JointState, 'joint_states', self._on_joint_states, reliable)
+        self._tracking = bool(self.get_parameter('track_joint_states').value)
+        if self._tracking:
+            self.create_subscription(JointState, 'joint_states', self._on_joint_states,
+                                     reliable)
         self.create_subscription(PoseStamped, 'goal_pose', self._on_goal_pose, reliable)
         self.create_service(SolveIK, 'solve_ik', self._on_solve_ik, qos_profile=SERVICE_QOS)
         self.get_logger().info(
@@ -144,6 +153,9 @@ class KinematicsNode(Node):
                scaling: float, seed: Optional[list] = None
                ) -> Tuple[bool, str, Optional[np.ndarray], tuple, Optional[JointTrajectory]]:
         p, o = target.pose.position, target.pose.orientation
+        if not self._tracking and (execute or not seed):
+            return self._fail('joint_states are not taken (track_joint_states is false): give '
+                              'a seed, and execute=false' + ('' if seed else ' (no seed given)'))
         try:
             pose = pose_matrix((p.x, p.y, p.z), (o.x, o.y, o.z, o.w))
             pose = self._kin.in_base_link(target.header.frame_id, pose, self._prefix)

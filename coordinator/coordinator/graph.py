@@ -97,8 +97,10 @@ def pipeline_graph(seed: int, belt_speed: float, synchronous: bool = True,
     # (The bases' speed limits come from the world file's drive sections.)
     if real_time_factor is not None:
         sim['real_time_factor'] = real_time_factor
+    # (Lock-step: the coordinator's time is the simulator's step count; it takes no /clock.)
     coordinator: Dict[str, ParameterValue] = {
-        **sim_time, 'synchronous': synchronous, 'control_rate': CONTROL_RATE,
+        **({} if synchronous else sim_time), 'synchronous': synchronous,
+        'control_rate': CONTROL_RATE,
         'time_step': time_step, 'state_publish_rate': rate,
         'belt_speed': belt_speed, 'scenario_seed': seed, 'world': world}
     if result_file is not None:
@@ -124,10 +126,14 @@ def pipeline_graph(seed: int, belt_speed: float, synchronous: bool = True,
         GraphNode('vision_node', 'perception', 'vision_node',
                   remappings=(('image_raw', '/belt_camera/image_raw'),
                               ('camera_info', '/belt_camera/camera_info'))),
+        # (The coordinator seeds every IK request with the arm's state and executes none: the
+        # IK servers need no joint_states, 30 messages a second each.)
         GraphNode('zu12_kinematics', 'arm_kinematics', 'kinematics_node', namespace='zu12',
-                  parameters={'arm': 'zu12', 'frame_prefix': prefixes.get('zu12', '')}),
+                  parameters={'arm': 'zu12', 'frame_prefix': prefixes.get('zu12', ''),
+                              'track_joint_states': False}),
         GraphNode('youbot_kinematics', 'arm_kinematics', 'kinematics_node', namespace='youbot',
-                  parameters={'arm': 'youbot', 'frame_prefix': prefixes.get('youbot', '')}),
+                  parameters={'arm': 'youbot', 'frame_prefix': prefixes.get('youbot', ''),
+                              'track_joint_states': False}),
         GraphNode('coordinator_node', 'coordinator', 'coordinator_node',
                   parameters=coordinator),
     ]

@@ -97,3 +97,35 @@ def test_kinematics_node_moves_the_simulated_arm_to_an_ik_target(start_node):
     finally:
         probe.close()
         sim.close()
+
+
+def test_an_ik_server_that_takes_no_joint_states_serves_seeded_requests(start_node):
+    """track_joint_states:=false (the trials' IK servers): no joint_states reader; a seeded
+    request that plans no motion is solved as with them, and a request that needs the arm's
+    state (no seed, or execute) is refused with the reason."""
+    probe = Probe()
+    try:
+        kin = start_node('kinematics_node', '-r', '__ns:=/youbot', '-p',
+                         'track_joint_states:=false')
+        target = YoubotKinematics().fk([0.6, 0.9, 0.7, 0.9, -0.4])
+        request = SolveIK.Request(execute=False, seed=[0.5, 0.8, 0.8, 0.8, -0.3])
+        request.target.header.frame_id = 'base_link'
+        pos = request.target.pose.position
+        pos.x, pos.y, pos.z = (float(v) for v in target[:3, 3])
+        o = request.target.pose.orientation
+        o.x, o.y, o.z, o.w = matrix_to_quaternion(target[:3, :3])
+        reply = probe.call(SolveIK, '/youbot/solve_ik', request, timeout=20.0)
+        assert reply.success and reply.position_error < 1e-4, reply.message
+        assert np.allclose(YoubotKinematics().fk(reply.positions)[:3, 3], target[:3, 3],
+                           atol=1e-4)
+        # (Its readers are known here once goal_pose's is: they were made together.)
+        wait_for(lambda: probe.node.count_subscribers('/youbot/goal_pose') == 1, 10.0,
+                 what="the node's goal_pose reader")
+        assert probe.node.count_subscribers('/youbot/joint_states') == 0
+        for execute, seed in ((False, []), (True, list(request.seed))):
+            request.execute, request.seed = execute, seed
+            reply = probe.call(SolveIK, '/youbot/solve_ik', request, timeout=20.0)
+            assert not reply.success and 'track_joint_states is false' in reply.message
+        assert kin.alive()
+    finally:
+        probe.close()

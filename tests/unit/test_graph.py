@@ -22,12 +22,18 @@ def test_a_lock_step_trial_is_five_processes_that_agree_on_the_scenario():
     assert sim['synchronous'] is True and sim['clock_publish_rate'] == tick_rate(TIME_STEP)
     assert sim['time_step'] == coordinator['time_step'] == TIME_STEP
     assert coordinator['result_file'] == '/r/result.json'
-    # Every node that reads the clock runs on simulated time; the simulator is its source,
-    # and the vision node and the IK servers read none (a /clock subscription would only cost
-    # them CPU).
-    clockless = {'sim_node', 'vision_node', 'zu12_kinematics', 'youbot_kinematics'}
-    assert all(n.parameters.get('use_sim_time') for n in graph if n.name not in clockless)
-    assert not any('use_sim_time' in by[name].parameters for name in clockless)
+    # In lock-step no node reads /clock: the simulator is its source, the vision node and the
+    # IK servers read none, and the coordinator keeps the step count's time (a /clock
+    # subscription would only cost them CPU). In real time the coordinator follows it.
+    assert not any('use_sim_time' in n.parameters for n in graph)
+    real_time = {n.name: n.parameters
+                 for n in pipeline_graph(7, 0.13, synchronous=False, world=PIPELINE_CELL)}
+    assert real_time['coordinator_node']['use_sim_time'] is True
+    assert not any('use_sim_time' in real_time[name] for name in real_time
+                   if name != 'coordinator_node')
+    # The IK servers take no joint_states: every request the coordinator makes is seeded.
+    assert by['zu12_kinematics'].parameters['track_joint_states'] is False
+    assert by['youbot_kinematics'].parameters['track_joint_states'] is False
     assert (by['zu12_kinematics'].namespace, by['youbot_kinematics'].namespace) == (
         'zu12', 'youbot')
     # The IK servers name their frames as the simulator does: the world's frame prefixes.
