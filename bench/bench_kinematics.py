@@ -6,9 +6,11 @@ Pinocchio's FK of the Zu 12's description, timed in the same run, is the baselin
 (issue 12): FK <= 20 us, youBot IK >= 20,000 solves/s, Zu 12 IK median <= 0.1 ms. Wall times
 on a busy machine are longer; the FK's CPU time per call is printed beside its wall time.
 """
+import json
 import statistics
 import sys
 import time
+from pathlib import Path
 
 import numpy as np
 
@@ -155,6 +157,11 @@ def main() -> int:
           f'>= 20,000 solves/s: {_verdict(youbot_rate >= 20000)} ({youbot_rate:,.0f}; the node '
           f'core {node_rate:,.0f}); Zu 12 IK median <= 0.1 ms: '
           f'{_verdict(zu12_median <= 0.1)} ({zu12_median:.3f} ms)')
+    out = Path(__file__).resolve().parent / 'results'
+    out.mkdir(exist_ok=True)
+    (out / 'bench_kinematics.json').write_text(json.dumps(
+        {'fk_us': {'youbot': fk_wall, 'zu12': zfk_wall}, 'youbot_ik_per_s': youbot_rate,
+         'youbot_node_ik_per_s': node_rate, 'zu12_ik_median_ms': zu12_median}, indent=1))
     return 0 if ok else 1
 
 

@@ -4,9 +4,12 @@ set -euo pipefail
 ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 # shellcheck disable=SC1091
 source "$ROOT/scripts/env.sh"
+START="$(date +%s)"
 python "$ROOT/bench/bench_sim.py"
 python "$ROOT/bench/bench_recorder.py"
 python "$ROOT/bench/bench_kinematics.py"
 python "$ROOT/bench/bench_youbot.py"
 python "$ROOT/bench/bench_vision.py"
 python "$ROOT/bench/bench_pipeline.py"
+# The issue-12 goals, from the figures of this run only.
+python "$ROOT/bench/goals.py" --since "$START"
