@@ -53,6 +53,17 @@ class InProcessSim:
         rclpy.try_shutdown(context=self.context)
 
 
+def _ik_request(target, **fields) -> SolveIK.Request:
+    """A SolveIK request for the 4x4 pose ``target`` in base_link."""
+    request = SolveIK.Request(**fields)
+    request.target.header.frame_id = 'base_link'
+    pos = request.target.pose.position
+    pos.x, pos.y, pos.z = (float(v) for v in target[:3, 3])
+    o = request.target.pose.orientation
+    o.x, o.y, o.z, o.w = matrix_to_quaternion(target[:3, :3])
+    return request
+
+
 def test_kinematics_node_moves_the_simulated_arm_to_an_ik_target(start_node):
     sim = InProcessSim()
     probe = Probe()
@@ -68,12 +79,8 @@ def test_kinematics_node_moves_the_simulated_arm_to_an_ik_target(start_node):
         # A reachable target in front of the robot, gripper pointing down and forward.
         target = YoubotKinematics().fk([0.6, 0.9, 0.7, 0.9, -0.4])
         assert target[2, 3] > 0.0
-        request = SolveIK.Request(execute=True)
-        request.target.header.frame_id = 'base_link'
+        request = _ik_request(target, execute=True)
         pos = request.target.pose.position
-        pos.x, pos.y, pos.z = (float(v) for v in target[:3, 3])
-        o = request.target.pose.orientation
-        o.x, o.y, o.z, o.w = matrix_to_quaternion(target[:3, :3])
         reply = probe.call(SolveIK, '/youbot/solve_ik', request, timeout=20.0)
         assert reply.success, reply.message
         assert reply.position_error < 1e-4 and len(reply.trajectory.points) == 1
@@ -108,12 +115,7 @@ def test_an_ik_server_that_takes_no_joint_states_serves_seeded_requests(start_no
         kin = start_node('kinematics_node', '-r', '__ns:=/youbot', '-p',
                          'track_joint_states:=false')
         target = YoubotKinematics().fk([0.6, 0.9, 0.7, 0.9, -0.4])
-        request = SolveIK.Request(execute=False, seed=[0.5, 0.8, 0.8, 0.8, -0.3])
-        request.target.header.frame_id = 'base_link'
-        pos = request.target.pose.position
-        pos.x, pos.y, pos.z = (float(v) for v in target[:3, 3])
-        o = request.target.pose.orientation
-        o.x, o.y, o.z, o.w = matrix_to_quaternion(target[:3, :3])
+        request = _ik_request(target, execute=False, seed=[0.5, 0.8, 0.8, 0.8, -0.3])
         reply = probe.call(SolveIK, '/youbot/solve_ik', request, timeout=20.0)
         assert reply.success and reply.position_error < 1e-4, reply.message
         assert np.allclose(YoubotKinematics().fk(reply.positions)[:3, 3], target[:3, 3],
