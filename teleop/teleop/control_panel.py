@@ -13,8 +13,6 @@ coordinator) runs in the node's executor. The dead-man rule is ``panel_core.Dead
 from __future__ import annotations
 
 import asyncio
-import collections
-import functools
 import http
 import itertools
 import json
@@ -22,9 +20,8 @@ import math
 import sys
 import threading
 import time
-import urllib.parse
 from pathlib import Path
-from typing import Any, Callable, Deque, Dict, List, Optional, Tuple
+from typing import Any, Dict, List, Optional, Tuple
 
 import cv2
 import numpy as np
@@ -46,7 +43,15 @@ from ros_common.geometry import yaw_of
 from ros_common.node_main import run_node
 from ros_common.params import float_range
 from ros_common.stamps import to_seconds
-from teleop.panel_core import DeadMan, PanelInputError, PanelRobot, parse_command, robots_of_world
+from ros_common.web_access import WebAccess, WebAccessError
+from teleop.panel_core import (
+    DeadMan,
+    Outbox,
+    PanelInputError,
+    PanelRobot,
+    parse_command,
+    robots_of_world,
+)
 from teleop.twist_out import TwistOut
 from world_description.resources import resolve_resource
 from world_description.world_config import WorldConfigError, load_world
@@ -101,6 +106,17 @@ class ControlPanel(Node):
         self.declare_parameter('max_turn', 0.2, float_range(
             'Turn rate at 100 % where neither the world nor the simulator says [rad/s]',
             1e-3, 20.0))
+        self.declare_parameter('allowed_hosts', [''], text(
+            description='Host names the page may be reached by besides loopback and the '
+                        "served address (a request naming another host is refused: a page "
+                        "of another site that made its name resolve here)", read_only=True))
+        self.declare_parameter('allowed_origins', [''], text(
+            description='Regular expressions of the origins (scheme://host:port) of other '
+                        "pages that may drive; empty: only the panel's own page",
+                        read_only=True))
+        self.declare_parameter('max_pages', 16, text(
+            description='Pages connected at once; past that a page is refused (503)',
+            read_only=True, integer_range=[IntegerRange(from_value=1, to_value=1024, step=1)]))
         get = lambda name: self.get_parameter(name).value  # noqa: E731
         for name in STATIC.values():
             if not (WEB / name[0]).is_file():
@@ -124,14 +140,22 @@ class ControlPanel(Node):
         self._coordinator: Optional[Dict[str, Any]] = None
         self._materials: Dict[int, Dict[str, Any]] = {}
         self.last_error = ''
-        self._calls: Deque[Callable[[], None]] = collections.deque()
-        # Pages: id -> (connection); the asyncio loop owns them.
-        self._pages: Dict[int, ServerConnection] = {}
+        # A robot chosen on a page, made the driven one at the next tick (the latest of a
+        # flood of choices only), and a hello owed to the pages (their view of the settings).
+        self._wanted_robot: Optional[PanelRobot] = None
+        self._hello_due = False
+        # Pages: id -> page; the asyncio loop owns them.
+        self._pages: Dict[int, _Page] = {}
         self._page_ids = itertools.count(1)
+        self._max_pages = int(get('max_pages'))
         self._loop = asyncio.new_event_loop()
         self._server_ready = threading.Event()
         self._server_error: Optional[BaseException] = None
         self._host, self._port = get('host'), int(get('port'))
+        try:
+            self._access = WebAccess(self._host, get('allowed_hosts'), get('allowed_origins'))
+        except WebAccessError as exc:
+            raise ControlPanelError(str(exc)) from None
         self._thread = threading.Thread(target=self._serve, name='control_panel_http',
                                         daemon=True)
         self._thread.start()
@@ -152,8 +176,9 @@ class ControlPanel(Node):
                                  QoSProfile(depth=1, durability=1))
         self.create_subscription(PipelineEvent, '/coordinator_node/events', self._on_event,
                                  QoSProfile(depth=100))
-        self.get_logger().info(f'serving the control panel on {self.url}; waiting for the '
-                               f'world of {self._sim}')
+        self.get_logger().info(f'serving the control panel on {self.url} (to '
+                               f'{self._access.describe()}); waiting for the world of '
+                               f'{self._sim}')
         self._ask_world()
 
     # --- the robots ---------------------------------------------------------------------------
@@ -217,13 +242,13 @@ class ControlPanel(Node):
         self._odom_sub = self.create_subscription(Odometry, robot.odom, self._on_odom,
                                                   QoSProfile(depth=5))
         self.get_logger().info(f'driving {robot.name} on {robot.cmd_vel}')
-        self._broadcast(self._hello())
+        self._hello_due = True
 
     def _error(self, text: str) -> None:
         if text != self.last_error:
             self.last_error = text
             self.get_logger().error(text)
-            self._broadcast({'op': 'error', 'text': text})
+            self._broadcast('error', {'op': 'error', 'text': text})
 
     # --- commands -----------------------------------------------------------------------------
     def command(self, page: int, text: Any) -> Optional[str]:
@@ -245,34 +270,31 @@ class ControlPanel(Node):
                     drive.set_speed(cmd.fraction)
                 elif cmd.op == 'report_turns':
                     drive.set_report_turns(cmd.on)
-                robot = next((r for r in self.robots if r.namespace == cmd.namespace), None)
-            if cmd.op == 'select':
-                if robot is None:
-                    raise PanelInputError(f'no base in namespace {cmd.namespace!r}')
-                self.executor_call(functools.partial(self._select, robot))
-            elif cmd.op in ('speed', 'report_turns'):
-                self._broadcast(self._hello())
-            elif cmd.op in ('release', 'stop'):
-                self.executor_call(self._tick)
+                if cmd.op == 'select':
+                    robot = next((r for r in self.robots if r.namespace == cmd.namespace),
+                                 None)
+                    if robot is None:
+                        raise PanelInputError(f'no base in namespace {cmd.namespace[:100]!r}')
+                    # (Made in the executor, where rclpy entities are made, at the next tick.)
+                    self._wanted_robot = robot
+                elif cmd.op in ('speed', 'report_turns'):
+                    self._hello_due = True
             return None
         except PanelInputError as exc:
             self.get_logger().warn(f'page {page}: refused: {exc}', throttle_duration_sec=1.0)
             return str(exc)
 
-    def executor_call(self, fn: Callable[[], None]) -> None:
-        """Run ``fn`` in the node's executor (rclpy entities are made there), at its next
-        tick."""
-        self._calls.append(fn)
-
     def page_gone(self, page: int) -> None:
         with self._lock:
             if self.drive is not None:
                 self.drive.gone(page)
-        self.executor_call(self._tick)
 
     def _tick(self) -> None:
-        while self._calls:
-            self._calls.popleft()()
+        with self._lock:
+            wanted, self._wanted_robot = self._wanted_robot, None
+            current = self.drive.robot if self.drive is not None else None
+        if wanted is not None and wanted != current:
+            self._select(wanted)
         with self._lock:
             if self.drive is None:
                 return
@@ -361,6 +383,9 @@ class ControlPanel(Node):
         self._camera_wanted()
         if not self._pages:
             return
+        if self._hello_due:
+            self._hello_due = False
+            self._broadcast('hello', self._hello())
         with self._lock:
             drive = self.drive
             state = {'op': 'state', 'odom': self._odom, 'path': list(self._path),
@@ -370,9 +395,9 @@ class ControlPanel(Node):
                      'coordinator': self._coordinator,
                      'materials': sorted(self._materials.values(), key=lambda m: m['id'])}
             jpeg, self._jpeg = self._jpeg, None
-        self._broadcast(state)
+        self._broadcast('state', state)
         if jpeg is not None:
-            self._broadcast(jpeg)
+            self._broadcast('frame', jpeg)
 
     # --- the web server (its own thread and asyncio loop) -----------------------------------
     def _serve(self) -> None:
@@ -393,17 +418,22 @@ class ControlPanel(Node):
 
     def _http(self, connection: ServerConnection, request: Request) -> Optional[Response]:
         path = request.path.split('?', 1)[0]
-        if path == '/ws':
-            # Only the panel's own page may drive: a browser sends the page's origin, and a
-            # page of another site (open in the same browser) must not reach the robots
-            # through it. (Clients that are not browsers send no Origin.)
-            origin = request.headers.get('Origin')
-            if origin is not None and urllib.parse.urlsplit(origin).netloc != \
-                    request.headers.get('Host'):
-                self.get_logger().warn(f'refused a WebSocket from the page of {origin}',
-                                       throttle_duration_sec=1.0)
-                return connection.respond(http.HTTPStatus.FORBIDDEN,
-                                          'only the panel\'s own page may connect\n')
+        websocket = path == '/ws'
+        # Only this server's own names, and a browser's WebSocket only from the panel's own
+        # page (ros_common/web_access.py: pages of other sites, DNS rebinding).
+        refusal = self._access.check(request.headers.get_all('Host'),
+                                     request.headers.get_all('Origin'), websocket)
+        if refusal is not None:
+            self.get_logger().warn(f'refused a request for {path[:100]!r} from '
+                                   f'{_peer(connection)}: {refusal.reason}',
+                                   throttle_duration_sec=1.0)
+            return connection.respond(http.HTTPStatus(refusal.status), refusal.reason + '\n')
+        if websocket:
+            if len(self._pages) >= self._max_pages:
+                self.get_logger().warn(f'refused a page: {len(self._pages)} pages are '
+                                       'connected (max_pages)', throttle_duration_sec=1.0)
+                return connection.respond(http.HTTPStatus.SERVICE_UNAVAILABLE,
+                                          f'{len(self._pages)} pages are connected\n')
             return None                         # the page's WebSocket
         if path not in STATIC:
             return connection.respond(http.HTTPStatus.NOT_FOUND, 'not found\n')
@@ -414,27 +444,40 @@ class ControlPanel(Node):
                                             ('Cache-Control', 'no-store')]), body)
 
     async def _page(self, connection: ServerConnection) -> None:
-        page = next(self._page_ids)
-        self._pages[page] = connection
-        self.get_logger().info(f'page {page} connected from {connection.remote_address[0]}')
+        page = _Page(next(self._page_ids), connection)
+        self._pages[page.id] = page
+        self.get_logger().info(f'page {page.id} connected from {_peer(connection)}')
+        sender = asyncio.ensure_future(page.send_loop())
+        page.post('hello', json.dumps(self._hello()))
         try:
-            await connection.send(json.dumps(self._hello()))
             async for text in connection:
-                refused = self.command(page, text)
+                try:
+                    refused = self.command(page.id, text)
+                except Exception as exc:    # (a bug must not cut the page off)
+                    self.get_logger().error(f'page {page.id}: a message failed: '
+                                            f'{type(exc).__name__}: {exc}',
+                                            throttle_duration_sec=1.0)
+                    refused = f'internal error: {type(exc).__name__}'
                 if refused is not None:
-                    await connection.send(json.dumps({'op': 'refused', 'text': refused}))
+                    page.outbox.refuse(refused)
+                    page.wake.set()
         except ConnectionClosed:
             pass
         finally:
-            del self._pages[page]
-            self.page_gone(page)
-            self.get_logger().info(f'page {page} left')
+            sender.cancel()
+            del self._pages[page.id]
+            self.page_gone(page.id)
+            self.get_logger().info(f'page {page.id} left')
 
-    def _broadcast(self, message: Any) -> None:
+    def _broadcast(self, kind: str, message: Any) -> None:
+        """Post the latest ``kind`` of news to every page (from any thread)."""
         data = message if isinstance(message, bytes) else json.dumps(message)
-        pages = list(self._pages.values())
-        if pages and not self._loop.is_closed():
-            self._loop.call_soon_threadsafe(_send_all, pages, data)
+        if self._pages and not self._loop.is_closed():
+            self._loop.call_soon_threadsafe(self._post_all, kind, data)
+
+    def _post_all(self, kind: str, data: Any) -> None:
+        for page in self._pages.values():
+            page.post(kind, data)
 
     def finish(self) -> str:
         with self._lock:
@@ -454,20 +497,33 @@ class ControlPanel(Node):
 MAX_FRAME = 64 * 1024           # what a page may send in one message
 
 
-def _send_all(pages: List[ServerConnection], data: Any) -> None:
-    for connection in pages:
-        # A page that cannot keep up misses frames rather than holding the others up.
-        if connection.transport is not None and \
-                connection.transport.get_write_buffer_size() > 4 * 1024 * 1024:
-            continue
-        asyncio.ensure_future(_send(connection, data))
+class _Page:
+    """A connected page: its connection, what it is owed (``Outbox``), and the task that
+    sends it, one message at a time, as fast as the page reads."""
+
+    def __init__(self, page_id: int, connection: ServerConnection) -> None:
+        self.id, self.connection = page_id, connection
+        self.outbox = Outbox()
+        self.wake = asyncio.Event()
+
+    def post(self, kind: str, data: Any) -> None:
+        self.outbox.put(kind, data)
+        self.wake.set()
+
+    async def send_loop(self) -> None:
+        try:
+            while True:
+                await self.wake.wait()
+                self.wake.clear()
+                while (data := self.outbox.take()) is not None:
+                    await self.connection.send(data)
+        except ConnectionClosed:
+            pass
 
 
-async def _send(connection: ServerConnection, data: Any) -> None:
-    try:
-        await connection.send(data)
-    except ConnectionClosed:
-        pass
+def _peer(connection: ServerConnection) -> str:
+    address = connection.remote_address
+    return str(address[0]) if address else 'an unknown peer'
 
 
 def _finish(node: ControlPanel) -> None:

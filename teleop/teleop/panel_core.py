@@ -14,10 +14,11 @@ it even if the panel itself dies.
 """
 from __future__ import annotations
 
+import collections
 import json
 import math
 from dataclasses import dataclass
-from typing import Any, Dict, List, Optional, Tuple
+from typing import Any, Deque, Dict, List, Optional, Tuple
 
 from teleop.teleop_core import HOLONOMIC_MOTIONS, MOTIONS, TeleopState
 from world_description.world_config import DiffDriveConfig, MecanumConfig, WorldConfig
@@ -90,40 +91,111 @@ class PanelCommand:
 
 
 _OPS = ('hold', 'release', 'stop', 'speed', 'select', 'report_turns')
+MAX_NAMESPACE = 256                 # characters of a namespace a page may name
+
+
+def _fraction(value: Any) -> float:
+    """A speed fraction: a JSON number within 0..1 (not a bool, a string, NaN, or an integer
+    too large for a float)."""
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        raise PanelInputError(f'speed fraction must be a number within 0..1, got '
+                              f'{_shown(value)}')
+    try:
+        fraction = float(value)
+    except OverflowError:
+        raise PanelInputError('speed fraction must be a number within 0..1, got an integer '
+                              f'of {len(str(value))} digits') from None
+    if not (math.isfinite(fraction) and 0.0 <= fraction <= 1.0):
+        raise PanelInputError(f'speed fraction must be a number within 0..1, got {fraction!r}')
+    return fraction
+
+
+def _shown(value: Any) -> str:
+    """A value a page sent, for a reason: its type and the start of its JSON."""
+    try:
+        text = json.dumps(value)
+    except (TypeError, ValueError, RecursionError):
+        text = type(value).__name__
+    return text if len(text) <= 40 else text[:37] + '...'
 
 
 def parse_command(text: Any) -> PanelCommand:
-    """A page's message (JSON text) as a command; raises PanelInputError with the reason."""
+    """A page's message (JSON text) as a command; raises PanelInputError with the reason.
+
+    It is the one gate between a page and the node: whatever a page sends, the answer is a
+    valid command or PanelInputError, never another exception (tested with hypothesis)."""
     if not isinstance(text, str):
         raise PanelInputError('messages are JSON text')
     if len(text) > MAX_MESSAGE_BYTES:
         raise PanelInputError(f'message of {len(text)} characters (at most {MAX_MESSAGE_BYTES})')
     try:
         data = json.loads(text)
-    except ValueError as exc:
-        raise PanelInputError(f'not JSON: {exc}') from None
-    if not isinstance(data, dict) or data.get('op') not in _OPS:
+    except RecursionError:
+        raise PanelInputError('not JSON: nested too deeply') from None
+    except ValueError as exc:       # (also an integer of more than 4300 digits)
+        raise PanelInputError(f'not JSON: {str(exc)[:100]}') from None
+    if not isinstance(data, dict) or not isinstance(data.get('op'), str) \
+            or data['op'] not in _OPS:
         raise PanelInputError(f'expected {{"op": one of {list(_OPS)}, ...}}')
     op = data['op']
     if op == 'hold':
         motion = data.get('motion')
-        if motion not in MOTIONS or motion == 'stop':
-            raise PanelInputError(f'unknown motion {motion!r}')
+        if not isinstance(motion, str) or motion not in MOTIONS or motion == 'stop':
+            raise PanelInputError(f'unknown motion {_shown(motion)}')
         return PanelCommand(op, motion=motion)
     if op == 'speed':
-        fraction = data.get('fraction')
-        if (isinstance(fraction, bool) or not isinstance(fraction, (int, float))
-                or not math.isfinite(fraction) or not 0.0 <= fraction <= 1.0):
-            raise PanelInputError(f'speed fraction must be a number within 0..1, got {fraction!r}')
-        return PanelCommand(op, fraction=float(fraction))
+        return PanelCommand(op, fraction=_fraction(data.get('fraction')))
     if op == 'select':
         namespace = data.get('namespace')
-        if not isinstance(namespace, str):
-            raise PanelInputError('select needs a namespace')
+        if not isinstance(namespace, str) or len(namespace) > MAX_NAMESPACE:
+            raise PanelInputError(f'select needs a namespace (text of at most {MAX_NAMESPACE} '
+                                  f'characters), got {_shown(namespace)}')
         return PanelCommand(op, namespace=namespace)
     if op == 'report_turns':
-        return PanelCommand(op, on=bool(data.get('on')))
+        on = data.get('on')
+        if not isinstance(on, bool):
+            raise PanelInputError(f'report_turns needs "on": true or false, got {_shown(on)}')
+        return PanelCommand(op, on=on)
     return PanelCommand(op)
+
+
+class Outbox:
+    """What the panel owes one page, bounded whatever the page does: the latest of each kind
+    of news (a newer state replaces one not yet sent; the page needs only the latest), and the
+    last few refusals. A page that does not read costs the panel this much and no more, and
+    its sender never holds up another page's."""
+
+    LATEST = ('error', 'hello', 'state', 'frame')     # sent in this order
+    MAX_REFUSALS = 8
+
+    def __init__(self) -> None:
+        self._latest: Dict[str, Any] = {}
+        self._refusals: Deque[str] = collections.deque(maxlen=self.MAX_REFUSALS)
+        self.dropped = 0            # news replaced or refusals dropped before they were sent
+
+    def put(self, kind: str, data: Any) -> None:
+        if kind not in self.LATEST:
+            raise ValueError(f'unknown kind {kind!r}')
+        if kind in self._latest:
+            self.dropped += 1
+        self._latest[kind] = data
+
+    def refuse(self, text: str) -> None:
+        if len(self._refusals) == self.MAX_REFUSALS:
+            self.dropped += 1
+        self._refusals.append(text)
+
+    def __bool__(self) -> bool:
+        return bool(self._latest or self._refusals)
+
+    def take(self) -> Optional[Any]:
+        """The next message to send (a JSON text or a frame's bytes), or None."""
+        if self._refusals:
+            return json.dumps({'op': 'refused', 'text': self._refusals.popleft()})
+        for kind in self.LATEST:
+            if kind in self._latest:
+                return self._latest.pop(kind)
+        return None
 
 
 class DeadMan:

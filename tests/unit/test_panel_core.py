@@ -5,7 +5,13 @@ import math
 
 import pytest
 
-from teleop.panel_core import DeadMan, PanelInputError, parse_command, robots_of_world
+from teleop.panel_core import (
+    DeadMan,
+    Outbox,
+    PanelInputError,
+    parse_command,
+    robots_of_world,
+)
 from world_description import PIPELINE_CELL
 from world_description.resources import resolve_resource
 from world_description.world_config import load_world
@@ -49,6 +55,14 @@ def test_the_robots_of_each_world():
     ('{"op": "speed", "fraction": "0.5"}', 'within 0..1'),
     ('{"op": "select", "namespace": 3}', 'namespace'),
     ('{"op": "stop", "pad": "' + 'x' * 5000 + '"}', 'at most'),
+    # (Each of these cut the connection with a traceback and close 1011.)
+    ('{"op": "hold", "motion": ["forward"]}', 'unknown motion'),
+    ('{"op": "hold", "motion": {"a": 1}}', 'unknown motion'),
+    ('{"op": "speed", "fraction": ' + '9' * 4000 + '}', '4000 digits'),
+    ('[' * 2040 + ']' * 2040, 'not JSON: nested too deeply'),
+    ('{"op": ["stop"]}', 'expected'),
+    ('{"op": "report_turns", "on": "yes"}', 'true or false'),
+    ('{"op": "select", "namespace": "' + 'y' * 300 + '"}', 'at most 256'),
 ])
 def test_what_a_page_may_not_send_is_refused_with_the_reason(message, why):
     with pytest.raises(PanelInputError, match=why):
@@ -130,3 +144,25 @@ def test_a_bad_deadman_timeout_is_refused():
     for bad in (0.0, -1.0, math.nan, math.inf):
         with pytest.raises(PanelInputError):
             DeadMan(mini(), bad)
+
+
+def test_a_page_that_does_not_read_is_owed_a_bounded_outbox():
+    """However much news a page is sent and however many messages of its are refused, what
+    the panel keeps for it is the latest of each kind and the last few refusals."""
+    box = Outbox()
+    assert not box and box.take() is None
+    for k in range(10000):
+        box.put('state', f'{{"op": "state", "k": {k}}}')
+        box.put('frame', bytes(100))
+        box.refuse(f'refusal {k}')
+    box.put('hello', '{"op": "hello"}')
+    sent = []
+    while box:
+        sent.append(box.take())
+    # The refusals first (the last 8), then the latest hello, state and frame.
+    assert [json.loads(m)['text'] for m in sent[:8]] == [f'refusal {k}' for k in
+                                                        range(9992, 10000)]
+    assert sent[8:] == ['{"op": "hello"}', '{"op": "state", "k": 9999}', bytes(100)]
+    assert box.dropped == 2 * 9999 + 9992
+    with pytest.raises(ValueError):
+        box.put('anything', '')

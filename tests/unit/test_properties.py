@@ -1,5 +1,6 @@
 """Property-based tests (hypothesis) of the ROS-free validators that stand between a user's
-input and the physics: trajectories, twists, world files, camera info and IK requests.
+input and the physics: trajectories, twists, world files, camera info, IK requests and what a
+web page sends the control panel.
 
 Each draws inputs from everything a careless or hostile sender could put in the message,
 NaN, infinities, 1e308, negative and zero times, wrong sizes, and checks that the validator
@@ -8,6 +9,7 @@ answers (never raises) and that what it lets through is safe: finite, within the
 derandomised, so a failure is reproduced by running the test again.
 """
 import copy
+import json
 import math
 
 import numpy as np
@@ -26,6 +28,8 @@ from controllers.joint_trajectory import (
 )
 from controllers.youbot_kinematics import YoubotKinematics
 from perception.projection import CameraModel, intrinsics_problem
+from teleop.panel_core import _OPS, MAX_MESSAGE_BYTES, PanelInputError, parse_command
+from teleop.teleop_core import MOTIONS
 from world_description.resources import resolve_resource
 from world_description.world_config import WorldConfigError, load_world, parse_world
 
@@ -260,3 +264,69 @@ def test_an_ik_request_is_answered_and_a_planned_motion_is_one_the_simulator_tak
     accepted = follower.set_trajectory(TrajectoryRequest(
         YOUBOT.joint_names, (TrajectoryPoint(plan.duration, tuple(plan.positions)),)), 0.0)
     assert accepted.accepted, accepted.reason
+
+
+# Any JSON value, the panel's own words often among them.
+JSON_LEAVES = st.one_of(st.none(), st.booleans(), st.integers(), st.integers(-10 ** 30, 10 ** 30),
+                        ANY_FLOAT, st.text(max_size=20),
+                        st.sampled_from(_OPS + tuple(MOTIONS) + ('/mini_robot', '', 'op')))
+JSON_VALUES = st.recursive(JSON_LEAVES, lambda inner: st.one_of(
+    st.lists(inner, max_size=4), st.dictionaries(st.text(max_size=10), inner, max_size=4)),
+    max_leaves=12)
+
+
+# What each field of a command holds when a page means well.
+GOOD_FIELDS = {'motion': st.sampled_from(tuple(MOTIONS)), 'fraction': st.floats(0.0, 1.0),
+               'namespace': st.sampled_from(['/mini_robot', '/youbot', '']),
+               'on': st.booleans(), 'extra': JSON_VALUES}
+
+
+@st.composite
+def page_messages(draw):
+    """What a page could send: a command with good or any fields, any JSON (NaN and Infinity
+    among it), deep nesting, bytes, or any text at all."""
+    kind = draw(st.sampled_from(['command', 'command', 'command', 'json', 'text', 'deep',
+                                 'bytes']))
+    if kind == 'command':
+        message = {'op': draw(st.one_of(st.sampled_from(_OPS), st.sampled_from(_OPS),
+                                        JSON_VALUES))}
+        own = {'hold': 'motion', 'speed': 'fraction', 'select': 'namespace',
+               'report_turns': 'on'}.get(message['op']) if isinstance(message['op'], str) \
+            else None
+        if own is not None and draw(st.booleans()):
+            message[own] = draw(GOOD_FIELDS[own])
+        for key in draw(st.lists(st.sampled_from(sorted(GOOD_FIELDS)), max_size=3)):
+            message[key] = draw(st.one_of(GOOD_FIELDS[key], GOOD_FIELDS[key], JSON_VALUES))
+        return json.dumps(message)
+    if kind == 'json':
+        return json.dumps(draw(JSON_VALUES))
+    if kind == 'deep':
+        depth = draw(st.integers(1, 5000))
+        return draw(st.sampled_from(['[', '{"a":'])) * depth
+    if kind == 'bytes':
+        return draw(st.binary(max_size=64))
+    return draw(st.text(max_size=200))
+
+
+@settings(SETTINGS, max_examples=600)
+@given(message=page_messages())
+def test_whatever_a_page_sends_is_a_valid_command_or_a_reason(message):
+    """The control panel's one gate: never another exception (a traceback that closed the
+    page's connection), and what it lets through is a command the dead man can take."""
+    try:
+        cmd = parse_command(message)
+    except PanelInputError as exc:
+        event('refused')
+        assert str(exc)
+        assert len(str(exc)) < 300
+        return
+    event(f'accepted {cmd.op}')
+    assert isinstance(message, str) and len(message) <= MAX_MESSAGE_BYTES
+    assert cmd.op in _OPS
+    if cmd.op == 'hold':
+        assert cmd.motion in MOTIONS and cmd.motion != 'stop'
+    if cmd.op == 'speed':
+        assert isinstance(cmd.fraction, float) and 0.0 <= cmd.fraction <= 1.0
+    if cmd.op == 'select':
+        assert isinstance(cmd.namespace, str)
+    assert isinstance(cmd.on, bool)

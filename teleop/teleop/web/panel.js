@@ -150,6 +150,7 @@ function drawPath(odom) {
   g.fillText(`grid ${grid.toFixed(1)} m`, 6, canvas.height - 6);
 }
 
+let shownMaterials = null;
 function showCell(state, materials) {
   $('cell').hidden = !state;
   if (!state) return;
@@ -160,6 +161,10 @@ function showCell(state, materials) {
   $('cell_counts').textContent = `${state.total} materials: ${state.identified} identified, `
     + `${state.picked} picked, ${state.delivered} delivered, ${state.missed} missed, `
     + `${state.failed} failed`;
+  // The table is rebuilt only when a material changed (10 state messages a second).
+  const key = JSON.stringify(materials);
+  if (key === shownMaterials) return;
+  shownMaterials = key;
   $('materials').tBodies[0].replaceChildren(...materials.map((m) => {
     const row = document.createElement('tr');
     const swatch = `<span class="swatch" style="background:${COLOURS[m.color] || '#999'}"></span>`;
