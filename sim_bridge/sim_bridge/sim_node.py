@@ -640,16 +640,20 @@ class SimNode(Node):
         return SetParametersResult(successful=True)
 
     def _on_reset(self, _request, response):
+        aborted = self._actions.abort_all(
+            'the simulation was reset: the arm is back at its start pose', hold=False)
+        faults = list(self._runner.faults)
+        self._runner.reset()
         self._hold_watch = HoldWatch(self._world)     # (simulated time starts again)
         for robot in self._cmd_out_pubs:
             self._publish_applied(robot, self._world.sim_time_ns)
         for name in self._world.robots:
             self.on_state(name, self._world.sim_time_ns)
-        faults = list(self._runner.faults)
-        self._runner.reset()
         response.success, response.message = True, 'robots returned to their start poses' + (
-            f' (faults cleared: {", ".join(faults)})' if faults else '')
-        self.get_logger().info('world reset')
+            f' (faults cleared: {", ".join(faults)})' if faults else '') + (
+            f' (goals aborted: {", ".join(aborted)})' if aborted else '')
+        self.get_logger().info('world reset' + (f'; goals aborted: {", ".join(aborted)}'
+                                                if aborted else ''))
         return response
 
     def _on_pause(self, _request, response):
@@ -658,12 +662,23 @@ class SimNode(Node):
         else:
             self._paused = True
             self._timer.cancel()
-            response.success, response.message = True, f'paused at {self._world.sim_time:.3f} s'
+            aborted = self._actions.abort_all(
+                'the simulation was paused: the arm holds where it is; send the goal again '
+                'after ~/resume', hold=True)
+            response.success = True
+            response.message = f'paused at {self._world.sim_time:.3f} s' + (
+                f' (goals aborted: {", ".join(aborted)})' if aborted else '')
         return response
 
     def _on_resume(self, _request, response):
         if self._synchronous:
             response.success, response.message = False, 'synchronous mode: use ~/step'
+        elif self._step_jobs:
+            # (Both would step the world: the reply's step count would not be the request's.)
+            left = sum(job.remaining for job in self._step_jobs)
+            response.success, response.message = False, (
+                f'~/step requests are being served ({left} steps left): resume after their '
+                'reply')
         else:
             self._paused = False
             self._pacer.restart()
@@ -825,8 +840,12 @@ def _material_marker(material, pos, rot, state: str, config, stamp: Time) -> Mar
 
 
 def main(args=None) -> int:
+    # SIGINT and SIGTERM end the spin between two callbacks: rclpy's own handler shut the
+    # context down under a running timer, which then failed to publish ('[FATAL] Exception
+    # in 'timers' callback: ... publisher's context is invalid').
     return run_node(SimNode, 'sim_node',
-                    (SimConfigError, WorldConfigError, WorldError, FileNotFoundError), args=args)
+                    (SimConfigError, WorldConfigError, WorldError, FileNotFoundError), args=args,
+                    graceful_signals=True)
 
 
 if __name__ == '__main__':

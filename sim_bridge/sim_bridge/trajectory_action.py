@@ -13,6 +13,9 @@ trajectory controller (JTC) offers them: ``<ns>/<controller>/follow_joint_trajec
 - After the trajectory's end: success once within the goal tolerances; GOAL_TOLERANCE_VIOLATED
   if still out of them ``goal_time_tolerance`` later (0: no limit, as JTC).
 - A cancel holds the arm where it is and ends the goal canceled.
+- ``~/reset`` and ``~/pause`` end every running goal, aborted with INVALID_GOAL and the reason
+  (the arm back at its start pose, or held where it is); a robot's fault ends its goals with
+  PATH_TOLERANCE_VIOLATED. A goal never outlives the motion it asked for.
 
 The judging is ``controllers.trajectory_goal`` (no ROS). The server runs on the node's
 executor: a goal's execution is a coroutine that awaits its outcome, which the state updates
@@ -167,6 +170,21 @@ class TrajectoryActions:
         running = self._running.pop(key, None)
         if running is not None and not running.outcome.done():
             running.outcome.set_result(Outcome(PATH_TOLERANCE_VIOLATED, why))
+
+    def abort_all(self, why: str, hold: bool) -> List[str]:
+        """End every running goal, aborted with INVALID_GOAL and ``why`` (the simulation was
+        reset or paused under it; JTC ends a goal so when it is deactivated); with ``hold``
+        the arm stays where it is. Returns the controllers whose goal ended."""
+        ended = []
+        for key in list(self._running):
+            running = self._running.pop(key)
+            if running.outcome.done():
+                continue
+            if hold:
+                self._group(key).hold_current()
+            running.outcome.set_result(Outcome(INVALID_GOAL, why))
+            ended.append(f'{key[0]}/{key[1]}')
+        return ended
 
     def on_state(self, robot: str, now: float) -> None:
         """Judge and report the robot's running goals (at the state rate)."""

@@ -106,3 +106,28 @@ def test_a_new_goal_preempts_the_running_one(arm):
 def test_a_goal_for_other_joints_is_rejected(arm):
     handle = arm.send(_goal(TARGET[:4], 1.0, names=JOINT_NAMES[:4]))
     assert not handle.accepted
+
+
+def test_a_reset_or_a_pause_under_a_goal_aborts_it(arm, probe):
+    """A ~/reset one second into a 5 s goal reported it SUCCEEDED four seconds later, "the
+    trajectory was followed within its tolerances", every arm joint at 0.0. A reset or a
+    pause under a goal now ends it, aborted with the reason."""
+    from std_srvs.srv import Trigger
+
+    for service, why in (('reset', 'the simulation was reset'),
+                         ('pause', 'the simulation was paused')):
+        feedback = []
+        handle = arm.send(_goal((1.0, 0.3, -0.3, 0.2, 0.5), 5.0), feedback.append)
+        assert handle.accepted
+        arm.spin_until(lambda seen=feedback: len(seen) > 20, 30.0, 'the arm to be moving')
+        reply = probe.call(Trigger, f'/sim_node/{service}', Trigger.Request())
+        assert reply.success and 'goals aborted: youbot/arm_controller' in reply.message
+        done = arm.result(handle, timeout=20.0)
+        assert done.status == GoalStatus.STATUS_ABORTED
+        assert done.result.error_code == Result.INVALID_GOAL
+        assert why in done.result.error_string
+        if service == 'pause':
+            assert probe.call(Trigger, '/sim_node/resume', Trigger.Request()).success
+    # The arm takes goals as before.
+    handle = arm.send(_goal(TARGET, 1.0, goal=0.03, goal_time=2.0))
+    assert arm.result(handle).status == GoalStatus.STATUS_SUCCEEDED
