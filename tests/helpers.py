@@ -35,6 +35,37 @@ def wait_for(condition: Callable[[], bool], timeout: float = 10.0, period: float
     raise TimeoutError(f'timed out after {timeout} s waiting for {what}')
 
 
+def handshake_status(url: str, host: Optional[str], origins: Sequence[str] = (),
+                     websocket: bool = True, extra: Sequence = ()) -> int:
+    """The HTTP status a web server on loopback answers a request with these Host and Origin
+    headers (a browser cannot choose them; a page of another site gets them from its own
+    address): 101 for an accepted WebSocket (of the Foxglove protocol: the live view takes no
+    other). ``url``: http:// or ws://, its path is asked."""
+    import http.client
+    import urllib.parse
+    parts = urllib.parse.urlsplit(url)
+    conn = http.client.HTTPConnection('127.0.0.1', parts.port, timeout=20)
+    try:
+        conn.putrequest('GET', parts.path or '/', skip_host=True,
+                        skip_accept_encoding=True)
+        if host is not None:
+            conn.putheader('Host', host)
+        for origin in origins:
+            conn.putheader('Origin', origin)
+        if websocket:
+            for name, value in (('Upgrade', 'websocket'), ('Connection', 'Upgrade'),
+                                ('Sec-WebSocket-Key', 'dGhlIHNhbXBsZSBub25jZQ=='),
+                                ('Sec-WebSocket-Version', '13'),
+                                ('Sec-WebSocket-Protocol', 'foxglove.sdk.v1')):
+                conn.putheader(name, value)
+        for name, value in extra:
+            conn.putheader(name, value)
+        conn.endheaders()
+        return conn.getresponse().status
+    finally:
+        conn.close()
+
+
 class NodeProcess:
     """A node executable run as its own process, its output kept in a log file."""
 
@@ -281,3 +312,33 @@ class ActionUser:
         self.executor.shutdown()
         self.node.destroy_node()
         rclpy.try_shutdown(context=self.context)
+
+
+def lying_bag(directory, storage, variant):
+    """A closed bag of 100 std_msgs/String on /t over 0.99 s whose metadata.yaml says
+    otherwise: ``none`` (0 messages), ``many`` (999999999) or ``backwards`` (a negative
+    duration)."""
+    import yaml
+    from rclpy.serialization import serialize_message
+    from std_msgs.msg import String
+
+    from recording.bag_writer import BagWriter
+    writer = BagWriter(directory, f'{variant}_{storage}', storage)
+    writer.add_topic('/t', 'std_msgs/msg/String')
+    for i in range(100):
+        writer.write('/t', 10_000_000 * i, serialize_message(String(data=str(i))))
+    writer.close()
+    meta = writer.path / 'metadata.yaml'
+    doc = yaml.safe_load(meta.read_text())
+    info = doc['rosbag2_bagfile_information']
+    if variant == 'none':
+        info['message_count'] = 0
+        for entry in info['topics_with_message_count'] + info['files']:
+            entry['message_count'] = 0
+    elif variant == 'many':
+        info['message_count'] = 999999999
+    elif variant == 'backwards':
+        info['duration']['nanoseconds'] = -(2 ** 63) + 1
+        info['starting_time']['nanoseconds_since_epoch'] = 0
+    meta.write_text(yaml.safe_dump(doc))
+    return writer.path

@@ -69,6 +69,7 @@ class Report:
     topics: List[TopicStats] = field(default_factory=list)
     paths: List[PathStats] = field(default_factory=list)
     tracking: List[TrackingStats] = field(default_factory=list)
+    notes: List[str] = field(default_factory=list)
 
 
 def open_reader(bag: Path) -> AnyReader:
@@ -117,7 +118,21 @@ def analyse(bag: Path) -> tuple:
             raise AnalysisError(f'{bag}: unreadable data ({type(exc).__name__}: {exc}); the '
                                 'bag is truncated or corrupt') from None
         storage = 'mcap' if list(Path(bag).glob('*.mcap')) else 'sqlite3'
-        report = Report(str(bag), storage, reader.duration * 1e-9, reader.message_count)
+        # The counts and the span are the data's: metadata.yaml may say otherwise (edited,
+        # copied from another bag), and where it does, the report says so.
+        count = sum(len(ts) for ts in stamps.values())
+        firsts = [ts[0] for ts in stamps.values() if ts]
+        lasts = [ts[-1] for ts in stamps.values() if ts]
+        duration = (max(lasts) - min(firsts)) * 1e-9 if firsts else 0.0
+        report = Report(str(bag), storage, duration, count)
+        said = reader.message_count
+        if said != count:
+            report.notes.append(f'metadata.yaml says {said} messages; the bag holds {count}, '
+                                'which this report counts')
+        said_by_topic = {t: info.msgcount for t, info in reader.topics.items()}
+        wrong = [t for t in sorted(stamps) if said_by_topic.get(t, 0) != len(stamps[t])]
+        if wrong and said == count:
+            report.notes.append(f'metadata.yaml miscounts the messages of {", ".join(wrong)}')
         for topic in sorted(stamps):
             ts = stamps[topic]
             span = (ts[-1] - ts[0]) * 1e-9 if len(ts) > 1 else 0.0
@@ -182,8 +197,9 @@ def write_report(bag: Path, out_dir: Path) -> Report:
 def to_markdown(report: Report) -> str:
     lines = [f'# Bag report: {report.bag}', '',
              f'{report.storage}, {report.message_count} messages over '
-             f'{report.duration_s:.2f} s', '',
-             '| topic | type | count | rate [Hz] | MB |', '|---|---|---|---|---|']
+             f'{report.duration_s:.2f} s', '']
+    lines += [f'> Note: {note}' for note in report.notes] + ([''] if report.notes else [])
+    lines += ['| topic | type | count | rate [Hz] | MB |', '|---|---|---|---|---|']
     for t in report.topics:
         rate = f'{t.rate_hz:.2f}' if t.rate_hz else '-'
         lines.append(f'| {t.topic} | {t.msgtype} | {t.count} | {rate} | '

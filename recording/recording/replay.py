@@ -91,6 +91,7 @@ class Replay(Node):
                              durability=DurabilityPolicy(durability))
             self._topic_pubs[c.topic] = self.create_publisher(msg_class, c.topic, qos)
         self.published = 0
+        self._read_once = 0         # messages on the replayed topics, in one pass
         self.clock_pub = (self.create_publisher(Clock, '/clock', QoSProfile(depth=10))
                           if self.publish_clock else None)
         self.get_logger().info(
@@ -125,11 +126,19 @@ class Replay(Node):
             self._wait_for_subscribers()
         if self.delay > 0.0:
             time.sleep(self.delay)
-        schedule = ReplaySchedule(self.reader.start_time, self.rate, self.start_offset)
+        # The schedule starts at the bag's first message as read, not at metadata.yaml's start
+        # time: metadata can be wrong (edited, or from another bag); the messages are played.
+        first = next((stamp for _, stamp, _ in self.reader.messages()), None)
+        if first is None:
+            self.get_logger().warn(f'{self.bag}: the bag holds no messages')
+            return 0
+        schedule = ReplaySchedule(first, self.rate, self.start_offset)
+        first_pass = True
         while self.context.ok():
             schedule.restart(time.monotonic())
             next_clock = 0.0
             for connection, bag_ns, raw in self.reader.messages(connections=self.connections):
+                self._read_once += first_pass
                 if schedule.skip(bag_ns) or connection.topic not in self._topic_pubs:
                     continue
                 due = schedule.due(bag_ns)
@@ -146,11 +155,18 @@ class Replay(Node):
                 self.published += 1
                 if not self.context.ok():
                     break
+            else:
+                first_pass = False              # (a whole pass read)
             if not self.loop:
                 break
         if self.context.ok():
             for pub in self._topic_pubs.values():
                 pub.wait_for_all_acked(Duration(seconds=2.0))
+        said = sum(c.msgcount for c in self.connections)
+        if not first_pass and said != self._read_once:
+            self.get_logger().warn(
+                f'{self.bag}: metadata.yaml counts {said} messages on the replayed topics; '
+                f'the bag holds {self._read_once}, which were replayed')
         self.get_logger().info(f'replay done: {self.published} messages published')
         return 0
 

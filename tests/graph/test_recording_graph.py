@@ -11,7 +11,7 @@ from rclpy.serialization import deserialize_message
 from rosbags.highlevel import AnyReader
 from rosgraph_msgs.msg import Clock
 
-from helpers import wait_for
+from helpers import lying_bag, wait_for
 from recording.repair import repair
 
 DT_NS = round(1e9 / 240)
@@ -98,7 +98,8 @@ def test_sigkill_loses_at_most_the_last_second(start_node, probe, tmp_path, stor
     rec.stop(signal.SIGKILL)
     bag = tmp_path / 'bags' / 'killed'
     assert not (bag / 'metadata.yaml').exists()
-    repaired, count, _ = repair(bag)
+    result = repair(bag)
+    repaired, count = result.path, result.messages
     assert count > 0
     recorded = {raw for _, raw, _ in _bag_messages(repaired)['/mini_robot/odom']}
     first = min(_ns(deserialize_message(raw, Odometry).header.stamp) for raw in recorded)
@@ -200,6 +201,24 @@ def test_replay_rate_and_topic_filter(start_node, probe, tmp_path):
     rec_span = (kept[-1][0] - kept[0][0]) * 1e-9
     assert replayed[-1][0] - replayed[0][0] == pytest.approx(rec_span / 2, rel=0.15)
     assert clock == []  # filtered out, and publish_clock is off
+
+
+def test_replay_plays_the_messages_when_the_metadata_says_there_are_none(start_node, probe,
+                                                                         tmp_path):
+    """metadata.yaml edited to message_count: 0: replay said "0 messages published" and
+    exited 0. The messages are what is played; the disagreement is logged."""
+    from std_msgs.msg import String
+
+    bag = lying_bag(tmp_path, 'mcap', 'none')
+    received = probe.collect(String, '/t')
+    replay = start_node('replay', '-p', f'bag:={bag}', '-p', 'rate:=4.0', '-p',
+                        'wait_for_subscribers:=20.0')
+    wait_for(lambda: not replay.alive(), 60.0, what='the replay to end')
+    assert replay.proc.returncode == 0
+    wait_for(lambda: len(received) >= 100, 10.0, what='every message replayed')
+    assert [m.data for _, m in received] == [str(i) for i in range(100)]
+    assert 'metadata.yaml counts 0 messages' in replay.output()
+    assert 'replay done: 100 messages published' in replay.output()
 
 
 def test_bad_bags_fail_clearly(start_node, tmp_path):

@@ -17,6 +17,7 @@ from rclpy.serialization import serialize_message
 from rosbags.highlevel import AnyReader
 from std_msgs.msg import String
 
+from helpers import lying_bag
 from recording.analysis import AnalysisError, analyse, write_report
 from recording.analysis import main as analysis_main
 from recording.bag_writer import BagError, BagWriter, unique_bag_path
@@ -114,7 +115,8 @@ def test_sigkill_loses_only_what_was_not_flushed_and_repair_restores_it(tmp_path
     assert not (bag / 'metadata.yaml').exists()
     with pytest.raises(AnalysisError, match='bag_repair'):
         analyse(bag)
-    out, count, _ = repair(bag)
+    result = repair(bag)
+    out, count = result.path, result.messages
     assert out.name == 'killed_repaired' and count == 600
     messages = _read_all(out)
     assert [raw for _, _, raw in messages] == [
@@ -152,7 +154,8 @@ def test_repair_of_a_sqlite_bag_killed_in_a_transaction_reads_what_was_committed
     assert 'journal' in proc.stdout or 'wal' in proc.stdout, proc.stdout
     bag = tmp_path / 'big'
     before = {p.name: p.read_bytes() for p in bag.iterdir()}
-    out, count, _ = repair(bag)
+    result = repair(bag)
+    out, count = result.path, result.messages
     assert count == 100 and [t for _, t, _ in _read_all(out)] == list(range(100))
     assert {p.name: p.read_bytes() for p in bag.iterdir()} == before
 
@@ -174,13 +177,15 @@ def _cut_mcap(tmp_path, name, compression='none'):
 
 
 def test_repair_of_a_truncated_mcap_keeps_the_complete_chunks(tmp_path):
-    out, count, truncated = repair(_cut_mcap(tmp_path, 'cut'))  # cut in the second chunk
+    result = repair(_cut_mcap(tmp_path, 'cut'))          # cut in the second chunk
+    out, count, truncated = result.path, result.messages, result.truncated
     assert truncated and count == 100
     assert len(_read_all(out)) == 100
 
 
 def test_repair_of_a_cut_zstd_bag_keeps_its_complete_chunks(tmp_path):
-    out, count, truncated = repair(_cut_mcap(tmp_path, 'cutz', compression='zstd'))
+    result = repair(_cut_mcap(tmp_path, 'cutz', compression='zstd'))
+    out, count, truncated = result.path, result.messages, result.truncated
     assert truncated and count in (100, 200)        # whole chunks only
     assert [raw for _, _, raw in _read_all(out)] == [
         serialize_message(String(data=f'{i:04d}' * 50)) for i in range(count)]
@@ -230,6 +235,136 @@ def test_repair_errors(tmp_path):
     with pytest.raises(RepairError, match='not an MCAP file'):
         repair(tmp_path / 'junk')
     assert repair_main([str(tmp_path / 'junk')]) == 2
+
+
+KILLED_SPLITTING_WRITER = textwrap.dedent('''
+    import os, signal, sys
+    from pathlib import Path
+    from rclpy.serialization import serialize_message
+    from std_msgs.msg import String
+    from recording.bag_writer import BagWriter
+    out, storage = Path(sys.argv[1]), sys.argv[2]
+    w = BagWriter(out, 'split', storage, max_bag_size=40_000)
+    w.add_topic('/clock', 'std_msgs/msg/String')
+    w.add_topic('/t', 'std_msgs/msg/String')
+    for i in range(1000):
+        w.write('/t', i * 1000, serialize_message(String(data=f'{i:04d}' + 'x' * 200)))
+        w.write('/clock', i * 1000, serialize_message(String(data=str(i))))
+        if i == 799:
+            w.flush()
+            print(len(w.files), flush=True)
+    os.kill(os.getpid(), signal.SIGKILL)
+''')
+
+
+@pytest.mark.parametrize('storage', STORAGES)
+def test_repair_of_a_killed_split_bag_reads_every_file(tmp_path, storage):
+    """A recorder killed with max_bag_size set leaves several files, each with its own copy
+    of the channels: repair crashed ('Connection can only be added once: ... /clock') and left
+    a 43-byte *_repaired/."""
+    proc = subprocess.run([sys.executable, '-c', KILLED_SPLITTING_WRITER, str(tmp_path),
+                           storage], capture_output=True, text=True, timeout=120)
+    assert proc.returncode == -signal.SIGKILL
+    assert int(proc.stdout) >= 3                   # (files so far)
+    bag = tmp_path / 'split'
+    result = repair(bag)
+    messages = _read_all(result.path)
+    text = [raw for topic, _, raw in messages if topic == '/t']
+    # What was flushed: the first 800, and what a later split closed.
+    assert len(text) >= 800
+    assert text == [serialize_message(String(data=f'{i:04d}' + 'x' * 200))
+                    for i in range(len(text))]
+    assert sorted({topic for topic, _, _ in messages}) == ['/clock', '/t']
+    assert result.messages == len(messages) >= 1600
+
+
+@pytest.mark.parametrize('storage', STORAGES)
+def test_repair_of_a_closed_bag_without_its_metadata_counts_each_message_once(tmp_path,
+                                                                             storage):
+    """A closed MCAP file repeats its schemas and channels in its summary: repair took them
+    for new connections and crashed."""
+    writer = BagWriter(tmp_path, 'closed', storage, max_bag_size=20_000)
+    writer.add_topic('/t', 'std_msgs/msg/String')
+    payloads = [serialize_message(String(data=f'{i:04d}' + 'y' * 100)) for i in range(500)]
+    for i, data in enumerate(payloads):
+        writer.write('/t', i, data)
+    writer.close()
+    (writer.path / 'metadata.yaml').unlink()
+    result = repair(writer.path)
+    assert [raw for _, _, raw in _read_all(result.path)] == payloads
+    assert not result.truncated and not result.notes
+
+
+def _bag_with_chunks(directory, storage='mcap', name='flip'):
+    writer = BagWriter(directory, name, storage)
+    writer.add_topic('/t', 'std_msgs/msg/String')
+    for i in range(600):
+        writer.write('/t', i, serialize_message(String(data=f'{i:04d}' + 'z' * 60)))
+        if i % 100 == 99:
+            writer.flush()
+    writer.close()
+    (writer.path / 'metadata.yaml').unlink()
+    return writer.path
+
+
+@pytest.mark.parametrize('storage', STORAGES)
+def test_repair_of_flipped_bytes_recovers_what_is_intact_or_says_why(tmp_path, storage):
+    """Bytes flipped anywhere in the file (a bad disk, a careless edit): a UnicodeDecodeError
+    or a MemoryError traceback before. Now the repair keeps what reads back, or ends with one
+    line, and never leaves a partial bag behind."""
+    import random
+    rng = random.Random(7)
+    original = _bag_with_chunks(tmp_path / 'src', storage)
+    data_file = next(p for p in original.iterdir() if p.suffix in ('.mcap', '.db3'))
+    data = data_file.read_bytes()
+    outcomes = {'repaired': 0, 'refused': 0}
+    for trial in range(60):
+        damaged = bytearray(data)
+        for _ in range(rng.choice([1, 1, 4, 16])):
+            at = rng.randrange(len(damaged))
+            damaged[at] = rng.choice([0x00, 0xff, damaged[at] ^ (1 << rng.randrange(8))])
+        bag = tmp_path / f'damaged_{trial}'
+        bag.mkdir()
+        (bag / data_file.name).write_bytes(bytes(damaged))
+        try:
+            result = repair(bag)
+        except RepairError as exc:
+            outcomes['refused'] += 1
+            assert str(exc)
+            assert not (tmp_path / f'damaged_{trial}_repaired').exists()
+            continue
+        outcomes['repaired'] += 1
+        assert result.messages <= 600
+        assert len(_read_all(result.path)) == result.messages
+    assert outcomes['repaired'] > 30, outcomes
+
+
+def test_repair_says_which_files_it_could_not_read(tmp_path, capsys):
+    bag = _bag_with_chunks(tmp_path)
+    (bag / 'extra_1.mcap').mkdir()                  # a data file replaced by a directory
+    result = repair(bag)
+    assert result.messages == 600 and 'extra_1.mcap is not a file' in result.notes
+    only = tmp_path / 'only'
+    only.mkdir()
+    (only / 'only_0.mcap').mkdir()
+    assert repair_main([str(only)]) == 2
+    err = capsys.readouterr().err
+    assert 'only_0.mcap is not a file' in err and 'Traceback' not in err
+    assert not (tmp_path / 'only_repaired').exists()
+
+
+@pytest.mark.parametrize('storage', STORAGES)
+@pytest.mark.parametrize('variant', ['none', 'many', 'backwards'])
+def test_analysis_counts_the_data_when_the_metadata_lies(tmp_path, storage, variant):
+    """An edited metadata.yaml headed the report's tables with "999999999 messages" or "0
+    messages over -9223372036.85 s" above the real counts."""
+    report, _ = analyse(lying_bag(tmp_path, storage, variant))
+    assert report.message_count == 100 and report.topics[0].count == 100
+    assert report.duration_s == pytest.approx(0.99)
+    if variant != 'backwards':
+        assert report.notes and 'the bag holds 100' in report.notes[0]
+    from recording.analysis import to_markdown
+    assert '100 messages over 0.99 s' in to_markdown(report)
 
 
 def test_analysis_reports_counts_rates_and_paths(tmp_path):
