@@ -11,6 +11,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Dict, List, Optional, Tuple, Union
 
+import yaml
+
 from world_description import PIPELINE_CELL
 from world_description.resources import resolve_resource
 from world_description.world_config import load_world
@@ -65,11 +67,18 @@ class GraphNode:
 
 
 def parameter_text(value: ParameterValue) -> str:
-    """A parameter value as ``-p name:=value`` takes it (YAML)."""
+    """A parameter value as ``-p name:=value`` takes it (YAML): a string that YAML would read
+    as something else (empty, a number, true) is quoted."""
     if isinstance(value, bool):
         return 'true' if value else 'false'
     if isinstance(value, list):
         return '[' + ', '.join(repr(str(v)) for v in value) + ']'
+    if isinstance(value, str):
+        try:
+            plain = yaml.safe_load(value) == value
+        except yaml.YAMLError:
+            plain = False
+        return value if plain and value.strip() == value else "'" + value.replace("'", "''") + "'"
     return str(value)
 
 

@@ -13,6 +13,7 @@ import csv
 import ctypes
 import fcntl
 import json
+import math
 import os
 import random
 import shlex
@@ -25,9 +26,32 @@ import time
 from concurrent.futures import FIRST_COMPLETED, ThreadPoolExecutor, wait
 from contextlib import contextmanager
 from pathlib import Path
-from typing import TYPE_CHECKING, Callable, Dict, Iterator, List, Optional, Sequence, Tuple, Union
+from typing import (
+    TYPE_CHECKING,
+    Callable,
+    Dict,
+    Iterator,
+    List,
+    NoReturn,
+    Optional,
+    Sequence,
+    Tuple,
+    Union,
+)
 
-from coordinator.graph import CONTROL_RATE, TIME_STEP, pipeline_graph
+from coordinator.campaign import (
+    CAMPAIGN_FILE,
+    PLAN_DEFAULTS,
+    RESULT_FILE,
+    CampaignError,
+    campaign_lock,
+    check_plan,
+    read_campaign,
+    read_result,
+    trial_results,
+    write_campaign,
+)
+from coordinator.graph import TIME_STEP, pipeline_graph
 from coordinator.progress import (
     CampaignBar,
     TrialProgress,
@@ -101,7 +125,11 @@ def run_trial(trial: int, seed: int, belt_speed: float, domain_id: int, out_dir:
     group: Optional[int] = None
     start = time.monotonic()
     try:
+        # (A user's stop is looked for before each process starts and while each is waited
+        # for: a trial being set up when the campaign is stopped starts nothing more.)
         for name, argv in commands.items():
+            if _INTERRUPTED.is_set():
+                break
             if name == 'coordinator_node' and 'recorder' in procs:
                 _wait_for_line(trial_dir / 'recorder.log', 'recording /clock', 30.0)
             log = open(trial_dir / f'{name}.log', 'w')
@@ -111,24 +139,27 @@ def run_trial(trial: int, seed: int, belt_speed: float, domain_id: int, out_dir:
             log.close()
             group = procs[name].pid if group is None else group
             _ACTIVE_GROUPS.add(group)
-        try:
-            procs['coordinator_node'].wait(timeout=wall_timeout)
-        except subprocess.TimeoutExpired:
+        coordinator = procs.get('coordinator_node')
+        deadline = time.monotonic() + wall_timeout
+        while (coordinator is not None and coordinator.poll() is None
+               and time.monotonic() < deadline and not _INTERRUPTED.wait(0.2)):
             pass
         cpu = {name: _cpu_seconds(p.pid) for name, p in procs.items() if p.poll() is None}
     finally:
-        _stop_group(group, procs)
+        _stop_group(group, procs, at_once=_INTERRUPTED.is_set())
         _ACTIVE_GROUPS.discard(group)
     wall = time.monotonic() - start
-    if result_file.exists():
-        result = json.loads(result_file.read_text())
+    result, problem = read_result(result_file)
+    if result is not None:
+        pass
     elif _INTERRUPTED.is_set():     # (stopped by the user: --resume runs it again)
         result = {'status': 'interrupted', 'completion_time': float('nan'),
                   'message': 'the campaign was interrupted'}
     else:
+        exit_code = procs['coordinator_node'].returncode if 'coordinator_node' in procs else None
         result = {'status': 'error', 'completion_time': float('nan'), 'message':
-                  f'no result (coordinator exit {procs["coordinator_node"].returncode}); see '
-                  f'{trial_dir}'}
+                  f'no result (coordinator exit {exit_code}'
+                  + (f'; its result file: {problem}' if problem else '') + f'); see {trial_dir}'}
     if 'cpu_seconds_self' in result:
         cpu['coordinator_node'] = result.pop('cpu_seconds_self')
     result.update({'trial': trial, 'scenario_seed': seed, 'belt_speed': belt_speed,
@@ -212,6 +243,15 @@ class LocalPool:
     def close(self) -> None:
         self._pool.shutdown(wait=True)
 
+    def drain(self) -> List[Dict]:
+        """After ``close``: the results of the trials that were running, now ended."""
+        out = []
+        for future in list(self._futures):
+            if future.done() and not future.cancelled() and future.exception() is None:
+                out.append(future.result())
+        self._futures.clear()
+        return out
+
 
 def _progress(pool, results: List[Dict], pending: int
               ) -> Tuple[List[TrialProgress], Optional[float]]:
@@ -248,12 +288,14 @@ def _trial_process(group: int) -> Callable[[], None]:
 
 
 def _wait_for_line(path: Path, text: str, timeout: float) -> bool:
-    """Until a process's log holds ``text`` (the recorder subscribed to the simulator)."""
+    """Until a process's log holds ``text`` (the recorder subscribed to the simulator), or
+    the campaign is stopped."""
     end = time.monotonic() + timeout
     while time.monotonic() < end:
         if path.exists() and text in path.read_text(errors='replace'):
             return True
-        time.sleep(0.05)
+        if _INTERRUPTED.wait(0.05):
+            return False
     return False
 
 
@@ -266,10 +308,15 @@ def _cpu_seconds(pid: int) -> float:
         return float('nan')
 
 
-def _stop_group(group: Optional[int], procs: Dict[str, subprocess.Popen]) -> None:
+def _stop_group(group: Optional[int], procs: Dict[str, subprocess.Popen],
+                at_once: bool = False) -> None:
+    """Stop a trial's processes: SIGINT, and SIGKILL for those still running 10 s later (or
+    at once: the campaign was stopped)."""
     if group is None:
         return
-    for sig, grace in ((signal.SIGINT, 10.0), (signal.SIGKILL, 5.0)):
+    steps = ((signal.SIGKILL, 5.0),) if at_once else ((signal.SIGINT, 10.0),
+                                                      (signal.SIGKILL, 5.0))
+    for sig, grace in steps:
         try:
             os.killpg(group, sig)
         except ProcessLookupError:
@@ -301,11 +348,12 @@ def write_csv(trials: List[Dict], path: Path) -> None:
 
 
 def _rebuild(out: Path) -> int:
-    results = []
-    for path in sorted(out.glob('trial_*/result.json')):
-        r = json.loads(path.read_text())
-        r.setdefault('trial', int(path.parent.name.split('_')[1]))
-        results.append(r)
+    results, problems = trial_results(out)
+    if problems:
+        for line in problems:
+            print(f'run_trials: error: {line}; remove it, or run_trials --resume {out} runs '
+                  'that trial again', file=sys.stderr)
+        return 2
     if not results:
         print(f'[trials] no trial_*/result.json in {out}', file=sys.stderr)
         return 1
@@ -322,15 +370,18 @@ def _rebuild(out: Path) -> int:
 
 def _finished(out: Path, item: Dict, code: str) -> Optional[Dict]:
     """The result of a planned trial already in ``out`` (same seed and belt speed, made by the
-    same code), if any."""
-    path = out / f'trial_{item["trial"]:03d}' / 'result.json'
-    try:
-        r = json.loads(path.read_text())
-    except (OSError, ValueError):
+    same code), if any; a result file that cannot be used is said so, and the trial runs
+    again."""
+    path = out / f'trial_{item["trial"]:03d}' / RESULT_FILE
+    r, problem = read_result(path)
+    if problem is not None:
+        print(f'[trials] {path}: {problem}; trial {item["trial"]} runs again', flush=True)
+    if r is None:
         return None
     if (r.get('scenario_seed') != item['seed'] or r.get('belt_speed') != item['belt_speed']
             or r.get('status') == 'interrupted' or r.get('code') != code):
         return None
+    r.setdefault('trial', item['trial'])
     return r
 
 
@@ -359,34 +410,58 @@ def _stop_all() -> None:
             pass
 
 
-# The options that define a campaign's plan, and their defaults. A campaign keeps them in
-# its directory (CAMPAIGN_FILE), so that ``--resume DIR`` needs nothing else.
-PLAN_DEFAULTS = {'trials': 10, 'seed0': 2026, 'seeds': None, 'first_trial': 0,
-                 'belt_speed': [0.10, 0.16], 'world': PIPELINE_CELL, 'time_step': TIME_STEP}
-CAMPAIGN_FILE = 'campaign.json'
+def _given_plan(args: argparse.Namespace) -> Dict:
+    """The plan's options given on the command line, checked (CampaignError)."""
+    return check_plan({k: (list(v) if isinstance(v, (tuple, list)) else v)
+                       for k in PLAN_DEFAULTS if (v := getattr(args, k)) is not None},
+                      'the command line')
 
 
-def _plan_options(args: argparse.Namespace, parser: argparse.ArgumentParser) -> Dict:
-    """The plan: as given, else as the campaign being resumed had it, else the defaults."""
-    given = {k: (list(v) if isinstance(v, (tuple, list)) else v)
-             for k in PLAN_DEFAULTS if (v := getattr(args, k)) is not None}
-    stored = {}
+def _plan_options(args: argparse.Namespace, given: Dict) -> Dict:
+    """The plan: as given, else as the campaign being resumed had it, else the defaults; every
+    option checked (CampaignError)."""
+    stored: Dict = {}
     if args.resume is not None:
-        try:
-            stored = json.loads((args.out / CAMPAIGN_FILE).read_text())['plan']
-        except FileNotFoundError:
-            pass
-        except (OSError, ValueError, KeyError, TypeError) as exc:
-            parser.error(f'{args.out / CAMPAIGN_FILE} is not readable: {exc}')
+        stored = read_campaign(args.out) or {}
+        if not stored:
+            print(f'[trials] {args.out} has no {CAMPAIGN_FILE}: resuming with the plan of the '
+                  'command line and the defaults', flush=True)
         for k, v in given.items():
             if k in stored and stored[k] != v:
-                parser.error(f'--{k.replace("_", "-")} {v} differs from the campaign being '
-                             f'resumed ({stored[k]}, in {args.out / CAMPAIGN_FILE})')
-    return {**PLAN_DEFAULTS, **stored, **given}
+                raise CampaignError(f'--{k.replace("_", "-")} {v} differs from the campaign '
+                                    f'being resumed ({stored[k]}, in {args.out / CAMPAIGN_FILE})')
+    elif read_campaign(args.out) is not None:
+        raise CampaignError(f'{args.out} holds a campaign already ({CAMPAIGN_FILE}): go on '
+                            f'with --resume {args.out}, or give another --out')
+    return check_plan({**PLAN_DEFAULTS, **stored, **given}, 'the plan')
+
+
+def check_world(world: str) -> None:
+    """The cell's world file is one the pipeline can run (CampaignError otherwise): read here,
+    once, before any process starts."""
+    from coordinator.layout import LayoutError, layout_from_world
+    from world_description.resources import ResourceError, resolve_resource
+    from world_description.world_config import WorldConfigError, load_world
+    path: Optional[Path] = None
+    try:
+        path = resolve_resource(world)
+        layout_from_world(load_world(path))
+    except (WorldConfigError, LayoutError, ResourceError) as exc:
+        text = ' '.join(str(exc).split())
+        named = world in text or (path is not None and str(path) in text)
+        raise CampaignError(f'--world: {text}' if named else f'--world {world}: {text}') \
+            from None
+
+
+class _Parser(argparse.ArgumentParser):
+    """A bad option is one line (``--help`` lists them all), not the usage of 25 options."""
+
+    def error(self, message: str) -> NoReturn:
+        self.exit(2, f'{self.prog}: error: {message} (run_trials --help lists the options)\n')
 
 
 def _main(argv: Optional[Sequence[str]]) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = _Parser(prog='run_trials', description=__doc__.splitlines()[0])
     parser.add_argument('--trials', type=int, default=None, help='trials in the plan (10)')
     parser.add_argument('--parallel', type=int, default=None,
                         help='trials at once (each a process group on its own DDS domain); '
@@ -437,6 +512,7 @@ def _main(argv: Optional[Sequence[str]]) -> int:
                              'speed, and made by the same code: the same commit, with no '
                              'uncommitted changes)')
     args = parser.parse_args(argv)
+    _check_arguments(args, parser)
     if args.resume:
         if args.out is not None and args.out != Path(args.resume):
             parser.error(f'--resume {args.resume} and --out {args.out} name two directories')
@@ -445,17 +521,33 @@ def _main(argv: Optional[Sequence[str]]) -> int:
         if args.resume is not None or args.report_only:
             parser.error('name the campaign directory: --resume DIR, or --out DIR')
         args.out = Path('runs') / time.strftime('trials-%Y%m%d-%H%M%S')
-    if args.report_only:
-        return _rebuild(args.out)
-    opts = _plan_options(args, parser)
-    if opts['trials'] < 1 or args.parallel is not None and args.parallel < 1:
-        parser.error('--trials and --parallel must be >= 1')
-    lo, hi = opts['belt_speed']
-    if not 0.0 < lo <= hi <= 0.5:
-        parser.error('--belt-speed needs 0 < LO <= HI <= 0.5')
-    if not 1e-4 <= opts['time_step'] <= 1.0 / CONTROL_RATE:
-        parser.error(f'--time-step must be within [0.0001, {1.0 / CONTROL_RATE:.4f}] s (a '
-                     'physics step at least once per control tick)')
+    if (args.resume is not None or args.report_only) and not args.out.is_dir():
+        parser.error(f'{args.out} is not a campaign directory (nothing to '
+                     f'{"resume" if args.resume is not None else "report"})')
+    try:
+        given = _given_plan(args)
+        if args.show_graph:
+            return _show_graph({**PLAN_DEFAULTS, **given})
+        if args.resume is None and not args.report_only:
+            check_world(given.get('world', PLAN_DEFAULTS['world']))     # (before any file)
+        args.out.mkdir(parents=True, exist_ok=True)
+        with campaign_lock(args.out):
+            if args.report_only:
+                return _rebuild(args.out)
+            return _campaign(args, given)
+    except CampaignError as exc:
+        print(f'run_trials: error: {exc}', file=sys.stderr, flush=True)
+        return 2
+
+
+def _check_arguments(args: argparse.Namespace, parser: argparse.ArgumentParser) -> None:
+    """The options that are not the plan's (check_plan checks those), each in its range."""
+    if args.parallel is not None and args.parallel < 1:
+        parser.error('--parallel must be >= 1')
+    if not (args.wall_timeout > 0.0 and math.isfinite(args.wall_timeout)):
+        parser.error('--wall-timeout must be a number of seconds > 0')
+    if not (args.progress_period > 0.0 and math.isfinite(args.progress_period)):
+        parser.error('--progress-period must be a number of seconds > 0')
     if not 0 <= args.domain_base <= MAX_DOMAIN:
         parser.error(f'--domain-base must be a DDS domain, 0-{MAX_DOMAIN}')
     if args.ray is None and (args.domain_base + (args.parallel or 1) - 1 > MAX_DOMAIN):
@@ -464,20 +556,37 @@ def _main(argv: Optional[Sequence[str]]) -> int:
         parser.error('--collect-bags and --cpus-per-trial go with --ray')
     if args.collect_bags and not args.record:
         parser.error('--collect-bags needs --record')
-    if args.cpus_per_trial is not None and args.cpus_per_trial <= 0:
+    if args.cpus_per_trial is not None and not (args.cpus_per_trial > 0
+                                                 and math.isfinite(args.cpus_per_trial)):
         parser.error('--cpus-per-trial must be > 0')
+
+
+def _plan(opts: Dict) -> List[Dict]:
+    lo, hi = opts['belt_speed']
     plan = trial_plan(opts['trials'], opts['first_trial'], opts['seed0'], (lo, hi))
     if opts['seeds'] is not None:
         plan = [{**item, 'trial': k, 'seed': seed} for k, (item, seed) in enumerate(
             zip(trial_plan(len(opts['seeds']), 0, opts['seed0'], (lo, hi)), opts['seeds']))]
-    if args.show_graph:
-        first = plan[0]
-        print(f"# trial {first['trial']}: seed {first['seed']}, belt {first['belt_speed']} m/s")
-        for node in pipeline_graph(first['seed'], first['belt_speed'], world=opts['world'],
-                                   time_step=opts['time_step']):
-            print(shlex.join(node.command()))
-        return 0
-    args.out.mkdir(parents=True, exist_ok=True)
+    return plan
+
+
+def _show_graph(opts: Dict) -> int:
+    check_world(opts['world'])
+    first = _plan(opts)[0]
+    print(f"# trial {first['trial']}: seed {first['seed']}, belt {first['belt_speed']} m/s")
+    for node in pipeline_graph(first['seed'], first['belt_speed'], world=opts['world'],
+                               time_step=opts['time_step']):
+        print(shlex.join(node.command()))
+    return 0
+
+
+def _campaign(args: argparse.Namespace, given: Dict) -> int:
+    """Run the plan into ``args.out`` (held by this runner)."""
+    opts = _plan_options(args, given)
+    if args.resume is not None:
+        check_world(opts['world'])
+    lo, hi = opts['belt_speed']
+    plan = _plan(opts)
     results: List[Dict] = []
     code = code_version()
     if args.resume is not None:
@@ -486,7 +595,7 @@ def _main(argv: Optional[Sequence[str]]) -> int:
         results.extend(done)
         print(f'[trials] resuming: {len(done)} trials of the plan already in {args.out} '
               f'made by this code ({code})', flush=True)
-    (args.out / CAMPAIGN_FILE).write_text(json.dumps({'plan': opts, 'code': code}, indent=1))
+    write_campaign(args.out, opts, code)
     trial_options = {'wall_timeout': args.wall_timeout, 'record': args.record, 'code': code,
                      'world': opts['world'], 'time_step': opts['time_step'],
                      'domain_base': args.domain_base}
@@ -546,6 +655,10 @@ def _main(argv: Optional[Sequence[str]]) -> int:
         pool.close()
         if bar is not None:
             bar.close()
+    if interrupted:
+        # (Trials that ended while the campaign stopped: their results are in their
+        # directories, and so in the CSV.)
+        results.extend(r for r in pool.drain() if r.get('status') != 'interrupted')
     write_csv(results, args.out / 'trials.csv')
     from coordinator.report import write_report
     setup = {'seed0': opts['seed0'], 'belt_speed': (lo, hi), 'parallel': pool.capacity,

@@ -208,3 +208,7 @@ class RayPool:
     def close(self) -> None:
         self._final_capacity = self.capacity
         ray.shutdown()
+
+    def drain(self) -> List[Dict]:
+        """After ``stop``: no results (canceled tasks return none; --resume runs them)."""
+        return []

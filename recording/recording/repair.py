@@ -31,8 +31,10 @@ from typing import Dict, Hashable, Iterator, List, Optional, Tuple, Union
 from mcap.data_stream import ReadDataStream
 from mcap.exceptions import EndOfFile, InvalidMagic, McapError
 from mcap.opcode import Opcode
-from mcap.records import Channel, Chunk, Message, Schema
+from mcap.records import Channel as McapChannel
+from mcap.records import Chunk, Message, Schema
 from mcap.stream_reader import StreamReader, get_chunk_data_stream
+from rosbags.interfaces import Connection
 from rosbags.rosbag2 import StoragePlugin, Writer
 from rosbags.rosbag2.writer import WriterError
 from rosbags.typesys import Stores, get_typestore
@@ -93,7 +95,7 @@ def scan_mcap(path: Path, file_index: int = 0) -> Scan:
         def recovered(record) -> Iterator[Item]:
             if isinstance(record, Schema):
                 schemas[record.id] = record
-            elif isinstance(record, Channel):
+            elif isinstance(record, McapChannel):
                 schema = schemas.get(record.schema_id)
                 if schema is None:
                     scan.damage.append(f'channel {record.topic!r} without its schema')
@@ -157,7 +159,7 @@ def _chunk(chunk: Chunk, recovered, scan: Scan) -> Iterator[Item]:
         yield from recovered(record)
 
 
-def _chunk_records(stream: ReadDataStream, length: int) -> Iterator[Union[Schema, Channel,
+def _chunk_records(stream: ReadDataStream, length: int) -> Iterator[Union[Schema, McapChannel,
                                                                           Message]]:
     while stream.count < length:
         opcode = stream.read1()
@@ -166,7 +168,7 @@ def _chunk_records(stream: ReadDataStream, length: int) -> Iterator[Union[Schema
             raise McapError(f'a record of {size} bytes in {length - stream.count} left')
         start = stream.count
         if opcode == Opcode.CHANNEL:
-            yield Channel.read(stream)
+            yield McapChannel.read(stream)
         elif opcode == Opcode.MESSAGE:
             yield Message.read(stream, size)
         elif opcode == Opcode.SCHEMA:
@@ -275,8 +277,8 @@ def repair(bag: Path, output: Optional[Path] = None) -> Repaired:
     writer.open()
     # One connection per (topic, type, definition): a channel recorded again (in each file of
     # a split bag, and in a closed MCAP's summary) is the same connection.
-    by_topic: Dict[Tuple[str, str, str], object] = {}
-    connections: Dict[Hashable, object] = {}
+    by_topic: Dict[Tuple[str, str, str], Connection] = {}
+    connections: Dict[Hashable, Connection] = {}
     count, truncated, written = 0, False, False
     try:
         for k, path in enumerate(files):

@@ -1,0 +1,194 @@
+"""A campaign's state on disk, checked before it is used: its plan (``campaign.json``), its
+trials' results (``trial_NNN/result.json``), and the lock that keeps a second runner out of
+its directory.
+
+Every file here may have been left by a crash, edited by hand or written by another version:
+each is read into the types the runner needs, or refused with one line that names the file
+and what is wrong with it (``CampaignError``).
+"""
+from __future__ import annotations
+
+import fcntl
+import json
+import math
+import os
+from contextlib import contextmanager
+from pathlib import Path
+from typing import IO, Any, Dict, Iterator, List, Optional, Tuple
+
+from coordinator.graph import CONTROL_RATE, TIME_STEP
+from world_description import PIPELINE_CELL
+
+CAMPAIGN_FILE = 'campaign.json'
+LOCK_FILE = '.run_trials.lock'
+RESULT_FILE = 'result.json'
+# The options that define a campaign's plan, and their defaults. A campaign keeps them in
+# its directory (CAMPAIGN_FILE), so that ``--resume DIR`` needs nothing else.
+PLAN_DEFAULTS: Dict[str, Any] = {
+    'trials': 10, 'seed0': 2026, 'seeds': None, 'first_trial': 0,
+    'belt_speed': [0.10, 0.16], 'world': PIPELINE_CELL, 'time_step': TIME_STEP}
+MAX_TRIALS = 100_000
+MAX_SEED = 2 ** 31 - 1              # (the simulator's scenario_seed is a 32-bit integer)
+MAX_BELT_SPEED = 0.5                # m/s
+
+
+class CampaignError(ValueError):
+    """A campaign's file or option that cannot be used; the message is the one line to print."""
+
+
+def _is_int(value: Any) -> bool:
+    return isinstance(value, int) and not isinstance(value, bool)
+
+
+def _is_number(value: Any) -> bool:
+    return isinstance(value, (int, float)) and not isinstance(value, bool)
+
+
+def check_plan(plan: Any, source: str) -> Dict[str, Any]:
+    """A plan's options (all of them, or some over the defaults) as the runner takes them;
+    raises CampaignError naming ``source`` and the first option that is wrong."""
+    if not isinstance(plan, dict):
+        raise CampaignError(f'{source}: the plan must be a mapping of options, got '
+                            f'{type(plan).__name__}')
+    unknown = sorted(set(plan) - set(PLAN_DEFAULTS))
+    if unknown:
+        raise CampaignError(f'{source}: unknown plan options {unknown}')
+
+    def bad(key: str, what: str) -> CampaignError:
+        return CampaignError(f'{source}: {key} must be {what}, got {plan[key]!r:.60}')
+    if 'trials' in plan and not (_is_int(plan['trials']) and 1 <= plan['trials'] <= MAX_TRIALS):
+        raise bad('trials', f'an integer within 1..{MAX_TRIALS}')
+    if 'seed0' in plan and not _is_int(plan['seed0']):
+        raise bad('seed0', 'an integer')
+    if 'first_trial' in plan and not (_is_int(plan['first_trial']) and plan['first_trial'] >= 0):
+        raise bad('first_trial', 'an integer >= 0')
+    seeds = plan.get('seeds')
+    if seeds is not None and not (isinstance(seeds, list) and 1 <= len(seeds) <= MAX_TRIALS
+                                  and all(_is_int(s) and 0 <= s <= MAX_SEED for s in seeds)):
+        raise bad('seeds', f'a list of integers within 0..{MAX_SEED}')
+    if 'belt_speed' in plan:
+        speeds = plan['belt_speed']
+        if not (isinstance(speeds, (list, tuple)) and len(speeds) == 2
+                and all(_is_number(v) and math.isfinite(v) for v in speeds)
+                and 0.0 < speeds[0] <= speeds[1] <= MAX_BELT_SPEED):
+            raise bad('belt_speed', f'[LO, HI] with 0 < LO <= HI <= {MAX_BELT_SPEED} m/s')
+    if 'world' in plan and not (isinstance(plan['world'], str) and plan['world'].strip()):
+        raise bad('world', 'the path or package:// address of a world file')
+    if 'time_step' in plan and not (_is_number(plan['time_step'])
+                                    and 1e-4 <= plan['time_step'] <= 1.0 / CONTROL_RATE):
+        raise bad('time_step', f'within [0.0001, {1.0 / CONTROL_RATE:.4f}] s (a physics step '
+                  'at least once per control tick)')
+    checked = dict(plan)
+    if 'belt_speed' in checked:
+        checked['belt_speed'] = [float(v) for v in checked['belt_speed']]
+    return checked
+
+
+def read_campaign(out: Path) -> Optional[Dict[str, Any]]:
+    """The plan stored in a campaign directory, or None if it has no campaign file."""
+    path = out / CAMPAIGN_FILE
+    try:
+        text = path.read_text()
+    except FileNotFoundError:
+        return None
+    except (OSError, UnicodeDecodeError) as exc:
+        raise CampaignError(f'{path} cannot be read: {exc}') from None
+    try:
+        data = json.loads(text)
+    except (ValueError, RecursionError) as exc:
+        raise CampaignError(f'{path} is not JSON: {str(exc)[:100]}') from None
+    if not isinstance(data, dict) or 'plan' not in data:
+        raise CampaignError(f'{path} is not a campaign file (no "plan")')
+    return check_plan(data['plan'], str(path))
+
+
+def write_campaign(out: Path, plan: Dict[str, Any], code: str) -> None:
+    """The plan, written whole or not at all (a crash leaves the previous file)."""
+    path = out / CAMPAIGN_FILE
+    scratch = path.with_name(path.name + '.new')
+    scratch.write_text(json.dumps({'plan': plan, 'code': code}, indent=1))
+    os.replace(scratch, path)
+
+
+# A result's fields that the CSV and the report read, and what each must be.
+_RESULT_NUMBERS = ('belt_speed', 'completion_time', 'wall_time')
+_RESULT_RATES = ('identification_rate', 'grasp_success_rate', 'handling_success_rate')
+
+
+def result_problem(result: Any) -> Optional[str]:
+    """What is wrong with a trial's result record, or None if the runner can use it."""
+    if not isinstance(result, dict):
+        return f'not a trial result (a JSON {type(result).__name__})'
+    if not isinstance(result.get('status'), str) or not result['status']:
+        return 'no status'
+    for key in ('trial', 'scenario_seed'):
+        if key in result and not (_is_int(result[key]) and result[key] >= 0):
+            return f'{key} is {result[key]!r:.40}, not an integer >= 0'
+    for key in _RESULT_NUMBERS:
+        if key in result and not _is_number(result[key]):
+            return f'{key} is {result[key]!r:.40}, not a number'
+    for key in _RESULT_RATES:
+        value = result.get(key)
+        if value is not None and not (_is_number(value) and (
+                math.isnan(value) or 0.0 <= value <= 1.0)):
+            return f'{key} is {value!r:.40}, not a rate within 0..1'
+    return None
+
+
+def read_result(path: Path) -> Tuple[Optional[Dict[str, Any]], Optional[str]]:
+    """A trial's result and None, or None and why it cannot be used (None, None: no file)."""
+    try:
+        text = path.read_text()
+    except FileNotFoundError:
+        return None, None
+    except (OSError, UnicodeDecodeError) as exc:
+        return None, f'cannot be read: {exc}'
+    try:
+        result = json.loads(text)
+    except (ValueError, RecursionError) as exc:
+        return None, f'not JSON: {str(exc)[:80]}'
+    problem = result_problem(result)
+    return (None, problem) if problem else (result, None)
+
+
+def trial_results(out: Path) -> Tuple[List[Dict[str, Any]], List[str]]:
+    """Every usable result in a campaign directory (with its trial number), and a line for
+    each one that is not."""
+    results, problems = [], []
+    for path in sorted(out.glob(f'trial_*/{RESULT_FILE}')):
+        result, problem = read_result(path)
+        if problem is not None:
+            problems.append(f'{path}: {problem}')
+            continue
+        if result is None:
+            continue
+        try:
+            result.setdefault('trial', int(path.parent.name.split('_')[1]))
+        except (IndexError, ValueError):
+            problems.append(f'{path}: not in a trial_NNN directory')
+            continue
+        results.append(result)
+    return results, problems
+
+
+@contextmanager
+def campaign_lock(out: Path) -> Iterator[None]:
+    """Hold the campaign directory for this runner (an advisory lock, gone with its process):
+    a second runner into it is refused with the first one's process id."""
+    path = out / LOCK_FILE
+    handle: IO[str] = open(path, 'a+')
+    try:
+        try:
+            fcntl.flock(handle, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except OSError:
+            handle.seek(0)
+            holder = handle.read().strip() or 'another process'
+            raise CampaignError(f'{out} is in use by another run_trials ({holder}); wait for '
+                                'it to end, or give another --out') from None
+        handle.seek(0)
+        handle.truncate()
+        handle.write(f'pid {os.getpid()}\n')
+        handle.flush()
+        yield
+    finally:
+        handle.close()

@@ -1,0 +1,68 @@
+"""run_trials as a user runs it, stopped while it sets a trial up and raced by a second
+runner into the same directory: it ends within seconds, with a valid CSV, its campaign file
+intact, and no process of its trial left."""
+import csv
+import json
+import os
+import shutil
+import signal
+import subprocess
+import time
+
+from helpers import wait_for
+
+
+def _session_processes(sid: int):
+    """(pid, command) of the processes still in a session."""
+    out = subprocess.run(['ps', '-eo', 'sid=,pid=,args='], capture_output=True, text=True)
+    found = []
+    for line in out.stdout.splitlines():
+        parts = line.split(None, 2)
+        if len(parts) == 3 and int(parts[0]) == sid:
+            found.append((int(parts[1]), parts[2]))
+    return found
+
+
+def test_a_signal_while_a_trial_is_set_up_ends_the_campaign_at_once(tmp_path):
+    """SIGTERM 3 s into a trial's set-up: the trial was launched anyway and ran to the end, the
+    runner exited 66 s after the signal and printed "0 finished" while the trial's result said
+    completed. A second run_trials into the same --out exited 0 too, and the two lost each
+    other's results."""
+    out = tmp_path / 'campaign'
+    runner = subprocess.Popen([shutil.which('run_trials'), '--trials', '1', '--out', str(out),
+                               '--progress-period', '1'], stdout=subprocess.PIPE,
+                              stderr=subprocess.STDOUT, text=True, start_new_session=True)
+    try:
+        # Set-up under way: the simulator has started, the other nodes are starting.
+        wait_for(lambda: (out / 'trial_000' / 'sim_node.log').exists()
+                 or runner.poll() is not None, 60.0, what='the trial to be set up')
+        assert runner.poll() is None
+        second = subprocess.run([shutil.which('run_trials'), '--trials', '2', '--out',
+                                 str(out)], capture_output=True, text=True, timeout=60)
+        assert second.returncode == 2
+        assert f'in use by another run_trials (pid {runner.pid})' in second.stderr
+        assert 'Traceback' not in second.stderr
+        runner.send_signal(signal.SIGTERM)
+        signalled = time.monotonic()
+        output, _ = runner.communicate(timeout=60)
+        took = time.monotonic() - signalled
+    finally:
+        if runner.poll() is None:
+            os.killpg(runner.pid, signal.SIGKILL)
+            runner.wait()
+    assert runner.returncode == 130, output
+    assert took < 15.0, (took, output)           # (a few seconds; the trial takes minutes)
+    assert 'interrupted' in output and 'Traceback' not in output
+    with open(out / 'trials.csv') as f:
+        rows = list(csv.DictReader(f))
+    result = out / 'trial_000' / 'result.json'
+    # The CSV says what the trial's directory says: it was stopped, or (if it had finished
+    # first) its result is in both.
+    status = json.loads(result.read_text())['status'] if result.exists() else None
+    if rows:
+        assert [row['status'] for row in rows] == [status]
+    else:
+        assert status in (None, 'interrupted')
+    assert json.loads((out / 'campaign.json').read_text())['plan']['trials'] == 1
+    wait_for(lambda: not _session_processes(runner.pid), 10.0,
+             what='no process of the campaign left')
