@@ -340,11 +340,14 @@ def trial_plan(count: int, first: int, seed0: int, belt_range: Sequence[float]) 
 
 
 def write_csv(trials: List[Dict], path: Path) -> None:
-    with open(path, 'w', newline='') as f:
+    """The trials' rows, written whole or not at all (a signal mid-write leaves the last)."""
+    scratch = path.with_name(path.name + '.new')
+    with open(scratch, 'w', newline='') as f:
         writer = csv.DictWriter(f, CSV_FIELDS, extrasaction='ignore')
         writer.writeheader()
         for t in sorted(trials, key=lambda t: t['trial']):
             writer.writerow({k: t.get(k, '') for k in CSV_FIELDS})
+    os.replace(scratch, path)
 
 
 def _rebuild(out: Path) -> int:

@@ -1,24 +1,32 @@
-"""What the live bridge decides without ROS: which topics it streams, and which clients fell
-behind.
+"""What the live bridge decides without ROS: which topics it streams, what it keeps for a client
+that reads slowly, and which clients fell behind.
 
-The Foxglove SDK keeps a bounded outbox per client (``message_backlog_size`` messages). A client
-that does not read fast enough never stalls the sender: when its outbox is full the SDK drops
-that client's oldest data messages, and logs ``outbox for client <address> full`` (at most once a
-second, for all clients together). It does not report how many it dropped, so what is counted
-here is how often each client's outbox was found full: ``SlowClients`` reads the SDK's log
-records.
+Every client is relayed by the gate (gate.py), which keeps a bounded outbox per client
+(``ClientOutbox``: ``send_buffer_limit`` bytes, as foxglove_bridge's): a client that does not
+read fast enough never stalls the sender or costs more memory than that; when its outbox is
+full its oldest message data is dropped. Behind the gate the Foxglove SDK keeps an outbox of its
+own per connection (``message_backlog_size`` messages), which fills only if the gate itself
+falls behind; the SDK then logs ``outbox for client <address> full`` (at most once a second).
+``SlowClients`` counts both.
 """
 from __future__ import annotations
 
+import collections
 import logging
 import re
 import threading
 from dataclasses import dataclass, field
-from typing import Dict, Iterable, List, Sequence, Set, Tuple
+from typing import Deque, Dict, Iterable, List, Sequence, Set, Tuple, Union
 
 # The SDK's logger and message for a client whose outbox is full (foxglove-sdk 0.30).
 SEND_LOSSY_LOGGER = 'foxglove.websocket.connected_client.send_lossy'
 _OUTBOX_FULL = re.compile(r'outbox for client (?P<client>\S+) full')
+# Binary opcodes of the Foxglove WebSocket protocol that a client can do without: message data
+# and the server's time (the next one replaces it). Everything else (advertisements, service
+# responses, fetched assets) is kept.
+DROPPABLE_OPCODES = (0x01, 0x02)
+
+Frame = Union[str, bytes]
 
 
 @dataclass
@@ -69,9 +77,50 @@ def graph_change(advertised: Dict[str, str],
     return GraphChange(add, drop)
 
 
+class ClientOutbox:
+    """The frames owed to one client, at most ``limit`` bytes: past it, the oldest message data
+    is dropped. If only frames that must not be dropped are left over the limit, the client is
+    too slow to serve (``put`` returns False: disconnect it)."""
+
+    def __init__(self, limit: int) -> None:
+        if limit < 1:
+            raise ValueError(f'send_buffer_limit must be >= 1 byte, got {limit}')
+        self.limit = limit
+        self.size = 0
+        self.dropped = 0                # frames of message data dropped
+        self._frames: Deque[Frame] = collections.deque()
+
+    def put(self, frame: Frame) -> bool:
+        self._frames.append(frame)
+        self.size += len(frame)
+        while self.size > self.limit:
+            if not self._drop_oldest_data():
+                return False
+        return True
+
+    def _drop_oldest_data(self) -> bool:
+        for k, frame in enumerate(self._frames):
+            if isinstance(frame, bytes) and frame[:1] and frame[0] in DROPPABLE_OPCODES:
+                del self._frames[k]
+                self.size -= len(frame)
+                self.dropped += 1
+                return True
+        return False
+
+    def take(self) -> Union[Frame, None]:
+        if not self._frames:
+            return None
+        frame = self._frames.popleft()
+        self.size -= len(frame)
+        return frame
+
+    def __len__(self) -> int:
+        return len(self._frames)
+
+
 class SlowClients(logging.Handler):
-    """Counts, per client, how often the SDK found its outbox full (and dropped its oldest
-    messages). Attach it to the SDK's ``send_lossy`` logger."""
+    """Counts, per client, the messages dropped for it (``add``, from the gate's outboxes) and
+    the times the SDK found its own outbox full (attached to the SDK's ``send_lossy`` logger)."""
 
     def __init__(self) -> None:
         super().__init__(level=logging.DEBUG)
@@ -79,20 +128,23 @@ class SlowClients(logging.Handler):
         self._counts: Dict[str, int] = {}
         self._reported: Dict[str, int] = {}
 
+    def add(self, client: str, dropped: int) -> None:
+        if dropped > 0:
+            with self._lock_counts:
+                self._counts[client] = self._counts.get(client, 0) + dropped
+
     def emit(self, record: logging.LogRecord) -> None:
         match = _OUTBOX_FULL.search(record.getMessage())
         if match:
-            with self._lock_counts:
-                client = match.group('client')
-                self._counts[client] = self._counts.get(client, 0) + 1
+            self.add(f'gate connection {match.group("client")}', 1)
 
     def counts(self) -> Dict[str, int]:
         with self._lock_counts:
             return dict(self._counts)
 
     def news(self) -> List[Tuple[str, int, int]]:
-        """(client, episodes since the last call, episodes in all) for the clients that fell
-        behind since the last call."""
+        """(client, drops since the last call, drops in all) for the clients that fell behind
+        since the last call."""
         with self._lock_counts:
             out = [(c, n - self._reported.get(c, 0), n) for c, n in sorted(self._counts.items())
                    if n != self._reported.get(c, 0)]

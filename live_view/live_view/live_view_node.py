@@ -4,8 +4,11 @@ chosen list, with its ``ros2msg`` schema and the CDR bytes as received.
 
 Topics are advertised as they appear (a publisher and one type) and dropped as they go. A ROS
 subscription is made only while a Foxglove client subscribes to the topic, so a camera nobody
-watches is not rendered for the bridge. A slow client never stalls the graph: the SDK drops
-that client's oldest messages, and the node counts and logs how often (bridge.py).
+watches is not rendered for the bridge. Clients come in through the gate (gate.py): only this
+server's Host names and the allowed Origins (a web page of another site is refused), at most
+``max_clients`` at once, each with an outbox of at most ``send_buffer_limit`` bytes. A slow
+client never stalls the graph or another client: its oldest messages are dropped, and the node
+counts and logs how many (bridge.py).
 """
 from __future__ import annotations
 
@@ -13,6 +16,8 @@ import collections
 import functools
 import logging
 import sys
+import threading
+import time
 from dataclasses import dataclass, field
 from typing import Deque, Dict, Optional, Set, Tuple
 
@@ -25,10 +30,13 @@ from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.subscription import Subscription
 
 from live_view.bridge import SEND_LOSSY_LOGGER, SlowClients, TopicFilter, graph_change
+from live_view.gate import Gate, GateError, default_origins, self_signed_certificate
 from recording.qos_profiles import adapt_to_publishers
 from recording.types import TypeResolutionError, TypeResolver, message_class
+from ros_common.log_limit import KeyedLimiter
 from ros_common.node_main import run_node
-from ros_common.params import float_range
+from ros_common.params import declare_web_access, float_range
+from ros_common.web_access import WebAccessError
 
 
 class LiveViewError(RuntimeError):
@@ -93,14 +101,20 @@ class LiveView(Node):
             description='Topics never streamed', read_only=True))
         self.declare_parameter('discovery_period', 0.2, float_range(
             'Wall seconds between looks for topics that appeared or went', 0.02, 10.0))
-        self.declare_parameter('message_backlog_size', 256, text(
-            description='Messages queued per client; past that its oldest are dropped',
-            read_only=True, integer_range=[IntegerRange(from_value=1, to_value=100000, step=1)]))
+        self.declare_parameter('message_backlog_size', 16, text(
+            description="Messages the Foxglove SDK queues for the gate's connection of a "
+                        'client (the gate drains it at once into the client\'s outbox); past '
+                        'that its oldest are dropped', read_only=True,
+            integer_range=[IntegerRange(from_value=1, to_value=1024, step=1)]))
         self.declare_parameter('queue_depth', 10, text(
             description='History depth of the ROS subscriptions', read_only=True,
             integer_range=[IntegerRange(from_value=1, to_value=10000, step=1)]))
         self.declare_parameter('report_period', 5.0, float_range(
             'Wall seconds between reports of clients that fell behind', 0.1, 3600.0))
+        self.declare_parameter('send_buffer_limit', 10000000, text(
+            description='Bytes queued for a client (as foxglove_bridge); past that its oldest '
+                        'messages are dropped', read_only=True,
+            integer_range=[IntegerRange(from_value=1024, to_value=2 ** 31 - 1, step=1)]))
         get = lambda name: self.get_parameter(name).value  # noqa: E731
         try:
             self._filter = TopicFilter(get('topics'), get('exclude'))
@@ -121,21 +135,46 @@ class LiveView(Node):
         foxglove.set_log_level(logging.INFO)
         host, port = get('host'), int(get('port'))
         try:
-            self._server = foxglove.start_server(
-                name='robot-sim live_view', host=host, port=port,
-                server_listener=_Listener(self._requests), supported_encodings=['cdr'],
-                message_backlog_size=int(get('message_backlog_size')))
-        except Exception as exc:  # noqa: BLE001 - the SDK raises its own error types
+            access, max_clients = declare_web_access(
+                self, host, default_origins(), "clients that are not browsers send none and "
+                "are let in. Default: Foxglove's web app and pages served on loopback",
+                'max_clients', 'Clients')
+        except WebAccessError as exc:
             self._detach_logs()
-            raise LiveViewError(f'cannot serve on {host}:{port}: {exc}') from None
-        self.url = f'ws://{host}:{self._server.port}'
+            raise LiveViewError(str(exc)) from None
+        # The SDK's server, on loopback behind TLS that only the gate trusts (gate.py).
+        certificate, key = self_signed_certificate()
+        try:
+            self._server = foxglove.start_server(
+                name='robot-sim live_view', host='127.0.0.1', port=0,
+                server_listener=_Listener(self._requests), supported_encodings=['cdr'],
+                message_backlog_size=int(get('message_backlog_size')),
+                tls_cert=certificate, tls_key=key)
+        except Exception as exc:    # (the SDK raises its own error types)
+            self._detach_logs()
+            raise LiveViewError(f'cannot start the Foxglove server: {exc}') from None
+        self._gate_limiter = KeyedLimiter(1.0)
+        self._gate_log_lock = threading.Lock()
+        self._gate = Gate(access, host, port, self._server.port, certificate,
+                          max_clients, int(get('send_buffer_limit')),
+                          self.slow_clients, self._gate_log)
+        try:
+            served = self._gate.start()
+        except GateError as exc:
+            self._server.stop()
+            self._detach_logs()
+            raise LiveViewError(str(exc)) from None
+        self.url = f'ws://{host}:{served}'
+        self.get_logger().info(f'the Foxglove server behind the gate: wss://127.0.0.1:'
+                               f'{self._server.port} (a certificate only the gate trusts)')
         # Wall-clock timers: the bridge runs whether or not simulated time advances.
         steady = Clock(clock_type=ClockType.STEADY_TIME)
         self.create_timer(get('discovery_period'), self._update, clock=steady)
         self.create_timer(get('report_period'), self._report, clock=steady)
         self.get_logger().info(
-            f'serving the Foxglove WebSocket protocol on {self.url} ({self._filter.describe()}); '
-            f'in Foxglove: Open connection > Foxglove WebSocket > {self.url}')
+            f'serving the Foxglove WebSocket protocol on {self.url} ({self._filter.describe()}; '
+            f'to {self._gate.describe()}); in Foxglove: Open connection > Foxglove WebSocket > '
+            f'{self.url}')
         self._update()
 
     # --- the graph --------------------------------------------------------------------------
@@ -207,11 +246,32 @@ class LiveView(Node):
 
     # --- reports ------------------------------------------------------------------------------
     def _report(self) -> None:
-        for client, new, total in self.slow_clients.news():
+        self._gate.collect_drops()
+        news = self.slow_clients.news()
+        if news:
+            shown = '; '.join(f'{client}: {new} ({total} in all)'
+                              for client, new, total in news[:5])
+            more = f'; and {len(news) - 5} more clients' if len(news) > 5 else ''
             self.get_logger().warn(
-                f'client {client} fell behind: its outbox was full {new} time(s) since the last '
-                f'report ({total} in all); its oldest messages were dropped, the graph was not '
+                f'{len(news)} client(s) fell behind, messages dropped since the last report, '
+                f'the oldest first: {shown}{more}; the graph and the other clients were not '
                 'held up')
+
+    def _gate_log(self, level: str, text: str, kind: str) -> None:
+        """The gate's log lines (from its thread); those of a kind at most once a second."""
+        logger = self.get_logger()
+        if kind:
+            with self._gate_log_lock:
+                line = self._gate_limiter.text(kind, time.monotonic(), text)
+            if line is None:
+                return
+            text = line
+        if level == 'warn':
+            logger.warn(text)
+        elif level == 'error':
+            logger.error(text)
+        else:
+            logger.info(text)
 
     def streamed(self) -> Dict[str, int]:
         return {t: e.forwarded for t, e in self._topics.items()}
@@ -222,6 +282,7 @@ class LiveView(Node):
 
     def finish(self) -> str:
         self._detach_logs()         # (the context may be shut down already: no ROS log now)
+        self._gate.stop()
         self._server.stop()
         counts = self.slow_clients.counts()
         behind = (f'; clients that fell behind: {counts}' if counts else '')

@@ -41,9 +41,9 @@ from websockets.http11 import Request, Response
 
 from ros_common.geometry import yaw_of
 from ros_common.node_main import run_node
-from ros_common.params import float_range
+from ros_common.params import declare_web_access, float_range
 from ros_common.stamps import to_seconds
-from ros_common.web_access import WebAccess, WebAccessError
+from ros_common.web_access import WebAccessError
 from teleop.panel_core import (
     DeadMan,
     Outbox,
@@ -106,17 +106,6 @@ class ControlPanel(Node):
         self.declare_parameter('max_turn', 0.2, float_range(
             'Turn rate at 100 % where neither the world nor the simulator says [rad/s]',
             1e-3, 20.0))
-        self.declare_parameter('allowed_hosts', [''], text(
-            description='Host names the page may be reached by besides loopback and the '
-                        "served address (a request naming another host is refused: a page "
-                        "of another site that made its name resolve here)", read_only=True))
-        self.declare_parameter('allowed_origins', [''], text(
-            description='Regular expressions of the origins (scheme://host:port) of other '
-                        "pages that may drive; empty: only the panel's own page",
-                        read_only=True))
-        self.declare_parameter('max_pages', 16, text(
-            description='Pages connected at once; past that a page is refused (503)',
-            read_only=True, integer_range=[IntegerRange(from_value=1, to_value=1024, step=1)]))
         get = lambda name: self.get_parameter(name).value  # noqa: E731
         for name in STATIC.values():
             if not (WEB / name[0]).is_file():
@@ -147,13 +136,14 @@ class ControlPanel(Node):
         # Pages: id -> page; the asyncio loop owns them.
         self._pages: Dict[int, _Page] = {}
         self._page_ids = itertools.count(1)
-        self._max_pages = int(get('max_pages'))
         self._loop = asyncio.new_event_loop()
         self._server_ready = threading.Event()
         self._server_error: Optional[BaseException] = None
         self._host, self._port = get('host'), int(get('port'))
         try:
-            self._access = WebAccess(self._host, get('allowed_hosts'), get('allowed_origins'))
+            self._access, self._max_pages = declare_web_access(
+                self, self._host, (), "empty: only the panel's own page may drive", 'max_pages',
+                'Pages')
         except WebAccessError as exc:
             raise ControlPanelError(str(exc)) from None
         self._thread = threading.Thread(target=self._serve, name='control_panel_http',

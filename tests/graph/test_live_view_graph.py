@@ -2,18 +2,21 @@
 `websockets` package speaking the Foxglove WebSocket protocol, and mcap-ros2-support decoding
 the CDR bytes with the schemas the bridge advertised."""
 import asyncio
+import functools
 import json
 import math
 import re
 import struct
 import time
+from pathlib import Path
 
+import pytest
 from geometry_msgs.msg import Twist
 from mcap.records import Schema
 from mcap_ros2.decoder import DecoderFactory
 from std_msgs.msg import String
 
-from helpers import wait_for
+from helpers import REPORT, handshake_status, wait_for
 
 SUBPROTOCOL = 'foxglove.sdk.v1'
 MESSAGE_DATA = 0x01
@@ -144,3 +147,96 @@ def test_a_client_sees_the_robot_drive_and_its_camera_live(start_node, probe):
     assert sim.alive() and bridge.alive()
     assert bridge.stop() == 0
     assert 'messages streamed per topic' in bridge.output()
+
+
+def _rss_mib(pid: int) -> float:
+    status = Path(f'/proc/{pid}/status').read_text()
+    return int(re.search(r'VmRSS:\s+(\d+)', status).group(1)) / 1024
+
+
+def test_only_its_own_clients_get_in_and_a_slow_one_costs_a_bounded_amount(start_node):
+    """A web page of another site (its Origin, or its own name made to resolve to 127.0.0.1)
+    got odometry, camera frames and the URDF; 30 clients that subscribe to the camera and never
+    read took the bridge from 222 MiB to 1.83 GiB. The SDK's own server is out of a page's
+    reach (TLS with a certificate only the gate trusts)."""
+    import ssl
+
+    import websockets
+    from websockets.exceptions import InvalidStatus
+
+    start_node('sim_node', '-p', 'real_time_factor:=1.0')
+    bridge = start_node('live_view', '-p', 'port:=0', '-p', 'max_clients:=31', '-p',
+                        'message_backlog_size:=4', '-p', 'send_buffer_limit:=1000000', '-p',
+                        'report_period:=0.5')
+    wait_for(lambda: _url(bridge) or not bridge.alive(), 30.0, what='the bridge to serve')
+    url = _url(bridge)
+    port = url.rsplit(':', 1)[1]
+    sdk = re.search(r'behind the gate: (wss://127\.0\.0\.1:\d+)', bridge.output()).group(1)
+    image, odom = '/mini_robot/camera/image_raw', '/mini_robot/odom'
+
+    async def connect(**kwargs):
+        return await websockets.connect(url, subprotocols=[SUBPROTOCOL], max_size=None,
+                                        **kwargs)
+
+    async def refused(status, **kwargs):
+        with pytest.raises(InvalidStatus, match=str(status)):
+            ws = await connect(**kwargs)
+            await ws.close()
+
+    async def session():
+        # Pages of other sites; then what no browser sends.
+        await refused(403, origin='https://evil.example')
+        await refused(403, origin='null')
+        evil = f'evil.example:{port}'             # (its name resolved to 127.0.0.1)
+        assert handshake_status(url, evil, [f'http://{evil}']) == 403
+        assert handshake_status(url, f'127.0.0.1:{port}', ['https://evil.example']) == 403
+        assert handshake_status(url, f'127.0.0.1:{port}') == 101
+        # Foxglove's web app and a page served on loopback are let in.
+        for origin in ('https://app.foxglove.dev', 'http://localhost:8080'):
+            ws = await connect(origin=origin)
+            await ws.close()
+        # The SDK's server: no plain WebSocket, and no TLS a browser would trust.
+        with pytest.raises((InvalidStatus, OSError, websockets.exceptions.InvalidMessage,
+                            websockets.exceptions.ConnectionClosed)):
+            async with websockets.connect(sdk.replace('wss', 'ws'),
+                                          subprotocols=[SUBPROTOCOL], open_timeout=10):
+                pass
+        with pytest.raises(ssl.SSLCertVerificationError):
+            async with websockets.connect(sdk, subprotocols=[SUBPROTOCOL],
+                                          ssl=ssl.create_default_context(), open_timeout=10):
+                pass
+
+        live = FoxgloveClient(await connect())
+        await live.pump(lambda: live.topic_channel(odom) and live.topic_channel(image), 30)
+        await live.subscribe(odom)
+        await live.pump(lambda: live.received.get(odom), 30)
+        before = _rss_mib(bridge.proc.pid)
+        deaf = []
+        for _ in range(30):
+            slow = FoxgloveClient(await connect(max_queue=1))
+            await slow.pump(functools.partial(slow.topic_channel, image), 30)
+            await slow.subscribe(image)
+            deaf.append(slow)
+        await refused(503)                      # (31 clients: max_clients)
+        # Ten seconds of camera frames to clients that read none of them.
+        count = len(live.received[odom])
+        end = time.monotonic() + 10.0
+        await live.pump(lambda: time.monotonic() > end, 30)
+        peak = _rss_mib(bridge.proc.pid)
+        for slow in deaf:
+            await slow.ws.close()
+        await live.ws.close()
+        return before, peak, len(live.received[odom]) - count
+
+    before, peak, odometry = asyncio.run(session())
+    REPORT.append(f'live view: 30 clients that never read 10 s of camera frames: RSS {before:.0f} '
+                  f'-> {peak:.0f} MiB (outboxes of 1 MB)')
+    # 30 outboxes of at most 1 MB each, the SDK's 4 frames (230 kB) behind each, and what the
+    # sockets hold.
+    assert peak - before < 150.0, (before, peak)
+    assert odometry > 100                       # (50 Hz: the reading client was not held up)
+    log = bridge.output()
+    assert 'fell behind' in log
+    assert 'is not allowed' in log and 'DNS rebinding' in log
+    assert 'max_clients' in log
+    assert bridge.alive()

@@ -26,7 +26,7 @@ PYTHON_KEYS = {
     'mcap': 'python3-mcap-pip', 'mcap_ros2': 'python3-mcap-ros2-support-pip',
     'zstandard': 'python3-zstandard-pip', 'ruckig': 'python3-ruckig-pip',
     'ray': 'python3-ray-pip', 'foxglove': 'python3-foxglove-sdk-pip',
-    'websockets': 'python3-websockets',
+    'websockets': 'python3-websockets', 'cryptography': 'python3-cryptography',
 }
 # Modules that come with rclpy or the interface packages, declared by their ROS package name.
 ROS_MODULES = {'rclpy', 'rcl_interfaces', 'builtin_interfaces', 'ament_index_python',

@@ -134,12 +134,17 @@ def test_the_acceleration_limit_moves_each_component_by_at_most_its_step(current
 CELL = load_world(resolve_resource('package://world_description/worlds/pipeline_cell.yaml'))
 WORLD_TEXT = __import__('yaml').safe_load(
     open(resolve_resource('package://world_description/worlds/pipeline_cell.yaml')))
-JSONISH = st.recursive(
-    st.one_of(st.none(), st.booleans(), ANY_FLOAT, st.integers(-10**6, 10**6),
-              st.text(max_size=12)),
-    lambda inner: st.one_of(st.lists(inner, max_size=4),
-                            st.dictionaries(st.text(max_size=8), inner, max_size=4)),
-    max_leaves=12)
+
+
+def json_values(leaves):
+    """Any JSON-like value (lists and mappings, a few levels deep) of ``leaves``."""
+    return st.recursive(leaves, lambda inner: st.one_of(
+        st.lists(inner, max_size=4), st.dictionaries(st.text(max_size=8), inner, max_size=4)),
+        max_leaves=12)
+
+
+JSONISH = json_values(st.one_of(st.none(), st.booleans(), ANY_FLOAT, st.integers(-10**6, 10**6),
+                                st.text(max_size=12)))
 
 
 def _paths(data, prefix=()):
@@ -270,9 +275,7 @@ def test_an_ik_request_is_answered_and_a_planned_motion_is_one_the_simulator_tak
 JSON_LEAVES = st.one_of(st.none(), st.booleans(), st.integers(), st.integers(-10 ** 30, 10 ** 30),
                         ANY_FLOAT, st.text(max_size=20),
                         st.sampled_from(_OPS + tuple(MOTIONS) + ('/mini_robot', '', 'op')))
-JSON_VALUES = st.recursive(JSON_LEAVES, lambda inner: st.one_of(
-    st.lists(inner, max_size=4), st.dictionaries(st.text(max_size=10), inner, max_size=4)),
-    max_leaves=12)
+JSON_VALUES = json_values(JSON_LEAVES)
 
 
 # What each field of a command holds when a page means well.

@@ -2,7 +2,12 @@
 import pytest
 
 from world_description.resources import resolve_resource
-from world_description.world_config import WorldConfigError, load_world, parse_world
+from world_description.world_config import (
+    MAX_WORLD_BYTES,
+    WorldConfigError,
+    load_world,
+    parse_world,
+)
 
 ROBOT = {'name': 'r1', 'urdf': 'package://robot_description/urdf/mini_robot.urdf'}
 
@@ -78,6 +83,25 @@ def test_missing_and_malformed_files(tmp_path):
     latin.write_bytes('robots: []  # caf\xe9\n'.encode('latin-1'))
     with pytest.raises(WorldConfigError, match='not UTF-8 text'):
         load_world(latin)
+
+
+def test_a_world_path_that_is_not_a_world_file_is_named_for_what_it_is(tmp_path):
+    with pytest.raises(WorldConfigError, match='is a directory'):
+        load_world(tmp_path)
+    (tmp_path / 'a.yaml').symlink_to(tmp_path / 'b.yaml')
+    (tmp_path / 'b.yaml').symlink_to(tmp_path / 'a.yaml')
+    with pytest.raises(WorldConfigError, match='Too many levels of symbolic links'):
+        load_world(tmp_path / 'a.yaml')
+    big = tmp_path / 'big.yaml'                   # (a 1 GB world took 8.5 min to parse)
+    with open(big, 'wb') as f:
+        f.truncate(MAX_WORLD_BYTES + 1)
+    with pytest.raises(WorldConfigError, match='a world file is at most'):
+        load_world(big)
+    bad = tmp_path / 'bad.yaml'
+    bad.write_text('robots:\n  - name: [\n')
+    with pytest.raises(WorldConfigError) as error:
+        load_world(bad)
+    assert '\n' not in str(error.value) and 'at line 3' in str(error.value)
 
 
 def test_both_bases_have_acceleration_limits():
