@@ -195,7 +195,7 @@ class Gate:
         try:
             upstream = await connect(
                 self._upstream, ssl=self._ssl, open_timeout=10.0, max_size=None,
-                compression=None, ping_interval=None, max_queue=4, logger=_QUIET,
+                compression=None, ping_interval=None, max_queue=2, logger=_QUIET,
                 subprotocols=[connection.subprotocol] if connection.subprotocol else None)
         except (OSError, InvalidHandshake, asyncio.TimeoutError) as exc:
             self._log('error', f'client {client.label}: cannot reach the Foxglove server: '
