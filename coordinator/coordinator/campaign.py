@@ -176,7 +176,10 @@ def campaign_lock(out: Path) -> Iterator[None]:
     """Hold the campaign directory for this runner (an advisory lock, gone with its process):
     a second runner into it is refused with the first one's process id."""
     path = out / LOCK_FILE
-    handle: IO[str] = open(path, 'a+')
+    try:
+        handle: IO[str] = open(path, 'a+')
+    except OSError as exc:
+        raise CampaignError(f'{out}: cannot be written ({exc.strerror or exc})') from None
     try:
         try:
             fcntl.flock(handle, fcntl.LOCK_EX | fcntl.LOCK_NB)

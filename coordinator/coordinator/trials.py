@@ -533,7 +533,10 @@ def _main(argv: Optional[Sequence[str]]) -> int:
             return _show_graph({**PLAN_DEFAULTS, **given})
         if args.resume is None and not args.report_only:
             check_world(given.get('world', PLAN_DEFAULTS['world']))     # (before any file)
-        args.out.mkdir(parents=True, exist_ok=True)
+        try:
+            args.out.mkdir(parents=True, exist_ok=True)
+        except OSError as exc:
+            raise CampaignError(f'--out {args.out}: {exc.strerror or exc}') from None
         with campaign_lock(args.out):
             if args.report_only:
                 return _rebuild(args.out)

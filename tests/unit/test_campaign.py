@@ -118,6 +118,12 @@ def test_resume_and_report_need_a_campaign_directory(capsys, tmp_path, nothing_r
             'not a campaign directory')
 
 
+def test_an_out_that_cannot_be_a_directory_is_one_line(capsys, tmp_path, nothing_runs):
+    (tmp_path / 'a_file').write_text('')
+    refused(capsys, ['--out', str(tmp_path / 'a_file')], '--out')
+    refused(capsys, ['--out', str(tmp_path / 'a_file' / 'below')], '--out')
+
+
 def test_a_new_campaign_does_not_write_over_another(capsys, tmp_path, nothing_runs):
     (tmp_path / 'campaign.json').write_text(json.dumps({'plan': {'trials': 3}}))
     refused(capsys, ['--out', str(tmp_path)], 'holds a campaign already')
