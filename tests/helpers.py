@@ -342,3 +342,41 @@ def lying_bag(directory, storage, variant):
         info['starting_time']['nanoseconds_since_epoch'] = 0
     meta.write_text(yaml.safe_dump(doc))
     return writer.path
+
+
+def chunked_bag(directory: Path, storage: str = 'mcap', name: str = 'flip',
+                keep_metadata: bool = True) -> Path:
+    """A closed bag of 600 std_msgs/String on /t, flushed every 100 (six MCAP chunks, six
+    SQLite commits)."""
+    from rclpy.serialization import serialize_message
+    from std_msgs.msg import String
+
+    from recording.bag_writer import BagWriter
+    writer = BagWriter(directory, name, storage)
+    writer.add_topic('/t', 'std_msgs/msg/String')
+    for i in range(600):
+        writer.write('/t', 1_000_000 * i, serialize_message(String(data=f'{i:04d}' + 'z' * 60)))
+        if i % 100 == 99:
+            writer.flush()
+    writer.close()
+    if not keep_metadata:
+        (writer.path / 'metadata.yaml').unlink()
+    return writer.path
+
+
+def flipped_copies(bag: Path, directory: Path, count: int, seed: int):
+    """``count`` copies of ``bag`` in ``directory``, each with a few of its data file's bytes
+    set to 0, 255 or one bit flipped (a bad disk, a careless edit), seeded."""
+    import random
+    rng = random.Random(seed)
+    data_file = next(p for p in bag.iterdir() if p.suffix in ('.mcap', '.db3'))
+    data = data_file.read_bytes()
+    for trial in range(count):
+        damaged = bytearray(data)
+        for _ in range(rng.choice([1, 1, 4, 16])):
+            at = rng.randrange(len(damaged))
+            damaged[at] = rng.choice([0x00, 0xff, damaged[at] ^ (1 << rng.randrange(8))])
+        copy = directory / f'damaged_{bag.name}_{trial}'
+        shutil.copytree(bag, copy)
+        (copy / data_file.name).write_bytes(bytes(damaged))
+        yield copy

@@ -108,6 +108,9 @@ def scan_mcap(path: Path, file_index: int = 0) -> Scan:
                 yield Topic((file_index, record.id), record.topic, schema.name, msgdef,
                             record.metadata.get('offered_qos_profiles', ''))
             elif isinstance(record, Message):
+                if record.log_time >= 2 ** 63:
+                    scan.damage.append('a message with a damaged time skipped')
+                    return
                 yield (file_index, record.channel_id), record.log_time, record.data
 
         size = path.stat().st_size
@@ -189,31 +192,52 @@ def scan_sqlite(path: Path, file_index: int = 0) -> Scan:
     def items() -> Iterator[Item]:
         with _sqlite_copy(path) as copy:
             db = sqlite3.connect(copy)
+            # (Text is decoded here, row by row: a damaged row may not be UTF-8.)
+            db.text_factory = bytes
             try:
                 try:
-                    defs = {row[0]: row[1] for row in db.execute(
+                    defs = dict(_text_rows(db.execute(
                         'SELECT topic_type, encoded_message_definition FROM '
-                        'message_definitions')}
-                    topics = list(db.execute(
-                        'SELECT id, name, type, offered_qos_profiles FROM topics'))
-                except sqlite3.Error as exc:
+                        'message_definitions'), scan))
+                    topics = list(_text_rows(db.execute(
+                        'SELECT name, type, offered_qos_profiles, id FROM topics'), scan))
+                except (sqlite3.Error, UnicodeDecodeError) as exc:
+                    # (UnicodeDecodeError: the schema itself is damaged, its column names.)
                     raise RepairError(f'{path}: {exc}') from None
-                for tid, name, msgtype, qos in topics:
+                for name, msgtype, qos, tid in topics:
                     yield Topic((file_index, tid), name, msgtype, defs.get(msgtype, ''),
                                 qos or '')
+                damaged = 0
                 try:
                     for tid, stamp, data in db.execute(
                             'SELECT topic_id, timestamp, data FROM messages ORDER BY id'):
+                        # (SQLite keeps any type in any column: a damaged row can hold text
+                        # where a time was.)
+                        if not (isinstance(tid, int) and isinstance(stamp, int)
+                                and 0 <= stamp < 2 ** 63 and isinstance(data, bytes)):
+                            damaged += 1
+                            continue
                         yield (file_index, tid), stamp, data
-                except sqlite3.Error as exc:
+                except (sqlite3.Error, UnicodeDecodeError) as exc:
                     scan.truncated = True
                     scan.damage.append(f'the messages are unreadable past a damaged page '
                                        f'({exc})')
+                if damaged:
+                    scan.damage.append(f'{damaged} damaged message rows skipped')
             finally:
                 db.close()
 
     scan.items = items()
     return scan
+
+
+def _text_rows(rows, scan: Scan) -> Iterator[tuple]:
+    """Rows whose text columns (bytes, as read) are UTF-8, decoded; the others are noted."""
+    for row in rows:
+        try:
+            yield tuple(v.decode() if isinstance(v, bytes) else v for v in row)
+        except UnicodeDecodeError:
+            scan.damage.append('a damaged topic or definition row skipped')
 
 
 @contextmanager

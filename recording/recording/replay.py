@@ -30,6 +30,10 @@ class ReplayError(RuntimeError):
     """A bag that cannot be replayed."""
 
 
+class BagDataError(RuntimeError):
+    """The bag's reader failed on its data (truncated, corrupt)."""
+
+
 class Replay(Node):
 
     def __init__(self, **kwargs) -> None:
@@ -68,7 +72,7 @@ class Replay(Node):
         try:
             self.reader = AnyReader([self.bag])
             self.reader.open()
-        except (AnyReaderError, ReaderError, OSError, ValueError, KeyError, IndexError) as exc:
+        except Exception as exc:    # (as _messages: the reader raises many kinds on bad data)
             raise ReplayError(f'{self.bag}: not a readable bag ({exc}); a bag left by a killed '
                               'recorder can be restored with bag_repair') from None
         self.connections = [c for c in self.reader.connections
@@ -113,7 +117,8 @@ class Replay(Node):
     def _play(self) -> int:
         try:
             return self._play_bag()
-        except (AnyReaderError, ReaderError, OSError, ValueError, KeyError, IndexError) as exc:
+        except (BagDataError, AnyReaderError, ReaderError, OSError, ValueError, KeyError,
+                IndexError) as exc:
             if not self.context.ok():
                 raise
             # The index opened, but a chunk is damaged: say so instead of a traceback.
@@ -128,7 +133,7 @@ class Replay(Node):
             time.sleep(self.delay)
         # The schedule starts at the bag's first message as read, not at metadata.yaml's start
         # time: metadata can be wrong (edited, or from another bag); the messages are played.
-        first = next((stamp for _, stamp, _ in self.reader.messages()), None)
+        first = next((stamp for _, stamp, _ in self._messages()), None)
         if first is None:
             self.get_logger().warn(f'{self.bag}: the bag holds no messages')
             return 0
@@ -137,7 +142,7 @@ class Replay(Node):
         while self.context.ok():
             schedule.restart(time.monotonic())
             next_clock = 0.0
-            for connection, bag_ns, raw in self.reader.messages(connections=self.connections):
+            for connection, bag_ns, raw in self._messages(self.connections):
                 self._read_once += first_pass
                 if schedule.skip(bag_ns) or connection.topic not in self._topic_pubs:
                     continue
@@ -169,6 +174,20 @@ class Replay(Node):
                 f'the bag holds {self._read_once}, which were replayed')
         self.get_logger().info(f'replay done: {self.published} messages published')
         return 0
+
+    def _messages(self, connections=()):
+        """The reader's messages; whatever the reader raises on damaged data (rosbags, the mcap
+        and SQLite libraries raise many kinds: struct.error, OverflowError, CorruptError, ...)
+        is a BagDataError."""
+        messages = self.reader.messages(connections=connections)
+        while True:
+            try:
+                item = next(messages)
+            except StopIteration:
+                return
+            except Exception as exc:
+                raise BagDataError(f'{type(exc).__name__}: {exc}') from None
+            yield item
 
     def _wait_for_subscribers(self) -> None:
         end = time.monotonic() + self.wait_for_subscribers

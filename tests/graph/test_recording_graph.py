@@ -11,7 +11,7 @@ from rclpy.serialization import deserialize_message
 from rosbags.highlevel import AnyReader
 from rosgraph_msgs.msg import Clock
 
-from helpers import lying_bag, wait_for
+from helpers import chunked_bag, flipped_copies, lying_bag, wait_for
 from recording.repair import repair
 
 DT_NS = round(1e9 / 240)
@@ -219,6 +219,42 @@ def test_replay_plays_the_messages_when_the_metadata_says_there_are_none(start_n
     assert [m.data for _, m in received] == [str(i) for i in range(100)]
     assert 'metadata.yaml counts 0 messages' in replay.output()
     assert 'replay done: 100 messages published' in replay.output()
+
+
+def _damaged_bags(directory, wanted=4):
+    """Copies of a closed bag with bytes flipped, chosen for the different errors they make
+    rosbags raise while reading (struct.error and OverflowError were replay tracebacks)."""
+    from rosbags.highlevel import AnyReader
+    bags, seen = [], set()
+    for storage in ('mcap', 'sqlite3'):
+        for bag in flipped_copies(chunked_bag(directory / 'src', storage, f'src_{storage}'),
+                                  directory, 200, seed=3):
+            try:
+                with AnyReader([bag]) as reader:
+                    for _ in reader.messages():
+                        pass
+                continue
+            except Exception as exc:  # (what kinds the reader raises is what is looked for)
+                kind = (storage, type(exc).__name__)
+            if kind not in seen:
+                seen.add(kind)
+                bags.append((bag, kind))
+            if len(bags) >= wanted * 2:
+                break
+    return bags
+
+
+def test_replay_of_damaged_bags_ends_with_one_error(start_node, tmp_path):
+    bags = _damaged_bags(tmp_path)
+    assert len(bags) >= 3, bags
+    for k, (bag, kind) in enumerate(bags):
+        proc = start_node('replay', '-p', f'bag:={bag}', '-p', 'rate:=100.0',
+                          name=f'replay_{k}')
+        wait_for(lambda p=proc: not p.alive(), 60.0, what='replay to exit')
+        log = proc.output()
+        assert proc.proc.returncode == 1, (kind, log)
+        assert 'Traceback' not in log, (kind, log)
+        assert 'not a readable bag' in log or 'unreadable data after' in log, (kind, log)
 
 
 def test_bad_bags_fail_clearly(start_node, tmp_path):

@@ -17,7 +17,7 @@ from rclpy.serialization import serialize_message
 from rosbags.highlevel import AnyReader
 from std_msgs.msg import String
 
-from helpers import lying_bag
+from helpers import chunked_bag, flipped_copies, lying_bag
 from recording.analysis import AnalysisError, analyse, write_report
 from recording.analysis import main as analysis_main
 from recording.bag_writer import BagError, BagWriter, unique_bag_path
@@ -295,43 +295,20 @@ def test_repair_of_a_closed_bag_without_its_metadata_counts_each_message_once(tm
     assert not result.truncated and not result.notes
 
 
-def _bag_with_chunks(directory, storage='mcap', name='flip'):
-    writer = BagWriter(directory, name, storage)
-    writer.add_topic('/t', 'std_msgs/msg/String')
-    for i in range(600):
-        writer.write('/t', i, serialize_message(String(data=f'{i:04d}' + 'z' * 60)))
-        if i % 100 == 99:
-            writer.flush()
-    writer.close()
-    (writer.path / 'metadata.yaml').unlink()
-    return writer.path
-
-
 @pytest.mark.parametrize('storage', STORAGES)
 def test_repair_of_flipped_bytes_recovers_what_is_intact_or_says_why(tmp_path, storage):
     """Bytes flipped anywhere in the file (a bad disk, a careless edit): a UnicodeDecodeError
     or a MemoryError traceback before. Now the repair keeps what reads back, or ends with one
     line, and never leaves a partial bag behind."""
-    import random
-    rng = random.Random(7)
-    original = _bag_with_chunks(tmp_path / 'src', storage)
-    data_file = next(p for p in original.iterdir() if p.suffix in ('.mcap', '.db3'))
-    data = data_file.read_bytes()
+    original = chunked_bag(tmp_path / 'src', storage, keep_metadata=False)
     outcomes = {'repaired': 0, 'refused': 0}
-    for trial in range(60):
-        damaged = bytearray(data)
-        for _ in range(rng.choice([1, 1, 4, 16])):
-            at = rng.randrange(len(damaged))
-            damaged[at] = rng.choice([0x00, 0xff, damaged[at] ^ (1 << rng.randrange(8))])
-        bag = tmp_path / f'damaged_{trial}'
-        bag.mkdir()
-        (bag / data_file.name).write_bytes(bytes(damaged))
+    for bag in flipped_copies(original, tmp_path, 60, seed=7):
         try:
             result = repair(bag)
         except RepairError as exc:
             outcomes['refused'] += 1
             assert str(exc)
-            assert not (tmp_path / f'damaged_{trial}_repaired').exists()
+            assert not bag.with_name(bag.name + '_repaired').exists()
             continue
         outcomes['repaired'] += 1
         assert result.messages <= 600
@@ -340,7 +317,7 @@ def test_repair_of_flipped_bytes_recovers_what_is_intact_or_says_why(tmp_path, s
 
 
 def test_repair_says_which_files_it_could_not_read(tmp_path, capsys):
-    bag = _bag_with_chunks(tmp_path)
+    bag = chunked_bag(tmp_path, keep_metadata=False)
     (bag / 'extra_1.mcap').mkdir()                  # a data file replaced by a directory
     result = repair(bag)
     assert result.messages == 600 and 'extra_1.mcap is not a file' in result.notes
