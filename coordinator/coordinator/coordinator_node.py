@@ -66,8 +66,9 @@ from coordinator.results import (
     IdentificationCheck,
     PeakJointSpeed,
     at_destination,
-    regions_from_world,
+    destinations,
     score,
+    why_not_there,
 )
 from ros_common.geometry import yaw_of
 from ros_common.node_main import run_task
@@ -177,7 +178,7 @@ class CoordinatorNode(Node):
         self.result_file = get('result_file')
         self.progress_file = Path(get('progress_file')) if get('progress_file') else None
         self.seed = int(get('scenario_seed'))
-        self.regions = regions_from_world(self.world, layout.material_size)
+        self.regions = destinations(layout)
 
         self._lock = threading.Condition()
         # arm: (stamp [ns], positions, velocities if the message has them)
@@ -628,10 +629,13 @@ class CoordinatorNode(Node):
             identified = self._identifications.finish()
             details = list(self._identifications.details)
         out = score(result, truth, identified, self.regions)
+        # The published state and the exit code say what the ground truth says.
+        result.status, result.message = out['status'], out['message']
         out['identifications'] = details
         out['final_materials'] = [
-            {'color': color, 'position': [round(float(v), 4) for v in p],
-             'at_destination': at_destination(color, p, self.regions)} for color, p in truth]
+            {'id': k, 'color': color, 'position': [round(float(v), 4) for v in p],
+             'at_destination': at_destination(color, p, self.regions),
+             'why': why_not_there(color, p, self.regions)} for k, (color, p) in enumerate(truth)]
         with self._lock:
             out['peak_joint_speed'] = {
                 arm: {'fraction_of_limit': round(p.fraction, 4),

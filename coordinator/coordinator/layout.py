@@ -1,14 +1,15 @@
 """Where things are in the pipeline cell, read from the world file (no ROS).
 
-The coordinator knows the cell as a plant engineer would: the belt, the ground target, the
-youBot's home pose and load plate, the pool and its platform, and the batch manifest (how many
-materials of which colour). It never reads the simulator's ground truth to act.
+The coordinator knows the cell as a plant engineer would: the belt, the youBot's home pose and
+load plate, the pool and the stands it unloads from, the batch manifest (how many materials of
+which class) and each class's rule: its destination (a region of the world, laid out in slots)
+and its route there. It never reads the simulator's ground truth to act.
 """
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
-from typing import Dict, List, Tuple
+from dataclasses import dataclass, field, replace
+from typing import Dict, List, Set, Tuple
 
 import numpy as np
 
@@ -22,8 +23,58 @@ PLATE_SLOTS_IN_BASE_M: Tuple[Tuple[float, float], ...] = tuple(
     (x, y) for x in (-0.065, -0.125, -0.185, -0.245) for y in (0.11, -0.11))
 
 
+# A destination's slots: a grid over its top face, the materials this far apart (and this far in
+# from its edges) [m]. The pool's slots are the unload stands' drop spots instead.
+SLOT_GAP_M = 0.02
+SLOT_EDGE_M = 0.025
+POOL = 'pool_floor'
+
+
 class LayoutError(ValueError):
     pass
+
+
+@dataclass(frozen=True)
+class Rule:
+    """A material class's rule: where it goes, and how (world_description.material_classes)."""
+    name: str
+    destination: str                    # a region: an obstacle of the world
+    route: str                          # 'place' (by the Zu 12) or 'carry' (by the youBot)
+    size: float                         # cube edge [m]
+    mass: float                         # [kg]
+
+
+@dataclass(frozen=True)
+class Region:
+    """A destination: an obstacle's top face, and the slots a material is set down on (the
+    point under its centre), in the order they are taken. The pool's slots are release points
+    over its floor (``drop``): a material is let go there, above the walls."""
+    name: str
+    center: Tuple[float, float]         # world x, y
+    half: Tuple[float, float]           # half its footprint along x and y [m]
+    top: float                          # its top face (world z)
+    slots: Tuple[np.ndarray, ...]
+    drop: bool = False
+
+    def box(self, size: float) -> Tuple[float, ...]:
+        """Where the centre of a material of edge ``size`` resting on it lies (x0, x1, y0, y1,
+        z0, z1): on the face, not on another material."""
+        (x, y), (hx, hy) = self.center, self.half
+        return (x - hx, x + hx, y - hy, y + hy, self.top, self.top + size)
+
+
+def slot_grid(center: Tuple[float, float], half: Tuple[float, float], top: float, size: float,
+              first: Tuple[float, float]) -> Tuple[np.ndarray, ...]:
+    """A grid of slots over a face, centred on it, nearest ``first`` (x, y) first."""
+    pitch, margin = size + SLOT_GAP_M, size / 2 + SLOT_EDGE_M
+    axes = []
+    for c, h in zip(center, half):
+        n = int(math.floor((2 * h - 2 * margin) / pitch + 1e-9)) + 1 if 2 * h >= 2 * margin else 0
+        axes.append([c + (k - (n - 1) / 2) * pitch for k in range(n)])
+    points = [np.array([x, y, top]) for x in axes[0] for y in axes[1]]
+    return tuple(sorted(points, key=lambda p: (round(math.hypot(p[0] - first[0],
+                                                                 p[1] - first[1]), 9),
+                                                p[0], p[1])))
 
 
 @dataclass(frozen=True)
@@ -35,7 +86,7 @@ class UnloadStand:
     pose: Pose2D
     row: int                            # the plate row unloaded here: +1 left (y > 0), -1 right
     drops: Tuple[np.ndarray, ...]       # release points of pool materials, one each (world)
-    platform: bool = False              # the platform's place is in reach from here
+    serves: frozenset = frozenset()     # the destinations unloaded from here
 
 
 @dataclass(frozen=True)
@@ -45,13 +96,13 @@ class CellLayout:
     belt_end_x: float                   # the belt's downstream end (its stop's face) [m]
     belt_speed: float                   # nominal carrying speed [m/s]
     belt_width: float                   # [m]
-    material_size: float                # cube edge [m]
-    manifest: Dict[str, int]            # materials per colour in the batch
-    ground_target: np.ndarray           # purple materials: a point on the floor (world)
+    material_size: float                # the largest class's cube edge [m]
+    manifest: Dict[str, int]            # materials per class in the batch
     youbot_home: Pose2D                 # the youBot's start (and loading) pose
     youbot_base_z: float                # its base_link above the floor, on its wheels [m]
     zu12_base: Tuple[float, float, float, float]   # x, y, z, yaw
-    platform_place: np.ndarray = field(default_factory=lambda: np.zeros(3))  # blue: surface
+    rules: Dict[str, Rule] = field(default_factory=dict)        # per class
+    regions: Dict[str, Region] = field(default_factory=dict)    # the classes' destinations
     # Where the youBot stands to unload (the right row, then the left row and the platform),
     # and the key poses of its paths: out, between the stands (it turns about clear of the
     # pool's wall), and back.
@@ -66,49 +117,67 @@ class CellLayout:
         return sum(self.manifest.values())
 
     def plate_bound(self) -> int:
-        """Materials the Zu 12 puts on the youBot (all but purple)."""
-        return sum(n for color, n in self.manifest.items() if color != 'purple')
+        """Materials the Zu 12 puts on the youBot (those its route carries)."""
+        return sum(n for name, n in self.manifest.items() if self.carried(name))
+
+    def rule(self, name: str) -> Rule:
+        return self.rules[name]
+
+    def carried(self, name: str) -> bool:
+        """Whether the class rides on the youBot to its destination."""
+        return self.rules[name].route == 'carry'
+
+    def destination(self, name: str) -> str:
+        return self.rules[name].destination
+
+    def size_of(self, name: str) -> float:
+        return self.rules[name].size
+
+    def region_of(self, name: str) -> Region:
+        return self.regions[self.rules[name].destination]
 
     def stand(self, name: str) -> UnloadStand:
         return next(st for st in self.stands if st.name == name)
 
-    def stand_for(self, color: str, slot: int) -> UnloadStand:
-        """Where a material on plate slot ``slot`` is unloaded: the platform's stand for blue,
-        otherwise the stand of the slot's row."""
-        if self.destination(color) == 'platform':
-            return next(st for st in self.stands if st.platform)
+    def serving(self, region: str) -> UnloadStand:
+        """The stand a set-down destination is unloaded from (the pool: each stand, its row)."""
+        return next(st for st in self.stands if region in st.serves)
+
+    def stand_for(self, name: str, slot: int) -> UnloadStand:
+        """Where a material on plate slot ``slot`` is unloaded: the pool's from the stand of the
+        slot's row, any other destination's from the stand that reaches it."""
+        if self.destination(name) != POOL:
+            return self.serving(self.destination(name))
         return next(st for st in self.stands if st.row == slot_row(slot))
 
-    def slot_order(self, color: str) -> List[int]:
-        """The plate slots in the order the Zu 12 fills them for a material of ``color``: the
-        row unloaded where it goes first (blue: the platform's row; pool materials: the first
-        stand's row), the near slots first."""
-        first = (self._platform_row() if self.destination(color) == 'platform'
-                 else self.stands[0].row)
+    def slot_order(self, name: str) -> List[int]:
+        """The plate slots in the order the Zu 12 fills them for a material of class ``name``:
+        the row unloaded where it goes first (the first stand's row for the pool, the serving
+        stand's row for another destination), the near slots first."""
+        first = (self.stands[0].row if self.destination(name) == POOL
+                 else self.serving(self.destination(name)).row)
         return sorted(range(len(PLATE_SLOTS_IN_BASE_M)), key=lambda k: (slot_row(k) != first, k))
 
-    def free_slots(self, color: str, taken: Dict[int, str]) -> List[int]:
-        """The free plate slots for a material of ``color``, in the order they are filled
-        (``slot_order``), with the slots ``taken`` (slot: colour of what is on it). A pool
-        material leaves the platform row's last free slots to the manifest's platform
-        materials not on the plate yet: with four oranges ahead of the blue, the blue went
+    def free_slots(self, name: str, taken: Dict[int, str]) -> List[int]:
+        """The free plate slots for a material of class ``name``, in the order they are filled
+        (``slot_order``), with the slots ``taken`` (slot: class of what is on it). A pool
+        material leaves the last free slots of a set-down destination's row to the manifest's
+        materials for it not on the plate yet: with four oranges ahead of the blue, the blue went
         into the other row, and was unloaded there from the platform's stand, the arm going the
         long way round (a trial took 72.4 s against 65 s)."""
-        free = [k for k in self.slot_order(color) if k not in taken]
-        if self.destination(color) == 'platform' or not self.stands:
+        free = [k for k in self.slot_order(name) if k not in taken]
+        if self.destination(name) != POOL or not self.stands:
             return free
-        platform = sum(n for c, n in self.manifest.items() if self.destination(c) == 'platform')
-        to_come = platform - sum(1 for c in taken.values() if self.destination(c) == 'platform')
-        in_row = [k for k in free if slot_row(k) == self._platform_row()]
-        kept = set(in_row[max(0, len(in_row) - to_come):]) if to_come > 0 else set()
+        kept: set = set()
+        for row in {st.row for st in self.stands if st.serves - {POOL}}:
+            bound = [c for c in self.manifest if self.carried(c) and self.destination(c) != POOL
+                     and self.serving(self.destination(c)).row == row]
+            to_come = (sum(self.manifest[c] for c in bound)
+                       - sum(1 for c in taken.values() if c in bound))
+            in_row = [k for k in free if slot_row(k) == row]
+            if to_come > 0:
+                kept |= set(in_row[max(0, len(in_row) - to_come):])
         return [k for k in free if k not in kept]
-
-    def _platform_row(self) -> int:
-        return next(st for st in self.stands if st.platform).row
-
-    def destination(self, color: str) -> str:
-        return {'purple': 'ground_target', 'orange': 'pool', 'blue': 'platform'}.get(
-            color, 'pool')
 
 
 def slot_row(slot: int) -> int:
@@ -134,57 +203,36 @@ def world_to_base(pose: Pose2D, point) -> np.ndarray:
 
 
 def layout_from_world(world) -> CellLayout:
-    """The layout of a loaded WorldConfig (world_description.world_config) of the pipeline cell."""
+    """The layout of a loaded WorldConfig (world_description.world_config) of the pipeline
+    cell; a LayoutError (one line) for a cell whose rules cannot work."""
     if world.conveyor is None or world.materials is None:
         raise LayoutError('the world has no conveyor with materials')
     named = {o.name: o for o in world.obstacles if o.name}
-    for needed in ('ground_target', 'pool_floor', 'pool_platform'):
-        if needed not in named:
-            raise LayoutError(f'the world has no obstacle named {needed}')
     names = {r.name for r in world.robots}
     if not {'zu12', 'youbot'} <= names:
         raise LayoutError(f'the cell needs robots zu12 and youbot, the world has {sorted(names)}')
+    if POOL not in named:
+        raise LayoutError(f'the world has no obstacle named {POOL}: the youBot unloads from '
+                          'stands beside the pool')
     conv = world.conveyor
     if abs(math.sin(conv.yaw)) > 1e-9 or math.cos(conv.yaw) < 0.0:
         raise LayoutError('the coordinator expects the belt to carry along +x (yaw 0)')
     yb = world.robot('youbot').pose
     zu = world.robot('zu12').pose
-    size = world.materials.size
-    pool, platform = named['pool_floor'], named['pool_platform']
-    px, py = pool.position[0], pool.position[1]
-    half = min(pool.size[0], pool.size[1]) / 2
-    # The youBot unloads from two stands west of the pool, side-on to it (Mecanum: it can stand
-    # any way round): facing south (the pool on its left, the platform ahead on the left) for
-    # the left row of its plate and the platform, then facing north (the pool on its right) for
-    # the right row. Its wheels (0.209 m from base_link; its side 0.18 m) stay 3.1 cm off the
-    # pool's west wall (its face 2 cm inside wall_x): at 2.1 cm, the base's overshoot on a
-    # loaded machine touched it (real time: 1.5 cm and 3 degrees past the stand); each
-    # centimetre further costs a run about 0.25 s (the arm reaches further). Each
-    # orange has its own drop spot, 7-15 cm inside the wall and 10 cm from the next: a cube
-    # dropped onto another can tumble back over the wall.
-    wall_x = px - half
-    side_x = wall_x - 0.26
-    top = platform.position[2] + platform.size[2] / 2
-    place = np.array([platform.position[0] - platform.size[0] / 2 + 0.05, platform.position[1],
-                      top])
-    right = UnloadStand('pool_right', (side_x, py + 0.05, math.pi / 2), -1, tuple(
-        np.array([wall_x + dx, py + dy, 0.2]) for dx, dy in
-        ((0.07, 0.18), (0.07, 0.08), (0.15, 0.13), (0.07, -0.02))))
-    left = UnloadStand('pool_left', (side_x, py - 0.3, -math.pi / 2), 1, tuple(
-        np.array([wall_x + dx, py + dy, 0.2]) for dx, dy in
-        ((0.07, -0.22), (0.07, -0.15), (0.15, -0.2), (0.15, -0.12))), platform=True)
+    mats = world.materials
+    rules = {c.name: Rule(c.name, c.destination, c.route, c.size, c.mass) for c in mats.classes}
+    stands = _stands(named[POOL], rules)
     home = (yb.x, yb.y, yb.yaw)
-    return CellLayout(
+    right = next(st for st in stands if st.row == -1)
+    side_x, py = stands[0].pose[0], named[POOL].position[1]
+    layout = CellLayout(
         belt_y=conv.position[1], belt_top=conv.position[2],
         belt_end_x=conv.position[0] + conv.length / 2, belt_speed=conv.belt_speed,
         belt_width=conv.width,
         end_stop=conv.end_stop,
-        material_size=size, manifest=dict(world.materials.counts),
-        ground_target=np.array([named['ground_target'].position[0],
-                                named['ground_target'].position[1], 0.0]),
+        material_size=mats.largest, manifest=dict(mats.counts),
         youbot_home=home, youbot_base_z=yb.z, zu12_base=(zu.x, zu.y, zu.z, zu.yaw),
-        platform_place=place,
-        stands=(left, right),
+        rules=rules, stands=stands,
         # Out: down to the first stand from the north-west (never east of it, so never
         # nearer the wall), facing south as it parks: through a point 15 cm west of it, from
         # which the path comes in along the wall (from 10 cm, it bowed 1 cm past the stand
@@ -194,3 +242,100 @@ def layout_from_world(world) -> CellLayout:
         via_out=((side_x - 0.15, py + 0.55, -math.pi / 2),),
         via_turn=((side_x - 0.3, py - 0.12, 0.0),),
         via_back=((0.5 * (home[0] + side_x), 0.5 * (home[1] + right.pose[1]), 0.0),))
+    regions: Dict[str, Region] = {}
+    served: Dict[str, Set[str]] = {}
+    for dest in sorted({r.destination for r in rules.values()}):
+        regions[dest], by = _region(layout, named[dest], dest)
+        if by:
+            served.setdefault(by, set()).add(dest)
+    layout = replace(layout, regions=regions, stands=tuple(
+        replace(st, serves=st.serves | frozenset(served.get(st.name, ()))) for st in stands))
+    _check_capacity(layout)
+    return layout
+
+
+def _stands(pool, rules: Dict[str, Rule]) -> Tuple[UnloadStand, ...]:
+    """The youBot unloads from two stands west of the pool, side-on to it (Mecanum: it can stand
+    any way round): facing south (the pool on its left) for the left row of its plate, then
+    facing north (the pool on its right) for the right row. Its wheels (0.209 m from base_link;
+    its side 0.18 m) stay 3.1 cm off the pool's west wall (its face 2 cm inside wall_x): at
+    2.1 cm, the base's overshoot on a loaded machine touched it (real time: 1.5 cm and 3 degrees
+    past the stand); each centimetre further costs a run about 0.25 s (the arm reaches further).
+    Each pool material has its own drop spot, 7-15 cm inside the wall and 10 cm from the next:
+    a cube dropped onto another can tumble back over the wall. A carried class's other
+    destination (the paper's platform) is unloaded from the stand nearer it."""
+    px, py = pool.position[0], pool.position[1]
+    half = min(pool.size[0], pool.size[1]) / 2
+    wall_x = px - half
+    side_x = wall_x - 0.26
+    right = UnloadStand('pool_right', (side_x, py + 0.05, math.pi / 2), -1, tuple(
+        np.array([wall_x + dx, py + dy, 0.2]) for dx, dy in
+        ((0.07, 0.18), (0.07, 0.08), (0.15, 0.13), (0.07, -0.02))), frozenset({POOL}))
+    left = UnloadStand('pool_left', (side_x, py - 0.3, -math.pi / 2), 1, tuple(
+        np.array([wall_x + dx, py + dy, 0.2]) for dx, dy in
+        ((0.07, -0.22), (0.07, -0.15), (0.15, -0.2), (0.15, -0.12))), frozenset({POOL}))
+    return (left, right)
+
+
+def _region(layout: CellLayout, obstacle, name: str) -> Tuple[Region, str]:
+    """A destination's region and its slots, each checked in reach of the robot that sets a
+    material down there (a LayoutError if none is), and the stand the youBot unloads there from
+    (a carried class's destination other than the pool: the nearer stand)."""
+    from coordinator.reach import youbot_reaches, zu12_reaches
+    ox, oy, oz = obstacle.position
+    if abs(math.sin(2 * obstacle.yaw)) > 1e-9:
+        raise LayoutError(f'destination {name} is turned {math.degrees(obstacle.yaw):.0f} deg: '
+                          'a destination lies along the world axes')
+    hx, hy = obstacle.size[0] / 2, obstacle.size[1] / 2
+    if abs(math.cos(obstacle.yaw)) < 0.5:
+        hx, hy = hy, hx
+    top = oz + obstacle.size[2] / 2
+    bound = [r for r in layout.rules.values() if r.destination == name]
+    size = max(r.size for r in bound)
+    routes = {r.route for r in bound}
+    if len(routes) > 1:
+        raise LayoutError(f'destination {name} is reached by both routes '
+                          f'({", ".join(r.name for r in bound)}): give it one')
+    if name == POOL:
+        if routes != {'carry'}:
+            raise LayoutError(f'{POOL} is the youBot\'s: its materials are carried there '
+                              '(route: carry)')
+        drops = tuple(d for st in layout.stands for d in st.drops)
+        return Region(name, (ox, oy), (hx, hy), top, drops, drop=True), ''
+
+    if routes == {'place'}:
+        slots = slot_grid((ox, oy), (hx, hy), top, size, (ox, oy))
+        lift = size + 0.01
+        slots = tuple(p for p in slots if zu12_reaches(
+            layout.zu12_base, [p + np.array([0.0, 0.0, lift]),
+                               p + np.array([0.0, 0.0, lift + 0.07])]))
+        if not slots:
+            raise LayoutError(f'destination {name} is out of the Zu 12\'s reach (its base at '
+                              f'{layout.zu12_base[:2]})')
+        return Region(name, (ox, oy), (hx, hy), top, slots), ''
+    stand = min(layout.stands, key=lambda st: math.hypot(st.pose[0] - ox, st.pose[1] - oy))
+    slots = slot_grid((ox, oy), (hx, hy), top, size, stand.pose[:2])
+    reached = []
+    for p in slots:
+        local = world_to_base(stand.pose, p + np.array([0.0, 0.0, size + 0.015]))
+        local[2] -= layout.youbot_base_z
+        if youbot_reaches([local, local + np.array([0.0, 0.0, 0.05])]):
+            reached.append(p)
+    if not reached:
+        raise LayoutError(f'destination {name} is out of the youBot arm\'s reach from its '
+                          f'unload stands beside the pool')
+    return Region(name, (ox, oy), (hx, hy), top, tuple(reached)), stand.name
+
+
+def _check_capacity(layout: CellLayout) -> None:
+    """Every destination has a slot for each material bound for it; the plate holds every
+    carried material (the youBot makes one trip)."""
+    for name, region in layout.regions.items():
+        bound = sum(n for c, n in layout.manifest.items() if layout.destination(c) == name)
+        if bound > len(region.slots):
+            raise LayoutError(f'destination {name} has {len(region.slots)} slots in reach for '
+                              f'{bound} materials')
+    carried = layout.plate_bound()
+    if carried > len(PLATE_SLOTS_IN_BASE_M):
+        raise LayoutError(f'{carried} materials are carried; the youBot\'s plate holds '
+                          f'{len(PLATE_SLOTS_IN_BASE_M)} (one trip)')

@@ -1,10 +1,12 @@
 """The pipeline run as an explicit state machine (no ROS): sorting, delivery and transport.
 
-Two machines share one clock. The loader (the Zu 12) watches the vision's detections, stops the
-belt when the front material reaches the pick point, picks it with the suction cup, puts purple
-on the ground target and the rest on the youBot's plate. The transport (the youBot) waits for its
-load, drives along Bezier paths with a PD follower, unloads with its arm (orange into the pool,
-blue onto the platform) and drives home. Both arms end at their start poses.
+Two machines share one clock. The loader (the Zu 12) watches the vision's detections, picks each
+material off the running belt with the suction cup, sets the ones its class's rule has it place
+down on their destination's next free slot, and loads the ones the youBot carries onto its
+plate. The transport (the youBot) waits for its load, drives along Bezier paths with a PD
+follower, unloads with its arm (into the pool from over its wall, onto any other destination's
+next free slot) and drives home. Both arms end at their start poses. Which class goes where is
+the world file's (coordinator.layout's rules): no class is named here.
 
 The machine acts through ``Ports`` (IK, trajectories, suction, belt, base twist, events) and
 sees the world through ``Observation``; the node implements both over ROS, tests fake them.
@@ -36,16 +38,16 @@ from controllers.time_optimal import (
     plan,
     timed_path,
 )
-from controllers.transforms import matrix_to_quaternion
-from controllers.youbot_arm import ARM_BASE_IN_BASE_LINK_M
 from controllers.youbot_kinematics import YoubotKinematics
 from coordinator.layout import (
     PLATE_SLOTS_IN_BASE_M,
     PLATE_TOP_IN_BASE_M,
+    POOL,
     CellLayout,
     slot_in_world,
     world_to_base,
 )
+from coordinator.reach import youbot_tool_quaternion
 
 DOWN = (1.0, 0.0, 0.0, 0.0)                  # tool z pointing down (x, y, z, w)
 # A pick's contact is planned at least this long after the arm could be over the material, and
@@ -206,6 +208,8 @@ class Material:
     # The vision's detection that confirmed it, as reported: its colour and where the frame
     # showed it, at the frame's stamp (``position`` is carried on by the belt model).
     detection: Optional[Detection] = None
+    size: float = 0.05            # its class's cube edge [m]
+    place: int = -1               # its slot at its destination, once one is kept for it
 
 
 @dataclass
@@ -375,8 +379,8 @@ def _crossing(g, samples: int = 200) -> float:
 
 class Loader(Machine):
     """The Zu 12: picks materials off the running belt (meeting each where it will be, and
-    moving with it while the cup is on it); purple onto the ground target once it has ridden
-    to the end stop, the rest onto the youBot's plate."""
+    moving with it while the cup is on it); a class it places itself onto its destination once
+    it has ridden to the end stop, the carried ones onto the youBot's plate."""
 
     state: LoaderState
 
@@ -501,10 +505,11 @@ class Loader(Machine):
 
     def _next(self, waiting: Sequence[Material]) -> Optional[Material]:
         """The next material to pick: the most downstream one bound for the youBot's plate (the
-        youBot waits for them); the purple once the end stop holds it (it rides to the end)."""
+        youBot waits for them); one the Zu 12 places itself once the end stop holds it (it
+        rides to the end)."""
         run = self.run
         ride = run.layout.end_stop
-        now_ = [m for m in waiting if not (ride and m.color == 'purple')]
+        now_ = [m for m in waiting if not (ride and not run.layout.carried(m.color))]
         if not now_:
             now_ = [m for m in waiting if run.held(m)]
         return max(now_, key=lambda m: m.position[0], default=None)
@@ -519,7 +524,7 @@ class Loader(Machine):
         Real time: ``spent`` is how long earlier plans of this pick took since ``obs.now``
         (the port started them late, so they were replaced before they began)."""
         run, now, t = self.run, obs.now, self.run.s.timing
-        size = run.layout.material_size
+        size = m.size
         # A second attempt presses 4 mm further down.
         timing = PickTiming(**{**t.__dict__, 'contact_gap': t.contact_gap - 0.004 * m.attempts})
         track = run.track(m)
@@ -552,8 +557,8 @@ class Loader(Machine):
         for _ in range(PICK_TRIES):
             if track(t_contact)[0] < run.s.pick_x - 1e-6:
                 t_contact = run.reaches(m, run.s.pick_x)
-            if track(t_contact + timing.dwell)[0] > (run.layout.belt_end_x
-                                                     - run.layout.material_size / 2 + 1e-6):
+            if track(t_contact + timing.dwell)[0] > (run.layout.belt_end_x - m.size / 2
+                                                     + 1e-6):
                 return self._leave_it(obs, m)      # off the end (no stop) before the cup is on it
             path, lift = follow_pick(track, t_contact, size, timing, SAMPLE_PERIOD_S)
             self._lift = np.asarray(lift, float)
@@ -644,7 +649,7 @@ class Loader(Machine):
     def _pick_failed(self, obs: Observation, m: Material, why: str) -> None:
         run = self.run
         run.fail(obs.now, m, 'grasp_failed', why, 'zu12')
-        m.slot = -1                     # (a place on the plate kept for it is free again)
+        m.slot = m.place = -1           # (a place kept for it is free again)
         self.current = None
         self._ahead = None
         self._move(LoaderState.RETREAT, obs, [Waypoint(run.home_q['zu12'].copy())])
@@ -727,9 +732,15 @@ class Loader(Machine):
         """The way from the lift point ``lift`` (x, y, z; None: from above the place) onto
         ``m``'s place, or why there is none: over the belt's edge, to ``place_height`` above
         the place, and straight down until the material is just above it."""
-        run, size = self.run, self.run.layout.material_size
-        if m.color == 'purple':
-            target = run.layout.ground_target
+        run, size, lay = self.run, m.size, self.run.layout
+        onto_plate = lay.carried(m.color)
+        if not onto_plate:
+            region = lay.region_of(m.color)
+            free = run.free_places(region.name, m)
+            if not free:
+                return f'{region.name} is full (its {len(region.slots)} slots are taken)'
+            m.place = free[0]
+            target = region.slots[m.place]
         else:
             taken = {x.slot: x.color for x in run.materials.values()
                      if x.slot >= 0 and x is not m}
@@ -751,7 +762,6 @@ class Loader(Machine):
         # again), what the cup holds 5 cm over what can ride on the belt: onto the plate round
         # the arc (the way crosses the edge near the plate; before that it lies over the
         # belt), onto the ground target on the straight line, 5 cm over the belt's top.
-        onto_plate = m.color != 'purple'
         edge = (transfer if lift is None else
                 self._edge(lift, above, 2 * size + EDGE_CLEARANCE_M, arc=True) if onto_plate
                 else self._edge(lift, above, size + EDGE_CLEARANCE_M))
@@ -784,9 +794,10 @@ class Loader(Machine):
         ok, why = run.ports.grip('zu12', False)
         if not ok:
             return self._place_failed(obs, m, f'release failed: {why}')
-        if m.color == 'purple':
+        if not run.layout.carried(m.color):
             m.status = 'placed'
-            run.event(now, 'placed', 'zu12', m, 'ground target')
+            run.event(now, 'placed', 'zu12', m, f'{run.layout.destination(m.color)} slot '
+                                                 f'{m.place}')
         else:
             m.status = 'on_plate'
             run.loaded += 1
@@ -818,6 +829,7 @@ class UnloadPath:
     lift: List[np.ndarray]        # up off the plate, straight, to clear of its neighbours
     over: np.ndarray              # 5 cm above its drop
     drop: np.ndarray              # where it is let go
+    place: int = -1               # the destination's slot it is set down on (not the pool)
 
 
 # The youBot's lift off the plate: heights over the grip [m], the last clear of the neighbours.
@@ -829,7 +841,8 @@ UNLOAD_LIFT_END_SPEEDS = (0.0, 0.25, 0.5, 0.75, 1.0)
 
 class Transport(Machine):
     """The youBot: waits for its load, drives along Bezier paths with a PD follower, unloads
-    one material at a time (orange into the pool, blue onto the platform), drives home."""
+    one material at a time (into the pool over its wall, onto another destination's free
+    slot), drives home."""
 
     state: TransportState
 
@@ -893,7 +906,7 @@ class Transport(Machine):
             return      # (nor while the Zu 12's cup is over the plate, or swinging home from it)
         order = [st.name for st in run.layout.stands]
         self.queue = sorted(on_plate, key=lambda m: (
-            order.index(self._stand_for(m)), m.color == 'blue', m.slot))
+            order.index(self._stand_for(m)), run.layout.destination(m.color) != POOL, m.slot))
         if not self.queue:
             self.enter(TransportState.DONE, obs.now, math.inf)
             return
@@ -994,7 +1007,7 @@ class Transport(Machine):
         6 cm apart the joints' straight line swings what is held 2 cm sideways and tilts it 8
         degrees, into a neighbour 1 cm away."""
         run = self.run
-        size, t = run.layout.material_size, run.s.timing
+        size, t = m.size, run.s.timing
         slot = PLATE_SLOTS_IN_BASE_M[m.slot]
         top = (PLATE_TOP_IN_BASE_M + size + YOUBOT_GRASP_STANDOFF_M
                - 0.004 * m.unload_attempts)
@@ -1002,16 +1015,18 @@ class Transport(Machine):
         hover = contact + np.array([0.0, 0.0, 0.05 if high else 0.03])
         lift = [contact + np.array([0.0, 0.0, h]) for h in UNLOAD_LIFT_STEPS_M]
         stand = self._stand_for(m)
-        if m.color == 'blue':
-            candidates = [run.layout.platform_place + np.array(
-                [0.0, 0.0, size + t.place_gap + YOUBOT_GRASP_STANDOFF_M])]
+        region = run.layout.region_of(m.color)
+        if not region.drop:
+            # Its destination's free slots, the first the arm reaches from here.
+            up = np.array([0.0, 0.0, size + t.place_gap + YOUBOT_GRASP_STANDOFF_M])
+            candidates = [(k, region.slots[k] + up) for k in run.free_places(region.name, m)]
         else:
             # The stand's next free drop first; if the arm cannot reach it from this slot as
             # the base stands (a far slot, a base a centimetre off), the others in turn.
             drops = run.layout.stand(stand).drops
             first = self._dropped.get(stand, 0)
-            candidates = [drops[(first + k) % len(drops)] for k in range(len(drops))]
-        for drop_world in candidates:
+            candidates = [(-1, drops[(first + k) % len(drops)]) for k in range(len(drops))]
+        for place, drop_world in candidates:
             drop = world_to_base(pose, drop_world)
             drop[2] -= run.layout.youbot_base_z
             # Over the drop, at least as high as the lift's top: a swing there keeps what is
@@ -1023,7 +1038,7 @@ class Transport(Machine):
             path = run.solve_tilted([hover, contact, *lift, over, drop],
                                     np.array(seed, float))
             if path is not None:
-                return UnloadPath(path[0], path[1], path[2:-2], path[-2], path[-1])
+                return UnloadPath(path[0], path[1], path[2:-2], path[-2], path[-1], place)
         return None
 
     def _lift(self, obs: Observation, m: Material, then: Sequence[Waypoint] = (),
@@ -1049,7 +1064,7 @@ class Transport(Machine):
                     continue
                 within = all(np.all(np.abs(v) <= limits.velocity) for _, _, v, _ in points)
                 if (within and (best is None or points[-1][0] < best[-1][0])
-                        and clear_of_the_plate(points, others, run.layout.material_size)):
+                        and clear_of_the_plate(points, others, m.size)):
                     best = points
             if best is not None:
                 return best
@@ -1083,6 +1098,7 @@ class Transport(Machine):
         once the arm is there (GRASP)."""
         run, t = self.run, self.run.s.timing
         self._carry, self._armed = plan, False
+        m.place = plan.place                # (kept for it: the pool's drops are the stand's)
         m.unload_attempts += 1
         run.count_grasp('youbot')
         self.move(TransportState.GRASP, obs, run.plan('youbot', obs.youbot_q, [
@@ -1131,8 +1147,8 @@ class Transport(Machine):
         """Over to the material's drop (first up off the plate with ``lift``)."""
         run, t = self.run, self.run.s.timing
         self._drop_pending = False
-        if m.color == 'blue':
-            # Set down on the platform gently, from above, and still before letting go.
+        if not run.layout.region_of(m.color).drop:
+            # Set down on its slot gently, from above, and still before letting go.
             carry = [Waypoint(over, stop=False),
                      Waypoint(drop, hold=SETTLE_S, min_time=t.place_descend)]
         else:
@@ -1145,7 +1161,7 @@ class Transport(Machine):
                 points = self._lift(obs, m, carry, detour)
             else:       # (from the lift's top, where it waited for the base to stand)
                 points = run.plan('youbot', obs.youbot_q, carry)
-                if not clear_of_the_plate(points, self._others(m), run.layout.material_size):
+                if not clear_of_the_plate(points, self._others(m), m.size):
                     points = run.plan('youbot', obs.youbot_q, detour)
         except PlanError as exc:
             return self._unload_failed(obs, m, 'failed', f'unload: {exc}')
@@ -1173,14 +1189,18 @@ class Transport(Machine):
             # Over to its drop as the base stands now (the drive ends a little off its goal).
             path = (self._unload_path(m, obs.youbot_pose, obs.youbot_q)
                     or known(self._carry, 'the unload path'))
+            self._carry, m.place = path, path.place
             return self._carry_out(obs, m, path.over, path.drop)
         if not arrived:
             run.event(now, 'arm_stalled', 'youbot', m, 'unload motion not completed')
         run.ports.grip('youbot', False)
         m.status = 'delivered'
-        if m.color != 'blue':
+        where = run.layout.destination(m.color)
+        if run.layout.region_of(m.color).drop:
             self._dropped[self._drive_goal] = self._dropped.get(self._drive_goal, 0) + 1
-        run.event(now, 'delivered', 'youbot', m, run.layout.destination(m.color))
+        else:
+            where += f' slot {m.place}'
+        run.event(now, 'delivered', 'youbot', m, where)
         # The arm stays still while the material falls free of the fingers.
         self.enter(TransportState.RELEASE, now, RELEASE_HOLD_S)
 
@@ -1331,6 +1351,15 @@ class Pipeline:
         if not ready:
             self.event(obs.now, 'returning', arm)
 
+    def free_places(self, region: str, m: Material) -> List[int]:
+        """The slots of a destination (its Region's, in order) that no other material has or
+        is kept for: a material never goes down on another."""
+        taken = {x.place for x in self.materials.values()
+                 if x is not m and x.place >= 0 and x.status not in ('failed', 'missed')
+                 and self.layout.destination(x.color) == region}
+        slots = self.layout.regions[region].slots
+        return [k for k in range(len(slots)) if k not in taken]
+
     # --- the belt -----------------------------------------------------------------------------
     def _on_belt(self) -> List[Material]:
         """The materials the belt carries (or its stop holds), as the coordinator believes:
@@ -1339,9 +1368,8 @@ class Pipeline:
                 if m.status in ('seen', 'picking', 'failed') and not m.picked]
 
     def _items(self, mats: Sequence[Material]) -> List[Item]:
-        size = self.layout.material_size
         # Along the belt as world x (the belt runs along +x; only differences matter).
-        return [Item(m.position[0], m.position[1] - self.layout.belt_y, size, size)
+        return [Item(m.position[0], m.position[1] - self.layout.belt_y, m.size, m.size)
                 for m in mats]
 
     @property
@@ -1369,7 +1397,7 @@ class Pipeline:
     def reaches(self, m: Material, x: float) -> float:
         """When the material's centre reaches ``x`` (now if it is there already; infinity if it
         never will: the belt is stopped, or the stop holds it upstream of ``x``)."""
-        if x > self.layout.belt_end_x - self.layout.material_size / 2:
+        if x > self.layout.belt_end_x - m.size / 2:
             return math.inf                         # beyond the belt's end
         if m.position[0] >= x:
             return self.now
@@ -1424,8 +1452,11 @@ class Pipeline:
                 if (d.hits < self.s.confirm_hits or not self._on_belt_area(d.position)
                         or d.position[0] >= self.s.pick_x):
                     continue
+                if d.color not in self.layout.rules:
+                    continue                # (no class of this cell: the vision's config)
                 m = self.materials[d.id] = Material(d.id, d.color, self._seen_at(d, obs.now),
-                                                    obs.now, d.hits, detection=d)
+                                                    obs.now, d.hits, detection=d,
+                                                    size=self.layout.size_of(d.color))
                 self.event(obs.now, 'seen', 'vision', m,
                            f'at {np.round(m.position, 3).tolist()}')
             elif m.status == 'seen':
@@ -1583,15 +1614,3 @@ def clear_of_the_plate(points: Points, others: Sequence[Tuple[float, float]], si
                                      for sx, sy in others):
                 return False
     return True
-
-
-def youbot_tool_quaternion(p: Vector, tilt: float) -> Tuple[float, float, float, float]:
-    """Tool orientation (x, y, z, w in base_link) for the youBot's 5-joint arm at ``p``: the
-    approach axis down, leaning ``tilt`` away from the arm's base axis in the arm's vertical
-    plane (the only orientations a 5-joint arm reaches at an arbitrary point)."""
-    phi = math.atan2(p[1] - ARM_BASE_IN_BASE_LINK_M[1], p[0] - ARM_BASE_IN_BASE_LINK_M[0])
-    z = np.array([math.cos(phi) * math.sin(tilt), math.sin(phi) * math.sin(tilt),
-                  -math.cos(tilt)])
-    y = np.array([-math.sin(phi), math.cos(phi), 0.0])
-    x = np.cross(y, z)
-    return matrix_to_quaternion(np.column_stack([x, y, z]))

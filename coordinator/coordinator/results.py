@@ -9,7 +9,8 @@ Definitions (docs/pipeline.md repeats them):
   the batch;
 - grasp success rate: successful grasps / grasp attempts, both arms (first-attempt and retried);
 - handling success rate: materials resting at their destination at the end / materials in the
-  batch (purple on the ground target, orange inside the pool, blue on the pool platform);
+  batch (each class's destination by the world's rules: resting on the region's top face, not
+  on another material);
 - split as the paper's columns: the Zu 12's grasp rate (its picks) and the youBot's grasp rate
   (its unloads); the youBot's transport rate: materials loaded onto its plate that rest at
   their destination / materials loaded onto its plate;
@@ -19,40 +20,80 @@ Definitions (docs/pipeline.md repeats them):
 from __future__ import annotations
 
 import math
-from dataclasses import asdict
-from typing import Dict, List, Optional, Sequence, Tuple
+from dataclasses import asdict, dataclass
+from typing import Dict, FrozenSet, List, Optional, Sequence, Tuple
 
 import numpy as np
 
 from controllers.arrays import Vector
+from coordinator.layout import CellLayout, layout_from_world
 from coordinator.pipeline import RunResult
 
 TruePose = Tuple[str, np.ndarray]            # (true colour, centre position)
 
 
-def at_destination(color: str, position: Vector, regions: Dict[str, Tuple]) -> bool:
-    """Whether a material of ``color`` resting at ``position`` is where it belongs. A region is
-    (x_min, x_max, y_min, y_max, z_min, z_max) in the world."""
-    key = {'purple': 'ground_target', 'blue': 'platform'}.get(color, 'pool')
-    x0, x1, y0, y1, z0, z1 = regions[key]
+@dataclass(frozen=True)
+class Destinations:
+    """Where each class's materials belong, by the world's rules: per class, the box its centre
+    lies in when it rests on its destination's top face (x_min, x_max, y_min, y_max, z_min,
+    z_max; not on another material, whose centre lies a size higher); and the carried
+    classes (the youBot's transport rate counts them)."""
+    boxes: Dict[str, Tuple[float, ...]]
+    carried: FrozenSet[str]
+    places: Dict[str, str]                    # per class: its destination's name
+
+
+def destinations(layout: CellLayout) -> Destinations:
+    return Destinations(
+        {c: layout.region_of(c).box(layout.size_of(c)) for c in layout.rules},
+        frozenset(c for c in layout.rules if layout.carried(c)),
+        {c: layout.destination(c) for c in layout.rules})
+
+
+def regions_from_world(world) -> Destinations:
+    """The destinations of a loaded world's classes."""
+    return destinations(layout_from_world(world))
+
+
+def at_destination(color: str, position: Vector, regions: Destinations) -> bool:
+    """Whether a material of ``color`` resting at ``position`` is where its rule puts it."""
+    box = regions.boxes.get(color)
+    if box is None:
+        return False
+    x0, x1, y0, y1, z0, z1 = box
     x, y, z = (float(v) for v in position)
     return x0 <= x <= x1 and y0 <= y <= y1 and z0 <= z <= z1
 
 
-def regions_from_world(world, size: float) -> Dict[str, Tuple]:
-    """Destination boxes from the world's named obstacles (a material's centre inside)."""
-    named = {o.name: o for o in world.obstacles if o.name}
+def why_not_there(color: str, position: Vector, regions: Destinations) -> str:
+    """Why a material of ``color`` resting at ``position`` is not at its destination ('' if it
+    is), from where it lies."""
+    box = regions.boxes.get(color)
+    if box is None:
+        return f'{color} is no class of this cell'
+    x0, x1, y0, y1, z0, z1 = box
+    x, y, z = (float(v) for v in position)
+    where = regions.places[color]
+    at = f'({x:.3f}, {y:.3f}, {z:.3f})'
+    if x0 <= x <= x1 and y0 <= y <= y1:
+        if z > z1:
+            return f'on {where} but {z - z0:.3f} m over its face, on another material, at {at}'
+        if z < z0:
+            return f'under {where}\'s face at {at}'
+        return ''
+    return f'not on {where}: at {at}'
 
-    def box(name: str, z0: float, z1: float, margin: float = 0.0) -> Tuple:
-        o = named[name]
-        hx, hy = o.size[0] / 2 + margin, o.size[1] / 2 + margin
-        return (o.position[0] - hx, o.position[0] + hx, o.position[1] - hy, o.position[1] + hy,
-                z0, z1)
-    platform = named['pool_platform']
-    top = platform.position[2] + platform.size[2] / 2
-    return {'ground_target': box('ground_target', 0.0, size),
-            'pool': box('pool_floor', 0.0, 0.1),
-            'platform': box('pool_platform', top, top + size)}
+
+def not_at_destination(final_truth: Sequence[TruePose], regions: Destinations) -> List[Dict]:
+    """Each material (by its order of appearance, the simulator's id) not at its destination,
+    and why."""
+    out = []
+    for k, (color, p) in enumerate(final_truth):
+        why = why_not_there(color, p, regions)
+        if why:
+            out.append({'id': k, 'color': color, 'destination': regions.places.get(color, ''),
+                        'why': why})
+    return out
 
 
 def nearest_material(position: Vector,
@@ -139,14 +180,25 @@ class IdentificationCheck:
 
 
 def score(result: RunResult, final_truth: Sequence[TruePose], identifications: Sequence[bool],
-          regions: Dict[str, Tuple]) -> Dict:
+          regions: Destinations) -> Dict:
     """The run's figures: counts, the three rates and the completion time, as a dict."""
     total = max(result.total, 1)
     handled = sum(1 for color, p in final_truth if at_destination(color, p, regions))
     correct = sum(1 for ok in identifications if ok)
     out = asdict(result)
+    missing = not_at_destination(final_truth, regions)
+    out['not_at_destination'] = missing
+    if result.status == 'completed' and (missing or len(final_truth) < result.total):
+        # The coordinator believed every material delivered; the simulator's ground truth says
+        # otherwise: the run did not complete.
+        out['status'] = 'incomplete'
+        told = [f'material {m["id"]} ({m["color"]}) {m["why"]}' for m in missing]
+        if len(final_truth) < result.total:
+            told.append(f'{result.total - len(final_truth)} of the {result.total} materials '
+                        'never appeared')
+        out['message'] = '; '.join(told)
     plate_bound = sum(1 for color, p in final_truth
-                      if color != 'purple' and at_destination(color, p, regions))
+                      if color in regions.carried and at_destination(color, p, regions))
     out.update({
         # The paper's split: the Zu 12's recognition and grasps, the youBot's transport.
         'zu12_grasp_rate': _rate(result.zu12_grasp_successes, result.zu12_grasp_attempts),

@@ -17,6 +17,7 @@ class ColorClass:
     hue_ranges: Tuple[Tuple[int, int], ...]
     min_saturation: int = 110
     min_value: int = 50
+    size: Optional[float] = None      # the class's cube edge [m], if it has its own
 
     def __post_init__(self) -> None:
         if not self.hue_ranges:
@@ -37,13 +38,10 @@ class ColorClass:
         return (hue & (s >= self.min_saturation) & (v >= self.min_value)).astype(np.uint8)
 
 
-# The scenario's colours (docs/robot-models.md §5): hues of the simulator's materials are 139
-# (purple), 14 (orange) and 112 (blue); the ranges leave room for lighting and colour noise.
-DEFAULT_CLASSES = (
-    ColorClass('purple', ((125, 160),)),
-    ColorClass('orange', ((3, 28),)),
-    ColorClass('blue', ((98, 124),)),
-)
+def classes_of(materials) -> Tuple[ColorClass, ...]:
+    """The camera's classes for a world's materials (world_description's MaterialsConfig): each
+    class's hue range (from its colour, or as the world gives it) and its size."""
+    return tuple(ColorClass(c.name, (tuple(c.hue),), size=c.size) for c in materials.classes)
 
 
 @dataclass
@@ -57,7 +55,7 @@ class Blob:
     contour: np.ndarray
 
 
-def segment(rgb: np.ndarray, classes: Sequence[ColorClass] = DEFAULT_CLASSES,
+def segment(rgb: np.ndarray, classes: Sequence[ColorClass],
             min_area: float = 20.0, roi: Optional[Tuple[int, int, int, int]] = None
             ) -> List[Blob]:
     """Blobs of each colour class in an RGB image (uint8, h x w x 3)."""

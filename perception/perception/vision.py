@@ -8,7 +8,7 @@ import cv2
 import numpy as np
 
 from perception.projection import CameraModel, locate_cube
-from perception.segmentation import DEFAULT_CLASSES, Blob, ColorClass, confidence, segment
+from perception.segmentation import Blob, ColorClass, confidence, segment
 from perception.tracker import Sighting, Track, Tracker
 
 BORDER_PX = 2
@@ -22,20 +22,27 @@ class FrameResult:
 
 
 class MaterialVision:
-    """Materials are upright cubes of edge ``size`` resting on the plane z = ``support_z``."""
+    """Materials are upright cubes resting on the plane z = ``support_z``, of edge ``size``
+    unless their class gives its own."""
 
     def __init__(self, camera: CameraModel, width: int, height: int, support_z: float,
-                 size: float, classes: Sequence[ColorClass] = DEFAULT_CLASSES,
+                 size: float, classes: Sequence[ColorClass],
                  min_area_fraction: float = 0.25, yaw: float = 0.0,
                  tracker: Optional[Tracker] = None) -> None:
         self.camera, self.width, self.height = camera, width, height
         self.support_z, self.size, self.yaw = support_z, size, yaw
         self.classes = tuple(classes)
-        depth = float((camera.position[2] - (support_z + size)))
-        if depth <= 0.0:
-            raise ValueError('the camera must be above the materials')
+        if not self.classes:
+            raise ValueError('no colour classes to look for')
+        self.sizes = {c.name: c.size or size for c in self.classes}
         focal = float(camera.k[0, 0])
-        self.expected_area = (focal * size / depth) ** 2
+        self.expected_areas = {}
+        for name, edge in self.sizes.items():
+            depth = float((camera.position[2] - (support_z + edge)))
+            if depth <= 0.0:
+                raise ValueError('the camera must be above the materials')
+            self.expected_areas[name] = (focal * edge / depth) ** 2
+        self.expected_area = min(self.expected_areas.values())
         self.min_area = max(4.0, min_area_fraction * self.expected_area)
         self.tracker = tracker or Tracker()
 
@@ -52,11 +59,11 @@ class MaterialVision:
             if cut:                      # partly out of view: its centroid is not its centre
                 continue
             centre, residual = locate_cube(self.camera, blob.u, blob.v, self.support_z,
-                                           self.size, self.yaw)
+                                           self.sizes[blob.color], self.yaw)
             if residual > 1.0:
                 continue
             observations.append(Sighting(blob.color, centre, blob.u, blob.v,
-                                            confidence(blob, self.expected_area)))
+                                            confidence(blob, self.expected_areas[blob.color])))
         return FrameResult(blobs, observations, self.tracker.update(t, observations))
 
     def annotate(self, rgb: np.ndarray, result: FrameResult) -> np.ndarray:

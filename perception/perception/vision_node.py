@@ -17,14 +17,16 @@ from typing import Any, Deque, Dict, Optional, Tuple
 import numpy as np
 from rcl_interfaces.msg import ParameterDescriptor
 from rclpy.event_handler import PublisherEventCallbacks
+from rclpy.exceptions import ParameterUninitializedException
 from rclpy.node import Node
+from rclpy.parameter import Parameter
 from rclpy.qos import QoSProfile, qos_profile_sensor_data
 from rclpy.subscription import Subscription
 from sensor_msgs.msg import CameraInfo, Image
 from sim_interfaces.msg import MaterialDetection, MaterialDetectionArray
 
 from perception.projection import CameraModel, intrinsics_problem
-from perception.segmentation import DEFAULT_CLASSES, ColorClass
+from perception.segmentation import ColorClass, classes_of
 from perception.tracker import Tracker
 from perception.vision import MaterialVision
 from ros_common.node_main import run_node
@@ -63,9 +65,10 @@ class VisionNode(Node):
         self.declare_parameter('material_size', -1.0, ro(
             description='Edge of the cubic materials [m]; -1: the world file\'s',
             read_only=True))
-        self.declare_parameter('classes', [c.name for c in DEFAULT_CLASSES], ro(
+        self.declare_parameter('classes', Parameter.Type.STRING_ARRAY, ro(
             description='Colour classes; each has <name>.hue_ranges, <name>.min_saturation, '
-                        '<name>.min_value', read_only=True))
+                        '<name>.min_value. Unset: the world file\'s material classes',
+            read_only=True))
         self.declare_parameter('track_gate', 0.04, float_range(
             'Largest distance between a track\'s prediction and a new observation [m]',
             1e-3, 1.0))
@@ -79,8 +82,10 @@ class VisionNode(Node):
             description='Take camera frames only while something reads detections or '
                         'debug_image (the simulator renders a camera only for its readers)',
             read_only=True))
-        classes = self._classes()
-        camera_pose, support, size, yaw = self._geometry()
+        world = (load_world(resolve_resource(self.get_parameter('world').value))
+                 if self.get_parameter('world').value else None)
+        classes = self._classes(world)
+        camera_pose, support, size, yaw = self._geometry(world)
         self._pose, self._support, self._size, self._yaw = camera_pose, support, size, yaw
         self._classes_cfg = classes
         get = lambda n: self.get_parameter(n).value  # noqa: E731
@@ -127,39 +132,58 @@ class VisionNode(Node):
                                    'frames until one comes (lazy:=false to take them anyway)')
 
     # --- configuration ------------------------------------------------------------------------
-    def _classes(self):
+    def _classes(self, world):
+        """The colour classes: the world's material classes unless ``classes`` names others
+        (each with its ``<name>.hue_ranges``); ``<name>.min_saturation`` and ``min_value``
+        may be set for either."""
+        named = self._unset_or('classes')
+        from_world = ({c.name: c for c in classes_of(world.materials)}
+                      if world is not None and world.materials is not None else {})
+        if not named and not from_world:
+            raise VisionConfigError('no colour classes: give a world file with materials, or '
+                                    'classes with <name>.hue_ranges each')
         classes = []
-        defaults = {c.name: c for c in DEFAULT_CLASSES}
-        for name in self.get_parameter('classes').value:
-            d = defaults.get(name)
-            ranges = [v for r in d.hue_ranges for v in r] if d else [0]
-            self.declare_parameter(f'{name}.hue_ranges', ranges, ParameterDescriptor(
-                description=f'OpenCV hue ranges (0..180) of {name}: lo, hi, lo, hi, ...',
-                read_only=True))
-            self.declare_parameter(f'{name}.min_saturation', d.min_saturation if d else 110,
+        for name in (named or list(from_world)):
+            d = from_world.get(name)
+            self.declare_parameter(f'{name}.hue_ranges', Parameter.Type.INTEGER_ARRAY,
+                                   ParameterDescriptor(
+                                       description=f'OpenCV hue ranges (0..180) of {name}: lo, '
+                                                   'hi, lo, hi, ... (unset: the world\'s)',
+                                       read_only=True))
+            self.declare_parameter(f'{name}.min_saturation', 110,
                                    ParameterDescriptor(read_only=True))
-            self.declare_parameter(f'{name}.min_value', d.min_value if d else 50,
-                                   ParameterDescriptor(read_only=True))
-            flat = list(self.get_parameter(f'{name}.hue_ranges').value)
+            self.declare_parameter(f'{name}.min_value', 50, ParameterDescriptor(read_only=True))
+            flat = self._unset_or(f'{name}.hue_ranges')
+            if flat is None:
+                if d is None:
+                    raise VisionConfigError(f'class {name} is no material class of the world: '
+                                            f'it needs {name}.hue_ranges')
+                flat = [v for r in d.hue_ranges for v in r]
+            flat = list(flat)
             if len(flat) < 2 or len(flat) % 2:
                 raise VisionConfigError(f'{name}.hue_ranges must hold pairs lo, hi; got {flat}')
             try:
                 classes.append(ColorClass(
                     name, tuple((int(flat[i]), int(flat[i + 1])) for i in range(0, len(flat), 2)),
                     int(self.get_parameter(f'{name}.min_saturation').value),
-                    int(self.get_parameter(f'{name}.min_value').value)))
+                    int(self.get_parameter(f'{name}.min_value').value),
+                    size=d.size if d is not None else None))
             except ValueError as exc:
                 raise VisionConfigError(str(exc)) from None
-        if not classes:
-            raise VisionConfigError('no colour classes')
         return classes
 
-    def _geometry(self):
+    def _unset_or(self, name: str) -> Any:
+        """A parameter declared without a default: its value, or None if none was given."""
+        try:
+            return self.get_parameter(name).value
+        except ParameterUninitializedException:
+            return None
+
+    def _geometry(self, world):
         get = lambda n: self.get_parameter(n).value  # noqa: E731
         position, look_at = list(get('camera_position')), list(get('camera_look_at'))
         support, size, yaw = get('support_height'), get('material_size'), 0.0
-        if get('world'):
-            world = load_world(resolve_resource(get('world')))
+        if world is not None:
             cams = [c for c in world.cameras if c.name == get('camera')]
             if not cams or cams[0].position is None:
                 raise VisionConfigError(f'world {get("world")} has no fixed camera '

@@ -38,6 +38,8 @@ class MaterialBody:
     color: str
     body: int
     spawned_at: float          # simulated time [s]
+    size: float = 0.05         # cube edge [m] (its class's)
+    mass: float = 0.1          # [kg]
 
 
 class Conveyor:
@@ -191,7 +193,8 @@ class MaterialSource:
         color, travel, across = self.plan[len(self.materials)]
         if self._conveyor.travel + 1e-12 < travel:
             return None
-        s = self.config.size
+        cls = self.config.cls(color)
+        s = cls.size
         half = (s / 2,) * 3
         col = self._p.createCollisionShape(pybullet.GEOM_BOX, halfExtents=half)
         vis = self._p.createVisualShape(pybullet.GEOM_BOX, halfExtents=half,
@@ -199,10 +202,10 @@ class MaterialSource:
         position = self._conveyor.point(self.config.start_offset + s / 2, across)
         position[2] += s / 2 + 1e-4
         orn = self._p.getQuaternionFromEuler((0.0, 0.0, self._conveyor.config.yaw))
-        body = self._p.createMultiBody(self.config.mass, col, vis, basePosition=position,
+        body = self._p.createMultiBody(cls.mass, col, vis, basePosition=position,
                                        baseOrientation=orn)
         self._p.changeDynamics(body, -1, lateralFriction=0.8)
-        material = MaterialBody(len(self.materials), color, body, sim_time)
+        material = MaterialBody(len(self.materials), color, body, sim_time, s, cls.mass)
         self.materials.append(material)
         return material
 
@@ -244,7 +247,7 @@ class Suction:
         if source is None or not source.materials:
             return None
         tcp, _ = self._robot.link_world_pose(self.link)
-        return min(((m, _distance_to_box(tcp, *source.pose(m), source.config.size / 2))
+        return min(((m, _distance_to_box(tcp, *source.pose(m), m.size / 2))
                     for m in source.materials), key=lambda md: md[1])
 
     def grip(self, source: Optional[MaterialSource]) -> Tuple[bool, str]:
@@ -258,7 +261,7 @@ class Suction:
         if best is None or best_d > self.reach:
             away = f'; nearest {best_d * 1000:.1f} mm away' if best is not None else ''
             return False, f'nothing within {self.reach * 1000:.0f} mm of the suction cup{away}'
-        if source.config.mass > self.max_payload:
+        if best.mass > self.max_payload:
             return False, f'material {best.index} is above the {self.max_payload} kg payload'
         pos, mrot = source.pose(best)
         link_index = self._robot.link_index[self.link]

@@ -833,7 +833,7 @@ def _material_marker(material, pos, rot, state: str, config, stamp: Time) -> Mar
         float(v) for v in pos)
     o = marker.pose.orientation
     o.x, o.y, o.z, o.w = matrix_to_quaternion(rot)
-    marker.scale.x = marker.scale.y = marker.scale.z = config.size
+    marker.scale.x = marker.scale.y = marker.scale.z = material.size
     r, g, b, a = dict(config.colors)[material.color]
     marker.color.r, marker.color.g, marker.color.b, marker.color.a = r, g, b, a
     return marker

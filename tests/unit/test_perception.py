@@ -11,10 +11,21 @@ from perception.projection import (
     locate_cube,
     pixel_to_plane,
 )
-from perception.segmentation import ColorClass, confidence, segment
+from perception.segmentation import ColorClass, classes_of, confidence
+from perception.segmentation import segment as segment_with
 from perception.tracker import Sighting, Tracker
 from sim_bringup.vision_evaluation import evaluate
+from world_description import PIPELINE_CELL
 from world_description.camera_geometry import look_at_rotation
+from world_description.resources import resolve_resource
+from world_description.world_config import load_world
+
+# The paper cell's classes, as its world file gives them.
+CLASSES = classes_of(load_world(resolve_resource(PIPELINE_CELL)).materials)
+
+
+def segment(rgb, **kwargs):
+    return segment_with(rgb, CLASSES, **kwargs)
 
 K = np.array([[290.0, 0.0, 160.0], [0.0, 290.0, 119.0], [0.0, 0.0, 1.0]])
 CAMERA = CameraModel(K, look_at_rotation((-0.55, 0.75, 1.25), (-0.55, 0.75, 0.4)),

@@ -318,7 +318,7 @@ def test_the_whole_run_delivers_every_material_and_both_robots_return():
     assert len(kinds(cell, 'placed')) == 1 and kinds(cell, 'placed')[0].color == 'purple'
     assert len(kinds(cell, 'loaded')) == 7
     delivered = kinds(cell, 'delivered')
-    assert sorted(e.detail for e in delivered) == ['platform'] + ['pool'] * 6
+    assert sorted(e.detail for e in delivered) == ['pool_floor'] * 6 + ['pool_platform slot 0']
     # The youBot left only with its whole load, and is home again; the belt is stopped.
     first_delivery = min(e.time for e in delivered)
     assert first_delivery > max(e.time for e in kinds(cell, 'loaded'))
@@ -375,7 +375,7 @@ def test_oranges_leave_a_slot_of_the_platforms_row_for_the_blue_still_to_come():
     layout = cell_layout()
     platform = layout.stand_for('blue', 0)
     row = [k for k in layout.slot_order('blue') if layout.stand_for('orange', k) is platform]
-    assert len(row) == 4 and platform.platform
+    assert len(row) == 4 and 'pool_platform' in platform.serves
     # Three oranges in the platform's row: a fourth goes to the other row, the blue still to
     # come gets the last slot of the platform's row (four oranges ahead of it took the whole
     # row, and the blue had to be unloaded from the other row, the long way round).
@@ -743,7 +743,8 @@ def test_youbot_tool_orientation_leans_outwards_in_the_arm_plane():
 def test_the_layout_of_the_cell_world():
     layout = cell_layout()
     assert layout.total == 8 and layout.plate_bound() == 7
-    assert layout.destination('blue') == 'platform' and layout.destination('orange') == 'pool'
+    assert layout.destination('blue') == 'pool_platform'
+    assert layout.destination('orange') == 'pool_floor'
     # The youBot's front (0.285 m ahead) stays west of the pool's west wall at both stands.
     assert all(st.pose[0] + 0.18 < 2.08 for st in layout.stands)   # side-on to the wall
 

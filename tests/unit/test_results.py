@@ -38,14 +38,17 @@ BESIDE_PLATFORM = _near('pool_platform', -0.19, 0.2, 0.025)     # on the floor, 
 
 @pytest.fixture(scope='module')
 def regions():
-    return regions_from_world(WORLD, WORLD.materials.size)
+    return regions_from_world(WORLD)
 
 
-def test_destinations_by_colour(regions):
-    assert at_destination('purple', (-0.5, 0.3, 0.025), regions)
-    assert not at_destination('purple', (-0.5, 0.0, 0.025), regions)     # beside the target
-    assert at_destination('orange', IN_POOL + [0, 0, 0.05], regions)       # in the pool, stacked
+def test_destinations_by_the_worlds_rules(regions):
+    assert at_destination('purple', (-0.5, 0.3, 0.027), regions)
+    assert not at_destination('purple', (-0.5, 0.0, 0.027), regions)     # beside the target
+    assert not at_destination('purple', (-0.5, 0.3, 0.077), regions)     # on another one
+    assert at_destination('orange', IN_POOL, regions)
+    assert not at_destination('orange', IN_POOL + [0, 0, 0.05], regions)   # on another one
     assert not at_destination('orange', IN_POOL + [0, 0, 0.1], regions)    # on the wall top
+    assert not at_destination('green', IN_POOL, regions)                   # no class of the cell
     assert at_destination('blue', ON_PLATFORM, regions)
     assert not at_destination('blue', BESIDE_PLATFORM, regions)           # fell off it
     assert not at_destination('orange', (1.0, 0.75, 0.425), regions)       # still on the belt
@@ -67,7 +70,7 @@ def _result(**kw):
 
 def test_score_takes_handling_from_ground_truth_not_from_the_coordinator(regions):
     truth = [('orange', IN_POOL)] * 6 + [
-        ('purple', np.array([-0.5, 0.3, 0.025])), ('blue', BESIDE_PLATFORM)]
+        ('purple', np.array([-0.5, 0.3, 0.027])), ('blue', BESIDE_PLATFORM)]
     out = score(_result(), truth, [True] * 7 + [False], regions)
     assert out['delivered'] == 8                       # what the coordinator believed
     assert out['handled_verified'] == 7 and out['handling_success_rate'] == 7 / 8
@@ -80,8 +83,8 @@ def test_the_rates_split_as_the_paper_splits_them(regions):
     # its plate one orange ended outside the pool.
     r = _result(zu12_grasp_attempts=9, zu12_grasp_successes=8, youbot_grasp_attempts=8,
                 youbot_grasp_successes=7, loaded=7)
-    truth = ([('purple', np.array([-0.5, 0.3, 0.025])), ('blue', ON_PLATFORM)]
-             + [('orange', IN_POOL + [0, 0, 0.05])] * 5
+    truth = ([('purple', np.array([-0.5, 0.3, 0.027])), ('blue', ON_PLATFORM)]
+             + [('orange', IN_POOL + [0.01 * k, 0, 0.0]) for k in range(5)]
              + [('orange', np.array([1.0, 0.0, 0.025]))])
     out = score(r, truth, [True] * 8, regions)
     assert out['zu12_grasp_rate'] == pytest.approx(8 / 9)
@@ -386,3 +389,25 @@ def test_identifications_left_at_the_end_are_decided_with_what_there_is():
     check.truth(1, [('orange', np.array([0.0, 0.0, 0.0]))])
     check.seen(5, [0.0, 0.0, 0.0], 'orange')
     assert check.finish() == [True]
+
+
+def test_a_run_is_completed_only_if_the_ground_truth_has_every_material_at_its_destination(
+        regions):
+    """The coordinator believed all 8 delivered; the second purple lies on the first, one
+    orange fell beside the pool: the result is incomplete and names both, and why."""
+    truth = ([('purple', np.array([-0.5, 0.3, 0.027])), ('purple', np.array([-0.5, 0.3, 0.077]))]
+             + [('orange', IN_POOL + [0.06 * k, 0, 0.0]) for k in range(4)]
+             + [('orange', np.array([1.7, -1.3, 0.027])), ('blue', ON_PLATFORM)])
+    out = score(_result(total=8), truth, [True] * 8, regions)
+    assert out['status'] == 'incomplete' and out['handled_verified'] == 6
+    missing = {m['id']: m for m in out['not_at_destination']}
+    assert sorted(missing) == [1, 6]
+    assert missing[1]['why'].startswith('on ground_target but 0.075 m over its face, on another')
+    assert missing[6]['why'] == 'not on pool_floor: at (1.700, -1.300, 0.027)'
+    assert 'material 1 (purple) on ground_target' in out['message']
+    # All there: completed, nothing named.
+    good = [truth[0]] + truth[2:6] + [('orange', IN_POOL + [0.0, 0.08, 0.0]), truth[7]]
+    ok = score(_result(total=7), good, [True] * 7, regions)
+    assert ok['status'] == 'completed' and ok['not_at_destination'] == []
+    # A material that never appeared is not at its destination either.
+    assert score(_result(total=8), good, [True] * 7, regions)['status'] == 'incomplete'

@@ -10,6 +10,14 @@ from typing import Any, Dict, List, Optional, Set, Tuple, Union
 
 import yaml
 
+from world_description.material_classes import (
+    PAPER_RULES,
+    ROUTES,
+    MaterialClass,
+    color_problem,
+    hue_ranges,
+)
+
 Vec3 = Tuple[float, float, float]
 
 
@@ -151,16 +159,39 @@ class ConveyorConfig:
 
 @dataclass(frozen=True)
 class MaterialsConfig:
-    """The material source: cubes of the scenario's colours dropped at the belt's start."""
+    """The material source: cubes of the cell's material classes dropped at the belt's start,
+    and each class's rule (world_description.material_classes)."""
 
-    counts: Tuple[Tuple[str, int], ...]          # (colour class, how many), e.g. the paper's 8
-    colors: Tuple[Tuple[str, Tuple[float, float, float, float]], ...]
-    size: float = 0.05
-    mass: float = 0.1
+    classes: Tuple[MaterialClass, ...]
+    size: float = 0.05                           # a class's edge unless it gives its own [m]
+    mass: float = 0.1                            # [kg]
     gap: Tuple[float, float] = (0.25, 0.45)      # belt travel between two drops [m]
     lateral_jitter: float = 0.03                 # +- across the belt [m]
     start_offset: float = 0.1                    # from the belt's upstream end [m]
     seed: int = 0
+
+    @property
+    def counts(self) -> Tuple[Tuple[str, int], ...]:
+        return tuple((c.name, c.count) for c in self.classes)
+
+    @property
+    def colors(self) -> Tuple[Tuple[str, Tuple[float, float, float, float]], ...]:
+        return tuple((c.name, c.color) for c in self.classes)
+
+    @property
+    def total(self) -> int:
+        return sum(c.count for c in self.classes)
+
+    @property
+    def largest(self) -> float:
+        """The largest class's edge [m]."""
+        return max((c.size for c in self.classes), default=self.size)
+
+    def cls(self, name: str) -> MaterialClass:
+        for c in self.classes:
+            if c.name == name:
+                return c
+        raise KeyError(name)
 
 
 @dataclass(frozen=True)
@@ -245,7 +276,7 @@ def parse_world(data: Any, source: str = '<memory>') -> WorldConfig:
     if data.get('materials') is not None:
         if conveyor is None:
             raise WorldConfigError(f'{source}: materials need a conveyor to be placed on')
-        materials = _materials(r, data['materials'])
+        materials = _materials(r, data['materials'], obstacles)
     return WorldConfig(source=source,
                        gravity=r.number(data, 'gravity', 'world', default=-9.81),
                        floor_size=r.number(data, 'floor_size', 'world', default=4.0, lo=0.1),
@@ -397,36 +428,121 @@ def _conveyor(r: '_Reader', item: Any) -> ConveyorConfig:
                                               hi=2.0), end_stop=end_stop)
 
 
-def _materials(r: '_Reader', item: Any) -> MaterialsConfig:
+def _materials(r: '_Reader', item: Any, obstacles: List[ObstacleConfig]) -> MaterialsConfig:
     where = 'materials'
-    r.only(item, where, {'counts', 'colors', 'size', 'mass', 'gap', 'lateral_jitter',
+    r.only(item, where, {'classes', 'counts', 'colors', 'size', 'mass', 'gap', 'lateral_jitter',
                          'start_offset', 'seed'})
+    size = r.number(item, 'size', where, default=0.05, lo=0.005, hi=1.0)
+    mass = r.number(item, 'mass', where, default=0.1, lo=1e-3, hi=100.0)
+    if item.get('classes') is not None:
+        if item.get('counts') is not None or item.get('colors') is not None:
+            raise r.fail(where, 'classes', 'replaces counts and colors: give one or the other')
+        classes = _classes(r, item['classes'], size, mass)
+    else:
+        classes = _paper_classes(r, item, size, mass)
+    if sum(c.count for c in classes) == 0:
+        raise r.fail(where, 'classes' if item.get('classes') is not None else 'counts',
+                     'bring no material at all')
+    _check_rules(r, classes, obstacles)
+    largest = max(c.size for c in classes)
+    lo_gap, hi_gap = r.vector(item, 'gap', where, 2, lo=0.0, default=(0.25, 0.45))
+    gap = (lo_gap, hi_gap)
+    if gap[0] > gap[1]:
+        raise r.fail(where, 'gap', f'must be [min, max], got {list(gap)}')
+    if gap[0] < largest * 1.2:
+        raise r.fail(where, 'gap', f'minimum {gap[0]} lets materials ({largest} m) touch')
+    return MaterialsConfig(
+        classes=classes, size=size, mass=mass, gap=gap,
+        lateral_jitter=r.number(item, 'lateral_jitter', where, default=0.03, lo=0.0, hi=1.0),
+        start_offset=r.number(item, 'start_offset', where, default=0.1, lo=0.0),
+        seed=int(r.number(item, 'seed', where, default=0, lo=0, hi=2**31 - 1, integer=True)))
+
+
+def _paper_classes(r: '_Reader', item: Dict[str, Any], size: float, mass: float
+                   ) -> Tuple[MaterialClass, ...]:
+    """The first form: ``counts`` and ``colors`` of the paper's colours, with its rules."""
+    where = 'materials'
     counts, colors = item.get('counts'), item.get('colors')
     if not isinstance(counts, dict) or not counts:
         raise r.fail(where, 'counts', 'must map colour classes to how many, e.g. '
-                                      '{purple: 1, orange: 6, blue: 1}')
+                                      '{purple: 1, orange: 6, blue: 1} (or give classes)')
     if not isinstance(colors, dict):
         raise r.fail(where, 'colors', 'must map each colour class to [r, g, b, a]')
     missing = sorted(set(counts) - set(colors))
     if missing:
         raise r.fail(where, 'colors', f'has no colour for {missing}')
-    count_items = tuple((str(k), int(r.number(counts, k, where + '.counts', lo=0, hi=1000,
-                                                  integer=True))) for k in counts)
-    color_items = tuple((str(k), r.rgba(colors, k, where + '.colors'))
-                        for k in colors)
-    lo_gap, hi_gap = r.vector(item, 'gap', where, 2, lo=0.0, default=(0.25, 0.45))
-    gap = (lo_gap, hi_gap)
-    if gap[0] > gap[1]:
-        raise r.fail(where, 'gap', f'must be [min, max], got {list(gap)}')
-    size = r.number(item, 'size', where, default=0.05, lo=0.005, hi=1.0)
-    if gap[0] < size * 1.2:
-        raise r.fail(where, 'gap', f'minimum {gap[0]} lets materials ({size} m) touch')
-    return MaterialsConfig(
-        counts=count_items, colors=color_items, size=size,
-        mass=r.number(item, 'mass', where, default=0.1, lo=1e-3, hi=100.0), gap=gap,
-        lateral_jitter=r.number(item, 'lateral_jitter', where, default=0.03, lo=0.0, hi=1.0),
-        start_offset=r.number(item, 'start_offset', where, default=0.1, lo=0.0),
-        seed=int(r.number(item, 'seed', where, default=0, lo=0, hi=2**31 - 1, integer=True)))
+    unruled = sorted(str(k) for k in counts if k not in PAPER_RULES)
+    if unruled:
+        raise r.fail(where, 'counts', f'{unruled}: only {sorted(PAPER_RULES)} have rules in '
+                     'this form; give materials.classes with a destination and route each')
+    rgba = {str(k): r.rgba(colors, k, where + '.colors') for k in colors}
+    return _with_hues(r, [
+        (str(k), rgba[str(k)], int(r.number(counts, k, where + '.counts', lo=0, hi=1000,
+                                            integer=True)), *PAPER_RULES[str(k)], size, mass,
+         None) for k in counts])
+
+
+def _classes(r: '_Reader', data: Any, size: float, mass: float) -> Tuple[MaterialClass, ...]:
+    where = 'materials.classes'
+    if not isinstance(data, dict) or not data:
+        raise WorldConfigError(f'{r.source}: {where} must map each class name to its colour, '
+                               'count, destination and route')
+    rows = []
+    for name, spec in data.items():
+        at = f'{where}.{name}'
+        if not isinstance(name, str) or not _NAME.match(name):
+            raise WorldConfigError(f'{r.source}: {where}: class name {name!r} must be a ROS '
+                                   'name ([A-Za-z][A-Za-z0-9_]*)')
+        r.only(spec, at, {'color', 'count', 'destination', 'route', 'size', 'mass', 'hue'})
+        route = r.string(spec, 'route', at)
+        if route not in ROUTES:
+            raise r.fail(at, 'route', f'must be one of {list(ROUTES)} (place: set down by the '
+                         f'Zu 12; carry: loaded onto the youBot), got {route!r}')
+        hue = None
+        if spec.get('hue') is not None:
+            lo, hi = r.vector(spec, 'hue', at, 2, lo=0.0, hi=180.0)
+            hue = (int(lo), int(hi))
+        rows.append((name, r.rgba(spec, 'color', at),
+                     int(r.number(spec, 'count', at, lo=0, hi=1000, integer=True)),
+                     r.string(spec, 'destination', at), route,
+                     r.number(spec, 'size', at, default=size, lo=0.005, hi=1.0),
+                     r.number(spec, 'mass', at, default=mass, lo=1e-3, hi=100.0), hue))
+    return _with_hues(r, rows)
+
+
+def _with_hues(r: '_Reader', rows: List[Tuple[Any, ...]]) -> Tuple[MaterialClass, ...]:
+    """The classes, each with the hue range the camera finds it by; refused when the camera
+    could not tell one from the belt or from another."""
+    for name, color, *_ in rows:
+        problem = color_problem(name, color)
+        if problem:
+            raise WorldConfigError(f'{r.source}: materials: {problem}')
+    try:
+        ranges = hue_ranges({row[0]: row[1] for row in rows},
+                            {row[0]: row[7] for row in rows if row[7] is not None})
+    except ValueError as exc:
+        raise WorldConfigError(f'{r.source}: materials: {exc}') from None
+    return tuple(MaterialClass(name, color, count, dest, route, size, mass, ranges[name])
+                 for name, color, count, dest, route, size, mass, _ in rows)
+
+
+def _check_rules(r: '_Reader', classes: Tuple[MaterialClass, ...],
+                 obstacles: List[ObstacleConfig]) -> None:
+    """Each class's destination is a region of the world a material fits on."""
+    named = {o.name: o for o in obstacles if o.name}
+    for c in classes:
+        o = named.get(c.destination)
+        if o is None:
+            raise WorldConfigError(
+                f'{r.source}: materials: {c.name} goes to {c.destination!r}, which is no '
+                f'obstacle of this world (named ones: {sorted(named)})')
+        if o.shape != 'box':
+            raise WorldConfigError(f'{r.source}: materials: {c.name} goes to {c.destination}, '
+                                   f'a {o.shape}: a destination is a box (its top face)')
+        if min(o.size[0], o.size[1]) < c.size:
+            raise WorldConfigError(
+                f'{r.source}: materials: {c.name} ({c.size} m) does not fit on '
+                f'{c.destination} ({o.size[0]} x {o.size[1]} m)')
 
 
 def _camera(r: '_Reader', item: Any, i: int, robots: List[RobotConfig]) -> CameraConfig:
@@ -507,7 +623,7 @@ class _Reader:
             raise self.fail(where, key, 'is required')
         if isinstance(value, bool) or not isinstance(value, (int, float)):
             raise self.fail(where, key, f'must be a number, got {value!r}')
-        if integer and int(value) != value:
+        if integer and math.isfinite(value) and int(value) != value:
             raise self.fail(where, key, f'must be an integer, got {value}')
         if not math.isfinite(value) or not (lo <= value <= hi):
             raise self.fail(where, key, f'must be finite and within [{lo}, {hi}], got {value}')

@@ -10,6 +10,7 @@ from typing import Dict, List, Set, Tuple
 import numpy as np
 
 from perception.projection import CameraModel
+from perception.segmentation import classes_of
 from perception.vision import MaterialVision
 from sim_bridge.world import SimWorld
 from world_description.camera_geometry import look_at_rotation
@@ -82,7 +83,7 @@ def _run(world: SimWorld, rng, frames: int, noise: float, acc: Accuracy, run: in
                         look_at_rotation(c.position, c.look_at), np.asarray(c.position))
     size = source.config.size
     vision = MaterialVision(model, c.width, c.height, conveyor.top[2], size,
-                            yaw=conveyor.config.yaw)
+                            classes_of(source.config), yaw=conveyor.config.yaw)
     conveyor.speed = float(rng.uniform(0.05, 0.3))
     lighting = random_lighting(rng)
     steps = round(1.0 / 15.0 / world.time_step)

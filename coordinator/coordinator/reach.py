@@ -1,0 +1,74 @@
+"""Whether the arms reach a point with their tools as the pipeline uses them (no ROS): the
+Zu 12's cup pointing down, the youBot's fingers down at one tilt in the arm's plane. The
+layout checks every destination slot with these at start-up."""
+from __future__ import annotations
+
+import math
+from functools import lru_cache
+from typing import Sequence, Tuple
+
+import numpy as np
+
+from controllers.arrays import Vector
+from controllers.transforms import matrix_to_quaternion, quaternion_to_matrix
+from controllers.youbot_arm import ARM_BASE_IN_BASE_LINK_M
+from controllers.youbot_kinematics import YoubotKinematics
+from controllers.zu12_kinematics import Zu12Kinematics
+
+# The youBot's tool tilts tried for a path, outwards from straight down [deg].
+YOUBOT_TILTS_DEG = tuple(range(0, 90, 10))
+# The Zu 12's cup straight down: x along world x, z down.
+_DOWN = np.array([[1.0, 0.0, 0.0], [0.0, -1.0, 0.0], [0.0, 0.0, -1.0]])
+
+
+def youbot_tool_quaternion(p: Vector, tilt: float) -> Tuple[float, float, float, float]:
+    """Tool orientation (x, y, z, w in base_link) for the youBot's 5-joint arm at ``p``: the
+    approach axis down, leaning ``tilt`` away from the arm's base axis in the arm's vertical
+    plane (the only orientations a 5-joint arm reaches at an arbitrary point)."""
+    phi = math.atan2(p[1] - ARM_BASE_IN_BASE_LINK_M[1], p[0] - ARM_BASE_IN_BASE_LINK_M[0])
+    z = np.array([math.cos(phi) * math.sin(tilt), math.sin(phi) * math.sin(tilt),
+                  -math.cos(tilt)])
+    y = np.array([-math.sin(phi), math.cos(phi), 0.0])
+    x = np.cross(y, z)
+    return matrix_to_quaternion(np.column_stack([x, y, z]))
+
+
+@lru_cache(maxsize=1)
+def _zu12() -> Zu12Kinematics:
+    return Zu12Kinematics('suction_tcp')
+
+
+@lru_cache(maxsize=1)
+def _youbot() -> YoubotKinematics:
+    return YoubotKinematics('gripper_tcp')
+
+
+def zu12_reaches(base: Sequence[float], points: Sequence[Vector]) -> bool:
+    """Whether the Zu 12 standing at ``base`` (x, y, z, yaw) reaches every world point with its
+    cup pointing down."""
+    x, y, z, yaw = base
+    c, s = math.cos(yaw), math.sin(yaw)
+    rot = np.array([[c, s, 0.0], [-s, c, 0.0], [0.0, 0.0, 1.0]])      # world -> base
+    for p in points:
+        target = np.eye(4)
+        target[:3, :3] = rot @ _DOWN
+        target[:3, 3] = rot @ (np.asarray(p, float) - np.array([x, y, z]))
+        if not _zu12().ik(target).success:
+            return False
+    return True
+
+
+def youbot_reaches(points_in_base: Sequence[Vector]) -> bool:
+    """Whether the youBot's arm reaches every point (base_link) at one tool tilt."""
+    for tilt in YOUBOT_TILTS_DEG:
+        ok = True
+        for p in points_in_base:
+            target = np.eye(4)
+            target[:3, :3] = quaternion_to_matrix(youbot_tool_quaternion(p, math.radians(tilt)))
+            target[:3, 3] = p
+            if not _youbot().ik(target).success:
+                ok = False
+                break
+        if ok:
+            return True
+    return False

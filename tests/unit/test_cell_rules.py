@@ -1,0 +1,131 @@
+"""The coordinator follows the world's rules: each class to its destination by its route, on a
+slot of its own; a cell whose rules cannot work is refused at start-up with one line."""
+import copy
+
+import numpy as np
+import pytest
+import yaml
+from test_pipeline import FakeCell, kinds, run
+
+from coordinator.layout import SLOT_GAP_M, LayoutError, layout_from_world
+from world_description.resources import resolve_resource
+from world_description.world_config import parse_world
+
+CELL = resolve_resource('package://world_description/worlds/pipeline_cell.yaml')
+PAPER = {
+    'purple': {'color': [0.5, 0.15, 0.7, 1.0], 'count': 1, 'destination': 'ground_target',
+               'route': 'place'},
+    'orange': {'color': [1.0, 0.5, 0.05, 1.0], 'count': 6, 'destination': 'pool_floor',
+               'route': 'carry'},
+    'blue': {'color': [0.1, 0.3, 0.9, 1.0], 'count': 1, 'destination': 'pool_platform',
+             'route': 'carry'},
+}
+
+
+def world(classes, obstacles=(), move=None):
+    with open(CELL, encoding='utf-8') as f:
+        data = yaml.safe_load(f)
+    data['materials'] = {k: v for k, v in data['materials'].items()
+                         if k not in ('counts', 'colors')}
+    data['materials']['classes'] = classes
+    data['obstacles'] += [dict(o) for o in obstacles]
+    for o in data['obstacles']:
+        if move and o['name'] in move:
+            o['position'] = move[o['name']]
+    return parse_world(data, 'cell.yaml')
+
+
+def test_every_destination_is_laid_out_in_slots_that_never_overlap():
+    layout = layout_from_world(world(copy.deepcopy(PAPER)))
+    for name, region in layout.regions.items():
+        size = max(layout.size_of(c) for c in layout.rules if layout.destination(c) == name)
+        x0, x1, y0, y1, _, _ = region.box(size)
+        for i, p in enumerate(region.slots):
+            if not region.drop:
+                assert x0 + size / 2 <= p[0] <= x1 - size / 2
+                assert y0 + size / 2 <= p[1] <= y1 - size / 2
+            for q in region.slots[i + 1:]:
+                assert max(abs(p[0] - q[0]), abs(p[1] - q[1])) >= min(size + SLOT_GAP_M, 0.07)
+    # The ground target's first slot is its centre (where the paper's purple goes).
+    assert layout.regions['ground_target'].slots[0][:2] == pytest.approx((-0.5, 0.3))
+
+
+def test_two_materials_placed_on_one_destination_go_on_slots_of_their_own():
+    classes = copy.deepcopy(PAPER)
+    classes['purple']['count'] = 3
+    classes['orange']['count'] = 4
+    layout = layout_from_world(world(classes))
+    cell = ReleaseLog(layout, ['orange', 'purple', 'orange', 'purple', 'blue', 'orange',
+                               'purple', 'orange'])
+    r = run(cell).result
+    assert r.status == 'completed', r
+    placed = kinds(cell, 'placed')
+    assert sorted(e.detail for e in placed) == [f'ground_target slot {k}' for k in range(3)]
+    # Where the cup let go of each (the fake's joints are the cup's position): over three
+    # points a material's size and the gap apart, each over the ground target.
+    on_target = [p for p in cell.releases if p[2] < 0.1]      # (the plate's are higher)
+    assert len(on_target) == 3
+    x0, x1, y0, y1, _, _ = layout.regions['ground_target'].box(0.05)
+    for i, p in enumerate(on_target):
+        assert x0 < p[0] < x1 and y0 < p[1] < y1
+        for q in on_target[i + 1:]:
+            assert np.linalg.norm(p[:2] - q[:2]) >= 0.05 + SLOT_GAP_M - 1e-9
+
+
+class ReleaseLog(FakeCell):
+    """The fake cell, noting where the Zu 12's cup lets go of what it holds."""
+
+    def __init__(self, *args, **kwargs) -> None:
+        super().__init__(*args, **kwargs)
+        self.releases = []
+
+    def grip(self, arm, on):
+        if arm == 'zu12' and not on and self.holding[arm]:
+            self.releases.append(self.q[arm][:3].copy())
+        return super().grip(arm, on)
+
+
+def test_a_class_of_the_users_own_goes_where_its_rule_says():
+    """A fourth colour, placed by the Zu 12 on a bin of its own beside the ground target."""
+    classes = copy.deepcopy(PAPER)
+    classes['green'] = {'color': [0.1, 0.8, 0.2, 1.0], 'count': 2, 'destination': 'green_bin',
+                        'route': 'place', 'size': 0.04, 'mass': 0.3}
+    bin_ = {'name': 'green_bin', 'shape': 'box', 'size': [0.2, 0.2, 0.05],
+            'position': [-0.2, -0.55, 0.025], 'color': [0.3, 0.6, 0.3, 1.0]}
+    layout = layout_from_world(world(classes, [bin_]))
+    assert layout.region_of('green').top == pytest.approx(0.05)
+    cell = FakeCell(layout, ['orange', 'green', 'orange', 'purple', 'orange', 'blue', 'orange',
+                             'green', 'orange', 'orange'])
+    r = run(cell).result
+    assert r.status == 'completed', r
+    greens = [e for e in kinds(cell, 'placed') if e.color == 'green']
+    assert sorted(e.detail for e in greens) == ['green_bin slot 0', 'green_bin slot 1']
+    assert len(kinds(cell, 'loaded')) == 7
+
+
+@pytest.mark.parametrize('change, fragment', [
+    # The ground target across the floor, 3 m from the Zu 12.
+    (lambda c, o, m: m.update(ground_target=[3.0, 2.0, 0.001]),
+     r"destination ground_target is out of the Zu 12's reach"),
+    # The platform carried to, but out by the belt: no stand reaches it.
+    (lambda c, o, m: m.update(pool_platform=[-1.5, -1.5, 0.075]),
+     r"destination pool_platform is out of the youBot arm's reach"),
+    (lambda c, o, m: c['purple'].update(count=12),
+     r'destination ground_target has 9 slots in reach for 12 materials'),
+    (lambda c, o, m: c['blue'].update(route='place'),
+     r'destination pool_platform is out of the Zu 12'),
+    (lambda c, o, m: c['orange'].update(route='place'),
+     r"pool_floor is the youBot's: its materials are carried there"),
+    (lambda c, o, m: c['purple'].update(destination='pool_floor'),
+     r'destination pool_floor is reached by both routes'),
+    (lambda c, o, m: c['orange'].update(count=9),
+     r'destination pool_floor has 8 slots in reach for 9 materials'),
+    (lambda c, o, m: c['orange'].update(count=8),
+     r"9 materials are carried; the youBot's plate holds 8"),
+])
+def test_a_cell_whose_rules_cannot_work_is_refused_with_one_line(change, fragment):
+    classes, obstacles, move = copy.deepcopy(PAPER), [], {}
+    change(classes, obstacles, move)
+    with pytest.raises(LayoutError, match=fragment) as err:
+        layout_from_world(world(classes, obstacles, move))
+    assert '\n' not in str(err.value)
