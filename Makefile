@@ -20,8 +20,12 @@ panel: setup
 # The paper's Table 2 over many seeded trials: make trials TRIALS=100 PARALLEL=2; on a Ray
 # cluster: make trials TRIALS=110 RAY=auto (docs/pipeline.md: "A campaign on a Ray cluster").
 # TIME_STEP=0.008333333333333333 takes 1/120 s physics steps (docs/benchmarks.md).
+# WORLD=cell_four_classes (a world of world_description/worlds) or WORLD=path/to/cell.yaml runs
+# a campaign on another cell (docs/writing-a-cell.md).
 trials: setup
-	@bash -c 'source scripts/env.sh && run_trials --trials $${TRIALS:-10} \
+	@bash -c 'source scripts/env.sh && w="$${WORLD:-}" && \
+	  case "$$w" in ""|*/*|*.yaml) ;; *) w="package://world_description/worlds/$$w.yaml" ;; esac && \
+	  run_trials --trials $${TRIALS:-10} $${w:+--world "$$w"} \
 	  $${PARALLEL:+--parallel $$PARALLEL} $${RAY:+--ray $$RAY} \
 	  $${TIME_STEP:+--time-step $$TIME_STEP}'
 

@@ -132,7 +132,8 @@ def pipeline_graph(seed: int, belt_speed: float, synchronous: bool = True,
         # stamp, a motion an IK server sends starts when the controller takes it, and a pose it
         # publishes carries its joint state's stamp. Without use_sim_time they take no /clock,
         # which costs each node about a millisecond of CPU per message.)
-        GraphNode('vision_node', 'perception', 'vision_node',
+        # (The world's camera, belt and material classes: a cell's own, not the paper's.)
+        GraphNode('vision_node', 'perception', 'vision_node', parameters={'world': world},
                   remappings=(('image_raw', '/belt_camera/image_raw'),
                               ('camera_info', '/belt_camera/camera_info'))),
         # (The coordinator seeds every IK request with the arm's state and executes none: the

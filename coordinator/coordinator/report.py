@@ -142,6 +142,21 @@ def _write(img: np.ndarray, out: Path) -> None:
         raise OSError(f'cannot write {out}')
 
 
+def scenario(world: str) -> str:
+    """The campaign's world, and its classes' rules (as far as the file can be read now)."""
+    from coordinator.layout import LayoutError, layout_from_world
+    from world_description.resources import resolve_resource
+    from world_description.world_config import WorldConfigError, load_world
+    try:
+        layout = layout_from_world(load_world(resolve_resource(world)))
+    except (WorldConfigError, LayoutError) as exc:
+        return f'Scenario: `{world}` (cannot be read now: {exc}).'
+    rules = ', '.join(f'{n} {c} to {layout.destination(c)} ({layout.rule(c).route}, '
+                      f'{layout.size_of(c) * 1000:.0f} mm, {layout.rule(c).mass:g} kg)'
+                      for c, n in layout.manifest.items())
+    return f'Scenario: `{world}`: {layout.total} materials, {rules}.'
+
+
 def write_report(trials: List[Dict], out_dir: Path, setup: Dict) -> Path:
     ok = [t for t in trials if t.get('status') not in ('error',)]
     s = summary_rows(ok)
@@ -164,6 +179,8 @@ def write_report(trials: List[Dict], out_dir: Path, setup: Dict) -> Path:
         f'{len(trials)} trials (lock-step), plan seed {setup.get("seed0")}, belt speed '
         f'{setup.get("belt_speed")} m/s, {setup.get("parallel")} in parallel, wall time '
         f'{setup.get("wall_time", 0.0):.0f} s.'), '']
+    if setup.get('world'):
+        lines[-1:-1] = [scenario(str(setup['world'])), '']
     codes = sorted({str(t.get('code', 'unknown')) for t in trials})
     lines[-1:-1] = [f'Code: {", ".join(codes)}' + (
         ' (the trials were run by different code)' if len(codes) > 1 else '') + '.']

@@ -188,15 +188,16 @@ def score(result: RunResult, final_truth: Sequence[TruePose], identifications: S
     out = asdict(result)
     missing = not_at_destination(final_truth, regions)
     out['not_at_destination'] = missing
-    if result.status == 'completed' and (missing or len(final_truth) < result.total):
-        # The coordinator believed every material delivered; the simulator's ground truth says
-        # otherwise: the run did not complete.
-        out['status'] = 'incomplete'
-        told = [f'material {m["id"]} ({m["color"]}) {m["why"]}' for m in missing]
-        if len(final_truth) < result.total:
-            told.append(f'{result.total - len(final_truth)} of the {result.total} materials '
-                        'never appeared')
-        out['message'] = '; '.join(told)
+    told = [f'material {m["id"]} ({m["color"]}) {m["why"]}' for m in missing]
+    if len(final_truth) < result.total:
+        told.append(f'{result.total - len(final_truth)} of the {result.total} materials never '
+                    'appeared')
+    if told:
+        # (The coordinator may have believed every material delivered: the simulator's ground
+        # truth says otherwise, and the run did not complete.)
+        if result.status == 'completed':
+            out['status'] = 'incomplete'
+        out['message'] = '; '.join(([result.message] if result.message else []) + told)
     plate_bound = sum(1 for color, p in final_truth
                       if color in regions.carried and at_destination(color, p, regions))
     out.update({

@@ -366,7 +366,12 @@ def _rebuild(out: Path) -> int:
     note = (f'{len(results)} trials (lock-step), rebuilt from their results; belt speeds '
             f'{min(speeds):.3f}-{max(speeds):.3f} m/s; seeds and wall times in trials.csv.'
             if speeds else f'{len(results)} trials, rebuilt from their results.')
-    report = write_report(results, out, {'note': note})
+    try:
+        plan = (read_campaign(out) or {}).get('plan', {})
+    except CampaignError:
+        plan = {}
+    world = plan.get('world') if isinstance(plan, dict) else None
+    report = write_report(results, out, {'note': note, **({'world': world} if world else {})})
     print(f'[trials] {len(results)} trials: CSV {out / "trials.csv"}, report {report}')
     return 0
 
@@ -668,7 +673,7 @@ def _campaign(args: argparse.Namespace, given: Dict) -> int:
     write_csv(results, args.out / 'trials.csv')
     from coordinator.report import write_report
     setup = {'seed0': opts['seed0'], 'belt_speed': (lo, hi), 'parallel': pool.capacity,
-             'wall_time': time.monotonic() - started, 'code': code}
+             'wall_time': time.monotonic() - started, 'code': code, 'world': opts['world']}
     if interrupted:
         setup['note'] = (f'Interrupted: {len(results)} of the {total} trials of the plan '
                          f'finished (plan seed {opts["seed0"]}, belt {lo}-{hi} m/s); '

@@ -222,8 +222,20 @@ _NAME = re.compile(r'^[A-Za-z][A-Za-z0-9_]*$')
 MAX_WORLD_BYTES = 4 * 1024 * 1024
 
 
+# A world may extend another, which may extend another, this deep at most.
+MAX_EXTENDS = 8
+
+
 def load_world(path: str | Path) -> WorldConfig:
+    """A world file, read and checked. One that ``extends`` another (a path relative to it, or
+    ``package://``) is that world with its own keys merged in: a mapping key by key, any other
+    value (a list too) replacing the base's; ``more_obstacles`` are added to the base's
+    obstacles, and ``materials.classes`` replaces the base's ``counts`` and ``colors``."""
     path = Path(path)
+    return parse_world(_resolved(path, _read(path), (path.resolve(),)), str(path))
+
+
+def _read(path: Path) -> Any:
     try:
         info = path.stat()
     except FileNotFoundError:
@@ -238,7 +250,7 @@ def load_world(path: str | Path) -> WorldConfig:
         raise WorldConfigError(f'world file {path} has {info.st_size} bytes; a world file is '
                                f'at most {MAX_WORLD_BYTES} bytes')
     try:
-        data = yaml.safe_load(path.read_text(encoding='utf-8'))
+        return yaml.safe_load(path.read_text(encoding='utf-8'))
     except yaml.YAMLError as exc:
         mark = getattr(exc, 'problem_mark', None)
         where = f' at line {mark.line + 1}, column {mark.column + 1}' if mark else ''
@@ -251,7 +263,50 @@ def load_world(path: str | Path) -> WorldConfig:
                                f'{exc.object[exc.start:exc.start + 1]!r})') from None
     except OSError as exc:
         raise WorldConfigError(f'{path}: cannot be read ({exc.strerror})') from None
-    return parse_world(data, str(path))
+
+
+def _resolved(path: Path, data: Any, seen: Tuple[Path, ...]) -> Any:
+    """``data`` with the world it extends merged under it (see load_world)."""
+    if not isinstance(data, dict) or 'extends' not in data:
+        if isinstance(data, dict) and 'more_obstacles' in data:
+            raise WorldConfigError(f'{path}: more_obstacles needs a world it extends')
+        return data
+    from world_description.resources import resolve_resource
+    uri = data['extends']
+    if not isinstance(uri, str) or not uri:
+        raise WorldConfigError(f'{path}: extends must name a world file, got {uri!r}')
+    base_path = resolve_resource(uri, path.parent)
+    if base_path.resolve() in seen:
+        raise WorldConfigError(f'{path}: extends {uri}, which extends it again')
+    if len(seen) > MAX_EXTENDS:
+        raise WorldConfigError(f'{path}: worlds extend each other more than {MAX_EXTENDS} deep')
+    base = _resolved(base_path, _read(base_path), seen + (base_path.resolve(),))
+    if not isinstance(base, dict):
+        raise WorldConfigError(f'{base_path}: the top level must be a mapping')
+    own = {k: v for k, v in data.items() if k not in ('extends', 'more_obstacles')}
+    more = data.get('more_obstacles') or []
+    if not isinstance(more, list):
+        raise WorldConfigError(f'{path}: more_obstacles must be a list')
+    merged = _merge(base, own)
+    if isinstance(own.get('materials'), dict) and 'classes' in own['materials']:
+        for key in ('counts', 'colors'):
+            if key not in own['materials']:
+                merged['materials'].pop(key, None)
+    if more:
+        obstacles = merged.get('obstacles') or []
+        if not isinstance(obstacles, list):
+            raise WorldConfigError(f'{path}: obstacles must be a list')
+        merged['obstacles'] = list(obstacles) + more
+    return merged
+
+
+def _merge(base: Any, own: Any) -> Any:
+    if isinstance(base, dict) and isinstance(own, dict):
+        out = dict(base)
+        for key, value in own.items():
+            out[key] = _merge(base[key], value) if key in base else value
+        return out
+    return own
 
 
 def parse_world(data: Any, source: str = '<memory>') -> WorldConfig:

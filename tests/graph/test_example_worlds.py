@@ -1,0 +1,43 @@
+"""Every example cell in world_description/worlds runs a trial through run_trials, as a user
+runs it, and ends with every material resting on its destination by the simulator's ground
+truth (docs/writing-a-cell.md)."""
+import json
+import shutil
+import subprocess
+from collections import Counter
+from pathlib import Path
+
+import pytest
+
+from world_description.resources import resolve_resource
+from world_description.world_config import load_world
+
+WORLDS = sorted(p.name for p in Path(resolve_resource('package://world_description/worlds'))
+                .glob('cell_*.yaml'))
+
+
+def test_there_are_example_cells():
+    assert {'cell_four_classes.yaml', 'cell_mixed_sizes.yaml'} <= set(WORLDS)
+
+
+@pytest.mark.parametrize('name', WORLDS)
+def test_an_example_cell_completes_with_every_material_at_its_destination(name, tmp_path):
+    world = f'package://world_description/worlds/{name}'
+    out = tmp_path / 'campaign'
+    run = subprocess.run([shutil.which('run_trials'), '--world', world, '--trials', '1',
+                          '--seed0', '7', '--out', str(out)], capture_output=True, text=True)
+    assert 'Traceback' not in run.stdout + run.stderr
+    result = json.loads((out / 'trial_000' / 'result.json').read_text())
+    assert result['status'] == 'completed', (result['message'], result['not_at_destination'])
+    assert run.returncode == 0, run.stdout[-2000:] + run.stderr[-2000:]
+    materials = load_world(resolve_resource(world)).materials
+    # Every material of every class, each where its class's rule puts it.
+    assert Counter(m['color'] for m in result['final_materials']) == dict(materials.counts)
+    assert all(m['at_destination'] for m in result['final_materials'])
+    assert result['handled_verified'] == materials.total
+    # Each material placed or delivered on a slot of its own (the pool's are its drops).
+    slots = [e[5] for e in result['events'] if e[1] in ('placed', 'delivered')
+             and 'slot' in e[5]]
+    assert len(slots) == len(set(slots))
+    report = (out / 'report.md').read_text()
+    assert f'Scenario: `{world}`: {materials.total} materials' in report
