@@ -70,6 +70,9 @@ RELEASE_HOLD_S = 0.1
 # ``arrive_tolerance`` and at rest), so the hold need only cover a control period or so
 # (0.15 s cost about a second per run over the 15 grasps and releases).
 SETTLE_S = 0.05
+# A material on the belt with another this near (between their faces, along the belt) is lifted
+# clear of it before it swings away [m].
+QUEUE_CLEARANCE_M = 0.03
 # An arm farther than this from where its motion has it now is not following it [rad].
 FOLLOW_TOLERANCE = 0.1
 # A motion's samples: (absolute time [s], joint positions, velocities, accelerations).
@@ -591,7 +594,12 @@ class Loader(Machine):
         self._ahead = None
         place_way = self._place_way(m, self._lift, obs.youbot_pose, qs[-1])
         if not isinstance(place_way, str):
-            through = waypoints[:-1] + [Waypoint(qs[-1], stop=False, min_time=timing.lift)]
+            # Lifted out of a queue (at the end stop), it comes to rest at the lift point,
+            # clear of its neighbours' tops, before it swings: a swing begun during the lift
+            # dragged a purple into the green queued behind it (the arm stalled, the purple fell
+            # back onto the belt).
+            crowded = run.crowded(m, t_contact)
+            through = waypoints[:-1] + [Waypoint(qs[-1], stop=crowded, min_time=timing.lift)]
             try:
                 whole = self._plan(obs, through + place_way.waypoints, start, q_edge)
             except PlanError:
@@ -1406,6 +1414,24 @@ class Pipeline:
             return math.inf
         t = self.now + (x - m.position[0]) / speed
         return t if self.track(m)(t)[0] >= x - 1e-6 else math.inf
+
+    def crowded(self, m: Material, t: float) -> bool:
+        """Whether another material on the belt will be next to ``m`` at ``t`` (less than
+        QUEUE_CLEARANCE_M between their faces along the belt, overlapping across it): a
+        material lifted from there drags against it if it moves sideways before it is clear of
+        its top."""
+        mats = self._on_belt()
+        if m not in mats:
+            return False
+        x = self.track(m)(t)[0]
+        for o in mats:
+            if o is m:
+                continue
+            reach = (m.size + o.size) / 2
+            if (abs(self.track(o)(t)[0] - x) < reach + QUEUE_CLEARANCE_M
+                    and abs(o.position[1] - m.position[1]) < reach):
+                return True
+        return False
 
     def off_belt(self, m: Material, now: float) -> None:
         """The cup has lifted the material off the belt (what queued behind it moves on)."""
