@@ -405,8 +405,12 @@ class SimNode(Node):
             self._publish_tf(robot, stamp)
         self._actions.on_state(robot, time_ns * 1e-9)
         for report in self._hold_watch.update(time_ns * 1e-9):
-            (self.get_logger().warning if report.blocked else self.get_logger().info)(
-                report.text)
+            # (One call site per severity: rclpy refuses a call site whose severity changes,
+            # and a held arm freed again after a warning took the simulator down.)
+            if report.blocked:
+                self.get_logger().warning(report.text)
+            else:
+                self.get_logger().info(report.text)
         if _wanted(self._joint_pubs[robot]):
             js = sim_robot.joint_states()
             msg = JointState(name=js.names, position=js.positions, velocity=js.velocities,

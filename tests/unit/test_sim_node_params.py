@@ -92,3 +92,19 @@ def test_acceleration_limits_as_diff_drive_controller_names_them(context, tmp_pa
             node.destroy_node()
     with pytest.raises(InvalidParameterValueException):
         make(context, **{'linear.x.max_acceleration': -1.0})
+
+
+def test_an_arm_held_then_freed_is_reported_both_times_without_taking_the_node_down(context):
+    """A hold watch warning (an arm blocked) and then its all-clear (freed) in one run: rclpy
+    refused the second from the same call site ('Logger severity cannot be changed between
+    calls'), and the simulator died mid-trial."""
+    from sim_bridge.hold_watch import HoldReport
+    node = make(context, world='package://world_description/worlds/pipeline_cell.yaml')
+    try:
+        reports = [[HoldReport('zu12/arm_controller', True, 'zu12 held back')],
+                   [HoldReport('zu12/arm_controller', False, 'zu12 free again')]] * 2
+        node._hold_watch.update = lambda now: reports.pop(0) if reports else []
+        for k in range(4):
+            node.on_state('zu12', k * 1_000_000)
+    finally:
+        node.destroy_node()
