@@ -9,11 +9,12 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field, replace
-from typing import Dict, List, Set, Tuple
+from typing import Dict, List, Optional, Set, Tuple
 
 import numpy as np
 
 from controllers.bezier import Pose2D
+from controllers.youbot_arm import ARM_BASE_IN_BASE_LINK_M
 
 # The youBot's load plate: its top face above base_link [m] (plate_joint z + its thickness) and
 # the slots the Zu 12 fills, in base_link. The youBot's arm cannot turn straight back (joint 1
@@ -158,21 +159,25 @@ class CellLayout:
                  else self.serving(self.destination(name)).row)
         return sorted(range(len(PLATE_SLOTS_IN_BASE_M)), key=lambda k: (slot_row(k) != first, k))
 
-    def free_slots(self, name: str, taken: Dict[int, str]) -> List[int]:
+    def free_slots(self, name: str, taken: Dict[int, str],
+                   to_come: Optional[Dict[str, int]] = None) -> List[int]:
         """The free plate slots for a material of class ``name``, in the order they are filled
         (``slot_order``), with the slots ``taken`` (slot: class of what is on it). A pool
-        material leaves the last free slots of a set-down destination's row to the manifest's
-        materials for it not on the plate yet: with four oranges ahead of the blue, the blue went
-        into the other row, and was unloaded there from the platform's stand, the arm going the
-        long way round (a trial took 72.4 s against 65 s)."""
+        material leaves the last free slots of a set-down destination's row to the materials
+        for it not on the plate yet (``to_come`` per class; by default the manifest's less those
+        on the plate): with four oranges ahead of the blue, the blue went into the other row,
+        and was unloaded there from the platform's stand, the arm going the long way round (a
+        trial took 72.4 s against 65 s)."""
         free = [k for k in self.slot_order(name) if k not in taken]
         if self.destination(name) != POOL or not self.stands:
             return free
+        to_come_of = to_come
         kept: set = set()
         for row in {st.row for st in self.stands if st.serves - {POOL}}:
             bound = [c for c in self.manifest if self.carried(c) and self.destination(c) != POOL
                      and self.serving(self.destination(c)).row == row]
-            to_come = (sum(self.manifest[c] for c in bound)
+            to_come = (sum(to_come_of[c] for c in bound) if to_come_of is not None else
+                       sum(self.manifest[c] for c in bound)
                        - sum(1 for c in taken.values() if c in bound))
             in_row = [k for k in free if slot_row(k) == row]
             if to_come > 0:
@@ -222,6 +227,9 @@ def layout_from_world(world) -> CellLayout:
     mats = world.materials
     rules = {c.name: Rule(c.name, c.destination, c.route, c.size, c.mass) for c in mats.classes}
     stands = _stands(named[POOL], rules)
+    into_pool = sum(c.count for c in mats.classes if c.destination == POOL)
+    # (A spare spot per stand: one the arm cannot reach as the base stands is swapped for it.)
+    stands = _pool_drops(stands, named[POOL], yb.z, into_pool + len(stands))
     home = (yb.x, yb.y, yb.yaw)
     right = next(st for st in stands if st.row == -1)
     side_x, py = stands[0].pose[0], named[POOL].position[1]
@@ -277,6 +285,61 @@ def _stands(pool, rules: Dict[str, Rule]) -> Tuple[UnloadStand, ...]:
     return (left, right)
 
 
+# The youBot grips a material's top face with its TCP this far above it (its fingertips reach
+# 10.4 mm beyond it) [m].
+GRASP_STANDOFF_M = 0.0104 + 0.002
+# More drop spots in the pool, when a batch brings more than the stands' eight: a grid this far
+# apart, this far in from its walls [m], each in the arm's reach from the nearer stand.
+POOL_DROP_PITCH_M = 0.07
+POOL_DROP_EDGE_M = 0.07
+POOL_DROP_MARGIN_M = 0.03
+
+
+def _pool_drops(stands: Tuple[UnloadStand, ...], pool, base_z: float, needed: int
+                ) -> Tuple[UnloadStand, ...]:
+    """The stands with the drop spots their arm reaches: their own, and more after them
+    (nearest the wall first) until the pool has ``needed``, none nearer than POOL_DROP_PITCH_M
+    to another, each in reach from its stand with a margin (at a tilt of its own: what is let
+    go over the pool need not stay level). (The left stand's fourth spot is out of reach: the
+    paper's batch never needed it.)"""
+    from coordinator.reach import youbot_reaches
+
+    def reached(stand: UnloadStand, point: np.ndarray, margin: float) -> bool:
+        local = world_to_base(stand.pose, point)
+        local[2] -= base_z
+        # (With a margin: the base stands a centimetre or two off its stand.)
+        out = local[:2] - np.asarray(ARM_BASE_IN_BASE_LINK_M[:2])
+        out = np.append(out / max(np.linalg.norm(out), 1e-9) * margin, 0.0)
+        return youbot_reaches([local + out + np.array([0.0, 0.0, 0.06]), local + out])
+
+    stands = tuple(replace(st, drops=tuple(d for d in st.drops if reached(st, d, 0.0)))
+                   for st in stands)
+    if all(len(st.drops) >= needed / len(stands) for st in stands):
+        return stands
+    px, py = pool.position[0], pool.position[1]
+    hx, hy = pool.size[0] / 2, pool.size[1] / 2
+    step = POOL_DROP_PITCH_M / 4                 # (candidates on a finer grid, taken greedily)
+    xs = np.arange(px - hx + POOL_DROP_EDGE_M, px + hx - POOL_DROP_EDGE_M + 1e-9, step)
+    ys = np.arange(py - hy + POOL_DROP_EDGE_M, py + hy - POOL_DROP_EDGE_M + 1e-9, step)
+    drops = {st.name: list(st.drops) for st in stands}
+    have = sum(len(d) for d in drops.values())
+    for x in xs:                                  # (the wall's side first: the arm's reach)
+        for y in ys:
+            if have >= needed:
+                break
+            point = np.array([x, y, 0.2])
+            if any(np.linalg.norm(point[:2] - d[:2]) < POOL_DROP_PITCH_M - 1e-9
+                   for ds in drops.values() for d in ds):
+                continue
+            for stand in sorted(stands, key=lambda st: (len(drops[st.name]),
+                                                        abs(st.pose[1] - y))):
+                if reached(stand, point, POOL_DROP_MARGIN_M):
+                    drops[stand.name].append(point)
+                    have += 1
+                    break
+    return tuple(replace(st, drops=tuple(drops[st.name])) for st in stands)
+
+
 def _region(layout: CellLayout, obstacle, name: str) -> Tuple[Region, str]:
     """A destination's region and its slots, each checked in reach of the robot that sets a
     material down there (a LayoutError if none is), and the stand the youBot unloads there from
@@ -328,14 +391,10 @@ def _region(layout: CellLayout, obstacle, name: str) -> Tuple[Region, str]:
 
 
 def _check_capacity(layout: CellLayout) -> None:
-    """Every destination has a slot for each material bound for it; the plate holds every
-    carried material (the youBot makes one trip)."""
+    """Every destination has a slot for each material bound for it (the youBot makes as many
+    trips as its load needs)."""
     for name, region in layout.regions.items():
         bound = sum(n for c, n in layout.manifest.items() if layout.destination(c) == name)
         if bound > len(region.slots):
             raise LayoutError(f'destination {name} has {len(region.slots)} slots in reach for '
                               f'{bound} materials')
-    carried = layout.plate_bound()
-    if carried > len(PLATE_SLOTS_IN_BASE_M):
-        raise LayoutError(f'{carried} materials are carried; the youBot\'s plate holds '
-                          f'{len(PLATE_SLOTS_IN_BASE_M)} (one trip)')

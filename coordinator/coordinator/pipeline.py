@@ -19,7 +19,18 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 from enum import Enum
-from typing import Callable, Dict, List, Optional, Protocol, Sequence, Tuple, TypeVar, Union
+from typing import (
+    Callable,
+    Dict,
+    List,
+    Optional,
+    Protocol,
+    Sequence,
+    Set,
+    Tuple,
+    TypeVar,
+    Union,
+)
 
 import numpy as np
 
@@ -40,11 +51,13 @@ from controllers.time_optimal import (
 )
 from controllers.youbot_kinematics import YoubotKinematics
 from coordinator.layout import (
+    GRASP_STANDOFF_M,
     PLATE_SLOTS_IN_BASE_M,
     PLATE_TOP_IN_BASE_M,
     POOL,
     CellLayout,
     slot_in_world,
+    slot_row,
     world_to_base,
 )
 from coordinator.reach import youbot_tool_quaternion
@@ -73,6 +86,9 @@ SETTLE_S = 0.05
 # A material on the belt with another this near (between their faces, along the belt) is lifted
 # clear of it before it swings away [m].
 QUEUE_CLEARANCE_M = 0.03
+# The belt stops while the end stop's queue reaches back to this far past the pick point (or,
+# without a stop, a material that must wait comes this near its end) [m].
+QUEUE_MARGIN_M = 0.15
 # An arm farther than this from where its motion has it now is not following it [rad].
 FOLLOW_TOLERANCE = 0.1
 # A motion's samples: (absolute time [s], joint positions, velocities, accelerations).
@@ -257,6 +273,8 @@ class RunResult:
     youbot_grasp_attempts: int = 0
     youbot_grasp_successes: int = 0
     loaded: int = 0                    # materials the Zu 12 set down on the youBot's plate
+    trips: int = 0                     # loads the youBot set off with
+    belt_stops: int = 0                # times the belt stopped while loading (a full queue)
 
 
 class LoaderState(Enum):
@@ -512,9 +530,13 @@ class Loader(Machine):
         rides to the end)."""
         run = self.run
         ride = run.layout.end_stop
-        now_ = [m for m in waiting if not (ride and not run.layout.carried(m.color))]
+        carried = [m for m in waiting if run.layout.carried(m.color)]
+        # (The youBot takes a load only while it waits at home, with room on its plate: the
+        # others ride on, and queue at the end stop until it is back.)
+        now_ = [m for m in carried if run.loadable(m)]
+        now_ += [m for m in waiting if not run.layout.carried(m.color) and not ride]
         if not now_:
-            now_ = [m for m in waiting if run.held(m)]
+            now_ = [m for m in waiting if not run.layout.carried(m.color) and run.held(m)]
         return max(now_, key=lambda m: m.position[0], default=None)
 
     def _plan_pick(self, obs: Observation, m: Material, spent: float = 0.0) -> None:
@@ -750,9 +772,7 @@ class Loader(Machine):
             m.place = free[0]
             target = region.slots[m.place]
         else:
-            taken = {x.slot: x.color for x in run.materials.values()
-                     if x.slot >= 0 and x is not m}
-            free = run.layout.free_slots(m.color, taken)
+            free = run.plate_slots(m)
             if not free:
                 return 'the youBot plate is full'
             m.slot = free[0]
@@ -864,10 +884,11 @@ class Transport(Machine):
         self._drive_goal = ''
         self._carry: Optional[UnloadPath] = None     # the unload's joint positions
         self._armed = False
-        self._dropped: Dict[str, int] = {}             # pool drops made, per stand
+        self._dropped: Dict[str, Set[int]] = {}        # pool drop spots used, per stand
         self._drive_deadline = math.inf
         # The arm holds a material up, over the plate, until the base stands at its stand.
         self._drop_pending = False
+        self.trips = 0                                  # loads it has set off with
         S = TransportState
         self.handlers = {S.WAIT_LOAD: self._wait_load, S.DRIVE: self._drive,
                          S.GRASP: self._grasp, S.CARRY: self._carry_to_drop,
@@ -904,13 +925,40 @@ class Transport(Machine):
                 f'{status.position_error * 1000:.0f} mm from {self._drive_goal}'))
         run.event(obs.now, 'arrived', 'youbot', detail=self._drive_goal)
 
+    def dropped(self, stand: str) -> Set[int]:
+        """The stand's pool drop spots used so far."""
+        return self._dropped.get(stand, set())
+
+    @property
+    def loading(self) -> bool:
+        """Whether the youBot waits at home for its load (the Zu 12 may load its plate)."""
+        return self.state is TransportState.WAIT_LOAD and not self.driving
+
+    def _load_complete(self, on_plate: Sequence[Material]) -> bool:
+        """Whether this trip's load is on the plate: every carried material the batch brings
+        (or the Zu 12 is done); or the plate has no room for the next one waiting on the belt
+        (it goes on the next trip). It waits while a carried material on its way could still
+        have a place."""
+        run = self.run
+        if run.loader.state is LoaderState.DONE:
+            return True
+        if any(m.status == 'picking' and run.layout.carried(m.color)
+               for m in run.materials.values()):
+            return False
+        waiting = [m for m in run.materials.values()
+                   if m.status == 'seen' and run.layout.carried(m.color)]
+        if any(run.plate_slots(m) for m in waiting):
+            return False
+        if waiting:
+            return bool(on_plate)           # (full for what waits: off to make room)
+        coming = [c for c in run.layout.manifest if run.layout.carried(c) and run.to_come(c)]
+        return bool(on_plate) and not any(
+            run.layout.free_slots(c, run.plate_taken(), run.to_come_counts()) for c in coming)
+
     def _wait_load(self, obs: Observation) -> None:
         run = self.run
         on_plate = [m for m in run.materials.values() if m.status == 'on_plate']
-        loaded = len(on_plate) >= run.layout.plate_bound()
-        loader = run.loader.state
-        if not (loaded or loader is LoaderState.DONE) or not run.loader.clear_of_the_plate(
-                obs.now):
+        if not self._load_complete(on_plate) or not run.loader.clear_of_the_plate(obs.now):
             return      # (nor while the Zu 12's cup is over the plate, or swinging home from it)
         order = [st.name for st in run.layout.stands]
         self.queue = sorted(on_plate, key=lambda m: (
@@ -918,7 +966,9 @@ class Transport(Machine):
         if not self.queue:
             self.enter(TransportState.DONE, obs.now, math.inf)
             return
-        run.event(obs.now, 'departing', 'youbot', detail=f'{len(self.queue)} materials')
+        self.trips += 1
+        run.event(obs.now, 'departing', 'youbot',
+                  detail=f'{len(self.queue)} materials, trip {self.trips}')
         # The arm rises to its carry pose while the base drives: folded, it reaches down in
         # front of the base, and its fingers would scrape the floor as the base pitches.
         self._drive_to(obs, self._stand_for(self.queue[0]))
@@ -964,6 +1014,11 @@ class Transport(Machine):
             # pitches). The cell's youBot starts in the carry pose: nothing is left to do.
             if not self.motion_over(obs, 'carry pose'):
                 return
+            if run.carried_to_come() and run.loader.state is not LoaderState.DONE:
+                # More to carry: it waits here, the arm in its carry pose, for the next load.
+                run.event(obs.now, 'waiting_for_load', 'youbot',
+                          detail=f'{run.carried_to_come()} carried materials to come')
+                return self.enter(TransportState.WAIT_LOAD, obs.now, math.inf)
             run.plan_home('youbot', obs)
             return self.enter(TransportState.FOLD, obs.now, run.motion('youbot').end
                               - obs.now + run.s.settle_margin)
@@ -1029,11 +1084,12 @@ class Transport(Machine):
             up = np.array([0.0, 0.0, size + t.place_gap + YOUBOT_GRASP_STANDOFF_M])
             candidates = [(k, region.slots[k] + up) for k in run.free_places(region.name, m)]
         else:
-            # The stand's next free drop first; if the arm cannot reach it from this slot as
-            # the base stands (a far slot, a base a centimetre off), the others in turn.
+            # The stand's first unused drop; if the arm cannot reach it from this slot as the
+            # base stands (a far slot, a base a centimetre off), the others in turn. A drop
+            # spot is used once: a cube dropped onto another can tumble back over the wall.
             drops = run.layout.stand(stand).drops
-            first = self._dropped.get(stand, 0)
-            candidates = [(-1, drops[(first + k) % len(drops)]) for k in range(len(drops))]
+            used = self._dropped.get(stand, set())
+            candidates = [(k, d) for k, d in enumerate(drops) if k not in used]
         for place, drop_world in candidates:
             drop = world_to_base(pose, drop_world)
             drop[2] -= run.layout.youbot_base_z
@@ -1045,6 +1101,12 @@ class Transport(Machine):
             over[2] = max(drop[2] + 0.05, lift[-1][2])
             path = run.solve_tilted([hover, contact, *lift, over, drop],
                                     np.array(seed, float))
+            if path is None and region.drop:
+                # A drop spot further in is reached leaning another way: the material, let go
+                # over the pool, need not stay level (one it is set down must).
+                grip = run.solve_tilted([hover, contact, *lift], np.array(seed, float))
+                out = grip and run.solve_tilted([over, drop], grip[-1])
+                path = grip + out if grip and out else None
             if path is not None:
                 return UnloadPath(path[0], path[1], path[2:-2], path[-2], path[-1], place)
         return None
@@ -1166,7 +1228,14 @@ class Transport(Machine):
         detour = [Waypoint(over, stop=False), Waypoint(drop)]
         try:
             if lift:
-                points = self._lift(obs, m, carry, detour)
+                try:
+                    points = self._lift(obs, m, carry, detour)
+                except PlanError:
+                    # No one motion off the plate and on over the drop (one reached at another
+                    # tilt: the wrist turns on the way): up clear of the others and still
+                    # first, and over from there (_carry_to_drop).
+                    self._drop_pending = True
+                    return self.move(TransportState.CARRY, obs, self._lift(obs, m))
             else:       # (from the lift's top, where it waited for the base to stand)
                 points = run.plan('youbot', obs.youbot_q, carry)
                 if not clear_of_the_plate(points, self._others(m), m.size):
@@ -1205,7 +1274,8 @@ class Transport(Machine):
         m.status = 'delivered'
         where = run.layout.destination(m.color)
         if run.layout.region_of(m.color).drop:
-            self._dropped[self._drive_goal] = self._dropped.get(self._drive_goal, 0) + 1
+            self._dropped.setdefault(self._drive_goal, set()).add(m.place)
+            where += f' drop {m.place} from {self._drive_goal}'
         else:
             where += f' slot {m.place}'
         run.event(now, 'delivered', 'youbot', m, where)
@@ -1244,6 +1314,7 @@ class Pipeline:
             (-math.inf, True) if belt_ran_before else (start_time, False)]
         self._belt_time = start_time      # the belt model's time (``_advance_belt``)
         self.lag = 0.0                    # the longest a pick's plan has taken (real time) [s]
+        self.belt_stops = 0               # the belt stopped while loading (its queue full)
         self.now = start_time
         self.q_now = np.zeros(0)
         self.home_q: Dict[str, np.ndarray] = {}
@@ -1359,6 +1430,45 @@ class Pipeline:
         if not ready:
             self.event(obs.now, 'returning', arm)
 
+    def to_come(self, name: str) -> int:
+        """Materials of class ``name`` the batch still brings that are not on the plate yet,
+        nor placed, delivered or given up (nor being picked for a plate slot kept for it)."""
+        gone = sum(1 for m in self.materials.values() if m.color == name and (
+            m.status in ('on_plate', 'placed', 'delivered', 'failed', 'missed')
+            or (m.status == 'picking' and m.slot >= 0)))
+        return max(0, self.layout.manifest.get(name, 0) - gone)
+
+    def to_come_counts(self) -> Dict[str, int]:
+        return {c: self.to_come(c) for c in self.layout.manifest}
+
+    def carried_to_come(self) -> int:
+        """Carried materials the youBot has still to take (not on its plate yet)."""
+        return sum(self.to_come(c) for c in self.layout.manifest if self.layout.carried(c))
+
+    def plate_taken(self, but: Optional[Material] = None) -> Dict[int, str]:
+        """The plate's slots that a material is on, or kept for one being picked."""
+        return {x.slot: x.color for x in self.materials.values()
+                if x.slot >= 0 and x is not but and x.status in ('picking', 'on_plate')}
+
+    def plate_slots(self, m: Material) -> List[int]:
+        """The plate slots free for ``m`` now, in the order they are filled: for a pool
+        material, only in a row whose stand has a drop spot left for it."""
+        taken = self.plate_taken(m)
+        free = self.layout.free_slots(m.color, taken, self.to_come_counts())
+        if not self.layout.region_of(m.color).drop:
+            return free
+        room = {}
+        for st in self.layout.stands:
+            bound = sum(1 for k, c in taken.items() if slot_row(k) == st.row
+                        and self.layout.region_of(c).drop)
+            room[st.row] = len(st.drops) - len(self.transport.dropped(st.name)) - bound
+        return [k for k in free if room.get(slot_row(k), 0) > 0]
+
+    def loadable(self, m: Material) -> bool:
+        """Whether the Zu 12 may put ``m`` onto the youBot's plate now: it waits at home, and
+        has a slot for it."""
+        return self.transport.loading and bool(self.plate_slots(m))
+
     def free_places(self, region: str, m: Material) -> List[int]:
         """The slots of a destination (its Region's, in order) that no other material has or
         is kept for: a material never goes down on another."""
@@ -1455,11 +1565,33 @@ class Pipeline:
             self._advance_belt(now)
             self.belt_running = running
             self.belt_log.append((max(now, effective or now), running))
-            self.event(now, 'belt_started' if running else 'belt_stopped')
+            loading = self.loader.state not in (LoaderState.HOME, LoaderState.DONE)
+            if not running and loading:
+                self.belt_stops += 1            # (stopped for the queue, not at the end)
+            self.event(now, 'belt_started' if running else 'belt_stopped',
+                       detail='the queue would overflow the belt' if not running and loading
+                       else '')
 
     def _belt_wanted(self, now: float) -> bool:
-        """The belt runs at a uniform speed from the start until loading is over."""
-        return self.loader.state not in (LoaderState.HOME, LoaderState.DONE)
+        """The belt runs at a uniform speed from the start until loading is over, unless what
+        waits for the youBot would overflow it: the end stop's queue reaching back to the pick
+        point, or (without a stop) a material the Zu 12 cannot take now near the belt's end."""
+        if self.loader.state in (LoaderState.HOME, LoaderState.DONE):
+            return False
+        return not self._overflow()
+
+    def _overflow(self) -> bool:
+        mats = self._on_belt()
+        if not mats:
+            return False
+        if self.layout.end_stop:
+            flags = held(self._items(mats), self._stop)
+            tail = min((m.position[0] - m.size / 2 for m, h in zip(mats, flags) if h),
+                       default=math.inf)
+            return tail < self.s.pick_x + QUEUE_MARGIN_M
+        end = self.layout.belt_end_x - QUEUE_MARGIN_M
+        return any(m.status == 'seen' and m.position[0] + m.size / 2 > end
+                   and self.layout.carried(m.color) and not self.loadable(m) for m in mats)
 
     def _running_time(self, t0: float, t1: float) -> float:
         total = 0.0
@@ -1526,6 +1658,7 @@ class Pipeline:
             zu12_grasp_successes=self.grasps['zu12'][1],
             youbot_grasp_attempts=self.grasps['youbot'][0],
             youbot_grasp_successes=self.grasps['youbot'][1], loaded=self.loaded,
+            trips=self.transport.trips, belt_stops=self.belt_stops,
             missed=sum(1 for m in mats if m.status == 'missed'),
             failed=sum(1 for m in mats if m.status == 'failed'), message=message,
             materials=[{'id': m.id, 'color': m.color, 'status': m.status,
@@ -1611,7 +1744,7 @@ class Pipeline:
 YOUBOT_CARRY_Q = np.zeros(5)
 # The youBot's fingertips reach 10.4 mm beyond gripper_tcp: it grasps a material's top face with
 # the TCP this far above it, so that the fingertips do not push the material away.
-YOUBOT_GRASP_STANDOFF_M = 0.0104 + 0.002
+YOUBOT_GRASP_STANDOFF_M = GRASP_STANDOFF_M
 
 
 # What the youBot holds passes this far over the tops of the plate's other materials [m].
