@@ -860,6 +860,9 @@ class UnloadPath:
     place: int = -1               # the destination's slot it is set down on (not the pool)
 
 
+# A youBot unload whose drop is reached at another tool tilt than its grip rises this much more
+# before the wrist turns [m].
+TILT_CHANGE_RISE_M = 0.06
 # The youBot's lift off the plate: heights over the grip [m], the last clear of the neighbours.
 UNLOAD_LIFT_STEPS_M = (0.01, 0.02, 0.03, 0.04, 0.05, 0.06)
 # The speeds at its top tried for a lift that goes on to the drop, as fractions of its own top
@@ -1103,9 +1106,14 @@ class Transport(Machine):
                                     np.array(seed, float))
             if path is None and region.drop:
                 # A drop spot further in is reached leaning another way: the material, let go
-                # over the pool, need not stay level (one it is set down must).
-                grip = run.solve_tilted([hover, contact, *lift], np.array(seed, float))
-                out = grip and run.solve_tilted([over, drop], grip[-1])
+                # over the pool, need not stay level (one it is set down must). It rises
+                # TILT_CHANGE_RISE_M more first, still level, so that what it holds clears the
+                # others on the plate as the wrist turns.
+                rise = lift[-1] + np.array([0.0, 0.0, TILT_CHANGE_RISE_M])
+                grip = run.solve_tilted([hover, contact, *lift, rise], np.array(seed, float))
+                high = over.copy()
+                high[2] = max(over[2], rise[2])
+                out = grip and run.solve_tilted([high, drop], grip[-1])
                 path = grip + out if grip and out else None
             if path is not None:
                 return UnloadPath(path[0], path[1], path[2:-2], path[-2], path[-1], place)
