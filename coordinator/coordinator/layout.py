@@ -171,17 +171,16 @@ class CellLayout:
         free = [k for k in self.slot_order(name) if k not in taken]
         if self.destination(name) != POOL or not self.stands:
             return free
-        to_come_of = to_come
         kept: set = set()
         for row in {st.row for st in self.stands if st.serves - {POOL}}:
             bound = [c for c in self.manifest if self.carried(c) and self.destination(c) != POOL
                      and self.serving(self.destination(c)).row == row]
-            to_come = (sum(to_come_of[c] for c in bound) if to_come_of is not None else
-                       sum(self.manifest[c] for c in bound)
-                       - sum(1 for c in taken.values() if c in bound))
+            coming = (sum(to_come[c] for c in bound) if to_come is not None else
+                      sum(self.manifest[c] for c in bound)
+                      - sum(1 for c in taken.values() if c in bound))
             in_row = [k for k in free if slot_row(k) == row]
-            if to_come > 0:
-                kept |= set(in_row[max(0, len(in_row) - to_come):])
+            if coming > 0:
+                kept |= set(in_row[max(0, len(in_row) - coming):])
         return [k for k in free if k not in kept]
 
 

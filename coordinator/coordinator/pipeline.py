@@ -1113,8 +1113,8 @@ class Transport(Machine):
                 grip = run.solve_tilted([hover, contact, *lift, rise], np.array(seed, float))
                 high = over.copy()
                 high[2] = max(over[2], rise[2])
-                out = grip and run.solve_tilted([high, drop], grip[-1])
-                path = grip + out if grip and out else None
+                out = run.solve_tilted([high, drop], grip[-1]) if grip is not None else None
+                path = grip + out if grip is not None and out is not None else None
             if path is not None:
                 return UnloadPath(path[0], path[1], path[2:-2], path[-2], path[-1], place)
         return None

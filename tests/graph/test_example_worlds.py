@@ -17,7 +17,8 @@ WORLDS = sorted(p.name for p in Path(resolve_resource('package://world_descripti
 
 
 def test_there_are_example_cells():
-    assert {'cell_four_classes.yaml', 'cell_mixed_sizes.yaml', 'cell_two_trips.yaml'} <= set(WORLDS)
+    assert {'cell_four_classes.yaml', 'cell_mixed_sizes.yaml',
+            'cell_two_trips.yaml'} <= set(WORLDS)
 
 
 @pytest.mark.parametrize('name', WORLDS)
