@@ -1109,11 +1109,11 @@ class Transport(Machine):
                 # over the pool, need not stay level (one it is set down must). It rises
                 # TILT_CHANGE_RISE_M more first, still level, so that what it holds clears the
                 # others on the plate as the wrist turns.
-                rise = lift[-1] + np.array([0.0, 0.0, TILT_CHANGE_RISE_M])
+                rise = np.array(lift[-1], float) + np.array([0.0, 0.0, TILT_CHANGE_RISE_M])
                 grip = run.solve_tilted([hover, contact, *lift, rise], np.array(seed, float))
-                high = over.copy()
-                high[2] = max(over[2], rise[2])
-                out = run.solve_tilted([high, drop], grip[-1]) if grip is not None else None
+                above = np.array(over, float)
+                above[2] = max(over[2], rise[2])
+                out = run.solve_tilted([above, drop], grip[-1]) if grip is not None else None
                 path = grip + out if grip is not None and out is not None else None
             if path is not None:
                 return UnloadPath(path[0], path[1], path[2:-2], path[-2], path[-1], place)
