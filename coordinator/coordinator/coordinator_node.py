@@ -672,15 +672,12 @@ class CoordinatorNode(Node):
 
     def _publish_state(self, now: float, result_json: str = '') -> None:
         p = self.pipeline
-        mats = list(p.materials.values())
+        tally = p.tally()
         msg = PipelineState(loader_state=p.loader.state.value,
                             transport_state=p.transport.state.value,
                             status=p.result.status if p.result else 'running',
-                            total=self.layout.total, identified=len(mats),
-                            picked=sum(1 for m in mats if m.picked),
-                            delivered=sum(1 for m in mats if m.status in ('placed', 'delivered')),
-                            missed=sum(1 for m in mats if m.status == 'missed'),
-                            failed=sum(1 for m in mats if m.status == 'failed'),
+                            total=tally.total, identified=tally.identified, picked=tally.picked,
+                            delivered=tally.delivered, missed=tally.missed, failed=tally.failed,
                             elapsed=float(now - p.start_time), result_json=result_json)
         msg.header.stamp = stamp_from_ns(max(0, round(now * 1e9)))
         self.state_pub.publish(msg)

@@ -1,0 +1,591 @@
+"""The loader: the Zu 12 picks materials off the running belt and sets them down."""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import (
+    TYPE_CHECKING,
+    Callable,
+    List,
+    Optional,
+    Sequence,
+    Tuple,
+    Union,
+)
+
+import numpy as np
+
+from controllers.bezier import Pose2D
+from controllers.pick_place import PickTiming, follow_pick
+from controllers.time_optimal import (
+    SAMPLE_PERIOD_S,
+    PlanError,
+    TooLate,
+    Waypoint,
+    plan,
+)
+from coordinator.layout import (
+    PLATE_SLOTS_IN_BASE_M,
+    slot_in_world,
+)
+from coordinator.pipeline.machine import Machine
+from coordinator.pipeline.model import (
+    DOWN,
+    EDGE_CLEARANCE_M,
+    FOLLOW_TOLERANCE,
+    MAX_REPLANS,
+    PICK_LEAD_S,
+    PICK_TRIES,
+    PLAN_MARGIN,
+    RELEASE_HOLD_S,
+    SETTLE_S,
+    LoaderState,
+    Material,
+    MaterialStatus,
+    Motion,
+    Observation,
+    Points,
+    known,
+)
+
+if TYPE_CHECKING:
+    from coordinator.pipeline.core import Pipeline
+
+
+@dataclass
+class PlaceWay:
+    """A held material's way onto its place (joints), and the rise from there."""
+    waypoints: List[Waypoint]     # from the lift point: over the belt's edge, above, down
+    then: np.ndarray              # where the cup rises to over the place (not to a pick)
+    above: np.ndarray             # above the place (x, y, z)
+    above_q: np.ndarray
+    onto_plate: bool
+
+
+@dataclass
+class Ahead:
+    """A pick's motion that goes on to the place: the way there, and the lift point it passes
+    on the way."""
+    way: PlaceWay
+    q_lift: np.ndarray
+    lift_end: float               # (about when it passes it)
+
+
+# A pick that cannot be made before the material leaves the belt.
+LEAVE = 'leave'
+
+
+@dataclass
+class PickPlan:
+    """A pick as it is planned: its material and timing, where the belt takes the material, and
+    the motion to meet it there (joints over it, over the belt's edge, at the lift point)."""
+    m: Material
+    timing: PickTiming
+    track: Callable[[float], np.ndarray]
+    start: float                  # when the motion starts
+    contact: float                # when the cup is on the material
+    q_hover: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    q_edge: Optional[np.ndarray] = None
+    q_lift: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    waypoints: List[Waypoint] = field(default_factory=list)
+    points: Points = field(default_factory=list)
+
+
+def _polar(v: np.ndarray) -> Tuple[float, float]:
+    return math.hypot(v[0], v[1]), math.atan2(v[1], v[0])
+
+
+def _crossing(g, samples: int = 200) -> float:
+    """The first fraction f in [0, 1] where g changes sign (bisected), or the end of [0, 1]
+    where |g| is smaller if it does not."""
+    fs = np.linspace(0.0, 1.0, samples + 1)
+    gs = [g(f) for f in fs]
+    for k in range(samples):
+        if gs[k] == 0.0 or gs[k] * gs[k + 1] < 0.0:
+            lo, hi = fs[k], fs[k + 1]
+            for _ in range(30):
+                mid = (lo + hi) / 2
+                if g(lo) * g(mid) <= 0.0:
+                    hi = mid
+                else:
+                    lo = mid
+            return (lo + hi) / 2
+    return 0.0 if abs(gs[0]) <= abs(gs[-1]) else 1.0
+
+
+class Loader(Machine):
+    """The Zu 12: picks materials off the running belt (meeting each where it will be, and
+    moving with it while the cup is on it); a class it places itself onto its destination once
+    it has ridden to the end stop, the carried ones onto the youBot's plate."""
+
+    state: LoaderState
+
+    name, arm = 'loader', 'zu12'
+
+    def __init__(self, run: 'Pipeline') -> None:
+        super().__init__(run, LoaderState.START)
+        self.current: Optional[Material] = None     # the material being picked or placed
+        self._then: Optional[np.ndarray] = None     # where the cup rises to from its place
+        self._above: Optional[np.ndarray] = None    # above the place (x, y, z), joints
+        self._above_q: Optional[np.ndarray] = None
+        self._lift: Optional[np.ndarray] = None     # the last pick's lift point (x, y, z)
+        self._onto_plate = False                    # the last place was on the youBot's plate
+        self._clear: Optional[np.ndarray] = None    # clear of the place once here (joints)
+        self._leave = math.inf                      # when the cup lifts the material
+        self._ahead: Optional[Ahead] = None         # the pick's motion goes on to the place
+        self._replans = 0                           # pick plans the port started late
+        # The cup has just let go on the plate or the ground target: the next motion rises
+        # first (straight up, after the release hold), whatever it is.
+        self._at_release = False
+        self._clear_at = -math.inf                  # when the cup is clear of the place
+        self._arm_pending = False                   # the cup goes on once it is clear
+        S = LoaderState
+        self.handlers = {S.WAIT: self._wait, S.PICK: self._pick, S.PLACE: self._place,
+                         S.RISE: self._rise, S.RETREAT: self._retreat, S.HOME: self._home,
+                         S.DONE: lambda obs: None}
+
+    def start(self, obs: Observation) -> None:
+        """The first observation: the arms' poses now are their home poses."""
+        self.run.home_q = {'zu12': np.array(obs.zu12_q, float),
+                           'youbot': np.array(obs.youbot_q, float)}
+        self.enter(LoaderState.WAIT, obs.now, self.run.s.idle_timeout)
+
+    def _wait(self, obs: Observation) -> None:
+        run, now = self.run, obs.now
+        waiting = [m for m in run.materials.values() if m.status == MaterialStatus.SEEN]
+        accounted = sum(1 for m in run.materials.values() if m.status != MaterialStatus.SEEN)
+        if accounted >= run.layout.total or (not waiting and self.late(now)):
+            why = ('every material handled' if accounted >= run.layout.total else
+                   f'nothing new for {run.s.idle_timeout:.0f} s')
+            run.event(now, 'loading_over', 'zu12', detail=why)
+            run.event(now, 'returning', 'zu12')
+            return self._move(LoaderState.HOME, obs, [Waypoint(run.home_q['zu12'].copy())])
+        m = self._next(waiting)
+        if m is not None:
+            self._plan_pick(obs, m)
+        if self.state is LoaderState.WAIT and self._at_release:
+            # Nothing to pick yet: up from the place, to wait there.
+            self._move(LoaderState.RISE, obs, [])
+
+    def _move(self, state: LoaderState, obs: Observation, waypoints: List[Waypoint],
+              start: Optional[float] = None) -> None:
+        """Send a motion through ``waypoints`` (planned from rest where the arm is); from a
+        place the cup has just let go at, it first stays still while the material falls free
+        and rises straight up."""
+        points = self._plan(obs, waypoints, start)
+        self.move(state, obs, points, start)
+        self._after_send()
+
+    def _plan(self, obs: Observation, waypoints: List[Waypoint],
+              start: Optional[float] = None, edge: Optional[np.ndarray] = None) -> Points:
+        """From a release: the hold, then straight up to above the place and over the belt's
+        edge at ``edge`` (joints; towards a pick), or without it up to the carry height."""
+        waypoints, wait = self._from_release(waypoints, edge)
+        if self._at_release:
+            # Clear of the place once straight above it: the cup may be switched on there
+            # (what it let go is place_height below it), and the youBot may leave.
+            self._clear = self._above_q
+        return self.run.plan('zu12', obs.zu12_q, waypoints, wait, start)
+
+    def _from_release(self, waypoints: List[Waypoint], edge: Optional[np.ndarray] = None
+                      ) -> Tuple[List[Waypoint], float]:
+        """``waypoints``, after the rise from a place the cup has just let go at (see _plan),
+        and how long the motion waits first."""
+        if not self._at_release:
+            return list(waypoints), 0.0
+        rise = self.run.s.timing.place_descend
+        if edge is not None:
+            first = [Waypoint(known(self._above_q, 'the point above the place'), stop=False,
+                              min_time=rise),
+                     Waypoint(edge, stop=False)]
+        else:
+            first = [Waypoint(known(self._then, 'the rise from the place'), stop=not waypoints,
+                              min_time=rise)]
+        return first + list(waypoints), RELEASE_HOLD_S
+
+    def _after_send(self) -> None:
+        if self._at_release:
+            self._at_release = False
+            self._clear_at = self.run.arrival_time('zu12', known(self._clear, 'the clear point'))
+
+    def _edge(self, a: np.ndarray, b: np.ndarray, low: float, arc: bool = False) -> np.ndarray:
+        """Where the way from ``a`` (over the belt) to ``b`` (beside it) crosses the belt's near
+        edge, EDGE_CLEARANCE_M outside it, and at least ``low`` above its top. The way is the
+        straight line, or with ``arc`` the arc round the Zu 12's base (angle, reach and height
+        changing evenly): the way its joints go, turning joint 1, when both ends lie at about
+        the same reach. The straight line between two such points passes nearer the base, and
+        the joints that set the reach pull in to the crossing and out again."""
+        lay = self.run.layout
+        y = lay.belt_y - math.copysign(lay.belt_width / 2 + EDGE_CLEARANCE_M,
+                                       lay.belt_y - b[1])
+        a, b = np.asarray(a, float), np.asarray(b, float)
+        if arc:
+            base = np.array(lay.zu12_base[:2], float)
+            (ra, ta), (rb, tb) = (_polar(p[:2] - base) for p in (a, b))
+            tb = ta + math.remainder(tb - ta, 2 * math.pi)
+            f = _crossing(lambda f: base[1] + (ra + f * (rb - ra)) * math.sin(
+                ta + f * (tb - ta)) - y)
+            r, t = ra + f * (rb - ra), ta + f * (tb - ta)
+            p = np.array([base[0] + r * math.cos(t), y, a[2] + f * (b[2] - a[2])])
+        else:
+            f = (a[1] - y) / (a[1] - b[1]) if abs(a[1] - b[1]) > 1e-9 else 0.0
+            p = a + min(max(f, 0.0), 1.0) * (b - a)
+        p[1], p[2] = y, max(p[2], lay.belt_top + low)
+        return p
+
+    def clear_of_the_plate(self, now: float) -> bool:
+        """Whether the cup is away from the youBot's plate: not placing there, nor rising from
+        it, nor swinging home (over it)."""
+        return (self.state not in (LoaderState.PLACE, LoaderState.RISE, LoaderState.HOME)
+                and not self._at_release and now >= self._clear_at)
+
+    def _next(self, waiting: Sequence[Material]) -> Optional[Material]:
+        """The next material to pick: the most downstream one bound for the youBot's plate (the
+        youBot waits for them); one the Zu 12 places itself once the end stop holds it (it
+        rides to the end)."""
+        run = self.run
+        ride = run.layout.end_stop
+        carried = [m for m in waiting if run.layout.carried(m.color)]
+        # (The youBot takes a load only while it waits at home, with room on its plate: the
+        # others ride on, and queue at the end stop until it is back.)
+        now_ = [m for m in carried if run.loadable(m)]
+        now_ += [m for m in waiting if not run.layout.carried(m.color) and not ride]
+        if not now_:
+            now_ = [m for m in waiting if not run.layout.carried(m.color) and run.belt.held(m)]
+        return max(now_, key=lambda m: m.position[0], default=None)
+
+    def _plan_pick(self, obs: Observation, m: Material, spent: float = 0.0) -> None:
+        """Meet the material where it will be: the earliest contact the arm can make from
+        where it is, past the pick point. One motion: to the hover point, arriving there with
+        the path's velocity at its time, then down onto the material and on it while the cup
+        seals, moving with it, and up to the lift height, at rest (and on to its place,
+        ``_onward``). The cup is switched on once the motion is sent (an armed cup seals when
+        it touches its part).
+
+        Real time: ``spent`` is how long earlier plans of this pick took since ``obs.now``
+        (the port started them late, so they were replaced before they began)."""
+        run, t = self.run, self.run.s.timing
+        # A second attempt presses 4 mm further down.
+        timing = PickTiming(**{**t.__dict__, 'contact_gap': t.contact_gap - 0.004 * m.attempts})
+        # Real time: allow for the longest a pick's plan has taken (a motion the port starts
+        # later would come too late to a moving material), after what this one has spent.
+        lag = run.lag
+        start = obs.now + run.s.plan_latency + lag + spent
+        pick = PickPlan(m, timing, run.belt.track(m), start, max(
+            start + timing.descend + PICK_LEAD_S, run.belt.reaches(m, run.s.pick_x)))
+        if not math.isfinite(pick.contact):
+            return self._leave_it(obs, m)   # it does not reach the pick point (belt off)
+        why = self._approach(obs, pick) or self._meet(obs, pick)
+        if why == LEAVE:
+            return self._leave_it(obs, m)
+        if why:
+            return self._pick_failed(obs, m, why)
+        self._onward(obs, pick)
+        self._send_pick(obs, pick, lag, spent)
+
+    def _approach(self, obs: Observation, pick: 'PickPlan') -> str:
+        """The joints over the material at a first guess of the contact time, and over the
+        belt's edge on the way there from a place; the contact no sooner than the arm can be
+        there. Why not, if it cannot be."""
+        run, m, timing = self.run, pick.m, pick.timing
+        seed = run.motion('zu12').goal if run.motions['zu12'] is not None else obs.zu12_q
+        # The hover point moves with the contact time: a first guess from a rest-to-rest move
+        # there, then later by a little until the arm makes it.
+        hover = follow_pick(pick.track, pick.contact, m.size, timing)[0][0][1]
+        q_hover = run.solve('zu12', hover, DOWN, 'world', seed)
+        if q_hover is None:
+            return 'no IK solution for the pick'
+        pick.q_hover = q_hover
+        # From a place: back over the belt's edge on the way to the hover point.
+        if self._at_release and self._above is not None:
+            # (From the plate: round the arc, the cup clear of what rides on the belt.)
+            edge = (self._edge(hover, self._above, m.size + EDGE_CLEARANCE_M, arc=True)
+                    if self._onto_plate else self._edge(hover, self._above, EDGE_CLEARANCE_M))
+            pick.q_edge = run.solve('zu12', edge, DOWN, 'world', self._above_q)
+        # (A first guess: the way to the hover point, at rest there; a plan that cannot make
+        # it says by how much.)
+        way, wait = self._from_release([Waypoint(q_hover)], pick.q_edge)
+        reach = wait + plan(obs.zu12_q, way, run.limits('zu12')).end
+        pick.contact = max(pick.contact, pick.start + reach + timing.descend)
+        return ''
+
+    def _meet(self, obs: Observation, pick: 'PickPlan') -> str:
+        """The pick's motion (``pick.points``), its contact moved later until the arm makes
+        it; why not (or LEAVE: the material leaves the belt first)."""
+        run, m, timing, track = self.run, pick.m, pick.timing, pick.track
+        for _ in range(PICK_TRIES):
+            if track(pick.contact)[0] < run.s.pick_x - 1e-6:
+                pick.contact = run.belt.reaches(m, run.s.pick_x)
+            if track(pick.contact + timing.dwell)[0] > (run.layout.belt_end_x - m.size / 2
+                                                        + 1e-6):
+                return LEAVE                   # off the end (no stop) before the cup is on it
+            path, lift = follow_pick(track, pick.contact, m.size, timing, SAMPLE_PERIOD_S)
+            self._lift = np.asarray(lift, float)
+            qs = run.solve_path('zu12', [p for _, p in path] + [lift], pick.q_hover)
+            if qs is None:
+                return 'no IK solution for the pick path'
+            times = np.array([t for t, _ in path])
+            q_path = np.array(qs[:-1])
+            v = np.gradient(q_path, times, axis=0, edge_order=2)
+            a = np.gradient(v, times, axis=0, edge_order=2)
+            # To the hover point at its time, with the path's velocity; along the path (sent as
+            # it is); then up to the lift point, at rest, as fast as the joints allow.
+            waypoints = [Waypoint(q_path[0], velocity=v[0], acceleration=a[0], at=times[0])]
+            waypoints += [Waypoint(q, velocity=vk, acceleration=ak, at=tk, direct=True)
+                          for q, vk, ak, tk in zip(q_path[1:], v[1:], a[1:], times[1:])]
+            waypoints.append(Waypoint(qs[-1], min_time=timing.lift))
+            pick.waypoints, pick.q_lift = waypoints, qs[-1]
+            try:
+                pick.points = self._plan(obs, waypoints, pick.start, pick.q_edge)
+                return ''
+            except TooLate as too_late:
+                pick.contact += max(too_late.by, 0.0) + PICK_LEAD_S / 2
+            except PlanError as exc:
+                return f'no motion for the pick: {exc}'
+        return 'the arm cannot meet the material in time'
+
+    def _onward(self, obs: Observation, pick: 'PickPlan') -> None:
+        """On to the place in the same motion, through the lift point without stopping there:
+        the swing starts during the lift, and the place does not wait for an arrival check at
+        the lift point and a plan after it. (A missed grasp stops the arm at the lift point
+        instead: see _pick.)"""
+        run, m = self.run, pick.m
+        self._ahead = None
+        place_way = self._place_way(m, self._lift, obs.youbot_pose, pick.q_lift)
+        if isinstance(place_way, str):
+            return                      # (the place is planned, or its failure told, later)
+        # Lifted out of a queue (at the end stop), it comes to rest at the lift point, clear
+        # of its neighbours' tops, before it swings: a swing begun during the lift dragged a
+        # purple into the green queued behind it (the arm stalled, the purple fell back onto
+        # the belt).
+        crowded = run.belt.crowded(m, pick.contact)
+        through = pick.waypoints[:-1] + [Waypoint(pick.q_lift, stop=crowded,
+                                                  min_time=pick.timing.lift)]
+        try:
+            whole = self._plan(obs, through + place_way.waypoints, pick.start, pick.q_edge)
+        except PlanError:
+            return                      # (the place is planned at the lift point then)
+        self._ahead = Ahead(place_way, pick.q_lift, pick.points[-1][0])
+        pick.points = whole
+
+    def _send_pick(self, obs: Observation, pick: 'PickPlan', lag: float, spent: float) -> None:
+        """Send the pick; plan it again if the port starts it late; switch the cup on."""
+        run, m, now = self.run, pick.m, obs.now
+        self.current, m.status = m, MaterialStatus.PICKING
+        self.move(LoaderState.PICK, obs, pick.points, start=pick.start)
+        late = run.motion('zu12').start - pick.start
+        if late > 1e-9:
+            # The port started it later than planned: it would miss the material. This plan
+            # took as long as was allowed for it and then ``late``; plan again at once, allowing
+            # for that much after this one (the new motion replaces it before it starts).
+            took = lag + late
+            run.lag = max(run.lag, PLAN_MARGIN * took)
+            run.event(now, 'replanned', 'zu12', m, f'the pick would start {late:.2f} s late')
+            if self._replans < MAX_REPLANS:
+                self._replans += 1
+                return self._plan_pick(obs, m, spent + took)
+            # Still late: hold the arm where it is (replacing the late motion before it
+            # starts) and plan afresh on the next observation.
+            self._replans = 0
+            hold = obs.zu12_q.copy()
+            run.send(Motion('zu12', [(run.now + run.s.plan_latency, hold, np.zeros_like(hold),
+                                      np.zeros_like(hold))]))
+            return self._leave_it(obs, m)
+        self._replans = 0
+        # The cup is switched on (an armed cup seals on what it touches) now, or from a place
+        # once it has risen from there: switched on where it let go, it would take the same
+        # material again.
+        self._arm_pending = self._at_release
+        if not self._arm_pending:
+            ok, why = run.ports.grip('zu12', True)
+            if not ok:
+                return self._pick_failed(obs, m, f'the suction did not switch on: {why}')
+        self._after_send()
+        self._leave = pick.contact + pick.timing.dwell + late
+        if self._ahead is not None:
+            self._ahead.lift_end += late
+        m.attempts += 1
+        run.count_grasp('zu12')
+        held = ' (held at the stop)' if run.belt.held(m) else ''
+        run.event(now, 'tracking', 'zu12', m,
+                  f'contact at {pick.contact:.2f} s, x {pick.track(pick.contact)[0]:.3f}{held}')
+
+    def _leave_it(self, obs: Observation, m: Material) -> None:
+        """The material cannot be picked before it leaves the belt."""
+        m.status = MaterialStatus.SEEN
+        self.current = None
+        self._ahead = None
+        if self.state is not LoaderState.WAIT:
+            self.enter(LoaderState.WAIT, obs.now, self.run.s.idle_timeout)
+
+    def _pick_failed(self, obs: Observation, m: Material, why: str) -> None:
+        run = self.run
+        run.fail(obs.now, m, 'grasp_failed', why, 'zu12')
+        m.slot = m.place = -1           # (a place kept for it is free again)
+        self.current = None
+        self._ahead = None
+        self._move(LoaderState.RETREAT, obs, [Waypoint(run.home_q['zu12'].copy())])
+
+    def _pick(self, obs: Observation) -> None:
+        run, m, now = self.run, known(self.current, 'the material'), obs.now
+        if self._arm_pending:
+            if now < self._clear_at:
+                return
+            self._arm_pending = False
+            ok, why = run.ports.grip('zu12', True)
+            if not ok:
+                return self._pick_failed(obs, m, f'the suction did not switch on: {why}')
+        if not m.picked and now >= self._leave and obs.zu12_holding:
+            # Off the belt from here: what the belt queued behind it moves on.
+            run.belt.lifted(m, now)
+            run.count_grasp('zu12', success=True)
+            run.event(now, 'picked', 'zu12', m, f'attempt {m.attempts}')
+            if self._ahead is not None:        # on its way to the place already
+                self._adopt(self._ahead.way)
+                self._ahead = None
+                return self.enter(LoaderState.PLACE, now, run.motion('zu12').end - now
+                                  + run.s.settle_margin)
+        elif not m.picked and now >= self._leave and self._ahead is not None:
+            # Not held after the dwell: the motion ends at the lift point instead, at rest,
+            # where a missed grasp is judged.
+            ahead, self._ahead = self._ahead, None
+            points = run.motion('zu12').points
+            q_now = min(points, key=lambda p: abs(p[0] - now))[1]
+            after = [p for p in points if p[0] > now + run.s.plan_latency]
+            if float(np.max(np.abs(obs.zu12_q - q_now))) > FOLLOW_TOLERANCE or not after:
+                self.deadline = ahead.lift_end + run.s.settle_margin
+            else:
+                # From where the motion has the arm at its next sample, moving, to rest at the
+                # lift point: the motion's own samples until then, and the stop from there.
+                t1, q1, v1, a1 = after[0]
+                stop = plan(q1, [Waypoint(ahead.q_lift)], run.limits('zu12'), t1, v0=v1, a0=a1)
+                run.send_continuing('zu12', now, t1, stop.points())
+                self.deadline = run.motion('zu12').end + run.s.settle_margin
+        arrived = self.arrival(obs)
+        if arrived is None:
+            return
+        if not arrived:
+            run.ports.grip('zu12', False)
+            if m.picked:
+                return self._place_failed(obs, m, 'the arm did not reach the lift point')
+            # (Real time: the simulator took the motion in too late and refused it.) The
+            # material rides on, untouched: another attempt, like a missed grasp.
+            run.event(now, 'arm_stalled', 'zu12', m, f'pick attempt {m.attempts} not completed')
+            if m.attempts <= run.s.max_retries:
+                return self._plan_pick(obs, m)
+            return self._pick_failed(obs, m, 'the arm did not reach the material')
+        if not obs.zu12_holding:
+            run.ports.grip('zu12', False)
+            if m.picked:
+                return self._place_failed(obs, m, 'dropped while lifting it')
+            run.event(now, 'grasp_missed', 'zu12', m, f'attempt {m.attempts}')
+            if m.attempts <= run.s.max_retries:
+                return self._plan_pick(obs, m)
+            return self._pick_failed(obs, m, f'not held after {m.attempts} attempts')
+        if not m.picked:                     # (held, but only sealed after the lift began)
+            run.belt.lifted(m, now)
+            run.count_grasp('zu12', success=True)
+            run.event(now, 'picked', 'zu12', m, f'attempt {m.attempts}')
+        self._plan_place(obs, m)
+
+    def _plan_place(self, obs: Observation, m: Material) -> None:
+        """From the lift point over to above the place and down until the material is just
+        above it, in one motion; the release and the rise follow once the arm is there. (A
+        pick's motion goes on to the place by itself: this is for a material held only once the
+        arm was at the lift point.)"""
+        way = self._place_way(m, self._lift, obs.youbot_pose, self.run.motion('zu12').goal)
+        if isinstance(way, str):
+            return self._place_failed(obs, m, way)
+        self._adopt(way)
+        self.move(LoaderState.PLACE, obs, self.run.plan('zu12', obs.zu12_q, way.waypoints))
+
+    def _place_way(self, m: Material, lift: Optional[np.ndarray], youbot_pose: Pose2D,
+                   seed: np.ndarray) -> Union['PlaceWay', str]:
+        """The way from the lift point ``lift`` (x, y, z; None: from above the place) onto
+        ``m``'s place, or why there is none: over the belt's edge, to ``place_height`` above
+        the place, and straight down until the material is just above it."""
+        run, size, lay = self.run, m.size, self.run.layout
+        onto_plate = lay.carried(m.color)
+        if not onto_plate:
+            region = lay.region_of(m.color)
+            free = run.free_places(region.name, m)
+            if not free:
+                return f'{region.name} is full (its {len(region.slots)} slots are taken)'
+            m.place = free[0]
+            target = region.slots[m.place]
+        else:
+            free = run.plate_slots(m)
+            if not free:
+                return 'the youBot plate is full'
+            m.slot = free[0]
+            target = slot_in_world(youbot_pose, PLATE_SLOTS_IN_BASE_M[m.slot],
+                                   run.layout.youbot_base_z, size)
+        t = run.s.timing
+        release = np.asarray(target, float) + np.array([0.0, 0.0, size + t.place_gap])
+        above = release + np.array([0.0, 0.0, t.place_height])
+        # Where the cup rises to over the place when it goes home or waits: clear of the belt
+        # (a joint-space move straight from there to a place lower than the belt would sweep
+        # the held material through the belt's side).
+        transfer = release.copy()
+        transfer[2] = max(above[2], run.layout.belt_top + 2 * size + t.lift_height)
+        # Over the belt's near edge (rather than up to the carry height over the place and down
+        # again), what the cup holds 5 cm over what can ride on the belt: onto the plate round
+        # the arc (the way crosses the edge near the plate; before that it lies over the
+        # belt), onto the ground target on the straight line, 5 cm over the belt's top.
+        edge = (transfer if lift is None else
+                self._edge(lift, above, 2 * size + EDGE_CLEARANCE_M, arc=True) if onto_plate
+                else self._edge(lift, above, size + EDGE_CLEARANCE_M))
+        qs = run.solve_path('zu12', [transfer, above, release, edge], seed)
+        if qs is None:
+            return 'no IK solution for the place path'
+        q_transfer, q_above, q_release, q_edge = qs
+        return PlaceWay([Waypoint(q_edge, stop=False), Waypoint(q_above, stop=False),
+                         Waypoint(q_release, hold=SETTLE_S, min_time=t.place_descend)],
+                        q_transfer, above, q_above, onto_plate)
+
+    def _adopt(self, way: 'PlaceWay') -> None:
+        """The place the arm is on its way to: where the cup rises from it to."""
+        self._then = way.then
+        self._above, self._above_q, self._onto_plate = way.above, way.above_q, way.onto_plate
+
+    def _place_failed(self, obs: Observation, m: Material, why: str) -> None:
+        self.run.ports.grip('zu12', False)
+        self._pick_failed(obs, m, why)
+
+    def _place(self, obs: Observation) -> None:
+        run, m, now = self.run, known(self.current, 'the material'), obs.now
+        if not obs.zu12_holding:
+            return self._place_failed(obs, m, 'dropped on the way to its place')
+        arrived = self.arrival(obs)
+        if arrived is None:
+            return
+        if not arrived:
+            return self._place_failed(obs, m, 'the arm did not reach the place')
+        ok, why = run.ports.grip('zu12', False)
+        if not ok:
+            return self._place_failed(obs, m, f'release failed: {why}')
+        if not run.layout.carried(m.color):
+            m.status = MaterialStatus.PLACED
+            run.event(now, 'placed', 'zu12', m, f'{run.layout.destination(m.color)} slot '
+                                                 f'{m.place}')
+        else:
+            m.status = MaterialStatus.ON_PLATE
+            run.loaded += 1
+            run.event(now, 'loaded', 'zu12', m, f'plate slot {m.slot}')
+        # The cup stays still while the vacuum lets go, then rises: as the start of the next
+        # motion, planned now.
+        self.current, self._at_release = None, True
+        self.enter(LoaderState.WAIT, now, run.s.idle_timeout)
+        self._wait(obs)
+
+    def _rise(self, obs: Observation) -> None:
+        if self.motion_over(obs, 'the rise from the place'):
+            self.enter(LoaderState.WAIT, obs.now, self.run.s.idle_timeout)
+
+    def _retreat(self, obs: Observation) -> None:
+        if self.motion_over(obs, 'retreat'):
+            self.enter(LoaderState.WAIT, obs.now, self.run.s.idle_timeout)
+
+    def _home(self, obs: Observation) -> None:
+        if self.motion_over(obs, 'home'):
+            self.enter(LoaderState.DONE, obs.now, math.inf)

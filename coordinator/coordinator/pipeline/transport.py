@@ -1,0 +1,534 @@
+"""The transport: the youBot carries its load to the pool and unloads it."""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import (
+    TYPE_CHECKING,
+    Dict,
+    List,
+    Optional,
+    Sequence,
+    Set,
+    Tuple,
+)
+
+import numpy as np
+
+from controllers.bezier import BezierPath, Pose2D, key_poses_between
+from controllers.path_follower import PathFollower, PDGains, TurnLimits
+from controllers.time_optimal import (
+    PlanError,
+    Waypoint,
+    timed_path,
+)
+from controllers.youbot_kinematics import YoubotKinematics
+from coordinator.layout import (
+    GRASP_STANDOFF_M,
+    PLATE_SLOTS_IN_BASE_M,
+    PLATE_TOP_IN_BASE_M,
+    POOL,
+    world_to_base,
+)
+from coordinator.pipeline.machine import Machine
+from coordinator.pipeline.model import (
+    RELEASE_HOLD_S,
+    SETTLE_S,
+    LoaderState,
+    Material,
+    MaterialStatus,
+    Motion,
+    Observation,
+    Points,
+    TransportState,
+    known,
+)
+
+if TYPE_CHECKING:
+    from coordinator.pipeline.core import Pipeline
+
+
+@dataclass
+class UnloadPath:
+    """The youBot's joint positions for one unload, all at one tool tilt."""
+    hover: np.ndarray             # over the material on the plate
+    contact: np.ndarray           # the fingers round it
+    lift: List[np.ndarray]        # up off the plate, straight, to clear of its neighbours
+    over: np.ndarray              # 5 cm above its drop
+    drop: np.ndarray              # where it is let go
+    place: int = -1               # the destination's slot it is set down on (not the pool)
+
+
+# A youBot unload whose drop is reached at another tool tilt than its grip rises this much more
+# before the wrist turns [m].
+TILT_CHANGE_RISE_M = 0.06
+# The youBot's lift off the plate: heights over the grip [m], the last clear of the neighbours.
+UNLOAD_LIFT_STEPS_M = (0.01, 0.02, 0.03, 0.04, 0.05, 0.06)
+# The speeds at its top tried for a lift that goes on to the drop, as fractions of its own top
+# speed: the one whose whole motion ends soonest within the joints' limits is kept.
+UNLOAD_LIFT_END_SPEEDS = (0.0, 0.25, 0.5, 0.75, 1.0)
+
+
+class Transport(Machine):
+    """The youBot: waits for its load, drives along Bezier paths with a PD follower, unloads
+    one material at a time (into the pool over its wall, onto another destination's free
+    slot), drives home."""
+
+    state: TransportState
+
+    name, arm = 'transport', 'youbot'
+
+    def __init__(self, run: 'Pipeline') -> None:
+        super().__init__(run, TransportState.WAIT_LOAD)
+        self.queue: List[Material] = []              # still to unload, the current one first
+        self._follower: Optional[PathFollower] = None   # while the base drives
+        self._followed = False                           # the port runs the follower
+        self._drive_goal = ''
+        self._carry: Optional[UnloadPath] = None     # the unload's joint positions
+        self._armed = False
+        self._dropped: Dict[str, Set[int]] = {}        # pool drop spots used, per stand
+        self._drive_deadline = math.inf
+        # The arm holds a material up, over the plate, until the base stands at its stand.
+        self._drop_pending = False
+        self.trips = 0                                  # loads it has set off with
+        S = TransportState
+        self.handlers = {S.WAIT_LOAD: self._wait_load, S.DRIVE: self._drive,
+                         S.GRASP: self._grasp, S.CARRY: self._carry_to_drop,
+                         S.RELEASE: self._release, S.FOLD: self._fold,
+                         S.DONE: lambda obs: None}
+
+    @property
+    def current(self) -> Optional[Material]:
+        return self.queue[0] if self.queue else None
+
+    @property
+    def driving(self) -> bool:
+        return self._follower is not None
+
+    def tick(self, obs: Observation) -> None:
+        if self._follower is not None:
+            self._steer(obs)
+        super().tick(obs)
+
+    def _steer(self, obs: Observation) -> None:
+        """The base along its path, with its follower, until it is there or out of time."""
+        run, follower = self.run, known(self._follower, 'the path follower')
+        status = follower.update(obs.now, obs.youbot_pose, obs.youbot_velocity[:2],
+                                 obs.youbot_velocity[2])
+        if not self._followed:
+            run.ports.drive(*status.command)
+        if not (status.finished or obs.now > self._drive_deadline):
+            return
+        self._follower = None
+        run.ports.follow(None)
+        run.ports.drive(0.0, 0.0, 0.0)
+        if not status.finished:
+            run.event(obs.now, 'drive_stalled', 'youbot', detail=(
+                f'{status.position_error * 1000:.0f} mm from {self._drive_goal}'))
+        run.event(obs.now, 'arrived', 'youbot', detail=self._drive_goal)
+
+    def dropped(self, stand: str) -> Set[int]:
+        """The stand's pool drop spots used so far."""
+        return self._dropped.get(stand, set())
+
+    @property
+    def loading(self) -> bool:
+        """Whether the youBot waits at home for its load (the Zu 12 may load its plate)."""
+        return self.state is TransportState.WAIT_LOAD and not self.driving
+
+    def _load_complete(self, on_plate: Sequence[Material]) -> bool:
+        """Whether this trip's load is on the plate: every carried material the batch brings
+        (or the Zu 12 is done); or the plate has no room for the next one waiting on the belt
+        (it goes on the next trip). It waits while a carried material on its way could still
+        have a place."""
+        run = self.run
+        if run.loader.state is LoaderState.DONE:
+            return True
+        if any(m.status == MaterialStatus.PICKING and run.layout.carried(m.color)
+               for m in run.materials.values()):
+            return False
+        waiting = [m for m in run.materials.values()
+                   if m.status == MaterialStatus.SEEN and run.layout.carried(m.color)]
+        if any(run.plate_slots(m) for m in waiting):
+            return False
+        if waiting:
+            return bool(on_plate)           # (full for what waits: off to make room)
+        coming = [c for c in run.layout.manifest if run.layout.carried(c) and run.to_come(c)]
+        return bool(on_plate) and not any(
+            run.layout.free_slots(c, run.plate_taken(), run.to_come_counts()) for c in coming)
+
+    def _wait_load(self, obs: Observation) -> None:
+        run = self.run
+        on_plate = [m for m in run.materials.values() if m.status == MaterialStatus.ON_PLATE]
+        if not self._load_complete(on_plate) or not run.loader.clear_of_the_plate(obs.now):
+            return      # (nor while the Zu 12's cup is over the plate, or swinging home from it)
+        order = [st.name for st in run.layout.stands]
+        self.queue = sorted(on_plate, key=lambda m: (
+            order.index(self._stand_for(m)), run.layout.destination(m.color) != POOL, m.slot))
+        if not self.queue:
+            self.enter(TransportState.DONE, obs.now, math.inf)
+            return
+        self.trips += 1
+        run.event(obs.now, 'departing', 'youbot',
+                  detail=f'{len(self.queue)} materials, trip {self.trips}')
+        # The arm rises to its carry pose while the base drives: folded, it reaches down in
+        # front of the base, and its fingers would scrape the floor as the base pitches.
+        self._drive_to(obs, self._stand_for(self.queue[0]))
+
+    def _stand_for(self, m: Material) -> str:
+        return self.run.layout.stand_for(m.color, m.slot).name
+
+    def _drive_to(self, obs: Observation, goal: str) -> None:
+        run, lay = self.run, self.run.layout
+        target = lay.youbot_home if goal == 'home' else lay.stand(goal).pose
+        x, y, yaw = (float(v) for v in obs.youbot_pose)
+        start = (x, y, yaw)
+        via: Sequence = ()
+        if goal == 'home':
+            via = lay.via_back
+        elif self._drive_goal in ('', 'home'):
+            via = lay.via_out
+        elif self._drive_goal != goal:
+            via = lay.via_turn
+        path = BezierPath(key_poses_between(start, target, via))
+        # Mecanum: the heading turns on its own profile in time while the base travels the
+        # path, both over the same time (a short path with a large turn takes the turn's).
+        self._follower = PathFollower(
+            path, obs.now, run.s.drive_speed, run.s.drive_accel,
+            PDGains(max_speed=run.s.base_max_speed, max_turn=run.s.base_max_turn),
+            turn=TurnLimits(run.s.drive_turn, run.s.drive_turn_accel))
+        self._followed = run.ports.follow(self._follower)
+        self._drive_goal = goal
+        run.event(obs.now, 'driving', 'youbot', detail=f'to {goal}, {path.length:.2f} m')
+        budget = self._follower.profile.duration + run.s.drive_margin
+        self._drive_deadline = obs.now + budget
+        self.enter(TransportState.DRIVE, obs.now, budget)
+        if goal != 'home' and self.queue:
+            self._ready_arm(obs, lay.stand(goal).pose)
+
+    def _drive(self, obs: Observation) -> None:
+        run = self.run
+        if self._drive_goal == 'home':
+            if self.driving:
+                return
+            # Back to its start pose only at home, from the carry pose (a folded arm reaches
+            # down in front of the base, and its fingers would catch the floor as the base
+            # pitches). The cell's youBot starts in the carry pose: nothing is left to do.
+            if not self.motion_over(obs, 'carry pose'):
+                return
+            if run.carried_to_come() and run.loader.state is not LoaderState.DONE:
+                # More to carry: it waits here, the arm in its carry pose, for the next load.
+                run.event(obs.now, 'waiting_for_load', 'youbot',
+                          detail=f'{run.carried_to_come()} carried materials to come')
+                return self.enter(TransportState.WAIT_LOAD, obs.now, math.inf)
+            run.plan_home('youbot', obs)
+            return self.enter(TransportState.FOLD, obs.now, run.motion('youbot').end
+                              - obs.now + run.s.settle_margin)
+        # Here only when the arm could not be sent down onto the first material it unloads
+        # here (_ready_arm): from the carry pose, the unload is planned (or its failure told).
+        if self.queue and not self.motion_over(obs, 'carry pose'):
+            return
+        if self.queue or not self.driving:
+            self._next_unload(obs)
+
+    def _next_unload(self, obs: Observation) -> None:
+        run = self.run
+        if not self.queue:
+            # Home: the arm rises from the drop (its fingers 4 cm over the pool's wall) to the
+            # upright carry pose as the base sets off (slowly: in the first 0.3 s it moves 3 cm,
+            # the fingers rise further).
+            run.send(Motion('youbot', run.plan('youbot', obs.youbot_q,
+                                               [Waypoint(YOUBOT_CARRY_Q.copy())])))
+            return self._drive_to(obs, 'home')
+        m = self.queue[0]
+        if self._stand_for(m) != self._drive_goal:
+            return self._drive_to(obs, self._stand_for(m))
+        self._plan_unload(obs, m)
+
+    def _ready_arm(self, obs: Observation, stand: Pose2D) -> None:
+        """While the base drives to a stand: the arm up through the carry pose (folded, it
+        reaches down in front of the base, and its fingers would scrape the floor as the base
+        pitches), over the first material it unloads there, and on down onto it without
+        stopping over it: the grasp starts as the arm arrives, the base still on its way or
+        not. Between the stands the arm swings joint 1 round 4.1 rad, and the first grasp there
+        waited for it: a stop 12 cm over the material, and the descent from there, added 0.7 s
+        to that wait."""
+        run, m = self.run, self.queue[0]
+        path = self._unload_path(m, stand, YOUBOT_CARRY_Q, high=True)
+        if path is None:
+            # Up to the carry pose; the unload is planned (and its failure told) from there.
+            run.send(Motion('youbot', run.plan('youbot', obs.youbot_q,
+                                               [Waypoint(YOUBOT_CARRY_Q.copy())])))
+            return
+        self._approach(obs, m, path, [Waypoint(YOUBOT_CARRY_Q.copy(), stop=False)])
+
+    def _unload_path(self, m: Material, pose: Pose2D, seed: np.ndarray,
+                     high: bool = False) -> Optional['UnloadPath']:
+        """Joint positions over the material on the plate (5 cm over it with ``high``, else 3), on
+        it, up its straight lift clear of its neighbours, above its drop and at its drop, for
+        the base standing at ``pose``. The fingers come down from 3 cm over its top face (the
+        neighbours' tops are level with it). The material rises 6 cm, over their 5 cm, before it
+        swings out, through a point every centimetre at the same tool tilt: between two points
+        6 cm apart the joints' straight line swings what is held 2 cm sideways and tilts it 8
+        degrees, into a neighbour 1 cm away."""
+        run = self.run
+        size, t = m.size, run.s.timing
+        slot = PLATE_SLOTS_IN_BASE_M[m.slot]
+        top = (PLATE_TOP_IN_BASE_M + size + YOUBOT_GRASP_STANDOFF_M
+               - 0.004 * m.unload_attempts)
+        contact = np.array([slot[0], slot[1], top])
+        hover = contact + np.array([0.0, 0.0, 0.05 if high else 0.03])
+        lift = [contact + np.array([0.0, 0.0, h]) for h in UNLOAD_LIFT_STEPS_M]
+        stand = self._stand_for(m)
+        region = run.layout.region_of(m.color)
+        if not region.drop:
+            # Its destination's free slots, the first the arm reaches from here.
+            up = np.array([0.0, 0.0, size + t.place_gap + YOUBOT_GRASP_STANDOFF_M])
+            candidates = [(k, region.slots[k] + up) for k in run.free_places(region.name, m)]
+        else:
+            # The stand's first unused drop; if the arm cannot reach it from this slot as the
+            # base stands (a far slot, a base a centimetre off), the others in turn. A drop
+            # spot is used once: a cube dropped onto another can tumble back over the wall.
+            drops = run.layout.stand(stand).drops
+            used = self._dropped.get(stand, set())
+            candidates = [(k, d) for k, d in enumerate(drops) if k not in used]
+        for place, drop_world in candidates:
+            drop = world_to_base(pose, drop_world)
+            drop[2] -= run.layout.youbot_base_z
+            # Over the drop, at least as high as the lift's top: a swing there keeps what is
+            # held over the plate's other materials where a joint motion from the lift's top
+            # straight down to a pool drop (lower than the plate) would swing it into the next
+            # one (campaign trial 31). Taken only when that is so (_lift).
+            over = drop.copy()
+            over[2] = max(drop[2] + 0.05, lift[-1][2])
+            path = run.solve_tilted([hover, contact, *lift, over, drop],
+                                    np.array(seed, float))
+            if path is None and region.drop:
+                # A drop spot further in is reached leaning another way: the material, let go
+                # over the pool, need not stay level (one it is set down must). It rises
+                # TILT_CHANGE_RISE_M more first, still level, so that what it holds clears the
+                # others on the plate as the wrist turns.
+                rise = np.array(lift[-1], float) + np.array([0.0, 0.0, TILT_CHANGE_RISE_M])
+                grip = run.solve_tilted([hover, contact, *lift, rise], np.array(seed, float))
+                above = np.array(over, float)
+                above[2] = max(over[2], rise[2])
+                out = run.solve_tilted([above, drop], grip[-1]) if grip is not None else None
+                path = grip + out if grip is not None and out is not None else None
+            if path is not None:
+                return UnloadPath(path[0], path[1], path[2:-2], path[-2], path[-1], place)
+        return None
+
+    def _lift(self, obs: Observation, m: Material, then: Sequence[Waypoint] = (),
+              detour: Sequence[Waypoint] = ()) -> Points:
+        """The motion from the grip: the straight lift off the plate, timed along the line (a
+        joint motion between its ends would swing the material into its neighbours), at rest
+        at its top, or going on from there through ``then`` (or ``detour`` where ``then``
+        would not keep ``m`` clear of the plate's other materials): at the speed, of those
+        tried, that ends soonest and keeps the joints within their limits."""
+        run = self.run
+        limits = run.limits('youbot')
+        others = self._others(m)
+        carry = known(self._carry, 'the unload path')
+        for way in ((then, detour) if detour else (then,)):
+            best = None
+            for speed in (UNLOAD_LIFT_END_SPEEDS if way else (0.0,)):
+                lift = timed_path([obs.youbot_q, *carry.lift], limits,
+                                  run.now + run.s.plan_latency, end_speed=speed,
+                                  min_time=run.s.timing.lift)
+                try:
+                    points = run.plan('youbot', obs.youbot_q, [*lift, *way])
+                except PlanError:
+                    continue
+                within = all(np.all(np.abs(v) <= limits.velocity) for _, _, v, _ in points)
+                if (within and (best is None or points[-1][0] < best[-1][0])
+                        and clear_of_the_plate(points, others, m.size)):
+                    best = points
+            if best is not None:
+                return best
+        raise PlanError('no motion off the plate within the joint limits and clear of the '
+                        'other materials')
+
+    def _others(self, m: Material) -> List[Tuple[float, float]]:
+        """The plate slots of the materials on the plate but ``m``."""
+        return [PLATE_SLOTS_IN_BASE_M[o.slot] for o in self.run.materials.values()
+                if o.status == MaterialStatus.ON_PLATE and o.slot >= 0 and o.id != m.id]
+
+    def _stand_pose(self, obs: Observation) -> Pose2D:
+        """Where the base stands for its unloads: its drive's goal while it is on its way."""
+        if self.driving:
+            return self.run.layout.stand(self._drive_goal).pose
+        return obs.youbot_pose
+
+    def _plan_unload(self, obs: Observation, m: Material) -> None:
+        """Down onto the material on the plate; the gripper closes once the arm is there."""
+        run, now = self.run, obs.now
+        plan = self._unload_path(m, self._stand_pose(obs), obs.youbot_q)
+        if plan is None:
+            self.queue.pop(0)
+            run.fail(now, m, 'grasp_failed', 'unload: no IK solution', 'youbot')
+            return self._next_unload(obs)
+        self._approach(obs, m, plan)
+
+    def _approach(self, obs: Observation, m: Material, plan: 'UnloadPath',
+                  through: Sequence[Waypoint] = ()) -> None:
+        """Down onto ``m`` on the plate through ``through`` and its hover; the gripper closes
+        once the arm is there (GRASP)."""
+        run, t = self.run, self.run.s.timing
+        self._carry, self._armed = plan, False
+        m.place = plan.place                # (kept for it: the pool's drops are the stand's)
+        m.unload_attempts += 1
+        run.count_grasp('youbot')
+        self.move(TransportState.GRASP, obs, run.plan('youbot', obs.youbot_q, [
+            *through, Waypoint(plan.hover, stop=False),
+            Waypoint(plan.contact, hold=SETTLE_S, min_time=t.descend)]))
+
+    def _grasp(self, obs: Observation) -> None:
+        run, m, now = self.run, self.queue[0], obs.now
+        arrived = self.arrival(obs)
+        if arrived is None:
+            return
+        if not arrived:
+            return self._unload_failed(obs, m, 'grasp_failed',
+                                       'unload: the arm did not reach the material')
+        if not self._armed:
+            # Closed only now: its 20 mm reach would take a neighbour on the way down.
+            run.ports.grip('youbot', True)
+            self._armed = True
+            return
+        if not obs.youbot_armed:
+            if self.late(now):
+                return self._unload_failed(obs, m, 'grasp_failed',
+                                           'unload: the gripper does not report closing')
+            return                      # (the grip state from before the gripper closed)
+        if not obs.youbot_holding:
+            run.ports.grip('youbot', False)
+            run.event(now, 'grasp_missed', 'youbot', m, f'attempt {m.unload_attempts}')
+            if m.unload_attempts <= run.s.max_retries:
+                return self._plan_unload(obs, m)
+            return self._unload_failed(obs, m, 'grasp_failed', f'unload: not held after '
+                                       f'{m.unload_attempts} attempts')
+        run.count_grasp('youbot', success=True)
+        run.event(now, 'unload_grasped', 'youbot', m, f'attempt {m.unload_attempts}')
+        if self.driving:
+            # Up clear of its neighbours, and held there until the base stands.
+            self._drop_pending = True
+            try:
+                return self.move(TransportState.CARRY, obs, self._lift(obs, m))
+            except PlanError as exc:
+                return self._unload_failed(obs, m, 'failed', f'unload: {exc}')
+        self._carry_out(obs, m, known(self._carry, 'the unload path').over,
+                            known(self._carry, 'the unload path').drop, lift=True)
+
+    def _carry_out(self, obs: Observation, m: Material, over: np.ndarray, drop: np.ndarray,
+                   lift: bool = False) -> None:
+        """Over to the material's drop (first up off the plate with ``lift``)."""
+        run, t = self.run, self.run.s.timing
+        self._drop_pending = False
+        if not run.layout.region_of(m.color).drop:
+            # Set down on its slot gently, from above, and still before letting go.
+            carry = [Waypoint(over, stop=False),
+                     Waypoint(drop, hold=SETTLE_S, min_time=t.place_descend)]
+        else:
+            # Let go over the pool, 14 cm up (4 cm over its walls): straight there, or over it
+            # first where the straight swing would not clear the plate's other materials.
+            carry = [Waypoint(drop)]
+        detour = [Waypoint(over, stop=False), Waypoint(drop)]
+        try:
+            if lift:
+                try:
+                    points = self._lift(obs, m, carry, detour)
+                except PlanError:
+                    # No one motion off the plate and on over the drop (one reached at another
+                    # tilt: the wrist turns on the way): up clear of the others and still
+                    # first, and over from there (_carry_to_drop).
+                    self._drop_pending = True
+                    return self.move(TransportState.CARRY, obs, self._lift(obs, m))
+            else:       # (from the lift's top, where it waited for the base to stand)
+                points = run.plan('youbot', obs.youbot_q, carry)
+                if not clear_of_the_plate(points, self._others(m), m.size):
+                    points = run.plan('youbot', obs.youbot_q, detour)
+        except PlanError as exc:
+            return self._unload_failed(obs, m, 'failed', f'unload: {exc}')
+        self.move(TransportState.CARRY, obs, points)
+
+    def _unload_failed(self, obs: Observation, m: Material, kind: str, why: str) -> None:
+        self._drop_pending = False
+        self.run.ports.grip('youbot', False)
+        self.queue.pop(0)
+        self.run.fail(obs.now, m, kind, why, 'youbot')
+        self._next_unload(obs)
+
+    def _carry_to_drop(self, obs: Observation) -> None:
+        run, m, now = self.run, self.queue[0], obs.now
+        if not obs.youbot_holding:
+            return self._unload_failed(obs, m, 'failed', 'unload: dropped on the way')
+        arrived = self.arrival(obs)
+        if arrived is None:
+            return
+        if self._drop_pending:
+            if self.driving:
+                return              # (held up over the plate until the base stands)
+            if not arrived:
+                run.event(now, 'arm_stalled', 'youbot', m, 'the lift off the plate not completed')
+            # Over to its drop as the base stands now (the drive ends a little off its goal).
+            path = (self._unload_path(m, obs.youbot_pose, obs.youbot_q)
+                    or known(self._carry, 'the unload path'))
+            self._carry, m.place = path, path.place
+            return self._carry_out(obs, m, path.over, path.drop)
+        if not arrived:
+            run.event(now, 'arm_stalled', 'youbot', m, 'unload motion not completed')
+        run.ports.grip('youbot', False)
+        m.status = MaterialStatus.DELIVERED
+        where = run.layout.destination(m.color)
+        if run.layout.region_of(m.color).drop:
+            self._dropped.setdefault(self._drive_goal, set()).add(m.place)
+            where += f' drop {m.place} from {self._drive_goal}'
+        else:
+            where += f' slot {m.place}'
+        run.event(now, 'delivered', 'youbot', m, where)
+        # The arm stays still while the material falls free of the fingers.
+        self.enter(TransportState.RELEASE, now, RELEASE_HOLD_S)
+
+    def _release(self, obs: Observation) -> None:
+        if self.late(obs.now):
+            self.queue.pop(0)
+            self._next_unload(obs)
+
+    def _fold(self, obs: Observation) -> None:
+        if self.motion_over(obs, 'home pose'):
+            self.enter(TransportState.DONE, obs.now, math.inf)
+
+
+# The youBot's arm upright (the datasheet's candle pose) while the base drives home.
+YOUBOT_CARRY_Q = np.zeros(5)
+# The youBot's fingertips reach 10.4 mm beyond gripper_tcp: it grasps a material's top face with
+# the TCP this far above it, so that the fingertips do not push the material away.
+YOUBOT_GRASP_STANDOFF_M = GRASP_STANDOFF_M
+
+
+# What the youBot holds passes this far over the tops of the plate's other materials [m].
+PLATE_CLEARANCE_M = 0.01
+_YOUBOT_FK = YoubotKinematics('gripper_tcp')
+
+
+def clear_of_the_plate(points: Points, others: Sequence[Tuple[float, float]], size: float,
+                       steps: int = 8) -> bool:
+    """Whether a youBot motion (samples of time, positions, velocities, accelerations) keeps
+    the material it holds (gripped by its top face) ``PLATE_CLEARANCE_M`` over the materials
+    in the plate slots ``others`` wherever it passes over one: along the path the controller
+    follows between the samples (cubic in position and velocity)."""
+    if not others:
+        return True
+    tops = PLATE_TOP_IN_BASE_M + size + PLATE_CLEARANCE_M
+    reach = size + 0.005         # centre to centre, nearer than this in x and y: over it
+    for (t0, q0, v0, _), (t1, q1, v1, _) in zip(points, points[1:]):
+        h = t1 - t0
+        for x in np.linspace(0.0, 1.0, steps, endpoint=False):
+            q = ((2 * x**3 - 3 * x**2 + 1) * q0 + (x**3 - 2 * x**2 + x) * h * v0
+                 + (-2 * x**3 + 3 * x**2) * q1 + (x**3 - x**2) * h * v1)
+            px, py, pz = _YOUBOT_FK.fk(q)[:3, 3]
+            bottom = pz - YOUBOT_GRASP_STANDOFF_M - size
+            if bottom < tops and any(abs(px - sx) < reach and abs(py - sy) < reach
+                                     for sx, sy in others):
+                return False
+    return True
