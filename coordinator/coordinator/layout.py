@@ -389,9 +389,25 @@ def _region(layout: CellLayout, obstacle, name: str) -> Tuple[Region, str]:
     return Region(name, (ox, oy), (hx, hy), top, tuple(reached)), stand.name
 
 
+# Carried materials stand at least this far apart on the youBot's plate [m].
+PLATE_GAP_M = 0.005
+
+
+def plate_pitch() -> float:
+    """The least distance between two of the plate's slots [m]."""
+    return min(math.dist(a, b) for i, a in enumerate(PLATE_SLOTS_IN_BASE_M)
+               for b in PLATE_SLOTS_IN_BASE_M[i + 1:])
+
+
 def _check_capacity(layout: CellLayout) -> None:
     """Every destination has a slot for each material bound for it (the youBot makes as many
-    trips as its load needs)."""
+    trips as its load needs), and every carried material fits the plate's slots."""
+    largest = plate_pitch() - PLATE_GAP_M
+    for name, rule in layout.rules.items():
+        if rule.route == 'carry' and rule.size > largest + 1e-9:
+            raise LayoutError(f'{name} ({rule.size} m) is too large to be carried: the youBot\'s '
+                              f'plate slots are {plate_pitch():.2f} m apart (at most '
+                              f'{largest:.3f} m)')
     for name, region in layout.regions.items():
         bound = sum(n for c, n in layout.manifest.items() if layout.destination(c) == name)
         if bound > len(region.slots):

@@ -62,7 +62,8 @@ class UnloadPath:
 # A youBot unload whose drop is reached at another tool tilt than its grip rises this much more
 # before the wrist turns [m].
 TILT_CHANGE_RISE_M = 0.06
-# The youBot's lift off the plate: heights over the grip [m], the last clear of the neighbours.
+# The youBot's lift off the plate: heights over the grip [m], the last clear of the neighbours
+# (of the paper's 5 cm materials; taller neighbours take it higher, 1 cm at a time).
 UNLOAD_LIFT_STEPS_M = (0.01, 0.02, 0.03, 0.04, 0.05, 0.06)
 # The speeds at its top tried for a lift that goes on to the drop, as fractions of its own top
 # speed: the one whose whole motion ends soonest within the joints' limits is kept.
@@ -278,7 +279,7 @@ class Transport(Machine):
                - 0.004 * m.unload_attempts)
         contact = np.array([slot[0], slot[1], top])
         hover = contact + np.array([0.0, 0.0, 0.05 if high else 0.03])
-        lift = [contact + np.array([0.0, 0.0, h]) for h in UNLOAD_LIFT_STEPS_M]
+        lift = [contact + np.array([0.0, 0.0, h]) for h in self._lift_steps(m)]
         stand = self._stand_for(m)
         region = run.layout.region_of(m.color)
         if not region.drop:
@@ -347,6 +348,17 @@ class Transport(Machine):
                 return best
         raise PlanError('no motion off the plate within the joint limits and clear of the '
                         'other materials')
+
+    def _lift_steps(self, m: Material) -> Tuple[float, ...]:
+        """Heights over the grip that the straight lift passes through: up until what it holds
+        clears the tallest other material on the plate by PLATE_CLEARANCE_M (its bottom rises
+        as far as the grip does)."""
+        tallest = max((o.size for o in self.run.materials.values()
+                       if o.status is MaterialStatus.ON_PLATE and o is not m), default=0.0)
+        steps = list(UNLOAD_LIFT_STEPS_M)
+        while steps[-1] < tallest + PLATE_CLEARANCE_M - 1e-9:
+            steps.append(round(steps[-1] + 0.01, 6))
+        return tuple(steps)
 
     def _others(self, m: Material) -> List[Tuple[float, float]]:
         """The plate slots of the materials on the plate but ``m``."""
