@@ -5,6 +5,7 @@ import copy
 import numpy as np
 import pytest
 import yaml
+from test_material_classes import PAPER_CLASSES as PAPER
 from test_pipeline import FakeCell, kinds, run
 
 from coordinator.layout import SLOT_GAP_M, LayoutError, layout_from_world
@@ -12,14 +13,6 @@ from world_description.resources import resolve_resource
 from world_description.world_config import parse_world
 
 CELL = resolve_resource('package://world_description/worlds/pipeline_cell.yaml')
-PAPER = {
-    'purple': {'color': [0.5, 0.15, 0.7, 1.0], 'count': 1, 'destination': 'ground_target',
-               'route': 'place'},
-    'orange': {'color': [1.0, 0.5, 0.05, 1.0], 'count': 6, 'destination': 'pool_floor',
-               'route': 'carry'},
-    'blue': {'color': [0.1, 0.3, 0.9, 1.0], 'count': 1, 'destination': 'pool_platform',
-             'route': 'carry'},
-}
 
 
 def world(classes, obstacles=(), move=None):
