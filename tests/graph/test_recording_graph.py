@@ -59,8 +59,14 @@ def test_recording_at_full_rates_loses_nothing_and_keeps_bytes(start_node, probe
     probe_odom = probe.collect(Odometry, '/mini_robot/odom', raw=True)
     # The probe receives before the recorder starts, so it saw everything the bag can hold.
     wait_for(lambda: len(probe_odom) > 5, 20.0, what='the probe receiving odometry')
+    sim_odom = probe.collect(Odometry, '/mini_robot/odom')
     rec = _start_recording(start_node, tmp_path, '-p', f'storage:={storage}')
-    time.sleep(3.0)  # three seconds of a real-time run
+    # Three seconds of simulated time: on a loaded machine the simulator runs behind the
+    # clock on the wall (three wall seconds gave 583 steps, not 720).
+    wait_for(lambda: sim_odom, 20.0, what='odometry')
+    t0 = _ns(sim_odom[-1][1].header.stamp)
+    wait_for(lambda: _ns(sim_odom[-1][1].header.stamp) - t0 >= 3_000_000_000, 60.0,
+             what='three simulated seconds')
     assert rec.stop(stop_signal) == 0
     assert 'closed with' in rec.output()
     bag = tmp_path / 'bags' / 'run'
@@ -93,7 +99,11 @@ def test_sigkill_loses_at_most_the_last_second(start_node, probe, tmp_path, stor
     probe_odom = probe.collect(Odometry, '/mini_robot/odom', raw=True)
     wait_for(lambda: len(probe_odom) > 5, 20.0, what='the probe receiving odometry')
     rec = _start_recording(start_node, tmp_path, '-p', f'storage:={storage}', name='killed')
-    time.sleep(3.0)
+    # A few seconds of recording, counted in messages (a loaded machine runs the simulator
+    # behind the wall clock): enough that more than 100 are older than the last second.
+    n0 = len(probe_odom)
+    wait_for(lambda: len(probe_odom) >= n0 + 150, 60.0, what='150 odometry messages')
+    time.sleep(1.0)
     killed_at = time.monotonic()
     rec.stop(signal.SIGKILL)
     bag = tmp_path / 'bags' / 'killed'
