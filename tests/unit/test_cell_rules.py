@@ -177,3 +177,42 @@ def test_a_queue_that_would_overflow_the_belt_stops_it_and_the_result_counts_the
     stops = [e for e in kinds(cell, 'belt_stopped') if e.detail]
     assert len(stops) == r.belt_stops
     assert all(e.detail == 'the queue would overflow the belt' for e in stops)
+
+
+def test_a_set_down_swings_in_over_what_is_at_its_destination_already(monkeypatch):
+    """Two 55 mm materials on one destination of each route: the arm carrying the second
+    comes in over the first with what it holds SET_DOWN_CLEARANCE_M above it (a 5 cm rise
+    over the drop swept the second youBot's blue through the first and pushed it off its
+    slot)."""
+    from coordinator.pipeline import loader, model, transport
+    classes = copy.deepcopy(PAPER)
+    classes['purple'].update(count=2, size=0.06)
+    classes['blue'].update(count=2, size=0.055)
+    classes['orange'].update(count=4)
+    layout = layout_from_world(world(classes))
+    swings = {'zu12': [], 'youbot': []}
+    carry_out = transport.Transport._carry_out
+    place_way = loader.Loader._place_way
+
+    def youbot(self, obs, m, over, drop, **kwargs):
+        swings['youbot'].append((m.color, over[2] - drop[2]))
+        return carry_out(self, obs, m, over, drop, **kwargs)
+
+    def zu12(self, m, *args):
+        way = place_way(self, m, *args)
+        if not isinstance(way, str) and not way.onto_plate:
+            # (The fake's joints are the tool's position: the last waypoint's, the release.)
+            swings['zu12'].append((m.color, way.above[2] - way.waypoints[-1].q[2]))
+        return way
+
+    monkeypatch.setattr(transport.Transport, '_carry_out', youbot)
+    monkeypatch.setattr(loader.Loader, '_place_way', zu12)
+    cell = FakeCell(layout, ['orange', 'blue', 'purple', 'orange', 'blue', 'orange', 'purple',
+                             'orange'])
+    r = run(cell).result
+    assert r.status == 'completed', r
+    gap = model.Settings().timing.place_gap
+    for arm, color, size in (('youbot', 'blue', 0.055), ('zu12', 'purple', 0.06)):
+        rises = [h for c, h in swings[arm] if c == color]
+        assert len(rises) == 2
+        assert rises[1] >= size + model.SET_DOWN_CLEARANCE_M - gap - 1e-9

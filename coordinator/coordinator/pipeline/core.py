@@ -28,6 +28,7 @@ from coordinator.pipeline.loader import Loader
 from coordinator.pipeline.model import (
     DOWN,
     QUEUE_MARGIN_M,
+    SET_DOWN_CLEARANCE_M,
     Event,
     LoaderState,
     Material,
@@ -241,6 +242,18 @@ class Pipeline:
                  and self.layout.destination(x.color) == region}
         slots = self.layout.regions[region].slots
         return [k for k in range(len(slots)) if k not in taken]
+
+    def set_down_rise(self, destination: Optional[str]) -> float:
+        """How far over its release point a held material must swing in to a set-down on
+        ``destination`` (None: the youBot's plate) to clear the materials there already by
+        SET_DOWN_CLEARANCE_M (0: none there)."""
+        there = [x.size for x in self.materials.values()
+                 if (x.status is MaterialStatus.ON_PLATE if destination is None else
+                     x.status in (MaterialStatus.PLACED, MaterialStatus.DELIVERED)
+                     and self.layout.destination(x.color) == destination)]
+        if not there:
+            return 0.0
+        return max(there) + SET_DOWN_CLEARANCE_M - self.s.timing.place_gap
 
     # --- the belt -----------------------------------------------------------------------------
     def _belt(self, now: float, running: bool) -> None:

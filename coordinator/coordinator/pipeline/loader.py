@@ -522,7 +522,10 @@ class Loader(Machine):
                                    run.layout.youbot_base_z, size)
         t = run.s.timing
         release = np.asarray(target, float) + np.array([0.0, 0.0, size + t.place_gap])
-        above = release + np.array([0.0, 0.0, t.place_height])
+        # Down onto it from over the materials there already.
+        rise = max(t.place_height,
+                   run.set_down_rise(None if onto_plate else lay.destination(m.color)))
+        above = release + np.array([0.0, 0.0, rise])
         # Where the cup rises to over the place when it goes home or waits: clear of the belt
         # (a joint-space move straight from there to a place lower than the belt would sweep
         # the held material through the belt's side).

@@ -29,6 +29,9 @@ PICK_LEAD_S = 0.1
 # The Zu 12 crosses the belt's near edge this far outside it, with what it carries (or its
 # empty cup) at least this far above the belt's top [m].
 EDGE_CLEARANCE_M = 0.05
+# An arm swings in over the materials already at a set-down's destination (or on the plate)
+# with what it holds at least this far above the tallest of them [m].
+SET_DOWN_CLEARANCE_M = 0.02
 PICK_TRIES = 6
 # Real time: a pick allows for this much more than the longest plan of one has taken (the next
 # may need a few more IK calls).

@@ -282,6 +282,9 @@ class Transport(Machine):
         lift = [contact + np.array([0.0, 0.0, h]) for h in self._lift_steps(m)]
         stand = self._stand_for(m)
         region = run.layout.region_of(m.color)
+        # The swing over to a set-down comes in over what is there already (5 cm over the drop
+        # is too little for 55 mm materials): it is as high over the drop as that asks.
+        clear = 0.0 if region.drop else run.set_down_rise(region.name)
         if not region.drop:
             # Its destination's free slots, the first the arm reaches from here.
             up = np.array([0.0, 0.0, size + t.place_gap + YOUBOT_GRASP_STANDOFF_M])
@@ -301,7 +304,7 @@ class Transport(Machine):
             # straight down to a pool drop (lower than the plate) would swing it into the next
             # one (campaign trial 31). Taken only when that is so (_lift).
             over = drop.copy()
-            over[2] = max(drop[2] + 0.05, lift[-1][2])
+            over[2] = max(drop[2] + 0.05, lift[-1][2], drop[2] + clear)
             path = run.solve_tilted([hover, contact, *lift, over, drop],
                                     np.array(seed, float))
             if path is None and region.drop:
