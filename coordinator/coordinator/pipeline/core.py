@@ -131,7 +131,14 @@ class Pipeline:
     def grasp_successes(self) -> int:
         return sum(s for _, s in self.grasps.values())
 
-    # --- what the machines share --------------------------------------------------------------
+    # --- what the machines share (coordinator.pipeline.shared lists it) -------------------------
+    @property
+    def loader_done(self) -> bool:
+        return self.loader.state is LoaderState.DONE
+
+    def zu12_clear_of_the_plate(self, now: float) -> bool:
+        return self.loader.clear_of_the_plate(now)
+
     def count_grasp(self, arm: str, success: bool = False) -> None:
         self.grasps[arm][1 if success else 0] += 1
 
@@ -163,6 +170,9 @@ class Pipeline:
         motion = Motion(arm, kept + list(points), start=now)
         self.ports.trajectory(arm, motion.points, now, continuing=True)
         self.motions[arm] = motion
+
+    def has_motion(self, arm: str) -> bool:
+        return self.motions[arm] is not None
 
     def motion(self, arm: str) -> Motion:
         """The arm's current motion (one has been sent)."""

@@ -49,7 +49,7 @@ from coordinator.pipeline.model import (
 )
 
 if TYPE_CHECKING:
-    from coordinator.pipeline.core import Pipeline
+    from coordinator.pipeline.shared import Shared
 
 
 @dataclass
@@ -122,7 +122,7 @@ class Loader(Machine):
 
     name, arm = 'loader', 'zu12'
 
-    def __init__(self, run: 'Pipeline') -> None:
+    def __init__(self, run: 'Shared') -> None:
         super().__init__(run, LoaderState.START)
         self.current: Optional[Material] = None     # the material being picked or placed
         self._then: Optional[np.ndarray] = None     # where the cup rises to from its place
@@ -288,7 +288,7 @@ class Loader(Machine):
         belt's edge on the way there from a place; the contact no sooner than the arm can be
         there. Why not, if it cannot be."""
         run, m, timing = self.run, pick.m, pick.timing
-        seed = run.motion('zu12').goal if run.motions['zu12'] is not None else obs.zu12_q
+        seed = run.motion('zu12').goal if run.has_motion('zu12') else obs.zu12_q
         # The hover point moves with the contact time: a first guess from a rest-to-rest move
         # there, then later by a little until the arm makes it.
         hover = follow_pick(pick.track, pick.contact, m.size, timing)[0][0][1]

@@ -17,7 +17,7 @@ from coordinator.pipeline.model import (
 )
 
 if TYPE_CHECKING:
-    from coordinator.pipeline.core import Pipeline
+    from coordinator.pipeline.shared import Shared
 
 
 class Machine:
@@ -27,7 +27,7 @@ class Machine:
     name = ''
     arm = ''
 
-    def __init__(self, run: 'Pipeline', initial: Enum) -> None:
+    def __init__(self, run: 'Shared', initial: Enum) -> None:
         self.run = run
         self.state = initial
         self.deadline = math.inf

@@ -34,7 +34,6 @@ from coordinator.pipeline.machine import Machine
 from coordinator.pipeline.model import (
     RELEASE_HOLD_S,
     SETTLE_S,
-    LoaderState,
     Material,
     MaterialStatus,
     Motion,
@@ -45,7 +44,7 @@ from coordinator.pipeline.model import (
 )
 
 if TYPE_CHECKING:
-    from coordinator.pipeline.core import Pipeline
+    from coordinator.pipeline.shared import Shared
 
 
 @dataclass
@@ -79,7 +78,7 @@ class Transport(Machine):
 
     name, arm = 'transport', 'youbot'
 
-    def __init__(self, run: 'Pipeline') -> None:
+    def __init__(self, run: 'Shared') -> None:
         super().__init__(run, TransportState.WAIT_LOAD)
         self.queue: List[Material] = []              # still to unload, the current one first
         self._follower: Optional[PathFollower] = None   # while the base drives
@@ -143,7 +142,7 @@ class Transport(Machine):
         (it goes on the next trip). It waits while a carried material on its way could still
         have a place."""
         run = self.run
-        if run.loader.state is LoaderState.DONE:
+        if run.loader_done:
             return True
         if any(m.status == MaterialStatus.PICKING and run.layout.carried(m.color)
                for m in run.materials.values()):
@@ -161,7 +160,7 @@ class Transport(Machine):
     def _wait_load(self, obs: Observation) -> None:
         run = self.run
         on_plate = [m for m in run.materials.values() if m.status == MaterialStatus.ON_PLATE]
-        if not self._load_complete(on_plate) or not run.loader.clear_of_the_plate(obs.now):
+        if not self._load_complete(on_plate) or not run.zu12_clear_of_the_plate(obs.now):
             return      # (nor while the Zu 12's cup is over the plate, or swinging home from it)
         order = [st.name for st in run.layout.stands]
         self.queue = sorted(on_plate, key=lambda m: (
@@ -217,7 +216,7 @@ class Transport(Machine):
             # pitches). The cell's youBot starts in the carry pose: nothing is left to do.
             if not self.motion_over(obs, 'carry pose'):
                 return
-            if run.carried_to_come() and run.loader.state is not LoaderState.DONE:
+            if run.carried_to_come() and not run.loader_done:
                 # More to carry: it waits here, the arm in its carry pose, for the next load.
                 run.event(obs.now, 'waiting_for_load', 'youbot',
                           detail=f'{run.carried_to_come()} carried materials to come')
