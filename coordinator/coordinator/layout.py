@@ -20,8 +20,28 @@ from controllers.youbot_arm import ARM_BASE_IN_BASE_LINK_M
 # the slots the Zu 12 fills, in base_link. The youBot's arm cannot turn straight back (joint 1
 # stops at 169 deg), so the slots sit in two rows along the plate's sides.
 PLATE_TOP_IN_BASE_M = 0.046 + 0.01
-PLATE_SLOTS_IN_BASE_M: Tuple[Tuple[float, float], ...] = tuple(
-    (x, y) for x in (-0.065, -0.125, -0.185, -0.245) for y in (0.11, -0.11))
+# The plate's slots (base_link x, y): two rows, one each side, from the near end towards the back
+# (the youBot's arm reaches no further), a material's size and PLATE_GAP_M apart but never
+# nearer than PLATE_PITCH_MIN_M: four a row up to 50 mm (the paper's), three above.
+PLATE_ROWS_Y_M = (0.11, -0.11)
+PLATE_NEAR_X_M, PLATE_FAR_X_M = -0.065, -0.245
+PLATE_PITCH_MIN_M = 0.06
+# Carried materials stand at least this far apart on the youBot's plate [m]: with 6 mm between
+# 54 mm materials, the Zu 12 knocked a neighbour as it set one down, and the youBot found no
+# lift off the plate that kept clear of them.
+PLATE_GAP_M = 0.01
+
+
+def plate_grid(size: float) -> Tuple[Tuple[float, float], ...]:
+    """The plate's slots for carried materials of edge ``size`` at most, in the order of
+    their numbers (near to far, each with its left and right)."""
+    pitch = max(PLATE_PITCH_MIN_M, size + PLATE_GAP_M)
+    n = int(math.floor((PLATE_NEAR_X_M - PLATE_FAR_X_M) / pitch + 1e-9)) + 1
+    return tuple((PLATE_NEAR_X_M - k * pitch, y) for k in range(n) for y in PLATE_ROWS_Y_M)
+
+
+# The paper's plate (50 mm materials).
+PLATE_SLOTS_IN_BASE_M = plate_grid(0.05)
 
 
 # A destination's slots: a grid over its top face, the materials this far apart (and this far in
@@ -112,6 +132,8 @@ class CellLayout:
     via_turn: Tuple[Tuple[float, ...], ...] = ()
     via_back: Tuple[Tuple[float, ...], ...] = ()
     end_stop: bool = False              # materials accumulate at the end instead of falling off
+    # The youBot plate's slots for the largest carried class (plate_grid).
+    plate_slots: Tuple[Tuple[float, float], ...] = PLATE_SLOTS_IN_BASE_M
 
     @property
     def total(self) -> int:
@@ -149,7 +171,7 @@ class CellLayout:
         slot's row, any other destination's from the stand that reaches it."""
         if self.destination(name) != POOL:
             return self.serving(self.destination(name))
-        return next(st for st in self.stands if st.row == slot_row(slot))
+        return next(st for st in self.stands if st.row == self.slot_row(slot))
 
     def slot_order(self, name: str) -> List[int]:
         """The plate slots in the order the Zu 12 fills them for a material of class ``name``:
@@ -157,7 +179,8 @@ class CellLayout:
         stand's row for another destination), the near slots first."""
         first = (self.stands[0].row if self.destination(name) == POOL
                  else self.serving(self.destination(name)).row)
-        return sorted(range(len(PLATE_SLOTS_IN_BASE_M)), key=lambda k: (slot_row(k) != first, k))
+        return sorted(range(len(self.plate_slots)),
+                      key=lambda k: (self.slot_row(k) != first, k))
 
     def free_slots(self, name: str, taken: Dict[int, str],
                    to_come: Optional[Dict[str, int]] = None) -> List[int]:
@@ -178,15 +201,14 @@ class CellLayout:
             coming = (sum(to_come[c] for c in bound) if to_come is not None else
                       sum(self.manifest[c] for c in bound)
                       - sum(1 for c in taken.values() if c in bound))
-            in_row = [k for k in free if slot_row(k) == row]
+            in_row = [k for k in free if self.slot_row(k) == row]
             if coming > 0:
                 kept |= set(in_row[max(0, len(in_row) - coming):])
         return [k for k in free if k not in kept]
 
-
-def slot_row(slot: int) -> int:
-    """The plate row of a slot: +1 left (y > 0), -1 right."""
-    return 1 if PLATE_SLOTS_IN_BASE_M[slot][1] > 0.0 else -1
+    def slot_row(self, slot: int) -> int:
+        """The plate row of a slot: +1 left (y > 0), -1 right."""
+        return 1 if self.plate_slots[slot][1] > 0.0 else -1
 
 
 def slot_in_world(pose: Pose2D, slot: Tuple[float, float], base_z: float,
@@ -240,6 +262,8 @@ def layout_from_world(world) -> CellLayout:
         material_size=mats.largest, manifest=dict(mats.counts),
         youbot_home=home, youbot_base_z=yb.z, zu12_base=(zu.x, zu.y, zu.z, zu.yaw),
         rules=rules, stands=stands,
+        plate_slots=plate_grid(max((r.size for r in rules.values() if r.route == 'carry'),
+                                   default=0.0)),
         # Out: down to the first stand from the north-west (never east of it, so never
         # nearer the wall), facing south as it parks: through a point 15 cm west of it, from
         # which the path comes in along the wall (from 10 cm, it bowed 1 cm past the stand
@@ -389,25 +413,17 @@ def _region(layout: CellLayout, obstacle, name: str) -> Tuple[Region, str]:
     return Region(name, (ox, oy), (hx, hy), top, tuple(reached)), stand.name
 
 
-# Carried materials stand at least this far apart on the youBot's plate [m].
-PLATE_GAP_M = 0.005
-
-
-def plate_pitch() -> float:
-    """The least distance between two of the plate's slots [m]."""
-    return min(math.dist(a, b) for i, a in enumerate(PLATE_SLOTS_IN_BASE_M)
-               for b in PLATE_SLOTS_IN_BASE_M[i + 1:])
+# The largest material the youBot carries [m].
+CARRIED_MAX_M = 0.06
 
 
 def _check_capacity(layout: CellLayout) -> None:
     """Every destination has a slot for each material bound for it (the youBot makes as many
     trips as its load needs), and every carried material fits the plate's slots."""
-    largest = plate_pitch() - PLATE_GAP_M
     for name, rule in layout.rules.items():
-        if rule.route == 'carry' and rule.size > largest + 1e-9:
-            raise LayoutError(f'{name} ({rule.size} m) is too large to be carried: the youBot\'s '
-                              f'plate slots are {plate_pitch():.2f} m apart (at most '
-                              f'{largest:.3f} m)')
+        if rule.route == 'carry' and rule.size > CARRIED_MAX_M + 1e-9:
+            raise LayoutError(f'{name} ({rule.size} m) is too large to be carried: the youBot '
+                              f'carries materials of at most {CARRIED_MAX_M} m')
     for name, region in layout.regions.items():
         bound = sum(n for c, n in layout.manifest.items() if layout.destination(c) == name)
         if bound > len(region.slots):

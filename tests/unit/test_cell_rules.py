@@ -111,8 +111,9 @@ def test_a_class_of_the_users_own_goes_where_its_rule_says():
      r"pool_floor is the youBot's: its materials are carried there"),
     (lambda c, o, m: c['purple'].update(destination='pool_floor'),
      r'destination pool_floor is reached by both routes'),
-    (lambda c, o, m: c['orange'].update(size=0.06),
-     r"orange \(0.06 m\) is too large to be carried: the youBot's plate slots are 0.06 m apart"),
+    (lambda c, o, m: c['orange'].update(size=0.07),
+     r"orange \(0.07 m\) is too large to be carried: the youBot carries materials of at most "
+     r"0.06 m"),
     (lambda c, o, m: c['orange'].update(count=30),
      r'destination pool_floor has \d+ slots in reach for 30 materials'),
 ])

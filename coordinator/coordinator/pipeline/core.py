@@ -21,7 +21,6 @@ from controllers.time_optimal import (
 )
 from coordinator.layout import (
     CellLayout,
-    slot_row,
 )
 from coordinator.pipeline.belt import BeltModel
 from coordinator.pipeline.loader import Loader
@@ -233,10 +232,10 @@ class Pipeline:
             return free
         room = {}
         for st in self.layout.stands:
-            bound = sum(1 for k, c in taken.items() if slot_row(k) == st.row
+            bound = sum(1 for k, c in taken.items() if self.layout.slot_row(k) == st.row
                         and self.layout.region_of(c).drop)
             room[st.row] = len(st.drops) - len(self.transport.dropped(st.name)) - bound
-        return [k for k in free if room.get(slot_row(k), 0) > 0]
+        return [k for k in free if room.get(self.layout.slot_row(k), 0) > 0]
 
     def loadable(self, m: Material) -> bool:
         """Whether the Zu 12 may put ``m`` onto the youBot's plate now: it waits at home, and

@@ -25,7 +25,6 @@ from controllers.time_optimal import (
     plan,
 )
 from coordinator.layout import (
-    PLATE_SLOTS_IN_BASE_M,
     slot_in_world,
 )
 from coordinator.pipeline.machine import Machine
@@ -518,7 +517,7 @@ class Loader(Machine):
             if not free:
                 return 'the youBot plate is full'
             m.slot = free[0]
-            target = slot_in_world(youbot_pose, PLATE_SLOTS_IN_BASE_M[m.slot],
+            target = slot_in_world(youbot_pose, run.layout.plate_slots[m.slot],
                                    run.layout.youbot_base_z, size)
         t = run.s.timing
         release = np.asarray(target, float) + np.array([0.0, 0.0, size + t.place_gap])

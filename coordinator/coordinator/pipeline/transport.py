@@ -25,7 +25,6 @@ from controllers.time_optimal import (
 from controllers.youbot_kinematics import YoubotKinematics
 from coordinator.layout import (
     GRASP_STANDOFF_M,
-    PLATE_SLOTS_IN_BASE_M,
     PLATE_TOP_IN_BASE_M,
     POOL,
     world_to_base,
@@ -273,7 +272,7 @@ class Transport(Machine):
         degrees, into a neighbour 1 cm away."""
         run = self.run
         size, t = m.size, run.s.timing
-        slot = PLATE_SLOTS_IN_BASE_M[m.slot]
+        slot = run.layout.plate_slots[m.slot]
         top = (PLATE_TOP_IN_BASE_M + size + YOUBOT_GRASP_STANDOFF_M
                - 0.004 * m.unload_attempts)
         contact = np.array([slot[0], slot[1], top])
@@ -364,7 +363,7 @@ class Transport(Machine):
 
     def _others(self, m: Material) -> List[Tuple[float, float]]:
         """The plate slots of the materials on the plate but ``m``."""
-        return [PLATE_SLOTS_IN_BASE_M[o.slot] for o in self.run.materials.values()
+        return [self.run.layout.plate_slots[o.slot] for o in self.run.materials.values()
                 if o.status == MaterialStatus.ON_PLATE and o.slot >= 0 and o.id != m.id]
 
     def _stand_pose(self, obs: Observation) -> Pose2D:
