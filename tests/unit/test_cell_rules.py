@@ -217,3 +217,34 @@ def test_a_set_down_swings_in_over_what_is_at_its_destination_already(monkeypatc
         rises = [h for c, h in swings[arm] if c == color]
         assert len(rises) == 2
         assert rises[1] >= size + model.SET_DOWN_CLEARANCE_M - gap - 1e-9
+
+
+def test_the_cup_rises_straight_up_from_a_place_before_it_swings_away(monkeypatch):
+    """After every release on the ground target, the Zu 12's next motion (to the next pick, to
+    wait, or home) passes first through the point straight above the place (over what stands
+    there), and only then swings away: a joint motion from the release straight towards home
+    swept two materials off their slots beside it. (The fake's joints are the cup's position,
+    so the sweep itself shows only on the real arm: this holds the plan to the way up.)"""
+    from coordinator.pipeline import loader
+    classes = copy.deepcopy(PAPER)
+    classes['purple']['count'] = 3
+    classes['orange']['count'] = 2
+    layout = layout_from_world(world(classes))
+    firsts = []
+    from_release = loader.Loader._from_release
+
+    def record(self, waypoints, edge=None):
+        way, wait = from_release(self, waypoints, edge)
+        if self._at_release and not self._onto_plate:
+            firsts.append((way[0], self._above_q, self._above))
+        return way, wait
+
+    monkeypatch.setattr(loader.Loader, '_from_release', record)
+    # (The last purple is the last material: from its place the arm goes home.)
+    cell = FakeCell(layout, ['purple', 'orange', 'purple', 'blue', 'orange', 'purple'])
+    r = run(cell).result
+    assert r.status == 'completed', r
+    assert len(firsts) >= 3
+    for first, above_q, above in firsts:
+        assert np.allclose(first.q, above_q)
+        assert above[2] >= layout.regions['ground_target'].top + 0.05 + 0.07 - 1e-9

@@ -198,8 +198,15 @@ class Loader(Machine):
                               min_time=rise),
                      Waypoint(edge, stop=False)]
         else:
-            first = [Waypoint(known(self._then, 'the rise from the place'), stop=not waypoints,
-                              min_time=rise)]
+            # Straight up over the place first (over what else is there: a swing from the
+            # release towards home swept two materials off their slots beside it), then on.
+            above = known(self._above_q, 'the point above the place')
+            then = known(self._then, 'the rise from the place')
+            first = [Waypoint(above, stop=False, min_time=rise)]
+            if float(np.max(np.abs(then - above))) > 1e-6:
+                first.append(Waypoint(then, stop=not waypoints))
+            elif not waypoints:
+                first = [Waypoint(above, min_time=rise)]
         return first + list(waypoints), RELEASE_HOLD_S
 
     def _after_send(self) -> None:
