@@ -999,7 +999,7 @@ def test_the_youbot_lifts_a_material_straight_off_its_plate_until_clear_of_its_n
                                      [Waypoint(path.over, stop=False), Waypoint(path.drop)])
         # Held at the lift's top (the base still drives): straight up, clear of the others.
         assert clear_of_the_plate(transport._lift(obs, m), [
-            slots[k] for k in range(len(slots)) if k != slot], size)
+            (*slots[k], size) for k in range(len(slots)) if k != slot], size)
         limits = run.limits('youbot')
         assert all(np.all(np.abs(v) <= limits.velocity) for _, _, v, _ in motion)
         grip = ports.kin.fk(path.contact)
@@ -1020,3 +1020,30 @@ def test_the_youbot_lifts_a_material_straight_off_its_plate_until_clear_of_its_n
             assert np.degrees(tilt) < 0.5, slot
         assert rose
         assert np.allclose(motion[-1][1], path.drop)
+
+
+@pytest.mark.parametrize('held, other, clear', [
+    (0.04, 0.04, True),       # 2.5 cm over a 40 mm neighbour's top
+    (0.04, 0.05, True),       # 1.5 cm over a 50 mm one
+    (0.04, 0.06, False),      # 0.5 cm over a 60 mm one: not clear
+])
+def test_a_material_held_over_the_plate_clears_each_neighbour_by_its_own_height(
+        held, other, clear):
+    """The lift's check judges each material on the plate by its own edge: a 40 mm material
+    held 2.5 cm over the top of a 40 mm neighbour clears it, but not a 60 mm one."""
+    from coordinator.layout import PLATE_SLOTS_IN_BASE_M, PLATE_TOP_IN_BASE_M
+    from coordinator.pipeline import YOUBOT_GRASP_STANDOFF_M, clear_of_the_plate
+    from coordinator.pipeline.transport import PLATE_CLEARANCE_M
+    from coordinator.reach import youbot_tool_quaternion
+    ports = _YoubotIK()
+    sx, sy = PLATE_SLOTS_IN_BASE_M[2]
+    bottom = PLATE_TOP_IN_BASE_M + 0.04 + 0.025           # the held material's bottom
+    tool = np.array([sx, sy, bottom + held + YOUBOT_GRASP_STANDOFF_M])
+    q = next(q for q, _ in (ports.solve('youbot', tool, youbot_tool_quaternion(
+        tool, math.radians(tilt)), 'base_link', np.zeros(5)) for tilt in range(0, 90, 10))
+        if q is not None)
+    still = [(0.0, q, np.zeros(5), np.zeros(5)), (0.1, q, np.zeros(5), np.zeros(5))]
+    assert clear_of_the_plate(still, [(sx, sy, other)], held) is clear
+    assert (bottom >= PLATE_TOP_IN_BASE_M + other + PLATE_CLEARANCE_M - 1e-9) is clear
+    # Beside it (a slot on), nothing is under what it holds.
+    assert clear_of_the_plate(still, [(sx - 0.064, sy, 0.06)], held)

@@ -361,9 +361,10 @@ class Transport(Machine):
             steps.append(round(steps[-1] + 0.01, 6))
         return tuple(steps)
 
-    def _others(self, m: Material) -> List[Tuple[float, float]]:
-        """The plate slots of the materials on the plate but ``m``."""
-        return [self.run.layout.plate_slots[o.slot] for o in self.run.materials.values()
+    def _others(self, m: Material) -> List[Tuple[float, float, float]]:
+        """The materials on the plate but ``m``: their slots (x, y) and sizes."""
+        return [(*self.run.layout.plate_slots[o.slot], o.size)
+                for o in self.run.materials.values()
                 if o.status == MaterialStatus.ON_PLATE and o.slot >= 0 and o.id != m.id]
 
     def _stand_pose(self, obs: Observation) -> Pose2D:
@@ -524,14 +525,28 @@ PLATE_CLEARANCE_M = 0.01
 _YOUBOT_FK = YoubotKinematics('gripper_tcp')
 
 
-def clear_of_the_plate(points: Points, others: Sequence[Tuple[float, float]], size: float,
-                       steps: int = 8) -> bool:
+def clear_of_the_plate(points: Points, others: Sequence[Tuple[float, float, float]],
+                       size: float, steps: int = 8) -> bool:
     """Whether a youBot motion (samples of time, positions, velocities, accelerations) keeps
-    the material it holds (gripped by its top face) ``PLATE_CLEARANCE_M`` over the materials
-    in the plate slots ``others`` wherever it passes over one: along the path the controller
-    follows between the samples (cubic in position and velocity)."""
+    the material of edge ``size`` it holds (gripped by its top face) ``PLATE_CLEARANCE_M`` over
+    each of the plate's ``others`` (slot x, y and edge) wherever it passes over one: along the
+    path the controller follows between the samples (cubic in position and velocity)."""
     if not others:
         return True
+    for (t0, q0, v0, _), (t1, q1, v1, _) in zip(points, points[1:]):
+        h = t1 - t0
+        for x in np.linspace(0.0, 1.0, steps, endpoint=False):
+            q = ((2 * x**3 - 3 * x**2 + 1) * q0 + (x**3 - 2 * x**2 + x) * h * v0
+                 + (-2 * x**3 + 3 * x**2) * q1 + (x**3 - x**2) * h * v1)
+            px, py, pz = _YOUBOT_FK.fk(q)[:3, 3]
+            bottom = pz - YOUBOT_GRASP_STANDOFF_M - size
+            for sx, sy, other in others:
+                # Over it: the two nearer than their half edges and 5 mm, centre to centre.
+                reach = (size + other) / 2 + 0.005
+                if (bottom < PLATE_TOP_IN_BASE_M + other + PLATE_CLEARANCE_M
+                        and abs(px - sx) < reach and abs(py - sy) < reach):
+                    return False
+    return True
     tops = PLATE_TOP_IN_BASE_M + size + PLATE_CLEARANCE_M
     reach = size + 0.005         # centre to centre, nearer than this in x and y: over it
     for (t0, q0, v0, _), (t1, q1, v1, _) in zip(points, points[1:]):
