@@ -248,3 +248,22 @@ def test_the_cup_rises_straight_up_from_a_place_before_it_swings_away(monkeypatc
     for first, above_q, above in firsts:
         assert np.allclose(first.q, above_q)
         assert above[2] >= layout.regions['ground_target'].top + 0.05 + 0.07 - 1e-9
+
+
+def test_a_plate_slot_whose_material_the_youbot_failed_to_unload_is_not_used_again():
+    """A material the youBot could not take off its plate stays there: the Zu 12 does not
+    set the next trip's material down on it (it did, and its arm hit it at 2.3 times a
+    joint's speed limit)."""
+    from coordinator.pipeline import Material, Pipeline, Settings
+    layout = layout_from_world(world(copy.deepcopy(PAPER)))
+    run_ = Pipeline(layout, FakeCell(layout, []), Settings())
+    stuck = Material(1, 'orange', np.zeros(3), 0.0, 3, status='failed', slot=0,
+                     failure='unload: no motion off the plate', left_on_plate=True)
+    gone = Material(2, 'orange', np.zeros(3), 0.0, 3, status='failed', slot=2,
+                    failure='dropped on the way to its place')
+    new = Material(3, 'orange', np.zeros(3), 0.0, 3)
+    run_.materials.update({1: stuck, 2: gone, 3: new})
+    assert 0 in run_.plate_taken() and 2 not in run_.plate_taken()
+    assert 0 not in run_.plate_slots(new) and 2 in run_.plate_slots(new)
+    # And the youBot's lifts keep clear of it.
+    assert (*layout.plate_slots[0], 0.05) in run_.transport._others(new)

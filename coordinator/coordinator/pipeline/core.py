@@ -218,10 +218,12 @@ class Pipeline:
         return sum(self.to_come(c) for c in self.layout.manifest if self.layout.carried(c))
 
     def plate_taken(self, but: Optional[Material] = None) -> Dict[int, str]:
-        """The plate's slots that a material is on, or kept for one being picked."""
+        """The plate's slots that a material is on, or kept for one being picked, or where one
+        the youBot failed to unload may still stand."""
         return {x.slot: x.color for x in self.materials.values()
                 if x.slot >= 0 and x is not but
-                and x.status in (MaterialStatus.PICKING, MaterialStatus.ON_PLATE)}
+                and (x.status in (MaterialStatus.PICKING, MaterialStatus.ON_PLATE)
+                     or x.left_on_plate)}
 
     def plate_slots(self, m: Material) -> List[int]:
         """The plate slots free for ``m`` now, in the order they are filled: for a pool
@@ -257,7 +259,7 @@ class Pipeline:
         ``destination`` (None: the youBot's plate) to clear the materials there already by
         SET_DOWN_CLEARANCE_M (0: none there)."""
         there = [x.size for x in self.materials.values()
-                 if (x.status is MaterialStatus.ON_PLATE if destination is None else
+                 if (x.on_the_plate if destination is None else
                      x.status in (MaterialStatus.PLACED, MaterialStatus.DELIVERED)
                      and self.layout.destination(x.color) == destination)]
         if not there:

@@ -209,6 +209,13 @@ class Material:
     detection: Optional[Detection] = None
     size: float = 0.05            # its class's cube edge [m]
     place: int = -1               # its slot at its destination, once one is kept for it
+    # Its unload failed: it may still stand on its plate slot, which is never used again.
+    left_on_plate: bool = False
+
+    @property
+    def on_the_plate(self) -> bool:
+        """On the youBot's plate: loaded and not unloaded yet, or left there."""
+        return self.status == MaterialStatus.ON_PLATE or self.left_on_plate
 
 
 @dataclass(frozen=True)

@@ -15,6 +15,7 @@ from typing import (
 
 import numpy as np
 
+from controllers.arrays import Vector
 from controllers.bezier import BezierPath, Pose2D, key_poses_between
 from controllers.path_follower import PathFollower, PDGains, TurnLimits
 from controllers.time_optimal import (
@@ -329,7 +330,7 @@ class Transport(Machine):
         tried, that ends soonest and keeps the joints within their limits."""
         run = self.run
         limits = run.limits('youbot')
-        others = self._others(m)
+        others, offset = self._others(m), self._held_offset(obs, m)
         carry = known(self._carry, 'the unload path')
         for way in ((then, detour) if detour else (then,)):
             best = None
@@ -343,7 +344,7 @@ class Transport(Machine):
                     continue
                 within = all(np.all(np.abs(v) <= limits.velocity) for _, _, v, _ in points)
                 if (within and (best is None or points[-1][0] < best[-1][0])
-                        and clear_of_the_plate(points, others, m.size)):
+                        and clear_of_the_plate(points, others, m.size, offset)):
                     best = points
             if best is not None:
                 return best
@@ -355,17 +356,23 @@ class Transport(Machine):
         clears the tallest other material on the plate by PLATE_CLEARANCE_M (its bottom rises
         as far as the grip does)."""
         tallest = max((o.size for o in self.run.materials.values()
-                       if o.status is MaterialStatus.ON_PLATE and o is not m), default=0.0)
+                       if o.on_the_plate and o is not m), default=0.0)
         steps = list(UNLOAD_LIFT_STEPS_M)
         while steps[-1] < tallest + PLATE_CLEARANCE_M - 1e-9:
             steps.append(round(steps[-1] + 0.01, 6))
         return tuple(steps)
 
+    def _held_offset(self, obs: Observation, m: Material) -> np.ndarray:
+        """Where ``m``, gripped over its plate slot, is from the tool (x, y in base_link): the
+        grip is a few millimetres off the slot's centre, the material with it."""
+        tool = _YOUBOT_FK.fk(obs.youbot_q)[:2, 3]
+        return np.asarray(self.run.layout.plate_slots[m.slot], float) - tool
+
     def _others(self, m: Material) -> List[Tuple[float, float, float]]:
         """The materials on the plate but ``m``: their slots (x, y) and sizes."""
         return [(*self.run.layout.plate_slots[o.slot], o.size)
                 for o in self.run.materials.values()
-                if o.status == MaterialStatus.ON_PLATE and o.slot >= 0 and o.id != m.id]
+                if o.on_the_plate and o.slot >= 0 and o.id != m.id]
 
     def _stand_pose(self, obs: Observation) -> Pose2D:
         """Where the base stands for its unloads: its drive's goal while it is on its way."""
@@ -459,7 +466,8 @@ class Transport(Machine):
                     return self.move(TransportState.CARRY, obs, self._lift(obs, m))
             else:       # (from the lift's top, where it waited for the base to stand)
                 points = run.plan('youbot', obs.youbot_q, carry)
-                if not clear_of_the_plate(points, self._others(m), m.size):
+                if not clear_of_the_plate(points, self._others(m), m.size,
+                                          self._held_offset(obs, m)):
                     points = run.plan('youbot', obs.youbot_q, detour)
         except PlanError as exc:
             return self._unload_failed(obs, m, 'failed', f'unload: {exc}')
@@ -468,6 +476,7 @@ class Transport(Machine):
     def _unload_failed(self, obs: Observation, m: Material, kind: str, why: str) -> None:
         self._drop_pending = False
         self.run.ports.grip('youbot', False)
+        m.left_on_plate = True
         self.queue.pop(0)
         self.run.fail(obs.now, m, kind, why, 'youbot')
         self._next_unload(obs)
@@ -526,13 +535,30 @@ _YOUBOT_FK = YoubotKinematics('gripper_tcp')
 
 
 def clear_of_the_plate(points: Points, others: Sequence[Tuple[float, float, float]],
-                       size: float, steps: int = 8) -> bool:
+                       size: float, offset: Vector = (0.0, 0.0), steps: int = 8) -> bool:
     """Whether a youBot motion (samples of time, positions, velocities, accelerations) keeps
-    the material of edge ``size`` it holds (gripped by its top face) ``PLATE_CLEARANCE_M`` over
-    each of the plate's ``others`` (slot x, y and edge) wherever it passes over one: along the
-    path the controller follows between the samples (cubic in position and velocity)."""
+    the material of edge ``size`` it holds (gripped by its top face, its centre ``offset``
+    from the tool in x and y) ``PLATE_CLEARANCE_M`` over each of the plate's ``others`` (slot
+    x, y and edge) wherever it passes over one: along the path the controller follows between
+    the samples (cubic in position and velocity)."""
     if not others:
         return True
+    shift = np.asarray(offset, float)
+    for (t0, q0, v0, _), (t1, q1, v1, _) in zip(points, points[1:]):
+        h = t1 - t0
+        for x in np.linspace(0.0, 1.0, steps, endpoint=False):
+            q = ((2 * x**3 - 3 * x**2 + 1) * q0 + (x**3 - 2 * x**2 + x) * h * v0
+                 + (-2 * x**3 + 3 * x**2) * q1 + (x**3 - x**2) * h * v1)
+            tool = _YOUBOT_FK.fk(q)[:3, 3]
+            px, py = tool[:2] + shift
+            bottom = tool[2] - YOUBOT_GRASP_STANDOFF_M - size
+            for sx, sy, other in others:
+                # Over it: the two nearer than their half edges and 5 mm, centre to centre.
+                reach = (size + other) / 2 + 0.005
+                if (bottom < PLATE_TOP_IN_BASE_M + other + PLATE_CLEARANCE_M
+                        and abs(px - sx) < reach and abs(py - sy) < reach):
+                    return False
+    return True
     for (t0, q0, v0, _), (t1, q1, v1, _) in zip(points, points[1:]):
         h = t1 - t0
         for x in np.linspace(0.0, 1.0, steps, endpoint=False):
