@@ -267,3 +267,29 @@ def test_a_plate_slot_whose_material_the_youbot_failed_to_unload_is_not_used_aga
     assert 0 not in run_.plate_slots(new) and 2 in run_.plate_slots(new)
     # And the youBot's lifts keep clear of it.
     assert (*layout.plate_slots[0], 0.05) in run_.transport._others(new)
+
+
+def test_a_pick_whose_joint_path_is_out_of_the_limits_meets_the_material_further_on(
+        monkeypatch):
+    """The IK can change branch along a stretch of the track, and the planner refuses the
+    joints' path there: the pick is planned to meet the material a little later, instead of
+    giving it up (a 47 mm orange was, "joint 3 acceleration -320 is beyond its limit")."""
+    from controllers.time_optimal import PlanError
+    from coordinator.pipeline import loader
+    layout = layout_from_world(world(copy.deepcopy(PAPER)))
+    refused = []
+    plan = loader.Loader._plan
+
+    def refuse_once(self, obs, waypoints, start=None, edge=None):
+        if any(w.direct for w in waypoints) and not refused:       # (a pick's path)
+            refused.append(waypoints[0].at)
+            raise PlanError('waypoint 5: joint 3 acceleration -320.373 is beyond its limit')
+        return plan(self, obs, waypoints, start, edge)
+
+    monkeypatch.setattr(loader.Loader, '_plan', refuse_once)
+    cell = FakeCell(layout, ['orange', 'purple', 'orange', 'blue', 'orange', 'orange',
+                             'orange', 'orange'])
+    r = run(cell).result
+    assert refused
+    assert r.status == 'completed', r
+    assert r.grasp_attempts == r.grasp_successes == 15

@@ -34,6 +34,7 @@ from coordinator.pipeline.model import (
     FOLLOW_TOLERANCE,
     MAX_REPLANS,
     PICK_LEAD_S,
+    PICK_REPLAN_STEP_S,
     PICK_TRIES,
     PLAN_MARGIN,
     RELEASE_HOLD_S,
@@ -319,6 +320,7 @@ class Loader(Machine):
         """The pick's motion (``pick.points``), its contact moved later until the arm makes
         it; why not (or LEAVE: the material leaves the belt first)."""
         run, m, timing, track = self.run, pick.m, pick.timing, pick.track
+        refused = ''
         for _ in range(PICK_TRIES):
             if track(pick.contact)[0] < run.s.pick_x - 1e-6:
                 pick.contact = run.belt.reaches(m, run.s.pick_x)
@@ -347,8 +349,11 @@ class Loader(Machine):
             except TooLate as too_late:
                 pick.contact += max(too_late.by, 0.0) + PICK_LEAD_S / 2
             except PlanError as exc:
-                return f'no motion for the pick: {exc}'
-        return 'the arm cannot meet the material in time'
+                # The joints' path along this stretch of the track is out of the limits (the
+                # IK changes branch somewhere on it): meet the material a little further on.
+                refused = f'no motion for the pick: {exc}'
+                pick.contact += PICK_REPLAN_STEP_S
+        return refused or 'the arm cannot meet the material in time'
 
     def _onward(self, obs: Observation, pick: 'PickPlan') -> None:
         """On to the place in the same motion, through the lift point without stopping there:

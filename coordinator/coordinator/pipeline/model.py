@@ -33,6 +33,8 @@ EDGE_CLEARANCE_M = 0.05
 # with what it holds at least this far above the tallest of them [m].
 SET_DOWN_CLEARANCE_M = 0.02
 PICK_TRIES = 6
+# A pick whose joint path is out of the limits is met this much later on the track [s].
+PICK_REPLAN_STEP_S = 0.3
 # Real time: a pick allows for this much more than the longest plan of one has taken (the next
 # may need a few more IK calls).
 PLAN_MARGIN = 1.25
