@@ -293,3 +293,34 @@ def test_a_pick_whose_joint_path_is_out_of_the_limits_meets_the_material_further
     assert refused
     assert r.status == 'completed', r
     assert r.grasp_attempts == r.grasp_successes == 15
+
+
+def test_a_pick_path_across_an_elbow_flip_is_solved_on_one_branch():
+    """Near the Zu 12's base the IK, seeded with the sample before, flips the elbow between
+    two samples of a pick's path (the planner then refuses it: "joint 3 acceleration -320"):
+    the path is solved again from its end, on the branch the end is on."""
+    from types import SimpleNamespace
+
+    from coordinator.pipeline import loader
+
+    def solve_path(arm, points, seed):
+        """Two branches: 'up' (joint 1 at +1) reaches x < 0 only; 'down' (-1) everywhere.
+        Each point takes the seed's branch where it can."""
+        qs = []
+        for p in points:
+            up = seed[1] > 0 and p[0] < 0.0
+            seed = np.array([p[0], 1.0 if up else -1.0, 0.0, 0.0, 0.0, 0.0])
+            qs.append(seed)
+        return qs
+
+    run_ = SimpleNamespace(solve_path=solve_path, event=lambda *a, **k: None)
+    zu12 = loader.Loader(run_)
+    path = [(k * 0.05, np.array([-0.1 + 0.02 * k, 0.75, 0.45])) for k in range(10)]
+    qs = zu12._solve_along(path, np.array([0.1, 0.75, 0.5]), np.array([0.0, 1.0, 0, 0, 0, 0]))
+    assert qs is not None and len(qs) == 11
+    assert all(q[1] == -1.0 for q in qs)               # all on the branch that reaches
+    assert loader._continuous(qs)
+    # A path that one branch covers is kept as solved.
+    short = path[:4]
+    qs = zu12._solve_along(short, np.array([-0.05, 0.75, 0.5]), np.array([0, 1.0, 0, 0, 0, 0]))
+    assert all(q[1] == 1.0 for q in qs)

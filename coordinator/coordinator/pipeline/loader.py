@@ -48,6 +48,10 @@ from coordinator.pipeline.model import (
     known,
 )
 
+# Two IK solutions a pick path's sample apart (50 ms) that differ by more than this in a joint
+# lie on two branches [rad].
+IK_JUMP_RAD = 0.5
+
 if TYPE_CHECKING:
     from coordinator.pipeline.shared import Shared
 
@@ -89,6 +93,11 @@ class PickPlan:
     q_lift: np.ndarray = field(default_factory=lambda: np.zeros(0))
     waypoints: List[Waypoint] = field(default_factory=list)
     points: Points = field(default_factory=list)
+
+
+def _continuous(qs: Sequence[np.ndarray]) -> bool:
+    """Whether no joint moves more than IK_JUMP_RAD between two neighbouring solutions."""
+    return all(float(np.max(np.abs(b - a))) <= IK_JUMP_RAD for a, b in zip(qs, qs[1:]))
 
 
 def _polar(v: np.ndarray) -> Tuple[float, float]:
@@ -329,9 +338,11 @@ class Loader(Machine):
                 return LEAVE                   # off the end (no stop) before the cup is on it
             path, lift = follow_pick(track, pick.contact, m.size, timing, SAMPLE_PERIOD_S)
             self._lift = np.asarray(lift, float)
-            qs = run.solve_path('zu12', [p for _, p in path] + [lift], pick.q_hover)
+            qs = self._solve_along(path, lift, pick.q_hover)
             if qs is None:
                 return 'no IK solution for the pick path'
+            if not _continuous([pick.q_hover, qs[0]]):
+                pick.q_hover = qs[0]            # (on the other branch, solved from the end)
             times = np.array([t for t, _ in path])
             q_path = np.array(qs[:-1])
             v = np.gradient(q_path, times, axis=0, edge_order=2)
@@ -354,6 +365,21 @@ class Loader(Machine):
                 refused = f'no motion for the pick: {exc}'
                 pick.contact += PICK_REPLAN_STEP_S
         return refused or 'the arm cannot meet the material in time'
+
+    def _solve_along(self, path, lift: np.ndarray, seed: np.ndarray
+                     ) -> Optional[List[np.ndarray]]:
+        """Joints along a pick's path and at its lift point, on one IK branch: near the Zu 12's
+        base its elbow can flip between two samples (a path the planner refuses, "joint 3
+        acceleration -320"); then the whole path is solved again from its end backwards, on
+        the branch the end is on. None if neither is continuous."""
+        points = [p for _, p in path] + [lift]
+        qs = self.run.solve_path('zu12', points, seed)
+        if qs is None or _continuous(qs):
+            return qs
+        back = self.run.solve_path('zu12', points[::-1], qs[-1])
+        if back is None or not _continuous(back):
+            return None
+        return back[::-1]
 
     def _onward(self, obs: Observation, pick: 'PickPlan') -> None:
         """On to the place in the same motion, through the lift point without stopping there:
