@@ -100,13 +100,6 @@ class PickPlan:
     points: Points = field(default_factory=list)
 
 
-def _between(a: np.ndarray, b: np.ndarray) -> List[np.ndarray]:
-    """Points DENSE_STEP_M apart, at most, strictly between ``a`` and ``b`` on the straight
-    line, from ``a``."""
-    n = int(math.ceil(float(np.linalg.norm(b - a)) / DENSE_STEP_M))
-    return [a + (b - a) * k / n for k in range(1, n)]
-
-
 def _continuous(qs: Sequence[np.ndarray]) -> bool:
     """Whether no joint moves more than IK_JUMP_RAD between two neighbouring solutions."""
     return all(float(np.max(np.abs(b - a))) <= IK_JUMP_RAD for a, b in zip(qs, qs[1:]))
@@ -550,9 +543,10 @@ class Loader(Machine):
             return self._place_failed(obs, m, way)
         points = self.run.plan('zu12', obs.zu12_q, way.waypoints)
         if self._dips_over_the_belt(points, m.size, obs.zu12_q):
-            dense = self._place_way(m, self._lift, obs.youbot_pose, seed, dense=True)
-            if not isinstance(dense, str):      # (else the way as it is)
-                way, points = dense, self.run.plan('zu12', obs.zu12_q, dense.waypoints)
+            way = self._place_way(m, self._lift, obs.youbot_pose, seed, dense=True)
+            if isinstance(way, str):
+                return self._place_failed(obs, m, way)
+            points = self.run.plan('zu12', obs.zu12_q, way.waypoints)
         self._adopt(way)
         self.move(LoaderState.PLACE, obs, points)
 
@@ -595,28 +589,36 @@ class Loader(Machine):
         edge = (transfer if lift is None else
                 self._edge(lift, above, 2 * size + EDGE_CLEARANCE_M, arc=True) if onto_plate
                 else self._edge(lift, above, size + EDGE_CLEARANCE_M))
-        if dense and lift is not None:
-            # Through points DENSE_STEP_M apart on the straight lines to the edge and on to
-            # above the place, all solved in turn from the lift point's joints (one branch):
-            # the joints between far-apart waypoints can take the cup low over the belt.
-            to_edge, to_above = _between(lift, edge), _between(edge, above)
-            chain = run.solve_path('zu12', [*to_edge, edge, *to_above, above, release], seed)
-            if chain is None or not _continuous([np.asarray(seed, float), *chain]):
-                return 'no IK solution on one branch for the place path'
-            back = run.solve_path('zu12', [transfer], chain[-1])
-            if back is None:
-                return 'no IK solution for the place path'
-            q_above, q_release = chain[-2], chain[-1]
-            return PlaceWay([Waypoint(q, stop=False) for q in chain[:-1]]
-                            + [Waypoint(q_release, hold=SETTLE_S, min_time=t.place_descend)],
-                            back[0], above, q_above, onto_plate)
         qs = run.solve_path('zu12', [transfer, above, release, edge], seed)
         if qs is None:
             return 'no IK solution for the place path'
         q_transfer, q_above, q_release, q_edge = qs
-        return PlaceWay([Waypoint(q_edge, stop=False), Waypoint(q_above, stop=False),
-                         Waypoint(q_release, hold=SETTLE_S, min_time=t.place_descend)],
+        to_edge: List[np.ndarray] = []
+        to_above: List[np.ndarray] = []
+        if dense and lift is not None:
+            # Through points DENSE_STEP_M apart on the straight lines to the edge and on to
+            # above the place, each solved from the far end back (on its branch): the joints
+            # between far-apart waypoints can take the cup low over the belt.
+            first, second = self._between(lift, edge, q_edge), self._between(edge, above, q_above)
+            if first is None or second is None:
+                return 'no IK solution for the place path'
+            to_edge, to_above = first, second
+        through = [Waypoint(q, stop=False) for q in to_edge]
+        through += [Waypoint(q_edge, stop=False)] + [Waypoint(q, stop=False) for q in to_above]
+        return PlaceWay(through + [Waypoint(q_above, stop=False),
+                                   Waypoint(q_release, hold=SETTLE_S, min_time=t.place_descend)],
                         q_transfer, above, q_above, onto_plate)
+
+    def _between(self, a: np.ndarray, b: np.ndarray, q_b: np.ndarray
+                 ) -> Optional[List[np.ndarray]]:
+        """Joints at points DENSE_STEP_M apart strictly between ``a`` and ``b`` (world) on
+        the straight line, in order from ``a``, solved from ``b`` (joints ``q_b``) back."""
+        n = int(math.ceil(float(np.linalg.norm(b - a)) / DENSE_STEP_M))
+        points = [a + (b - a) * k / n for k in range(n - 1, 0, -1)]
+        if not points:
+            return []
+        qs = self.run.solve_path('zu12', points, q_b)
+        return None if qs is None else qs[::-1]
 
     def _dips_over_the_belt(self, points: Points, size: float, lift_q: np.ndarray) -> bool:
         """Whether a motion, from where it passes the lift point (joints ``lift_q``) on, takes
