@@ -62,7 +62,6 @@ from coordinator.pipeline import (
     known,
 )
 from coordinator.progress import write_progress
-from coordinator.reach import zu12_tool_in_world
 from coordinator.results import (
     IdentificationCheck,
     PeakJointSpeed,
@@ -321,9 +320,6 @@ class CoordinatorNode(Node):
         o.x, o.y, o.z, o.w = (float(v) for v in orientation)
         reply = self._call(self.ik[arm], req, 'IK')
         return (np.array(reply.positions), '') if reply.success else (None, reply.message)
-
-    def zu12_tool(self, q) -> np.ndarray:
-        return zu12_tool_in_world(self.layout.zu12_base, q)
 
     def trajectory(self, arm: str, points: Points, start: float,
                    continuing: bool = False) -> float:

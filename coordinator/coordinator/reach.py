@@ -43,14 +43,6 @@ def _youbot() -> YoubotKinematics:
     return YoubotKinematics('gripper_tcp')
 
 
-def zu12_tool_in_world(base: Sequence[float], q: Vector) -> np.ndarray:
-    """Where the Zu 12 standing at ``base`` (x, y, z, yaw) has its cup at joints ``q``."""
-    x, y, z, yaw = base
-    bx, by, bz = _zu12().fk(np.asarray(q, float))[:3, 3]
-    c, s = math.cos(yaw), math.sin(yaw)
-    return np.array([x + c * bx - s * by, y + s * bx + c * by, z + bz])
-
-
 def zu12_reaches(base: Sequence[float], points: Sequence[Vector]) -> bool:
     """Whether the Zu 12 standing at ``base`` (x, y, z, yaw) reaches every world point with its
     cup pointing down."""

@@ -199,8 +199,8 @@ def test_a_set_down_swings_in_over_what_is_at_its_destination_already(monkeypatc
         swings['youbot'].append((m.color, over[2] - drop[2]))
         return carry_out(self, obs, m, over, drop, **kwargs)
 
-    def zu12(self, m, *args, **kwargs):
-        way = place_way(self, m, *args, **kwargs)
+    def zu12(self, m, *args):
+        way = place_way(self, m, *args)
         if not isinstance(way, str) and not way.onto_plate:
             # (The fake's joints are the tool's position: the last waypoint's, the release.)
             swings['zu12'].append((m.color, way.above[2] - way.waypoints[-1].q[2]))
@@ -324,59 +324,3 @@ def test_a_pick_path_across_an_elbow_flip_is_solved_on_one_branch():
     short = path[:4]
     qs = zu12._solve_along(short, np.array([-0.05, 0.75, 0.5]), np.array([0, 1.0, 0, 0, 0, 0]))
     assert all(q[1] == 1.0 for q in qs)
-
-
-def test_a_way_to_a_place_that_dips_over_the_belt_goes_through_more_points():
-    """The Zu 12's joints between the lift point and the belt's edge took a purple 4 cm low,
-    onto the belt's side (the arm stalled, at 1.8 times a joint's speed limit). A motion that
-    takes what the cup holds lower over the belt than its edge point is planned again through
-    points 10 cm apart on the straight line; one that stays high is kept."""
-    from coordinator.pipeline import Pipeline, Settings
-    from coordinator.pipeline.model import EDGE_CLEARANCE_M
-    layout = layout_from_world(world(copy.deepcopy(PAPER)))
-    cell = FakeCell(layout, [])
-    pipeline = Pipeline(layout, cell, Settings())
-    zu12 = pipeline.loader
-    top, y0, size = layout.belt_top, layout.belt_y, 0.05
-
-    def motion(low):
-        """From a lift point over the belt to beside it, through ``low`` over the belt's top
-        half way (the fake's joints are the cup's position)."""
-        qs = [np.array([0.3, y0, top + 0.2]), np.array([0.2, y0 - 0.05, top + size + low]),
-              np.array([0.1, y0 - 0.3, top + 0.1])]
-        return [(k * 0.5, np.r_[q, 0, 0, 0], np.zeros(6), np.zeros(6)) for k, q in enumerate(qs)]
-
-    lift = np.r_[0.3, y0, top + 0.2, 0, 0, 0]
-    assert zu12._dips_over_the_belt(motion(0.0), size, lift)
-    assert not zu12._dips_over_the_belt(motion(EDGE_CLEARANCE_M), size, lift)
-    # (Before the lift point, the pick itself is low over the belt: not judged.)
-    pick = [(-0.5, np.r_[0.3, y0, top + size, 0, 0, 0], np.zeros(6), np.zeros(6))]
-    assert not zu12._dips_over_the_belt(pick + motion(EDGE_CLEARANCE_M), size, lift)
-
-
-def test_a_place_whose_motion_dips_is_planned_through_more_points(monkeypatch):
-    from coordinator.pipeline import loader
-    layout = layout_from_world(world(copy.deepcopy(PAPER)))
-    ways = []
-    place_way = loader.Loader._place_way
-    dips = loader.Loader._dips_over_the_belt
-
-    def record(self, m, *args, dense=False):
-        way = place_way(self, m, *args, dense=dense)
-        ways.append((m.color, dense, None if isinstance(way, str) else len(way.waypoints)))
-        return way
-
-    def first_dips(self, points, size, lift_q):
-        # The first way to the ground target dips; the way through more points does not.
-        return (not any(d for c, d, _ in ways if c == 'purple')
-                and ways[-1][0] == 'purple') or dips(self, points, size, lift_q)
-
-    monkeypatch.setattr(loader.Loader, '_place_way', record)
-    monkeypatch.setattr(loader.Loader, '_dips_over_the_belt', first_dips)
-    cell = FakeCell(layout, ['orange', 'purple', 'orange', 'blue', 'orange', 'orange',
-                             'orange', 'orange'])
-    r = run(cell).result
-    assert r.status == 'completed', r
-    purple = [(d, n) for c, d, n in ways if c == 'purple']
-    assert purple[-1][0] and purple[-1][1] > purple[0][1]     # (dense: more waypoints)
-    assert [e.detail for e in kinds(cell, 'placed')] == ['ground_target slot 0']

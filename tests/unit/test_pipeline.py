@@ -102,9 +102,6 @@ class FakeCell:
         self.pipeline: Pipeline = None
 
     # --- ports ---
-    def zu12_tool(self, q):
-        return np.asarray(q[:3], float)         # (the fake's joints are the cup's position)
-
     def solve(self, arm, position, orientation, frame, seed):
         self.busy += self.solve_cost
         if self.timeout_on == 'solve':

@@ -48,11 +48,6 @@ from coordinator.pipeline.model import (
     known,
 )
 
-# A way to a place the joints take low over the belt goes through points this far apart [m].
-DENSE_STEP_M = 0.1
-# What the cup holds may pass this much lower over the belt than its edge point allows, on the
-# way to a place [m].
-BELT_DIP_TOLERANCE_M = 0.005
 # Two IK solutions a pick path's sample apart (50 ms) that differ by more than this in a joint
 # lie on two branches [rad].
 IK_JUMP_RAD = 0.5
@@ -407,8 +402,6 @@ class Loader(Machine):
             whole = self._plan(obs, through + place_way.waypoints, pick.start, pick.q_edge)
         except PlanError:
             return                      # (the place is planned at the lift point then)
-        if self._dips_over_the_belt(whole, m.size, pick.q_lift):
-            return                      # (planned at the lift point, through more points)
         self._ahead = Ahead(place_way, pick.q_lift, pick.points[-1][0])
         pick.points = whole
 
@@ -537,21 +530,14 @@ class Loader(Machine):
         above it, in one motion; the release and the rise follow once the arm is there. (A
         pick's motion goes on to the place by itself: this is for a material held only once the
         arm was at the lift point.)"""
-        seed = self.run.motion('zu12').goal
-        way = self._place_way(m, self._lift, obs.youbot_pose, seed)
+        way = self._place_way(m, self._lift, obs.youbot_pose, self.run.motion('zu12').goal)
         if isinstance(way, str):
             return self._place_failed(obs, m, way)
-        points = self.run.plan('zu12', obs.zu12_q, way.waypoints)
-        if self._dips_over_the_belt(points, m.size, obs.zu12_q):
-            way = self._place_way(m, self._lift, obs.youbot_pose, seed, dense=True)
-            if isinstance(way, str):
-                return self._place_failed(obs, m, way)
-            points = self.run.plan('zu12', obs.zu12_q, way.waypoints)
         self._adopt(way)
-        self.move(LoaderState.PLACE, obs, points)
+        self.move(LoaderState.PLACE, obs, self.run.plan('zu12', obs.zu12_q, way.waypoints))
 
     def _place_way(self, m: Material, lift: Optional[np.ndarray], youbot_pose: Pose2D,
-                   seed: np.ndarray, dense: bool = False) -> Union['PlaceWay', str]:
+                   seed: np.ndarray) -> Union['PlaceWay', str]:
         """The way from the lift point ``lift`` (x, y, z; None: from above the place) onto
         ``m``'s place, or why there is none: over the belt's edge, to ``place_height`` above
         the place, and straight down until the material is just above it."""
@@ -593,53 +579,9 @@ class Loader(Machine):
         if qs is None:
             return 'no IK solution for the place path'
         q_transfer, q_above, q_release, q_edge = qs
-        to_edge: List[np.ndarray] = []
-        to_above: List[np.ndarray] = []
-        if dense and lift is not None:
-            # Through points DENSE_STEP_M apart on the straight lines to the edge and on to
-            # above the place, each solved from the far end back (on its branch): the joints
-            # between far-apart waypoints can take the cup low over the belt.
-            first, second = self._between(lift, edge, q_edge), self._between(edge, above, q_above)
-            if first is None or second is None:
-                return 'no IK solution for the place path'
-            to_edge, to_above = first, second
-        through = [Waypoint(q, stop=False) for q in to_edge]
-        through += [Waypoint(q_edge, stop=False)] + [Waypoint(q, stop=False) for q in to_above]
-        return PlaceWay(through + [Waypoint(q_above, stop=False),
-                                   Waypoint(q_release, hold=SETTLE_S, min_time=t.place_descend)],
+        return PlaceWay([Waypoint(q_edge, stop=False), Waypoint(q_above, stop=False),
+                         Waypoint(q_release, hold=SETTLE_S, min_time=t.place_descend)],
                         q_transfer, above, q_above, onto_plate)
-
-    def _between(self, a: np.ndarray, b: np.ndarray, q_b: np.ndarray
-                 ) -> Optional[List[np.ndarray]]:
-        """Joints at points DENSE_STEP_M apart strictly between ``a`` and ``b`` (world) on
-        the straight line, in order from ``a``, solved from ``b`` (joints ``q_b``) back."""
-        n = int(math.ceil(float(np.linalg.norm(b - a)) / DENSE_STEP_M))
-        points = [a + (b - a) * k / n for k in range(n - 1, 0, -1)]
-        if not points:
-            return []
-        qs = self.run.solve_path('zu12', points, q_b)
-        return None if qs is None else qs[::-1]
-
-    def _dips_over_the_belt(self, points: Points, size: float, lift_q: np.ndarray) -> bool:
-        """Whether a motion, from where it passes the lift point (joints ``lift_q``) on, takes
-        what the cup holds (edge ``size``) lower over the belt than what can ride on it, along
-        the path the controller follows between the samples."""
-        lay = self.run.layout
-        k0 = min(range(len(points)), key=lambda k: float(np.max(np.abs(points[k][1] - lift_q))))
-        # (As low as the way's edge point may be: EDGE_CLEARANCE_M over the belt's top.)
-        floor = (lay.belt_top + min(lay.material_size, EDGE_CLEARANCE_M)
-                 - BELT_DIP_TOLERANCE_M)
-        for (t0, q0, v0, _), (t1, q1, v1, _) in zip(points[k0:], points[k0 + 1:]):
-            h = t1 - t0
-            for f in np.linspace(0.0, 1.0, 4, endpoint=False):
-                q = ((2 * f**3 - 3 * f**2 + 1) * q0 + (f**3 - 2 * f**2 + f) * h * v0
-                     + (-2 * f**3 + 3 * f**2) * q1 + (f**3 - f**2) * h * v1)
-                wx, wy, wz = self.run.ports.zu12_tool(q)
-                over = (abs(wy - lay.belt_y) < lay.belt_width / 2 + size / 2
-                        and wx < lay.belt_end_x + size / 2)
-                if over and wz - size < floor:
-                    return True
-        return False
 
     def _adopt(self, way: 'PlaceWay') -> None:
         """The place the arm is on its way to: where the cup rises from it to."""

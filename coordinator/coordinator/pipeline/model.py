@@ -113,9 +113,6 @@ class Ports(Protocol):
               frame: str, seed: Vector) -> Tuple[Optional[np.ndarray], str]:
         """Joint positions for the tool at a pose, or (None, why). Raises NodeTimeout."""
 
-    def zu12_tool(self, q: Vector) -> np.ndarray:
-        """Where the Zu 12's cup is (x, y, z in the world) at joint positions ``q``."""
-
     def trajectory(self, arm: str, points: Points, start: float,
                    continuing: bool = False) -> float:
         """Send an arm motion whose first segment begins at ``start`` (points: absolute times).
