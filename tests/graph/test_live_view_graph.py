@@ -132,8 +132,10 @@ def test_a_client_sees_the_robot_drive_and_its_camera_live(start_node, probe):
                 await slow.subscribe(image)
                 before = len(live.received[odom])
                 await live.pump(lambda: 'fell behind' in bridge.output(), 60)
-                # Odometry (50 Hz) kept arriving at the reading client meanwhile.
-                assert len(live.received[odom]) > before
+                # Odometry (50 Hz) keeps arriving at the reading client while the slow one
+                # is behind. (The bridge can say so before the next odometry message is read
+                # here: on a loaded machine, the same count before and after.)
+                await live.pump(lambda: len(live.received[odom]) > before + 5, 30)
 
             # Topics appear and go: a publisher of a new topic, then none.
             extra = probe.node.create_publisher(String, '/live_view_test/extra', 10)
