@@ -559,30 +559,3 @@ def clear_of_the_plate(points: Points, others: Sequence[Tuple[float, float, floa
                         and abs(px - sx) < reach and abs(py - sy) < reach):
                     return False
     return True
-    for (t0, q0, v0, _), (t1, q1, v1, _) in zip(points, points[1:]):
-        h = t1 - t0
-        for x in np.linspace(0.0, 1.0, steps, endpoint=False):
-            q = ((2 * x**3 - 3 * x**2 + 1) * q0 + (x**3 - 2 * x**2 + x) * h * v0
-                 + (-2 * x**3 + 3 * x**2) * q1 + (x**3 - x**2) * h * v1)
-            px, py, pz = _YOUBOT_FK.fk(q)[:3, 3]
-            bottom = pz - YOUBOT_GRASP_STANDOFF_M - size
-            for sx, sy, other in others:
-                # Over it: the two nearer than their half edges and 5 mm, centre to centre.
-                reach = (size + other) / 2 + 0.005
-                if (bottom < PLATE_TOP_IN_BASE_M + other + PLATE_CLEARANCE_M
-                        and abs(px - sx) < reach and abs(py - sy) < reach):
-                    return False
-    return True
-    tops = PLATE_TOP_IN_BASE_M + size + PLATE_CLEARANCE_M
-    reach = size + 0.005         # centre to centre, nearer than this in x and y: over it
-    for (t0, q0, v0, _), (t1, q1, v1, _) in zip(points, points[1:]):
-        h = t1 - t0
-        for x in np.linspace(0.0, 1.0, steps, endpoint=False):
-            q = ((2 * x**3 - 3 * x**2 + 1) * q0 + (x**3 - 2 * x**2 + x) * h * v0
-                 + (-2 * x**3 + 3 * x**2) * q1 + (x**3 - x**2) * h * v1)
-            px, py, pz = _YOUBOT_FK.fk(q)[:3, 3]
-            bottom = pz - YOUBOT_GRASP_STANDOFF_M - size
-            if bottom < tops and any(abs(px - sx) < reach and abs(py - sy) < reach
-                                     for sx, sy in others):
-                return False
-    return True
