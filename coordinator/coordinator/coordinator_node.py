@@ -68,6 +68,7 @@ from coordinator.results import (
     at_destination,
     destinations,
     score,
+    tracks_of,
     why_not_there,
 )
 from ros_common.geometry import yaw_of
@@ -411,7 +412,7 @@ class CoordinatorNode(Node):
                 # The vision's own report, at its frame's time: not where the belt model has
                 # carried it since (in real time the coordinator may see a frame late).
                 d = m.detection
-                self._identifications.seen(round(d.stamp * 1e9), d.position, d.color)
+                self._identifications.seen(round(d.stamp * 1e9), d.position, d.color, m.id)
 
     # --- the loop -----------------------------------------------------------------------------
     def run(self) -> Dict:
@@ -628,12 +629,18 @@ class CoordinatorNode(Node):
         with self._lock:
             identified = self._identifications.finish()
             details = list(self._identifications.details)
-        out = score(result, truth, identified, self.regions)
+        tracks = tracks_of(details)
+        out = score(result, truth, identified, self.regions, tracks)
         # The published state and the exit code say what the ground truth says.
         result.status, result.message = out['status'], out['message']
         out['identifications'] = details
+        # Each material of the coordinator's by the simulator's id too (-1: never matched).
+        sim_id = {material: k for k, material in tracks.items()}
+        for m in out['materials']:
+            m['sim_id'] = sim_id.get(m['id'], -1)
         out['final_materials'] = [
-            {'id': k, 'color': color, 'position': [round(float(v), 4) for v in p],
+            {'id': k, 'material': tracks.get(k, -1), 'color': color,
+             'position': [round(float(v), 4) for v in p],
              'at_destination': at_destination(color, p, self.regions),
              'why': why_not_there(color, p, self.regions)} for k, (color, p) in enumerate(truth)]
         with self._lock:

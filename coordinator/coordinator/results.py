@@ -84,27 +84,43 @@ def why_not_there(color: str, position: Vector, regions: Destinations) -> str:
     return f'not on {where}: at {at}'
 
 
-def not_at_destination(final_truth: Sequence[TruePose], regions: Destinations) -> List[Dict]:
+def not_at_destination(final_truth: Sequence[TruePose], regions: Destinations,
+                       tracks: Optional[Dict[int, int]] = None) -> List[Dict]:
     """Each material (by its order of appearance, the simulator's id) not at its destination,
-    and why."""
+    and why; with ``tracks`` (simulator id: the coordinator's material id), the id the
+    coordinator's log and the result's ``materials`` know it by (-1 if it never saw it)."""
     out = []
     for k, (color, p) in enumerate(final_truth):
         why = why_not_there(color, p, regions)
         if why:
             out.append({'id': k, 'color': color, 'destination': regions.places.get(color, ''),
-                        'why': why})
+                        'why': why, 'material': (tracks or {}).get(k, -1)})
     return out
+
+
+def tracks_of(details: Sequence[Dict]) -> Dict[int, int]:
+    """Simulator id: the coordinator's material id, from the identifications' details (each
+    made on the material nearest its detection, in the snapshot of its moment)."""
+    return {d['truth_id']: d['material'] for d in details
+            if d.get('truth_id') is not None and d.get('material', -1) >= 0}
 
 
 def nearest_material(position: Vector,
                      truth: Sequence[TruePose]) -> Tuple[Optional[str], float]:
     """The true colour of the material nearest ``position``, and its distance [m]."""
+    _, color, distance = _nearest(position, truth)
+    return color, distance
+
+
+def _nearest(position: Vector,
+             truth: Sequence[TruePose]) -> Tuple[Optional[int], Optional[str], float]:
+    """The material nearest ``position``: its simulator id, true colour and distance [m]."""
     best, best_d = None, math.inf
-    for color, p in truth:
+    for k, (_, p) in enumerate(truth):
         d = float(np.linalg.norm(np.asarray(p, float) - np.asarray(position, float)))
         if d < best_d:
-            best, best_d = color, d
-    return best, best_d
+            best, best_d = k, d
+    return best, (truth[best][0] if best is not None else None), best_d
 
 
 def match_identification(position: Vector, truth: Sequence[TruePose],
@@ -124,11 +140,12 @@ class IdentificationCheck:
 
     def __init__(self, keep: int = 50) -> None:
         self._snapshots: List[Tuple[int, Sequence[TruePose]]] = []
-        self._pending: List[Tuple[int, np.ndarray, str]] = []
+        self._pending: List[Tuple[int, np.ndarray, str, int]] = []
         self._keep = keep
         self.results: List[bool] = []
-        # Per identification: its stamp [s], colour, the nearest true material's colour and
-        # distance [m] in the snapshot that decided it (None where there was none).
+        # Per identification: its stamp [s], colour, the coordinator's material id, the nearest
+        # true material's simulator id, colour and distance [m] in the snapshot that decided
+        # it (None where there was none).
         self.details: List[Dict] = []
 
     def truth(self, stamp_ns: int, truth: Sequence[TruePose]) -> None:
@@ -138,16 +155,17 @@ class IdentificationCheck:
         del self._snapshots[:-self._keep]
         self._decide(final=False)
 
-    def seen(self, stamp_ns: int, position: Vector, color: str) -> None:
-        """An identification: ``color`` for the material at ``position`` at ``stamp_ns``."""
-        self._pending.append((stamp_ns, np.asarray(position, float).copy(), color))
+    def seen(self, stamp_ns: int, position: Vector, color: str, material: int = -1) -> None:
+        """An identification: ``color`` for the material at ``position`` at ``stamp_ns`` (the
+        coordinator's material ``material``)."""
+        self._pending.append((stamp_ns, np.asarray(position, float).copy(), color, material))
         self._decide(final=False)
 
     def unknown(self) -> None:
         """An identification with nothing to check it on counts as wrong."""
         self.results.append(False)
-        self.details.append({'stamp': None, 'color': None, 'true_color': None,
-                             'distance': None})
+        self.details.append({'stamp': None, 'color': None, 'material': -1, 'truth_id': None,
+                             'true_color': None, 'distance': None})
 
     def finish(self) -> List[bool]:
         """Decide what is still pending with the snapshots there are; the results."""
@@ -156,39 +174,45 @@ class IdentificationCheck:
 
     def _decide(self, final: bool) -> None:
         waiting = []
-        for stamp_ns, position, color in self._pending:
+        for item in self._pending:
+            stamp_ns = item[0]
             if not self._snapshots:
                 if final:
-                    self._record(stamp_ns, color, [], position)
+                    self._record(item, [])
                 else:
-                    waiting.append((stamp_ns, position, color))
+                    waiting.append(item)
                 continue
             if not final and self._snapshots[-1][0] < stamp_ns:
-                waiting.append((stamp_ns, position, color))
+                waiting.append(item)
                 continue
-            _, truth = min(self._snapshots, key=lambda item: abs(item[0] - stamp_ns))
-            self._record(stamp_ns, color, truth, position)
+            _, truth = min(self._snapshots, key=lambda snap: abs(snap[0] - stamp_ns))
+            self._record(item, truth)
         self._pending = waiting
 
-    def _record(self, stamp_ns: int, color: str, truth: Sequence[TruePose],
-                position: np.ndarray) -> None:
+    def _record(self, item: Tuple[int, np.ndarray, str, int],
+                truth: Sequence[TruePose]) -> None:
+        stamp_ns, position, color, material = item
         self.results.append(match_identification(position, truth) == color)
-        true_color, distance = nearest_material(position, truth)
+        k, true_color, distance = _nearest(position, truth)
         self.details.append({'stamp': round(stamp_ns * 1e-9, 4), 'color': color,
-                             'true_color': true_color,
+                             'material': material, 'truth_id': k, 'true_color': true_color,
                              'distance': round(distance, 4) if true_color else None})
 
 
 def score(result: RunResult, final_truth: Sequence[TruePose], identifications: Sequence[bool],
-          regions: Destinations) -> Dict:
-    """The run's figures: counts, the three rates and the completion time, as a dict."""
+          regions: Destinations, tracks: Optional[Dict[int, int]] = None) -> Dict:
+    """The run's figures: counts, the three rates and the completion time, as a dict. The
+    materials not at their destination are named by their simulator id, and with ``tracks``
+    (tracks_of) by the coordinator's too."""
     total = max(result.total, 1)
     handled = sum(1 for color, p in final_truth if at_destination(color, p, regions))
     correct = sum(1 for ok in identifications if ok)
     out = asdict(result)
-    missing = not_at_destination(final_truth, regions)
+    missing = not_at_destination(final_truth, regions, tracks)
     out['not_at_destination'] = missing
-    told = [f'material {m["id"]} ({m["color"]}) {m["why"]}' for m in missing]
+    told = [f'material {m["id"]} ({m["color"]}'
+            + (f', the coordinator\'s {m["material"]}' if m['material'] >= 0 else '')
+            + f') {m["why"]}' for m in missing]
     if len(final_truth) < result.total:
         told.append(f'{result.total - len(final_truth)} of the {result.total} materials never '
                     'appeared')

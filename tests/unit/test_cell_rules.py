@@ -324,3 +324,33 @@ def test_a_pick_path_across_an_elbow_flip_is_solved_on_one_branch():
     short = path[:4]
     qs = zu12._solve_along(short, np.array([-0.05, 0.75, 0.5]), np.array([0, 1.0, 0, 0, 0, 0]))
     assert all(q[1] == 1.0 for q in qs)
+
+
+@pytest.mark.parametrize('size', [0.04, 0.05, 0.055, 0.06])
+def test_every_pool_drop_is_reached_from_every_slot_of_its_stands_row(size):
+    """The drops the layout gives each stand are the ones the transport's planner reaches: a
+    drop is used by whichever material of the stand's row unloads next, so from each slot of
+    that row, the others full of materials as tall, the way to each drop is found (with the
+    real youBot IK). The layout checked its drops more loosely than the planner went: 13
+    oranges of 52 mm found no way to the stand's last drops."""
+    from test_pipeline import _YoubotIK
+
+    from coordinator.pipeline import Material, Pipeline, Settings
+    classes = copy.deepcopy(PAPER)
+    classes['orange'].update(count=13, size=size)
+    classes['blue'].update(size=min(size, 0.05))
+    layout = layout_from_world(world(classes))
+    assert len(layout.regions['pool_floor'].slots) >= 13
+    run_ = Pipeline(layout, _YoubotIK(), Settings())
+    tr = run_.transport
+    for stand in layout.stands:
+        row = [k for k, s in enumerate(layout.plate_slots) if layout.slot_row(k) == stand.row]
+        for k in row:
+            run_.materials = {
+                10 + j: Material(10 + j, 'orange', np.zeros(3), 0.0, 3, status='on_plate',
+                                 slot=j, size=size) for j in range(len(layout.plate_slots))}
+            m = run_.materials[10 + k]
+            for d in range(len(stand.drops)):
+                tr._dropped = {stand.name: set(range(len(stand.drops))) - {d}}
+                path = tr._unload_path(m, stand.pose, np.zeros(5))
+                assert path is not None and path.place == d, (stand.name, k, d)

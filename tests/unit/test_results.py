@@ -17,6 +17,7 @@ from coordinator.results import (
     regions_from_world,
     score,
     summary_rows,
+    tracks_of,
 )
 from coordinator.trials import trial_plan, write_csv
 from world_description.resources import resolve_resource
@@ -332,7 +333,7 @@ def test_an_identification_waits_for_the_truth_of_its_own_moment():
     # Only an older snapshot is in (under load the truth came late): the orange rode 6 cm on
     # since, more than the match's 4 cm. Decided on it, a correct identification was wrong.
     check.truth(int(9.5 * ns), _belt_truth(9.5))
-    check.seen(10 * ns, [-0.5, 0.75, 0.425], 'orange')
+    check.seen(10 * ns, [-0.5, 0.75, 0.425], 'orange', 7)
     assert check.results == []
     check.truth(10 * ns, _belt_truth(10.0))
     assert check.results == [True]
@@ -342,9 +343,11 @@ def test_an_identification_waits_for_the_truth_of_its_own_moment():
     check.unknown()
     assert check.results == [True, False, False]
     # What decided each one is kept, to read in the result.
-    assert check.details[0] == {'stamp': 10.0, 'color': 'orange', 'true_color': 'orange',
-                                'distance': 0.0}
+    assert check.details[0] == {'stamp': 10.0, 'color': 'orange', 'material': 7,
+                                'truth_id': 0, 'true_color': 'orange', 'distance': 0.0}
     assert check.details[1]['true_color'] == 'purple' and check.details[2]['color'] is None
+    # Which of the simulator's materials each of the coordinator's is: the one seen on.
+    assert tracks_of(check.details) == {0: 7}
 
 
 def test_the_identifications_do_not_depend_on_when_the_truth_arrives():
@@ -405,6 +408,11 @@ def test_a_run_is_completed_only_if_the_ground_truth_has_every_material_at_its_d
     assert missing[1]['why'].startswith('on ground_target but 0.075 m over its face, on another')
     assert missing[6]['why'] == 'not on pool_floor: at (1.700, -1.300, 0.027)'
     assert 'material 1 (purple) on ground_target' in out['message']
+    # Named by the coordinator's id too, where it saw the material (its log's, its result's).
+    named = score(_result(total=8), truth, [True] * 8, regions, {1: 12, 0: 3})
+    assert 'material 1 (purple, the coordinator\'s 12) on ground_target' in named['message']
+    assert 'material 6 (orange) not on pool_floor' in named['message']
+    assert [m['material'] for m in named['not_at_destination']] == [12, -1]
     # All there: completed, nothing named.
     good = [truth[0]] + truth[2:6] + [('orange', IN_POOL + [0.0, 0.08, 0.0]), truth[7]]
     ok = score(_result(total=7), good, [True] * 7, regions)
