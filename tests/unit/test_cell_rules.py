@@ -385,3 +385,31 @@ def test_every_pool_drop_is_reached_from_every_slot_of_its_stands_row(size):
                 tr._dropped = {stand.name: set(range(len(stand.drops))) - {d}}
                 path = tr._unload_path(m, stand.pose, np.zeros(5))
                 assert path is not None and path.place == d, (stand.name, k, d)
+
+
+def test_after_a_release_the_youbot_waits_for_its_arm_to_come_to_rest():
+    """An arm that sagged under a heavy material springs back as it lets go: a motion planned
+    from where it is meanwhile started 0.11-0.16 rad off, the controller refused it and the
+    next unload failed. The next motion waits until the arm is still (up to
+    SPRING_BACK_WAIT_S)."""
+    from coordinator.pipeline import Material, Observation, Pipeline, Settings
+    from coordinator.pipeline.model import RELEASE_HOLD_S, SPRING_BACK_WAIT_S, TransportState
+    layout = layout_from_world(world(copy.deepcopy(PAPER)))
+    run_ = Pipeline(layout, FakeCell(layout, []), Settings())
+    tr = run_.transport
+    went_on = []
+    tr._next_unload = lambda obs: went_on.append(obs.now)
+    pose = layout.youbot_home
+
+    def release_at(now, speed):
+        tr.queue = [Material(1, 'orange', np.zeros(3), 0.0, 3, status='delivered')]
+        tr.enter(TransportState.RELEASE, 0.0, RELEASE_HOLD_S)
+        went_on.clear()
+        tr._release(Observation(now, np.zeros(6), np.zeros(5), pose,
+                                youbot_dq=np.full(5, speed)))
+        return bool(went_on)
+
+    assert not release_at(0.05, 0.0)                     # (the hold first)
+    assert release_at(0.2, 0.0)                          # still: on at once
+    assert not release_at(0.2, 0.6)                      # springing back: it waits
+    assert release_at(RELEASE_HOLD_S + SPRING_BACK_WAIT_S + 0.05, 0.6)   # but not for ever

@@ -44,7 +44,7 @@ from coordinator.pipeline.model import (
     known,
 )
 from coordinator.pipeline.transport import Transport
-from coordinator.reach import youbot_tool_quaternion
+from coordinator.reach import youbot_holds, youbot_tool_quaternion
 
 # Materials not to come any more: on the plate, at their destination, or given up.
 _PAST_THE_BELT = (MaterialStatus.ON_PLATE, MaterialStatus.PLACED, MaterialStatus.DELIVERED,
@@ -373,11 +373,14 @@ class Pipeline:
             seed = q
         return qs
 
-    def solve_tilted(self, points: Sequence[np.ndarray], seed: np.ndarray
-                     ) -> Optional[List[np.ndarray]]:
+    def solve_tilted(self, points: Sequence[np.ndarray], seed: np.ndarray,
+                     payload: float = 0.0, held_from: int = 0) -> Optional[List[np.ndarray]]:
         """Joint positions for a youBot path whose every point has the same tool tilt: its arm
         reaches the plate's far slots only leaning outwards, and a material held at one tilt
-        stays level only if it is set down at the same tilt."""
+        stays level only if it is set down at the same tilt. From point ``held_from`` on the
+        arm holds ``payload`` kg: a tilt whose poses there its joints cannot hold at rest
+        (youbot_holds) is not taken."""
+        heavy = False
         for tilt_deg in range(0, 90, 10):
             plan: List[np.ndarray] = []
             q = seed
@@ -389,10 +392,13 @@ class Pipeline:
                 q = solution
                 plan.append(q)
             if len(plan) == len(points):
-                return plan
+                if youbot_holds(plan[held_from:], payload):
+                    return plan
+                heavy = True
+        why = (f'not held at rest with {payload} kg' if heavy else 'at any one tilt up to 80 deg')
         self.event(self.now, 'ik_failed', 'youbot',
-                   detail=f'{np.round(points[1], 3).tolist()} via '
-                          f'{np.round(points[-1], 3).tolist()} at any one tilt up to 80 deg')
+                   detail=f'{np.round(points[1 if len(points) > 1 else 0], 3).tolist()} via '
+                          f'{np.round(points[-1], 3).tolist()} {why}')
         return None
 
     def limits(self, arm: str) -> JointLimits:

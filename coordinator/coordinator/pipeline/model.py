@@ -43,6 +43,12 @@ MAX_REPLANS = 2
 # A released material falls free of the cup or the fingers before the tool moves on [s]: it has
 # dropped 5 cm by then, and the tool's next motion starts from rest (0.2 s cost 0.1 s a cycle).
 RELEASE_HOLD_S = 0.1
+# After a release, an arm that is still moving (one that sagged under a heavy load springs back
+# to its reference as it lets go) is waited for, up to this long, before its next motion is
+# planned from where it is: planned while it sprang back 0.11-0.16 rad, the motion's first
+# point was out of the joints' speed limits when it arrived, the controller refused it and
+# held still, and the next unload failed, "the arm did not reach the material" [s].
+SPRING_BACK_WAIT_S = 1.0
 # A motion that ends where the tool grips or lets go holds its goal this long, so that the arm
 # has settled there [s]. Its arrival is judged on joint feedback as well (within
 # ``arrive_tolerance`` and at rest), so the hold need only cover a control period or so

@@ -34,6 +34,7 @@ from coordinator.pipeline.machine import Machine
 from coordinator.pipeline.model import (
     RELEASE_HOLD_S,
     SETTLE_S,
+    SPRING_BACK_WAIT_S,
     Material,
     MaterialStatus,
     Motion,
@@ -273,12 +274,7 @@ class Transport(Machine):
         degrees, into a neighbour 1 cm away."""
         run = self.run
         size, t = m.size, run.s.timing
-        slot = run.layout.plate_slots[m.slot]
-        top = (PLATE_TOP_IN_BASE_M + size + YOUBOT_GRASP_STANDOFF_M
-               - 0.004 * m.unload_attempts)
-        contact = np.array([slot[0], slot[1], top])
-        hover = contact + np.array([0.0, 0.0, 0.05 if high else 0.03])
-        lift = [contact + np.array([0.0, 0.0, h]) for h in self._lift_steps(m)]
+        mass = run.layout.rule(m.color).mass
         stand = self._stand_for(m)
         region = run.layout.region_of(m.color)
         # The swing over to a set-down comes in over what is there already (5 cm over the drop
@@ -295,6 +291,27 @@ class Transport(Machine):
             drops = run.layout.stand(stand).drops
             used = self._dropped.get(stand, set())
             candidates = [(k, d) for k, d in enumerate(drops) if k not in used]
+        # First a way whose every pose the arm holds with the material at rest (its load
+        # within youbot_holds); only if there is none, the first it reaches (a heavy material
+        # held out over a far drop sags the arm, but is still delivered).
+        for load in (mass, 0.0) if mass > 0.0 else (0.0,):
+            path = self._unload_way(m, pose, seed, high, load, candidates, clear)
+            if path is not None:
+                return path
+        return None
+
+    def _unload_way(self, m: Material, pose: Pose2D, seed: np.ndarray, high: bool,
+                    load: float, candidates: Sequence[Tuple[int, np.ndarray]], clear: float
+                    ) -> Optional['UnloadPath']:
+        """_unload_path's way to the first of ``candidates`` (place, world point) the arm
+        reaches, holding ``load`` kg at rest from the grip on."""
+        run = self.run
+        region = run.layout.region_of(m.color)
+        slot = run.layout.plate_slots[m.slot]
+        contact = np.array([slot[0], slot[1], PLATE_TOP_IN_BASE_M + m.size
+                            + YOUBOT_GRASP_STANDOFF_M - 0.004 * m.unload_attempts])
+        hover = contact + np.array([0.0, 0.0, 0.05 if high else 0.03])
+        lift = [contact + np.array([0.0, 0.0, h]) for h in self._lift_steps(m)]
         for place, drop_world in candidates:
             drop = world_to_base(pose, drop_world)
             drop[2] -= run.layout.youbot_base_z
@@ -304,18 +321,21 @@ class Transport(Machine):
             # one (campaign trial 31). Taken only when that is so (_lift).
             over = drop.copy()
             over[2] = max(drop[2] + 0.05, lift[-1][2], drop[2] + clear)
+            # (Held from the contact on: the arm must hold it still all the way to its drop.)
             path = run.solve_tilted([hover, contact, *lift, over, drop],
-                                    np.array(seed, float))
+                                    np.array(seed, float), load, held_from=1)
             if path is None and region.drop:
                 # A drop spot further in is reached leaning another way: the material, let go
                 # over the pool, need not stay level (one it is set down must). It rises
                 # TILT_CHANGE_RISE_M more first, still level, so that what it holds clears the
                 # others on the plate as the wrist turns.
                 rise = np.array(lift[-1], float) + np.array([0.0, 0.0, TILT_CHANGE_RISE_M])
-                grip = run.solve_tilted([hover, contact, *lift, rise], np.array(seed, float))
+                grip = run.solve_tilted([hover, contact, *lift, rise], np.array(seed, float),
+                                        load, held_from=1)
                 above = np.array(over, float)
                 above[2] = max(over[2], rise[2])
-                out = run.solve_tilted([above, drop], grip[-1]) if grip is not None else None
+                out = (run.solve_tilted([above, drop], grip[-1], load) if grip is not None
+                       else None)
                 path = grip + out if grip is not None and out is not None else None
             if path is not None:
                 return UnloadPath(path[0], path[1], path[2:-2], path[-2], path[-1], place)
@@ -513,7 +533,11 @@ class Transport(Machine):
         self.enter(TransportState.RELEASE, now, RELEASE_HOLD_S)
 
     def _release(self, obs: Observation) -> None:
-        if self.late(obs.now):
+        if not self.late(obs.now):
+            return
+        still = (obs.youbot_dq is None
+                 or float(np.max(np.abs(obs.youbot_dq))) <= self.run.s.rest_speed)
+        if still or obs.now > self.deadline + SPRING_BACK_WAIT_S:
             self.queue.pop(0)
             self._next_unload(obs)
 
