@@ -413,3 +413,38 @@ def test_after_a_release_the_youbot_waits_for_its_arm_to_come_to_rest():
     assert release_at(0.2, 0.0)                          # still: on at once
     assert not release_at(0.2, 0.6)                      # springing back: it waits
     assert release_at(RELEASE_HOLD_S + SPRING_BACK_WAIT_S + 0.05, 0.6)   # but not for ever
+
+
+def test_an_unload_that_stalled_short_of_its_drop_is_a_failure_not_a_delivery():
+    """A 0.44 kg blue's unload stalled 2 cm over its plate slot; the youBot let go and reported
+    it set down on the platform. Stalled with the gripper more than DROP_REACH_TOLERANCE_M
+    across from its drop, it is a failure that names how far, and the material keeps its plate
+    slot; stalled near its drop (a sagging shoulder, 2 cm off over the pool), a delivery."""
+    from test_pipeline import _YoubotIK
+
+    from coordinator.pipeline import Material, Observation, Pipeline, Settings
+    from coordinator.pipeline.model import MaterialStatus
+    from coordinator.pipeline.transport import DROP_REACH_TOLERANCE_M
+    class Ports(_YoubotIK):
+        def grip(self, arm, on):
+            return True, ''
+
+    layout = layout_from_world(world(copy.deepcopy(PAPER)))
+    run_ = Pipeline(layout, Ports(), Settings())
+    tr = run_.transport
+    tr._next_unload = lambda obs: None
+    tr.arrival = lambda obs: False                          # (the motion's end passed)
+    for where, delivered in (('slot', False), ('drop', True)):
+        m = Material(1, 'blue', np.zeros(3), 0.0, 3, status='on_plate', slot=0)
+        run_.materials = {1: m}
+        stand = layout.stand_for('blue', 0)
+        path = tr._unload_path(m, stand.pose, np.zeros(5))
+        tr._carry, tr.queue, tr._drop_pending = path, [m], False
+        q = path.contact if where == 'slot' else path.drop
+        obs = Observation(10.0, np.zeros(6), q, stand.pose, youbot_holding=True)
+        assert (tr._short_of_drop(obs) > DROP_REACH_TOLERANCE_M) is not delivered
+        tr._carry_to_drop(obs)
+        assert (m.status is MaterialStatus.DELIVERED) is delivered, m
+        assert m.left_on_plate is not delivered
+        if not delivered:
+            assert m.failure.startswith('unload: the arm stalled') and 'short of the drop' in m.failure
