@@ -447,7 +447,8 @@ def test_an_unload_that_stalled_short_of_its_drop_is_a_failure_not_a_delivery():
         assert (m.status is MaterialStatus.DELIVERED) is delivered, m
         assert m.left_on_plate is not delivered
         if not delivered:
-            assert m.failure.startswith('unload: the arm stalled') and 'short of the drop' in m.failure
+            assert m.failure.startswith('unload: the arm stalled')
+            assert 'short of the drop' in m.failure
 
 
 def test_a_lift_out_of_the_end_stops_queue_keeps_to_the_straight_line_up():
@@ -483,7 +484,8 @@ def test_a_lift_out_of_the_end_stops_queue_keeps_to_the_straight_line_up():
     q_on, q_lift = run_.solve_path('zu12', [on, zu12._lift], ready)
     pick = SimpleNamespace(timing=PickTiming(lift_height=0.07), contact=1.0)
     for crowded in (True, False):
-        run_.belt = SimpleNamespace(held=lambda m: True, crowded=lambda m, t: crowded)
+        run_.belt = SimpleNamespace(held=lambda m: True,
+                                    crowded=lambda m, t, crowded=crowded: crowded)
         way = zu12._lift_way(m, pick, on, q_on, 1.0, q_lift)
         assert np.allclose(way[-1].q, q_lift, atol=1e-9)
         if not crowded:
