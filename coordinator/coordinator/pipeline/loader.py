@@ -23,7 +23,6 @@ from controllers.time_optimal import (
     TooLate,
     Waypoint,
     plan,
-    timed_path,
 )
 from coordinator.layout import (
     slot_in_world,
@@ -50,9 +49,6 @@ from coordinator.pipeline.model import (
     known,
 )
 
-# A lift out of the end stop's queue keeps to the straight line up through a point this often
-# [m].
-LIFT_LINE_STEP_M = 0.01
 # Two IK solutions a pick path's sample apart (50 ms) that differ by more than this in a joint
 # lie on two branches [rad].
 IK_JUMP_RAD = 0.5
@@ -359,7 +355,7 @@ class Loader(Machine):
             waypoints = [Waypoint(q_path[0], velocity=v[0], acceleration=a[0], at=times[0])]
             waypoints += [Waypoint(q, velocity=vk, acceleration=ak, at=tk, direct=True)
                           for q, vk, ak, tk in zip(q_path[1:], v[1:], a[1:], times[1:])]
-            waypoints += self._lift_way(m, pick, path[-1][1], q_path[-1], times[-1], qs[-1])
+            waypoints.append(Waypoint(qs[-1], min_time=timing.lift))
             pick.waypoints, pick.q_lift = waypoints, qs[-1]
             try:
                 pick.points = self._plan(obs, waypoints, pick.start, pick.q_edge)
@@ -372,30 +368,6 @@ class Loader(Machine):
                 refused = f'no motion for the pick: {exc}'
                 pick.contact += PICK_REPLAN_STEP_S
         return refused or 'the arm cannot meet the material in time'
-
-    def _lift_way(self, m: Material, pick: 'PickPlan', on: np.ndarray, q_on: np.ndarray,
-                  t_on: float, q_lift: np.ndarray) -> List[Waypoint]:
-        """From the dwell (the cup on the material at ``on``, joints ``q_on``, at ``t_on``) up
-        to the lift point: as fast as the joints allow; out of the end stop's queue, with
-        another material right behind, straight up along the line, timed along it
-        (timed_path). The joints' own way from the dwell to the lift point bowed 1.8 cm
-        upstream as it began, into the material behind, and lifted the queue with it (the
-        ones behind rose up to 4 cm and fell back turned 23 degrees)."""
-        run, timing = self.run, pick.timing
-        if not (run.belt.held(m) and run.belt.crowded(m, pick.contact)):
-            return [Waypoint(q_lift, min_time=timing.lift)]
-        rise = float(np.linalg.norm(self._lift - on)) if self._lift is not None else 0.0
-        steps = max(1, int(math.ceil(rise / LIFT_LINE_STEP_M - 1e-9)))
-        points = [on + (np.asarray(self._lift, float) - on) * k / steps
-                  for k in range(1, steps)]
-        line = run.solve_path('zu12', points, q_on) if points else []
-        if line is None or not _continuous([q_on, *line, q_lift]):
-            return [Waypoint(q_lift, min_time=timing.lift)]
-        try:
-            return timed_path([q_on, *line, q_lift], run.limits('zu12'), t_on,
-                              min_time=timing.lift)
-        except PlanError:
-            return [Waypoint(q_lift, min_time=timing.lift)]
 
     def _solve_along(self, path, lift: np.ndarray, seed: np.ndarray
                      ) -> Optional[List[np.ndarray]]:
@@ -427,9 +399,8 @@ class Loader(Machine):
         # purple into the green queued behind it (the arm stalled, the purple fell back onto
         # the belt).
         crowded = run.belt.crowded(m, pick.contact)
-        through = (pick.waypoints if pick.waypoints[-1].direct else   # (straight up: _lift_way)
-                   pick.waypoints[:-1] + [Waypoint(pick.q_lift, stop=crowded,
-                                                   min_time=pick.timing.lift)])
+        through = pick.waypoints[:-1] + [Waypoint(pick.q_lift, stop=crowded,
+                                                  min_time=pick.timing.lift)]
         try:
             whole = self._plan(obs, through + place_way.waypoints, pick.start, pick.q_edge)
         except PlanError:
