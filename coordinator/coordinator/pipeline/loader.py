@@ -37,7 +37,6 @@ from coordinator.pipeline.model import (
     PICK_REPLAN_STEP_S,
     PICK_TRIES,
     PLAN_MARGIN,
-    QUEUE_LIFT_PAUSE_LEAD_S,
     RELEASE_HOLD_S,
     SETTLE_S,
     LoaderState,
@@ -149,8 +148,6 @@ class Loader(Machine):
         self._at_release = False
         self._clear_at = -math.inf                  # when the cup is clear of the place
         self._arm_pending = False                   # the cup goes on once it is clear
-        # When the belt pauses for a lift out of the end stop's queue (from, to) [s].
-        self.belt_pause: Tuple[float, float] = (math.inf, -math.inf)
         S = LoaderState
         self.handlers = {S.WAIT: self._wait, S.PICK: self._pick, S.PLACE: self._place,
                          S.RISE: self._rise, S.RETREAT: self._retreat, S.HOME: self._home,
@@ -447,21 +444,11 @@ class Loader(Machine):
         m.attempts += 1
         run.count_grasp('zu12')
         held = ' (held at the stop)' if run.belt.held(m) else ''
-        if held and run.belt.crowded(m, pick.contact):
-            # Another pressed against it: the belt pauses before the cup comes down, and the
-            # queue's pressure with it, until the lift is over (QUEUE_LIFT_PAUSE_LEAD_S).
-            lifted = self._ahead.lift_end if self._ahead is not None else pick.points[-1][0]
-            self.belt_pause = (pick.contact + late - QUEUE_LIFT_PAUSE_LEAD_S, lifted)
         run.event(now, 'tracking', 'zu12', m,
                   f'contact at {pick.contact:.2f} s, x {pick.track(pick.contact)[0]:.3f}{held}')
 
-    def pauses_belt(self, now: float) -> bool:
-        """Whether the belt pauses now for a lift out of the end stop's queue."""
-        return self.belt_pause[0] <= now <= self.belt_pause[1]
-
     def _leave_it(self, obs: Observation, m: Material) -> None:
         """The material cannot be picked before it leaves the belt."""
-        self.belt_pause = (math.inf, -math.inf)
         m.status = MaterialStatus.SEEN
         self.current = None
         self._ahead = None
@@ -470,7 +457,6 @@ class Loader(Machine):
 
     def _pick_failed(self, obs: Observation, m: Material, why: str) -> None:
         run = self.run
-        self.belt_pause = (math.inf, -math.inf)
         run.fail(obs.now, m, 'grasp_failed', why, 'zu12')
         m.slot = m.place = -1           # (a place kept for it is free again)
         self.current = None
