@@ -133,7 +133,8 @@ def test_without_link_tf_only_odometry_and_the_anchors_are_published(start_node,
         == {('youbot/odom', 'youbot/base_link')}
 
 
-def test_a_recorded_bag_of_the_cell_decodes_with_an_independent_reader(start_node, tmp_path):
+def test_a_recorded_bag_of_the_cell_decodes_with_an_independent_reader(start_node, probe,
+                                                                       tmp_path):
     """The recorder's MCAP (zstd chunks) read with the mcap library and its ROS 2 decoder,
     which share no code with rosbags: the TF tree, both descriptions and the camera frames."""
     from mcap.reader import make_reader
@@ -147,6 +148,11 @@ def test_a_recorded_bag_of_the_cell_decodes_with_an_independent_reader(start_nod
                   '/zu12/robot_description', '/belt_camera/image_raw'):
         wait_for(lambda t=topic: f'receiving {t}\n' in rec.output(), 30.0,
                  what=f'the recorder to receive {topic}')
+    # Each robot's moving frames come in a /tf message of their own: recorded until both have
+    # come a few times over (stopped at the first /tf, under load the bag held the Zu 12's
+    # frames only).
+    moving = probe.collect(TFMessage, '/tf', TF_QOS)
+    wait_for(lambda: len(moving) >= 10, 30.0, what='/tf, both robots')
     assert rec.stop() == 0
     assert 'zstd compression' in rec.output()
     (path,) = (tmp_path / 'cell').glob('*.mcap')
