@@ -145,8 +145,14 @@ class ArmStatics:
             if j.name not in index or not j.revolute:
                 continue
             origin, axis = frames[k]
-            moment = sum((np.cross(p - origin, mass * GRAVITY) for after, mass, p in points
-                          if after >= k), np.zeros(3))
+            # The moment of the weights beyond it about its origin: sum m (p - o) x g, that is
+            # (sum m p - (sum m) o) x g.
+            beyond = [(mass, p) for after, mass, p in points if after >= k]
+            first = sum((mass * p for mass, p in beyond), np.zeros(3))
+            r = first - sum(mass for mass, _ in beyond) * origin
+            g = GRAVITY
+            moment = np.array([r[1] * g[2] - r[2] * g[1], r[2] * g[0] - r[0] * g[2],
+                               r[0] * g[1] - r[1] * g[0]])
             out[index[j.name]] = -float(axis @ moment)         # (what the joint applies)
         return out
 

@@ -108,6 +108,21 @@ class UnloadStand:
     row: int                            # the plate row unloaded here: +1 left (y > 0), -1 right
     drops: Tuple[np.ndarray, ...]       # release points of pool materials, one each (world)
     serves: frozenset = frozenset()     # the destinations unloaded from here
+    # How far the base may stand from ``pose`` along its heading, back and forth [m]: its
+    # footprint stays clear of the world's obstacles (stand_slide).
+    slide: Tuple[float, float] = (0.0, 0.0)
+
+    def abeam(self, point) -> Pose2D:
+        """The stand's pose slid along its heading (within ``slide``) to bring the arm's base
+        level with ``point`` (world x, y): the nearest it comes to the point. A heavy material
+        the arm cannot hold out at the stand's far drops is let go abeam of its base."""
+        x, y, yaw = self.pose
+        c, s = math.cos(yaw), math.sin(yaw)
+        arm_x = x + ARM_BASE_IN_BASE_LINK_M[0] * c
+        arm_y = y + ARM_BASE_IN_BASE_LINK_M[0] * s
+        along = (point[0] - arm_x) * c + (point[1] - arm_y) * s
+        along = min(max(along, self.slide[0]), self.slide[1])
+        return (x + along * c, y + along * s, yaw)
 
 
 @dataclass(frozen=True)
@@ -247,10 +262,12 @@ def layout_from_world(world) -> CellLayout:
     zu = world.robot('zu12').pose
     mats = world.materials
     rules = {c.name: Rule(c.name, c.destination, c.route, c.size, c.mass) for c in mats.classes}
-    stands = _stands(named[POOL], rules)
+    stands = tuple(replace(st, slide=stand_slide(st.pose, world.obstacles, world.floor_size))
+                   for st in _stands(named[POOL], rules))
     into_pool = sum(c.count for c in mats.classes if c.destination == POOL)
     # (A spare spot per stand: one the arm cannot reach as the base stands is swapped for it.)
-    stands = _pool_drops(stands, named[POOL], yb.z, into_pool + len(stands))
+    heaviest = max((c.mass for c in mats.classes if c.destination == POOL), default=0.0)
+    stands = _pool_drops(stands, named[POOL], yb.z, into_pool + len(stands), heaviest)
     home = (yb.x, yb.y, yb.yaw)
     right = next(st for st in stands if st.row == -1)
     side_x, py = stands[0].pose[0], named[POOL].position[1]
@@ -308,6 +325,78 @@ def _stands(pool, rules: Dict[str, Rule]) -> Tuple[UnloadStand, ...]:
     return (left, right)
 
 
+# The youBot's footprint: half its length and half its width over the wheels, about
+# base_link [m] (its box 0.57 x 0.36, the wheels' outer faces 0.209 from base_link).
+YOUBOT_HALF_LENGTH_M, YOUBOT_HALF_WIDTH_M = 0.29, 0.21
+# A stand's base slides along its heading at most this far either way [m], keeping this far
+# from any obstacle ahead or behind, and this far to its sides (a stand beside the pool's wall
+# has 3.1 cm there) [m]; an obstacle this low is driven over (a marked area on the floor) [m].
+STAND_SLIDE_MAX_M = 0.5
+STAND_SLIDE_STEP_M = 0.01
+STAND_CLEAR_AHEAD_M, STAND_CLEAR_SIDE_M = 0.05, 0.01
+OBSTACLE_LOW_M = 0.01
+
+
+def stand_slide(pose: Pose2D, obstacles, floor_size: float) -> Tuple[float, float]:
+    """How far a base standing at ``pose`` may slide along its heading, back (negative) and
+    forth, in STAND_SLIDE_STEP_M steps up to STAND_SLIDE_MAX_M, its footprint (with its
+    clearances) clear of every obstacle that stands higher than OBSTACLE_LOW_M and on the
+    floor; (0, 0) if it is not clear where it stands."""
+    x, y, yaw = pose
+    c, s = math.cos(yaw), math.sin(yaw)
+    half = (YOUBOT_HALF_LENGTH_M + STAND_CLEAR_AHEAD_M, YOUBOT_HALF_WIDTH_M + STAND_CLEAR_SIDE_M)
+    boxes = [_footprint(o) for o in obstacles
+             if o.collision and o.position[2] + _height(o) / 2 > OBSTACLE_LOW_M]
+
+    def clear(along: float) -> bool:
+        at = (x + along * c, y + along * s)
+        if max(abs(at[0]), abs(at[1])) + math.hypot(*half) > floor_size / 2:
+            return False
+        return not any(_overlap((at, yaw, half), box) for box in boxes)
+
+    if not clear(0.0):
+        return (0.0, 0.0)
+    ends = []
+    for sign in (-1.0, 1.0):
+        along = 0.0
+        while along < STAND_SLIDE_MAX_M - 1e-9 and clear(sign * (along + STAND_SLIDE_STEP_M)):
+            along = round(along + STAND_SLIDE_STEP_M, 6)
+        ends.append(sign * along)
+    return (ends[0], ends[1])
+
+
+def _height(o) -> float:
+    return float(o.size[2] if o.shape == 'box' else o.size[-1] if o.shape == 'cylinder'
+                 else 2 * o.size[0])
+
+
+def _footprint(o) -> Tuple[Tuple[float, float], float, Tuple[float, float]]:
+    """An obstacle's outline on the floor: centre, yaw and half extents (a round one's
+    bounding square)."""
+    if o.shape == 'box':
+        half = (o.size[0] / 2, o.size[1] / 2)
+    else:
+        half = (o.size[0], o.size[0])
+    return ((o.position[0], o.position[1]), o.yaw, half)
+
+
+def _overlap(a, b) -> bool:
+    """Whether two rectangles (centre, yaw, half extents) overlap (separating axes)."""
+    axes = []
+    corners = []
+    for (cx, cy), yaw, (hx, hy) in (a, b):
+        u, v = np.array([math.cos(yaw), math.sin(yaw)]), np.array([-math.sin(yaw), math.cos(yaw)])
+        axes += [u, v]
+        corners.append([np.array([cx, cy]) + i * hx * u + j * hy * v
+                        for i in (-1, 1) for j in (-1, 1)])
+    for axis in axes:
+        pa = [float(p @ axis) for p in corners[0]]
+        pb = [float(p @ axis) for p in corners[1]]
+        if max(pa) <= min(pb) or max(pb) <= min(pa):
+            return False
+    return True
+
+
 # The youBot grips a material's top face with its TCP this far above it (its fingertips reach
 # 10.4 mm beyond it) [m].
 GRASP_STANDOFF_M = 0.0104 + 0.002
@@ -318,56 +407,91 @@ POOL_DROP_EDGE_M = 0.07
 POOL_DROP_MARGIN_M = 0.03
 
 
-def _pool_drops(stands: Tuple[UnloadStand, ...], pool, base_z: float, needed: int
-                ) -> Tuple[UnloadStand, ...]:
+def _pool_drops(stands: Tuple[UnloadStand, ...], pool, base_z: float, needed: int,
+                mass: float) -> Tuple[UnloadStand, ...]:
     """The stands with the drop spots their arm reaches: their own, and more after them
     (nearest the wall first) until the pool has ``needed``, none nearer than POOL_DROP_PITCH_M
     to another, each in reach from its stand with a margin (at a tilt of its own: what is let
-    go over the pool need not stay level). (The left stand's fourth spot is out of reach: the
-    paper's batch never needed it.)"""
-    from coordinator.reach import youbot_reaches
+    go over the pool need not stay level), the arm holding ``mass`` kg there at rest: from the
+    stand, or from the base slid along its line abeam the spot (UnloadStand.abeam)."""
+    seen: Dict[Tuple[str, float, float, float], bool] = {}
 
     def reached(stand: UnloadStand, point: np.ndarray, margin: float) -> bool:
-        local = world_to_base(stand.pose, point)
-        local[2] -= base_z
-        # (With a margin: the base stands a centimetre or two off its stand.)
-        out = local[:2] - np.asarray(ARM_BASE_IN_BASE_LINK_M[:2])
-        out = np.append(out / max(np.linalg.norm(out), 1e-9) * margin, 0.0)
-        return youbot_reaches([local + out + np.array([0.0, 0.0, 0.06]), local + out])
+        key = (stand.name, round(float(point[0]), 6), round(float(point[1]), 6), margin)
+        if key not in seen:
+            seen[key] = _youbot_reaches_from(stand, point, base_z, margin, mass)
+        return seen[key]
 
     stands = tuple(replace(st, drops=tuple(d for d in st.drops if reached(st, d, 0.0)))
                    for st in stands)
     if all(len(st.drops) >= needed / len(stands) for st in stands):
         return stands
+    # Too few: more spots after the stands' own; if that still leaves the pool short (a heavy
+    # class is held out only near the wall), spots on a grid of their own instead.
+    drops = _more_drops(stands, pool, needed, reached, {st.name: list(st.drops) for st in stands})
+    if sum(len(d) for d in drops.values()) < needed:
+        fresh = _more_drops(stands, pool, needed, reached, {st.name: [] for st in stands})
+        if sum(len(d) for d in fresh.values()) > sum(len(d) for d in drops.values()):
+            drops = fresh
+    return tuple(replace(st, drops=tuple(drops[st.name])) for st in stands)
+
+
+def _more_drops(stands: Tuple[UnloadStand, ...], pool, needed: int, reached,
+                drops: Dict[str, List[np.ndarray]]) -> Dict[str, List[np.ndarray]]:
+    """``drops`` (per stand) with spots added from a fine grid over the pool, the wall's side
+    first (the arm's reach), until there are ``needed``: none nearer than POOL_DROP_PITCH_M to
+    another, each for the stand with fewest that ``reached`` (stand, point, margin) it."""
     px, py = pool.position[0], pool.position[1]
     hx, hy = pool.size[0] / 2, pool.size[1] / 2
     step = POOL_DROP_PITCH_M / 4                 # (candidates on a finer grid, taken greedily)
     xs = np.arange(px - hx + POOL_DROP_EDGE_M, px + hx - POOL_DROP_EDGE_M + 1e-9, step)
     ys = np.arange(py - hy + POOL_DROP_EDGE_M, py + hy - POOL_DROP_EDGE_M + 1e-9, step)
-    drops = {st.name: list(st.drops) for st in stands}
     have = sum(len(d) for d in drops.values())
-    for x in xs:                                  # (the wall's side first: the arm's reach)
+    for x in xs:
         for y in ys:
             if have >= needed:
-                break
+                return drops
             point = np.array([x, y, 0.2])
             if any(np.linalg.norm(point[:2] - d[:2]) < POOL_DROP_PITCH_M - 1e-9
                    for ds in drops.values() for d in ds):
                 continue
+            # (A stand with fewer first, then the nearer.)
             for stand in sorted(stands, key=lambda st: (len(drops[st.name]),
                                                         abs(st.pose[1] - y))):
                 if reached(stand, point, POOL_DROP_MARGIN_M):
                     drops[stand.name].append(point)
                     have += 1
                     break
-    return tuple(replace(st, drops=tuple(drops[st.name])) for st in stands)
+    return drops
+
+
+def _youbot_reaches_from(stand: UnloadStand, point: np.ndarray, base_z: float, margin: float,
+                         mass: float, over: float = 0.06) -> bool:
+    """Whether the youBot's arm reaches ``point`` (world) and ``over`` above it, from
+    ``stand`` or slid along its line abeam the point: ``margin`` [m] further out from the arm's
+    base too (the base stands a centimetre or two off its goal), and holding ``mass`` kg there
+    at rest (within youbot_holds' share of each joint's effort)."""
+    from coordinator.reach import youbot_reaches
+    up = np.array([0.0, 0.0, over])
+    poses = [stand.pose]
+    if stand.abeam(point) != tuple(stand.pose):
+        poses.append(stand.abeam(point))
+    for pose in poses:
+        local = world_to_base(pose, point)
+        local[2] -= base_z
+        out = local[:2] - np.asarray(ARM_BASE_IN_BASE_LINK_M[:2])
+        out = np.append(out / max(np.linalg.norm(out), 1e-9) * margin, 0.0)
+        if (youbot_reaches([local + out + up, local + out])
+                and youbot_reaches([local + up, local], mass)):
+            return True
+    return False
 
 
 def _region(layout: CellLayout, obstacle, name: str) -> Tuple[Region, str]:
     """A destination's region and its slots, each checked in reach of the robot that sets a
     material down there (a LayoutError if none is), and the stand the youBot unloads there from
     (a carried class's destination other than the pool: the nearer stand)."""
-    from coordinator.reach import youbot_reaches, zu12_reaches
+    from coordinator.reach import zu12_reaches
     ox, oy, oz = obstacle.position
     if abs(math.sin(2 * obstacle.yaw)) > 1e-9:
         raise LayoutError(f'destination {name} is turned {math.degrees(obstacle.yaw):.0f} deg: '
@@ -401,12 +525,11 @@ def _region(layout: CellLayout, obstacle, name: str) -> Tuple[Region, str]:
         return Region(name, (ox, oy), (hx, hy), top, slots), ''
     stand = min(layout.stands, key=lambda st: math.hypot(st.pose[0] - ox, st.pose[1] - oy))
     slots = slot_grid((ox, oy), (hx, hy), top, size, stand.pose[:2])
-    reached = []
-    for p in slots:
-        local = world_to_base(stand.pose, p + np.array([0.0, 0.0, size + 0.015]))
-        local[2] -= layout.youbot_base_z
-        if youbot_reaches([local, local + np.array([0.0, 0.0, 0.05])]):
-            reached.append(p)
+    # Each slot the arm sets the heaviest of its classes down on, holding it at rest (from the
+    # stand, or from the base slid along its line abeam the slot).
+    mass = max(r.mass for r in bound)
+    reached = [p for p in slots if _youbot_reaches_from(
+        stand, p + np.array([0.0, 0.0, size + 0.015]), layout.youbot_base_z, 0.0, mass, 0.05)]
     if not reached:
         raise LayoutError(f'destination {name} is out of the youBot arm\'s reach from its '
                           f'unload stands beside the pool')

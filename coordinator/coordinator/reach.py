@@ -29,10 +29,10 @@ def youbot_tool_quaternion(p: Vector, tilt: float) -> Tuple[float, float, float,
     approach axis down, leaning ``tilt`` away from the arm's base axis in the arm's vertical
     plane (the only orientations a 5-joint arm reaches at an arbitrary point)."""
     phi = math.atan2(p[1] - ARM_BASE_IN_BASE_LINK_M[1], p[0] - ARM_BASE_IN_BASE_LINK_M[0])
-    z = np.array([math.cos(phi) * math.sin(tilt), math.sin(phi) * math.sin(tilt),
-                  -math.cos(tilt)])
-    y = np.array([-math.sin(phi), math.cos(phi), 0.0])
-    x = np.cross(y, z)
+    cp, sp, ct, st = math.cos(phi), math.sin(phi), math.cos(tilt), math.sin(tilt)
+    z = np.array([cp * st, sp * st, -ct])
+    y = np.array([-sp, cp, 0.0])
+    x = np.array([-cp * ct, -sp * ct, -st])         # y x z
     return matrix_to_quaternion(np.column_stack([x, y, z]))
 
 
@@ -82,17 +82,19 @@ def zu12_reaches(base: Sequence[float], points: Sequence[Vector]) -> bool:
     return True
 
 
-def youbot_reaches(points_in_base: Sequence[Vector]) -> bool:
-    """Whether the youBot's arm reaches every point (base_link) at one tool tilt."""
+def youbot_reaches(points_in_base: Sequence[Vector], payload: float = 0.0) -> bool:
+    """Whether the youBot's arm reaches every point (base_link) at one tool tilt, holding
+    ``payload`` kg at rest at each (youbot_holds)."""
     for tilt in YOUBOT_TILTS_DEG:
-        ok = True
+        qs = []
         for p in points_in_base:
             target = np.eye(4)
             target[:3, :3] = quaternion_to_matrix(youbot_tool_quaternion(p, math.radians(tilt)))
             target[:3, 3] = p
-            if not _youbot().ik(target).success:
-                ok = False
+            solution = _youbot().ik(target)
+            if not solution.success or solution.positions is None:
                 break
-        if ok:
+            qs.append(solution.positions)
+        if len(qs) == len(points_in_base) and (payload <= 0.0 or youbot_holds(qs, payload)):
             return True
     return False

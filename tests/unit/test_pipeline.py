@@ -695,11 +695,10 @@ def test_a_pool_drop_out_of_reach_is_swapped_for_another():
     layout = cell_layout()
     from coordinator.layout import world_to_base
     blocked = []
-    for stand in layout.stands:
-        if len(stand.drops) > 4:
-            b = world_to_base(stand.pose, stand.drops[0])
-            b[2] -= layout.youbot_base_z
-            blocked.append(b)
+    stand = layout.stand('pool_right')
+    b = world_to_base(stand.pose, stand.drops[0])
+    b[2] -= layout.youbot_base_z
+    blocked.append(b)
 
     def unreachable(arm, p):
         return arm == 'youbot' and any(np.linalg.norm(np.asarray(p) - b) < 0.02

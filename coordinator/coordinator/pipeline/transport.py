@@ -57,6 +57,7 @@ class UnloadPath:
     over: np.ndarray              # 5 cm above its drop
     drop: np.ndarray              # where it is let go
     place: int = -1               # the destination's slot it is set down on (not the pool)
+    pose: Optional[Pose2D] = None  # where the base stands for it
 
 
 # A youBot unload whose drop is reached at another tool tilt than its grip rises this much more
@@ -65,6 +66,9 @@ TILT_CHANGE_RISE_M = 0.06
 # The youBot's lift off the plate: heights over the grip [m], the last clear of the neighbours
 # (of the paper's 5 cm materials; taller neighbours take it higher, 1 cm at a time).
 UNLOAD_LIFT_STEPS_M = (0.01, 0.02, 0.03, 0.04, 0.05, 0.06)
+# A heavy material's unload slides the base along its stand's line only this far or further
+# (nearer, it is unloaded from where the base stands) [m].
+SLIDE_MIN_M = 0.03
 # The speeds at its top tried for a lift that goes on to the drop, as fractions of its own top
 # speed: the one whose whole motion ends soonest within the joints' limits is kept.
 UNLOAD_LIFT_END_SPEEDS = (0.0, 0.25, 0.5, 0.75, 1.0)
@@ -85,6 +89,7 @@ class Transport(Machine):
         self._follower: Optional[PathFollower] = None   # while the base drives
         self._followed = False                           # the port runs the follower
         self._drive_goal = ''
+        self._target: Optional[Pose2D] = None          # the drive's end pose
         self._carry: Optional[UnloadPath] = None     # the unload's joint positions
         self._armed = False
         self._dropped: Dict[str, Set[int]] = {}        # pool drop spots used, per stand
@@ -180,18 +185,32 @@ class Transport(Machine):
         return self.run.layout.stand_for(m.color, m.slot).name
 
     def _drive_to(self, obs: Observation, goal: str) -> None:
-        run, lay = self.run, self.run.layout
-        target = lay.youbot_home if goal == 'home' else lay.stand(goal).pose
-        x, y, yaw = (float(v) for v in obs.youbot_pose)
-        start = (x, y, yaw)
-        via: Sequence = ()
+        """Home, or to a stand: where it stands for the first material it unloads there (the
+        stand's pose, or slid along its line for a heavy one, _unload_path), the arm readied
+        for that material on the way."""
+        lay = self.run.layout
+        plan = None
         if goal == 'home':
-            via = lay.via_back
-        elif self._drive_goal in ('', 'home'):
-            via = lay.via_out
-        elif self._drive_goal != goal:
-            via = lay.via_turn
-        path = BezierPath(key_poses_between(start, target, via))
+            target, via = lay.youbot_home, lay.via_back
+        else:
+            target = lay.stand(goal).pose
+            if self.queue:
+                plan = self._unload_path(self.queue[0], target, YOUBOT_CARRY_Q, high=True,
+                                         slide=True)
+                target = plan.pose if plan is not None and plan.pose is not None else target
+            via = (lay.via_out if self._drive_goal in ('', 'home')
+                   else lay.via_turn if self._drive_goal != goal else ())
+        self._follow(obs, target, via, goal)
+        self.enter(TransportState.DRIVE, obs.now, self._drive_deadline - obs.now)
+        if goal != 'home' and self.queue:
+            self._ready_arm(obs, plan)
+
+    def _follow(self, obs: Observation, target: Pose2D, via: Sequence, goal: str) -> None:
+        """The base off along a path from where it is through ``via`` to ``target`` (at stand
+        or home ``goal``)."""
+        run = self.run
+        x, y, yaw = (float(v) for v in obs.youbot_pose)
+        path = BezierPath(key_poses_between((x, y, yaw), target, via))
         # Mecanum: the heading turns on its own profile in time while the base travels the
         # path, both over the same time (a short path with a large turn takes the turn's).
         self._follower = PathFollower(
@@ -199,13 +218,10 @@ class Transport(Machine):
             PDGains(max_speed=run.s.base_max_speed, max_turn=run.s.base_max_turn),
             turn=TurnLimits(run.s.drive_turn, run.s.drive_turn_accel))
         self._followed = run.ports.follow(self._follower)
-        self._drive_goal = goal
+        self._drive_goal, self._target = goal, target
         run.event(obs.now, 'driving', 'youbot', detail=f'to {goal}, {path.length:.2f} m')
-        budget = self._follower.profile.duration + run.s.drive_margin
-        self._drive_deadline = obs.now + budget
-        self.enter(TransportState.DRIVE, obs.now, budget)
-        if goal != 'home' and self.queue:
-            self._ready_arm(obs, lay.stand(goal).pose)
+        self._drive_deadline = (obs.now + self._follower.profile.duration
+                                + run.s.drive_margin)
 
     def _drive(self, obs: Observation) -> None:
         run = self.run
@@ -246,7 +262,7 @@ class Transport(Machine):
             return self._drive_to(obs, self._stand_for(m))
         self._plan_unload(obs, m)
 
-    def _ready_arm(self, obs: Observation, stand: Pose2D) -> None:
+    def _ready_arm(self, obs: Observation, path: Optional['UnloadPath']) -> None:
         """While the base drives to a stand: the arm up through the carry pose (folded, it
         reaches down in front of the base, and its fingers would scrape the floor as the base
         pitches), over the first material it unloads there, and on down onto it without
@@ -255,7 +271,6 @@ class Transport(Machine):
         waited for it: a stop 12 cm over the material, and the descent from there, added 0.7 s
         to that wait."""
         run, m = self.run, self.queue[0]
-        path = self._unload_path(m, stand, YOUBOT_CARRY_Q, high=True)
         if path is None:
             # Up to the carry pose; the unload is planned (and its failure told) from there.
             run.send(Motion('youbot', run.plan('youbot', obs.youbot_q,
@@ -264,14 +279,16 @@ class Transport(Machine):
         self._approach(obs, m, path, [Waypoint(YOUBOT_CARRY_Q.copy(), stop=False)])
 
     def _unload_path(self, m: Material, pose: Pose2D, seed: np.ndarray,
-                     high: bool = False) -> Optional['UnloadPath']:
+                     high: bool = False, slide: bool = False) -> Optional['UnloadPath']:
         """Joint positions over the material on the plate (5 cm over it with ``high``, else 3), on
         it, up its straight lift clear of its neighbours, above its drop and at its drop, for
         the base standing at ``pose``. The fingers come down from 3 cm over its top face (the
         neighbours' tops are level with it). The material rises 6 cm, over their 5 cm, before it
         swings out, through a point every centimetre at the same tool tilt: between two points
         6 cm apart the joints' straight line swings what is held 2 cm sideways and tilts it 8
-        degrees, into a neighbour 1 cm away."""
+        degrees, into a neighbour 1 cm away. With ``slide``, where the arm holds the material
+        at none of its drops from ``pose``, the base may stand elsewhere along its stand's
+        line: abeam the drop nearest there that it holds it at (UnloadPath.pose)."""
         run = self.run
         size, t = m.size, run.s.timing
         mass = run.layout.rule(m.color).mass
@@ -296,6 +313,28 @@ class Transport(Machine):
         # held out over a far drop sags the arm, but is still delivered).
         for load in (mass, 0.0) if mass > 0.0 else (0.0,):
             path = self._unload_way(m, pose, seed, high, load, candidates, clear)
+            if path is None and slide and load > 0.0:
+                path = self._slid_way(m, pose, seed, high, load, candidates, clear)
+            if path is not None:
+                return path
+        return None
+
+    def _slid_way(self, m: Material, pose: Pose2D, seed: np.ndarray, high: bool, load: float,
+                  candidates: Sequence[Tuple[int, np.ndarray]], clear: float
+                  ) -> Optional['UnloadPath']:
+        """_unload_path's way to a candidate from the base slid along its stand's line abeam
+        of it (UnloadStand.abeam; at least SLIDE_MIN_M from ``pose``), the nearest slides first:
+        a heavy material's far drops are beyond what the arm holds (the shoulder sags, or the
+        arm stalls), and its near ones may be used."""
+        stand = self.run.layout.stand(self._stand_for(m))
+        slid = []
+        for place, point in candidates:
+            at = stand.abeam(point)
+            away = math.hypot(at[0] - pose[0], at[1] - pose[1])
+            if away >= SLIDE_MIN_M:
+                slid.append((away, place, point, at))
+        for _, place, point, at in sorted(slid, key=lambda c: c[0]):
+            path = self._unload_way(m, at, seed, high, load, [(place, point)], clear)
             if path is not None:
                 return path
         return None
@@ -338,7 +377,8 @@ class Transport(Machine):
                        else None)
                 path = grip + out if grip is not None and out is not None else None
             if path is not None:
-                return UnloadPath(path[0], path[1], path[2:-2], path[-2], path[-1], place)
+                return UnloadPath(path[0], path[1], path[2:-2], path[-2], path[-1], place,
+                                  pose)
         return None
 
     def _lift(self, obs: Observation, m: Material, then: Sequence[Waypoint] = (),
@@ -395,19 +435,24 @@ class Transport(Machine):
                 if o.on_the_plate and o.slot >= 0 and o.id != m.id]
 
     def _stand_pose(self, obs: Observation) -> Pose2D:
-        """Where the base stands for its unloads: its drive's goal while it is on its way."""
+        """Where the base stands for its unloads: its drive's end while it is on its way."""
         if self.driving:
-            return self.run.layout.stand(self._drive_goal).pose
+            return known(self._target, 'the drive\'s end')
         return obs.youbot_pose
 
     def _plan_unload(self, obs: Observation, m: Material) -> None:
-        """Down onto the material on the plate; the gripper closes once the arm is there."""
+        """Down onto the material on the plate; the gripper closes once the arm is there.
+        Standing, the base slides along its stand's line first where a heavy material is held
+        out to its drop only from elsewhere on it (the arm on its way down meanwhile)."""
         run, now = self.run, obs.now
-        plan = self._unload_path(m, self._stand_pose(obs), obs.youbot_q)
+        here = self._stand_pose(obs)
+        plan = self._unload_path(m, here, obs.youbot_q, slide=not self.driving)
         if plan is None:
             self.queue.pop(0)
             run.fail(now, m, 'grasp_failed', 'unload: no IK solution', 'youbot')
             return self._next_unload(obs)
+        if plan.pose is not None and plan.pose is not here:
+            self._follow(obs, plan.pose, (), self._drive_goal)
         self._approach(obs, m, plan)
 
     def _approach(self, obs: Observation, m: Material, plan: 'UnloadPath',
