@@ -177,7 +177,38 @@ def test_a_queue_that_would_overflow_the_belt_stops_it_and_the_result_counts_the
     assert r.belt_stops >= 1
     stops = [e for e in kinds(cell, 'belt_stopped') if e.detail]
     assert len(stops) == r.belt_stops
-    assert all(e.detail == 'the queue would overflow the belt' for e in stops)
+    overflow = [e for e in stops if e.detail == 'the queue would overflow the belt']
+    lifts = [e for e in stops if e.detail == 'a lift out of the end stop\'s queue']
+    assert overflow and len(overflow) + len(lifts) == len(stops)
+
+
+def test_the_belt_pauses_while_a_material_is_lifted_out_of_a_pressed_queue():
+    """The belt drives the end stop's queue into the stop; a material lifted off its front
+    dragged the ones pressed behind it up by their faces (13 oranges of 0.38 kg: they rose
+    1 to 4 cm, fell back 2 cm aside and turned 12 degrees, and the next place hit them). The
+    belt pauses from before the cup's contact until the lift is over, and only then: never
+    for a material picked on the fly, or held with nothing pressed behind it."""
+    classes = copy.deepcopy(PAPER)
+    classes['orange']['count'] = 12
+    layout = layout_from_world(world(classes))
+    cell = FakeCell(layout, ['orange'] * 12 + ['blue', 'purple'], gap=0.3)
+    from coordinator.pipeline import Settings
+    p = run(cell, Settings(pick_x=0.2), limit=900.0)
+    assert p.result.status == 'completed', p.result
+    switched = [e for e in cell.events if e.kind in ('belt_stopped', 'belt_started')]
+    pauses = [(e, next(s for s in switched if s.time > e.time and s.kind == 'belt_started'))
+              for e in switched if e.detail == 'a lift out of the end stop\'s queue']
+    assert pauses
+    held = {e.material: float(e.detail.split()[2].rstrip(','))
+            for e in kinds(cell, 'tracking') if 'held at the stop' in e.detail}
+    lifted = {e.material: e.time for e in kinds(cell, 'picked')}
+    for stop, start in pauses:
+        m = next(k for k, c in held.items() if stop.time <= c <= start.time)
+        assert stop.time <= held[m] - 0.3 and lifted[m] <= start.time
+    # The paper's batch (picked on the fly, the purple alone at the stop): never.
+    paper = FakeCell(layout_from_world(world(copy.deepcopy(PAPER))),
+                     ['orange'] * 6 + ['blue', 'purple'])
+    assert run(paper).result.belt_stops == 0
 
 
 def test_a_set_down_swings_in_over_what_is_at_its_destination_already(monkeypatch):
@@ -420,3 +451,50 @@ def test_an_unload_that_stalled_short_of_its_drop_is_a_failure_not_a_delivery():
             assert m.failure.startswith('unload: the arm stalled')
             assert 'short of the drop' in m.failure
 
+
+def test_a_lift_out_of_the_end_stops_queue_keeps_to_the_straight_line_up():
+    """Lifted off the end stop with another material right behind it, the cup rises straight
+    up (real Zu 12 IK): the joints' own way from the dwell to the lift point bowed 1.8 cm
+    upstream as it began, into the material behind, and lifted the whole queue with it. Alone
+    at the stop, or moving on the belt, the lift is one motion to the lift point as before."""
+    from types import SimpleNamespace
+
+    from controllers.pick_place import PickTiming
+    from controllers.transforms import pose_matrix, quaternion_to_matrix
+    from controllers.zu12_kinematics import Zu12Kinematics
+    from coordinator.pipeline import Material, Pipeline, Settings
+    from coordinator.pipeline.model import DOWN
+
+    class Zu12IK:
+        kin = Zu12Kinematics('suction_tcp')
+
+        def solve(self, arm, position, orientation, frame, seed):
+            solution = self.kin.ik(pose_matrix(position, orientation), seed=seed)
+            return (solution.positions, '') if solution.success else (None, solution.reason)
+
+        def event(self, event):
+            pass
+
+    layout = layout_from_world(world(copy.deepcopy(PAPER)))      # (the Zu 12 at the origin)
+    run_ = Pipeline(layout, Zu12IK(), Settings())
+    zu12 = run_.loader
+    m = Material(1, 'purple', np.array([0.675, 0.75, 0.425]), 0.0, 3, size=0.05)
+    on = np.array([0.675, 0.75, 0.4 + 0.05 + 0.001])
+    zu12._lift = on + np.array([0.0, 0.0, 0.07])
+    ready = np.array([1.201, 1.436, -1.222, 1.357, 1.571, -0.37])    # (the world's)
+    q_on, q_lift = run_.solve_path('zu12', [on, zu12._lift], ready)
+    pick = SimpleNamespace(timing=PickTiming(lift_height=0.07), contact=1.0)
+    for crowded in (True, False):
+        run_.belt = SimpleNamespace(held=lambda m: True,
+                                    crowded=lambda m, t, crowded=crowded: crowded)
+        way = zu12._lift_way(m, pick, on, q_on, 1.0, q_lift)
+        assert np.allclose(way[-1].q, q_lift, atol=1e-9)
+        if not crowded:
+            assert len(way) == 1
+            continue
+        assert len(way) > 5 and all(w.direct for w in way)
+        tips = [Zu12IK.kin.fk(w.q)[:3, 3] for w in way]
+        assert max(float(np.linalg.norm(t[:2] - on[:2])) for t in tips) < 1e-3
+        assert all(b[2] >= a[2] - 1e-6 for a, b in zip(tips, tips[1:]))
+        assert np.allclose(Zu12IK.kin.fk(way[-1].q)[:3, :3], quaternion_to_matrix(DOWN),
+                           atol=1e-6)

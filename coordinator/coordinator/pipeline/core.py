@@ -272,11 +272,12 @@ class Pipeline:
             effective = self.ports.belt(self.layout.belt_speed if running else 0.0)
             self.belt.switched(now, running, effective or now)
             loading = self.loader.state not in (LoaderState.HOME, LoaderState.DONE)
+            why = ''
             if not running and loading:
                 self.belt_stops += 1            # (stopped for the queue, not at the end)
-            self.event(now, 'belt_started' if running else 'belt_stopped',
-                       detail='the queue would overflow the belt' if not running and loading
-                       else '')
+                why = ('a lift out of the end stop\'s queue' if self.loader.pauses_belt(now)
+                       else 'the queue would overflow the belt')
+            self.event(now, 'belt_started' if running else 'belt_stopped', detail=why)
 
     def _belt_wanted(self, now: float) -> bool:
         """The belt runs at a uniform speed from the start until loading is over, unless what
@@ -284,7 +285,7 @@ class Pipeline:
         point, or (without a stop) a material the Zu 12 cannot take now near the belt's end."""
         if self.loader.state in (LoaderState.HOME, LoaderState.DONE):
             return False
-        return not self._overflow()
+        return not (self.loader.pauses_belt(now) or self._overflow())
 
     def _overflow(self) -> bool:
         if self.layout.end_stop:

@@ -57,6 +57,12 @@ SETTLE_S = 0.05
 # A material on the belt with another this near (between their faces, along the belt) is lifted
 # clear of it before it swings away [m].
 QUEUE_CLEARANCE_M = 0.03
+# A material lifted off the end stop's queue with another pressed against it (the belt drives
+# the queue into the stop) drags its neighbours up by their faces' friction: 13 oranges of
+# 0.38 kg rose 1 to 4 cm with the one lifted and fell back 2 cm sideways and turned 12 degrees,
+# and the next place hit them. The belt pauses from this long before the cup's contact until
+# the lift is over, and the queue's pressure is gone [s].
+QUEUE_LIFT_PAUSE_LEAD_S = 0.5
 # The belt stops while the end stop's queue reaches back to this far past the pick point (or,
 # without a stop, a material that must wait comes this near its end) [m].
 QUEUE_MARGIN_M = 0.15
