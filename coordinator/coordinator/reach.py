@@ -82,6 +82,18 @@ def zu12_reaches(base: Sequence[float], points: Sequence[Vector]) -> bool:
     return True
 
 
+def zu12_cup_positions(base: Sequence[float], q_a: Vector, q_b: Vector, samples: int = 24
+                       ) -> np.ndarray:
+    """Where the Zu 12's cup (standing at ``base``: x, y, z, yaw) passes in the world as its
+    joints go in a straight line from ``q_a`` to ``q_b`` (``samples`` + 1 points, both ends)."""
+    x, y, z, yaw = base
+    c, s = math.cos(yaw), math.sin(yaw)
+    rot = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])         # base -> world
+    a, b = np.asarray(q_a, float), np.asarray(q_b, float)
+    return np.array([rot @ _zu12().fk(a + f * (b - a))[:3, 3] + np.array([x, y, z])
+                     for f in np.linspace(0.0, 1.0, samples + 1)])
+
+
 def youbot_reaches(points_in_base: Sequence[Vector], payload: float = 0.0) -> bool:
     """Whether the youBot's arm reaches every point (base_link) at one tool tilt, holding
     ``payload`` kg at rest at each (youbot_holds)."""

@@ -49,10 +49,14 @@ from coordinator.pipeline.model import (
     Points,
     known,
 )
+from coordinator.reach import zu12_cup_positions
 
 # A lift out of the end stop's queue keeps to the straight line up through a point this often
 # [m].
 LIFT_LINE_STEP_M = 0.01
+# A swing of the Zu 12's joints keeps what its cup holds (or the cup) this far above anything
+# that can ride on the belt wherever it passes over the belt [m].
+SWING_CLEARANCE_M = 0.02
 # Two IK solutions a pick path's sample apart (50 ms) that differ by more than this in a joint
 # lie on two branches [rad].
 IK_JUMP_RAD = 0.5
@@ -211,8 +215,13 @@ class Loader(Machine):
             return list(waypoints), 0.0
         rise = self.run.s.timing.place_descend
         if edge is not None:
-            first = [Waypoint(known(self._above_q, 'the point above the place'), stop=False,
-                              min_time=rise),
+            above = known(self._above_q, 'the point above the place')
+            # (Up over the place first where the swing from there to the edge would bulge out
+            # over the belt, low: see _place_way.)
+            then = known(self._then, 'the rise from the place')
+            over = ([Waypoint(then, stop=False)] if self.over_the_belt(above, edge, 0.0)
+                     and float(np.max(np.abs(then - above))) > 1e-6 else [])
+            first = [Waypoint(above, stop=False, min_time=rise), *over,
                      Waypoint(edge, stop=False)]
         else:
             # Straight up over the place first (over what else is there: a swing from the
@@ -622,9 +631,27 @@ class Loader(Machine):
         if qs is None:
             return 'no IK solution for the place path'
         q_transfer, q_above, q_release, q_edge = qs
-        return PlaceWay([Waypoint(q_edge, stop=False), Waypoint(q_above, stop=False),
+        # Over to a place lower than the belt, the joints' way from the edge down to above it
+        # can bulge back out over the belt: then through the transfer point (above the place,
+        # clear of the belt) first, and straight down from there.
+        over = ([Waypoint(q_transfer, stop=False)]
+                if self.over_the_belt(q_edge, q_above, size) else [])
+        return PlaceWay([Waypoint(q_edge, stop=False), *over, Waypoint(q_above, stop=False),
                          Waypoint(q_release, hold=SETTLE_S, min_time=t.place_descend)],
                         q_transfer, above, q_above, onto_plate)
+
+    def over_the_belt(self, q_a: np.ndarray, q_b: np.ndarray, held: float) -> bool:
+        """Whether the Zu 12's joints going straight from ``q_a`` to ``q_b`` bring what its
+        cup holds (``held``: its size; 0 for the empty cup) over the belt lower than
+        SWING_CLEARANCE_M above the tallest material that rides on it. (From the stop to a
+        ground place 2 cm further out than the paper's, the way from the edge bulged 13 cm back
+        out over the belt, 5 cm above its top, and a 0.49 kg purple struck what rode there.)"""
+        lay = self.run.layout
+        cup = zu12_cup_positions(lay.zu12_base, q_a, q_b)
+        half = lay.belt_width / 2 + held / 2
+        low = lay.belt_top + lay.material_size + SWING_CLEARANCE_M
+        return bool(np.any((np.abs(cup[:, 1] - lay.belt_y) < half) & (cup[:, 0] < lay.belt_end_x)
+                           & (cup[:, 2] - held < low)))
 
     def _adopt(self, way: 'PlaceWay') -> None:
         """The place the arm is on its way to: where the cup rises from it to."""
