@@ -177,6 +177,17 @@ class CellLayout:
     def stand(self, name: str) -> UnloadStand:
         return next(st for st in self.stands if st.name == name)
 
+    def way_out(self, stand: str) -> Tuple[Tuple[float, ...], ...]:
+        """The via points of the drive from home to ``stand``: past the pool's north-west corner
+        facing the way the first stand faces (``via_out``); to a stand facing the other way,
+        through the point the base turns about between the stands (``via_turn``): turning past
+        the corner, its corners swept 2.7 cm into the pool's wall, and the plate's materials
+        slid 6 cm."""
+        turn = self.stand(stand).pose[2] - self.via_out[0][2]
+        if abs(math.remainder(turn, 2 * math.pi)) < math.pi / 2:
+            return self.via_out
+        return self.via_turn
+
     def serving(self, region: str) -> UnloadStand:
         """The stand a set-down destination is unloaded from (the pool: each stand, its row)."""
         return next(st for st in self.stands if region in st.serves)

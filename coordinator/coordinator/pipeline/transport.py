@@ -198,7 +198,7 @@ class Transport(Machine):
                 plan = self._unload_path(self.queue[0], target, YOUBOT_CARRY_Q, high=True,
                                          slide=True)
                 target = plan.pose if plan is not None and plan.pose is not None else target
-            via = (lay.via_out if self._drive_goal in ('', 'home')
+            via = (lay.way_out(goal) if self._drive_goal in ('', 'home')
                    else lay.via_turn if self._drive_goal != goal else ())
         self._follow(obs, target, via, goal)
         self.enter(TransportState.DRIVE, obs.now, self._drive_deadline - obs.now)
