@@ -56,6 +56,21 @@ class BeltModel:
         mats = self.on_belt()
         return m in mats and held(self._items(mats), self.stop)[mats.index(m)]
 
+    def comes_to_rest(self, m: Material) -> float:
+        """When the material comes to rest at the end stop or behind what it holds, while the
+        belt runs as it does now (now if it is held already; infinity if it never will)."""
+        if self.held(m):
+            return self.now
+        if self.speed <= 0.0 or not math.isfinite(self.stop):
+            return math.inf
+        track, x = self.track(m), float(m.position[0])
+        rest = float(track(self.now + (self.stop - x) / self.speed + 1.0)[0])
+        return self.now + max(0.0, rest - x) / self.speed
+
+    def held_by(self, m: Material, t: float) -> bool:
+        """Whether the end stop (or what it holds) holds the material at ``t``."""
+        return self.comes_to_rest(m) <= t + 1e-9
+
     def queue_tail(self) -> float:
         """The upstream face of the queue the end stop holds (world x; infinity if none)."""
         mats = self.on_belt()

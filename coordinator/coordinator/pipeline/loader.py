@@ -57,6 +57,9 @@ LIFT_LINE_STEP_M = 0.01
 # A swing of the Zu 12's joints keeps what its cup holds (or the cup) this far above anything
 # that can ride on the belt wherever it passes over the belt [m].
 SWING_CLEARANCE_M = 0.02
+# A material met at rest in the end stop's queue is met this long after its belt pause began,
+# and that no sooner than it came to rest there [s].
+QUEUE_REST_S = 0.1
 # Two IK solutions a pick path's sample apart (50 ms) that differ by more than this in a joint
 # lie on two branches [rad].
 IK_JUMP_RAD = 0.5
@@ -341,6 +344,19 @@ class Loader(Machine):
         pick.contact = max(pick.contact, pick.start + reach + timing.descend)
         return ''
 
+    def _not_as_it_queues(self, m: Material, contact: float, timing: PickTiming) -> float:
+        """The contact, or later: not while the material comes to rest against another in the
+        end stop's queue, between the cup's contact and the lift. Met on the move there, the
+        cup carried a 50 mm blue on into the purple the stop held (the camera's estimate 4 mm
+        behind), pressed it, and the lift dragged the purple up and off the belt's end. It is
+        met once at rest there instead (the belt pauses around that lift; the pause begins
+        QUEUE_LIFT_PAUSE_LEAD_S before the contact, after it has come to rest)."""
+        belt = self.run.belt
+        rest = belt.comes_to_rest(m)
+        if contact < rest <= contact + timing.dwell + timing.lift and belt.crowded(m, rest):
+            return rest + QUEUE_LIFT_PAUSE_LEAD_S + QUEUE_REST_S
+        return contact
+
     def _meet(self, obs: Observation, pick: 'PickPlan') -> str:
         """The pick's motion (``pick.points``), its contact moved later until the arm makes
         it; why not (or LEAVE: the material leaves the belt first)."""
@@ -349,6 +365,7 @@ class Loader(Machine):
         for _ in range(PICK_TRIES):
             if track(pick.contact)[0] < run.s.pick_x - 1e-6:
                 pick.contact = run.belt.reaches(m, run.s.pick_x)
+            pick.contact = self._not_as_it_queues(m, pick.contact, timing)
             if track(pick.contact + timing.dwell)[0] > (run.layout.belt_end_x - m.size / 2
                                                         + 1e-6):
                 return LEAVE                   # off the end (no stop) before the cup is on it
@@ -391,7 +408,7 @@ class Loader(Machine):
         upstream as it began, into the material behind, and lifted the queue with it (the
         ones behind rose up to 4 cm and fell back turned 23 degrees)."""
         run, timing = self.run, pick.timing
-        if not (run.belt.held(m) and run.belt.crowded(m, pick.contact)):
+        if not (run.belt.held_by(m, pick.contact) and run.belt.crowded(m, pick.contact)):
             return [Waypoint(q_lift, min_time=timing.lift)]
         rise = float(np.linalg.norm(self._lift - on)) if self._lift is not None else 0.0
         steps = max(1, int(math.ceil(rise / LIFT_LINE_STEP_M - 1e-9)))
@@ -484,7 +501,7 @@ class Loader(Machine):
             self._ahead.lift_end += late
         m.attempts += 1
         run.count_grasp('zu12')
-        held = ' (held at the stop)' if run.belt.held(m) else ''
+        held = ' (held at the stop)' if run.belt.held_by(m, pick.contact) else ''
         if held and run.belt.crowded(m, pick.contact):
             # Another pressed against it: the belt pauses before the cup comes down, and the
             # queue's pressure with it, until the lift is over (QUEUE_LIFT_PAUSE_LEAD_S).

@@ -1,0 +1,46 @@
+"""The Zu 12 meets a material that comes to rest in the end stop's queue once it rests there,
+not on the move into it (real Zu 12 IK)."""
+import numpy as np
+import pytest
+from test_zu12_swing import _cell
+
+from controllers.pick_place import PickTiming
+from coordinator.pipeline import Material
+from coordinator.pipeline import loader as loader_module
+from coordinator.pipeline.belt import BeltModel
+from coordinator.pipeline.model import QUEUE_LIFT_PAUSE_LEAD_S
+
+
+def test_a_material_about_to_come_to_rest_in_the_queue_is_met_at_rest_there():
+    """A blue met on the move 3 cm short of where it comes to rest behind the purple the stop
+    held: the cup carried it on into the purple (the camera's estimate 4 mm behind) and the
+    lift dragged the purple off the belt's end. Its contact waits until it rests there, then
+    the belt's pause (QUEUE_LIFT_PAUSE_LEAD_S before the contact) and the straight lift apply;
+    a material that rests against nothing (the stop's face) is met on the move as before."""
+
+    layout, run_, zu12 = _cell(0.05, 1)
+    end, speed = layout.belt_end_x, layout.belt_speed
+    purple = Material(1, 'purple', np.array([end - 0.021, layout.belt_y, 0.42]), 0.0, 3,
+                      size=0.042)
+    blue = Material(2, 'blue', np.array([end - 0.12, layout.belt_y, 0.425]), 0.0, 3, size=0.05)
+    run_.materials = {1: purple, 2: blue}
+    run_.belt = BeltModel(layout, run_.materials, 0.0, ran_before=True)
+    run_.belt.running = True
+    belt, timing = run_.belt, PickTiming()
+    assert belt.held(purple) and not belt.held(blue)
+    rest = belt.comes_to_rest(blue)
+    gap = (end - 0.042) - 0.003 - 0.025 - (end - 0.12)     # to 3 mm behind the purple
+    assert rest == pytest.approx(gap / speed, abs=1e-3)
+    assert not belt.held_by(blue, rest - 0.01) and belt.held_by(blue, rest)
+    # Met just before it rests: later, at rest.
+    contact = rest - 0.2
+    met = zu12._not_as_it_queues(blue, contact, timing)
+    assert met == pytest.approx(rest + QUEUE_LIFT_PAUSE_LEAD_S + loader_module.QUEUE_REST_S)
+    assert belt.held_by(blue, met - QUEUE_LIFT_PAUSE_LEAD_S)         # at rest as the belt pauses
+    # Met well before it gets there (it rests after the lift): unchanged.
+    early = rest - timing.dwell - timing.lift - 0.1
+    assert zu12._not_as_it_queues(blue, early, timing) == early
+    # Nothing held ahead of it: it comes to rest against the stop alone, met on the move.
+    run_.materials.pop(1)
+    assert zu12._not_as_it_queues(blue, belt.comes_to_rest(blue) - 0.2, timing) == (
+        belt.comes_to_rest(blue) - 0.2)
