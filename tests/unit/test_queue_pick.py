@@ -37,6 +37,12 @@ def test_a_material_about_to_come_to_rest_in_the_queue_is_met_at_rest_there():
     met = zu12._not_as_it_queues(blue, contact, timing)
     assert met == pytest.approx(rest + QUEUE_LIFT_PAUSE_LEAD_S + loader_module.QUEUE_REST_S)
     assert belt.held_by(blue, met - QUEUE_LIFT_PAUSE_LEAD_S)         # at rest as the belt pauses
+    # Met just after it rests, before the belt's pause would begin: later too (the belt
+    # paused 0.35 s before it came to rest, it stopped 8 cm short, and the cup missed it).
+    assert zu12._not_as_it_queues(blue, rest + 0.3, timing) == pytest.approx(met)
+    # At rest long enough before the pause: unchanged.
+    settled = rest + QUEUE_LIFT_PAUSE_LEAD_S + loader_module.QUEUE_REST_S + 0.05
+    assert zu12._not_as_it_queues(blue, settled, timing) == settled
     # Met well before it gets there (it rests after the lift): unchanged.
     early = rest - timing.dwell - timing.lift - 0.1
     assert zu12._not_as_it_queues(blue, early, timing) == early

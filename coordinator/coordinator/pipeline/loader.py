@@ -353,7 +353,9 @@ class Loader(Machine):
         QUEUE_LIFT_PAUSE_LEAD_S before the contact, after it has come to rest)."""
         belt = self.run.belt
         rest = belt.comes_to_rest(m)
-        if contact < rest <= contact + timing.dwell + timing.lift and belt.crowded(m, rest):
+        # (Resting there by the contact but not yet as the pause begins, it would stop short.)
+        begins = contact - QUEUE_LIFT_PAUSE_LEAD_S - QUEUE_REST_S
+        if begins < rest <= contact + timing.dwell + timing.lift and belt.crowded(m, rest):
             return rest + QUEUE_LIFT_PAUSE_LEAD_S + QUEUE_REST_S
         return contact
 
