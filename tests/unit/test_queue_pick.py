@@ -50,3 +50,27 @@ def test_a_material_about_to_come_to_rest_in_the_queue_is_met_at_rest_there():
     run_.materials.pop(1)
     assert zu12._not_as_it_queues(blue, belt.comes_to_rest(blue) - 0.2, timing) == (
         belt.comes_to_rest(blue) - 0.2)
+
+
+def test_a_lift_out_of_the_queue_rises_over_the_tallest_material_that_can_stand_next_to_it():
+    """Lifted from behind an orange, a green rose 7 cm and its swing on sagged 1.3 cm and bulged
+    2 cm sideways onto the orange, and knocked it over. Out of the queue the lift rises until
+    what the cup holds passes QUEUE_SWING_CLEARANCE_M over the tallest material of the batch;
+    a pick on the move keeps its lift."""
+    from types import SimpleNamespace
+    layout, run_, zu12 = _cell(0.05, 1)
+    end = layout.belt_end_x
+    orange = Material(1, 'orange', np.array([end - 0.025, layout.belt_y, 0.425]), 0.0, 3,
+                      size=0.05)
+    green = Material(2, 'orange', np.array([end - 0.078, layout.belt_y, 0.425]), 0.0, 3,
+                     size=0.05)
+    run_.materials = {1: orange, 2: green}
+    run_.belt = BeltModel(layout, run_.materials, 0.0, ran_before=True)
+    run_.belt.running = True
+    timing = run_.s.timing                 # (the cell's: a 7 cm lift)
+    queued = SimpleNamespace(m=green, timing=timing, contact=1.0)
+    high = zu12._lifting(queued).lift_height
+    assert high == pytest.approx(layout.material_size + loader_module.QUEUE_SWING_CLEARANCE_M)
+    assert high > timing.lift_height
+    run_.materials.pop(1)                  # alone at the stop: the lift as before
+    assert zu12._lifting(queued).lift_height == timing.lift_height

@@ -2,7 +2,7 @@
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import (
     TYPE_CHECKING,
     Callable,
@@ -57,6 +57,9 @@ LIFT_LINE_STEP_M = 0.01
 # A swing of the Zu 12's joints keeps what its cup holds (or the cup) this far above anything
 # that can ride on the belt wherever it passes over the belt [m].
 SWING_CLEARANCE_M = 0.02
+# What the Zu 12 lifts out of the end stop's queue rises this far over the tallest material
+# that can stand next to it before it swings away [m].
+QUEUE_SWING_CLEARANCE_M = 0.05
 # A material met at rest in the end stop's queue is met this long after its belt pause began,
 # and that no sooner than it came to rest there [s].
 QUEUE_REST_S = 0.1
@@ -359,6 +362,18 @@ class Loader(Machine):
             return rest + QUEUE_LIFT_PAUSE_LEAD_S + QUEUE_REST_S
         return contact
 
+    def _lifting(self, pick: 'PickPlan') -> PickTiming:
+        """The pick's timing, its lift high enough out of the end stop's queue for what it holds
+        to pass QUEUE_SWING_CLEARANCE_M over the tallest material that can be next to it: the
+        swing on from the lift point sags and bulges outwards as it begins (a green lifted
+        7 cm from behind an orange came down 1.3 cm and 2 cm sideways onto it, and knocked it
+        over)."""
+        run, m, timing = self.run, pick.m, pick.timing
+        if not (run.belt.held_by(m, pick.contact) and run.belt.crowded(m, pick.contact)):
+            return timing
+        high = run.layout.material_size + QUEUE_SWING_CLEARANCE_M
+        return replace(timing, lift_height=max(timing.lift_height, high))
+
     def _meet(self, obs: Observation, pick: 'PickPlan') -> str:
         """The pick's motion (``pick.points``), its contact moved later until the arm makes
         it; why not (or LEAVE: the material leaves the belt first)."""
@@ -371,7 +386,8 @@ class Loader(Machine):
             if track(pick.contact + timing.dwell)[0] > (run.layout.belt_end_x - m.size / 2
                                                         + 1e-6):
                 return LEAVE                   # off the end (no stop) before the cup is on it
-            path, lift = follow_pick(track, pick.contact, m.size, timing, SAMPLE_PERIOD_S)
+            path, lift = follow_pick(track, pick.contact, m.size, self._lifting(pick),
+                                     SAMPLE_PERIOD_S)
             self._lift = np.asarray(lift, float)
             qs = self._solve_along(path, lift, pick.q_hover)
             if qs is None:
