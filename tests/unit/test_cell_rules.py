@@ -459,24 +459,16 @@ def test_a_lift_out_of_the_end_stops_queue_keeps_to_the_straight_line_up():
     at the stop, or moving on the belt, the lift is one motion to the lift point as before."""
     from types import SimpleNamespace
 
+    from test_pipeline import Zu12IK
+
     from controllers.pick_place import PickTiming
-    from controllers.transforms import pose_matrix, quaternion_to_matrix
-    from controllers.zu12_kinematics import Zu12Kinematics
+    from controllers.transforms import quaternion_to_matrix
     from coordinator.pipeline import Material, Pipeline, Settings
     from coordinator.pipeline.model import DOWN
 
-    class Zu12IK:
-        kin = Zu12Kinematics('suction_tcp')
-
-        def solve(self, arm, position, orientation, frame, seed):
-            solution = self.kin.ik(pose_matrix(position, orientation), seed=seed)
-            return (solution.positions, '') if solution.success else (None, solution.reason)
-
-        def event(self, event):
-            pass
-
     layout = layout_from_world(world(copy.deepcopy(PAPER)))      # (the Zu 12 at the origin)
-    run_ = Pipeline(layout, Zu12IK(), Settings())
+    ik = Zu12IK()
+    run_ = Pipeline(layout, ik, Settings())
     zu12 = run_.loader
     m = Material(1, 'purple', np.array([0.675, 0.75, 0.425]), 0.0, 3, size=0.05)
     on = np.array([0.675, 0.75, 0.4 + 0.05 + 0.001])
@@ -485,7 +477,7 @@ def test_a_lift_out_of_the_end_stops_queue_keeps_to_the_straight_line_up():
     q_on, q_lift = run_.solve_path('zu12', [on, zu12._lift], ready)
     pick = SimpleNamespace(timing=PickTiming(lift_height=0.07), contact=1.0)
     for crowded in (True, False):
-        run_.belt = SimpleNamespace(held=lambda m: True,
+        run_.belt = SimpleNamespace(held=lambda m: True, held_by=lambda m, t: True,
                                     crowded=lambda m, t, crowded=crowded: crowded)
         way = zu12._lift_way(m, pick, on, q_on, 1.0, q_lift)
         assert np.allclose(way[-1].q, q_lift, atol=1e-9)
@@ -493,8 +485,8 @@ def test_a_lift_out_of_the_end_stops_queue_keeps_to_the_straight_line_up():
             assert len(way) == 1
             continue
         assert len(way) > 5 and all(w.direct for w in way)
-        tips = [Zu12IK.kin.fk(w.q)[:3, 3] for w in way]
+        tips = [ik.kin.fk(w.q)[:3, 3] for w in way]
         assert max(float(np.linalg.norm(t[:2] - on[:2])) for t in tips) < 1e-3
         assert all(b[2] >= a[2] - 1e-6 for a, b in zip(tips, tips[1:]))
-        assert np.allclose(Zu12IK.kin.fk(way[-1].q)[:3, :3], quaternion_to_matrix(DOWN),
+        assert np.allclose(ik.kin.fk(way[-1].q)[:3, :3], quaternion_to_matrix(DOWN),
                            atol=1e-6)

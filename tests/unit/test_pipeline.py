@@ -956,6 +956,22 @@ class _YoubotIK:
         pass
 
 
+class Zu12IK:
+    """Ports with the Zu 12's real IK (its swings' and lifts' geometry), and nothing else."""
+
+    def __init__(self) -> None:
+        from controllers.zu12_kinematics import Zu12Kinematics
+        self.kin = Zu12Kinematics('suction_tcp')
+
+    def solve(self, arm, position, orientation, frame, seed):
+        from controllers.transforms import pose_matrix
+        solution = self.kin.ik(pose_matrix(position, orientation), seed=seed)
+        return (solution.positions, '') if solution.success else (None, solution.reason)
+
+    def event(self, event):
+        pass
+
+
 def _hermite(points, steps=8):
     """The controller's path between samples (cubic in position and velocity)."""
     for (t0, q0, v0, _), (t1, q1, v1, _) in zip(points, points[1:]):

@@ -10,26 +10,14 @@ import numpy as np
 import pytest
 from test_cell_rules import world
 from test_material_classes import PAPER_CLASSES as PAPER
+from test_pipeline import Zu12IK
 
 from controllers.time_optimal import Waypoint
-from controllers.transforms import pose_matrix
-from controllers.zu12_kinematics import Zu12Kinematics
 from coordinator.layout import layout_from_world
 from coordinator.pipeline import Material, Pipeline, Settings
 from coordinator.pipeline import loader as loader_module
 
 READY = np.array([1.201, 1.436, -1.222, 1.357, 1.571, -0.37])      # (the world's)
-
-
-class Zu12IK:
-    kin = Zu12Kinematics('suction_tcp')
-
-    def solve(self, arm, position, orientation, frame, seed):
-        solution = self.kin.ik(pose_matrix(position, orientation), seed=seed)
-        return (solution.positions, '') if solution.success else (None, solution.reason)
-
-    def event(self, event):
-        pass
 
 
 def _cell(size, count):
