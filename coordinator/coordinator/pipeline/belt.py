@@ -101,17 +101,17 @@ class BeltModel:
         t = self.now + (x - m.position[0]) / self.speed
         return t if self.track(m)(t)[0] >= x - 1e-6 else math.inf
 
-    def crowded(self, m: Material, t: float) -> bool:
+    def crowded(self, m: Material, t: float, behind: bool = False) -> bool:
         """Whether another material on the belt will be next to ``m`` at ``t`` (less than
         QUEUE_CLEARANCE_M between their faces along the belt, overlapping across it): a
         material lifted from there drags against it if it moves sideways before it is clear of
-        its top."""
+        its top. With ``behind``: only one upstream of it (pressed against it by the belt)."""
         mats = self.on_belt()
         if m not in mats:
             return False
         x = self.track(m)(t)[0]
         for o in mats:
-            if o is m:
+            if o is m or (behind and self.track(o)(t)[0] >= x):
                 continue
             reach = (m.size + o.size) / 2
             if (abs(self.track(o)(t)[0] - x) < reach + QUEUE_CLEARANCE_M
