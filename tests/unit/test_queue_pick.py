@@ -52,21 +52,27 @@ def test_a_material_about_to_come_to_rest_in_the_queue_is_met_at_rest_there():
         belt.comes_to_rest(blue) - 0.2)
 
 
+def _two_at_the_stop():
+    """A cell whose end stop holds a 50 mm material and another right behind it (belt on)."""
+    layout, run_, zu12 = _cell(0.05, 1)
+    end = layout.belt_end_x
+    ahead = Material(1, 'purple', np.array([end - 0.025, layout.belt_y, 0.425]), 0.0, 3,
+                     size=0.05)
+    behind = Material(2, 'orange', np.array([end - 0.078, layout.belt_y, 0.425]), 0.0, 3,
+                      size=0.05)
+    run_.materials = {1: ahead, 2: behind}
+    run_.belt = BeltModel(layout, run_.materials, 0.0, ran_before=True)
+    run_.belt.running = True
+    return layout, run_, zu12, ahead, behind
+
+
 def test_a_lift_out_of_the_queue_rises_over_the_tallest_material_that_can_stand_next_to_it():
     """Lifted from behind an orange, a green rose 7 cm and its swing on sagged 1.3 cm and bulged
     2 cm sideways onto the orange, and knocked it over. Out of the queue the lift rises until
     what the cup holds passes QUEUE_SWING_CLEARANCE_M over the tallest material of the batch;
     a pick on the move keeps its lift."""
     from types import SimpleNamespace
-    layout, run_, zu12 = _cell(0.05, 1)
-    end = layout.belt_end_x
-    orange = Material(1, 'orange', np.array([end - 0.025, layout.belt_y, 0.425]), 0.0, 3,
-                      size=0.05)
-    green = Material(2, 'orange', np.array([end - 0.078, layout.belt_y, 0.425]), 0.0, 3,
-                     size=0.05)
-    run_.materials = {1: orange, 2: green}
-    run_.belt = BeltModel(layout, run_.materials, 0.0, ran_before=True)
-    run_.belt.running = True
+    layout, run_, zu12, _, green = _two_at_the_stop()
     timing = run_.s.timing                 # (the cell's: a 7 cm lift)
     queued = SimpleNamespace(m=green, timing=timing, contact=1.0)
     high = zu12._lifting(queued).lift_height
@@ -80,14 +86,7 @@ def test_the_belt_pauses_for_a_lift_only_with_a_material_behind():
     """The belt presses the queue from behind: a lift with a material right behind pauses it;
     one with only the stop's material ahead (the paper's orange behind its purple) does not
     (the paper's belt had paused 5 times in 110 trials)."""
-    layout, run_, zu12 = _cell(0.05, 1)
-    end = layout.belt_end_x
-    purple = Material(1, 'purple', np.array([end - 0.025, layout.belt_y, 0.425]), 0.0, 3,
-                      size=0.05)
-    orange = Material(2, 'orange', np.array([end - 0.078, layout.belt_y, 0.425]), 0.0, 3,
-                      size=0.05)
-    run_.materials = {1: purple, 2: orange}
-    belt = run_.belt = BeltModel(layout, run_.materials, 0.0, ran_before=True)
-    belt.running = True
+    _, run_, _, purple, orange = _two_at_the_stop()
+    belt = run_.belt
     assert belt.crowded(orange, 0.0) and not belt.crowded(orange, 0.0, behind=True)
     assert belt.crowded(purple, 0.0) and belt.crowded(purple, 0.0, behind=True)
