@@ -121,6 +121,7 @@ class Probe:
         self.node = Node(name, context=self.context)
         self.executor = SingleThreadedExecutor(context=self.context)
         self.executor.add_node(self.node)
+        self._clients: Dict[str, object] = {}
         self._thread = threading.Thread(target=self._spin, daemon=True)
         self._running = True
         self._thread.start()
@@ -139,11 +140,18 @@ class Probe:
                                       raw=raw)
         return received
 
-    def call(self, srv_type, name: str, request, timeout: float = 10.0):
-        client = self.node.create_client(srv_type, name)
+    def service(self, srv_type, name: str, timeout: float = 10.0):
+        """A client of the service, once the server is discovered (one per name: a test that
+        must call at a given moment discovers the server before, not in that moment)."""
+        client = self._clients.get(name)
+        if client is None:
+            client = self._clients[name] = self.node.create_client(srv_type, name)
         if not client.wait_for_service(timeout_sec=timeout):
             raise TimeoutError(f'service {name} not available')
-        future = client.call_async(request)
+        return client
+
+    def call(self, srv_type, name: str, request, timeout: float = 10.0):
+        future = self.service(srv_type, name, timeout).call_async(request)
         wait_for(future.done, timeout, what=f'reply of {name}')
         return future.result()
 

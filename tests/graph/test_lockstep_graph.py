@@ -99,6 +99,7 @@ def test_a_long_step_request_is_served_in_chunks_while_the_node_serves_the_rest(
     applied = probe.collect(TwistStamped, '/mini_robot/cmd_vel_out')
     before = driver.reply(driver.step(1)).step_count
     steps = 24000                                     # 100 s of simulated time
+    probe.service(Trigger, '/sim_node/pause', 30.0)   # (found before, not while it runs)
     long = driver.step(steps)
     wait_for(lambda: clock and stamp_s(clock[-1][1].clock) > 2.0, 60.0, what='stepping')
     # Another service is answered, and a command takes effect, while the request runs.

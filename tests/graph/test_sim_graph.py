@@ -276,6 +276,7 @@ def test_pause_resume_and_step_while_paused(sim, probe):
     # A resume while a long step request is served is refused: both stepping, the reply
     # counted 61,888 steps for a request of 60,000.
     client = probe.node.create_client(StepSimulation, '/sim_node/step')
+    probe.service(Trigger, '/sim_node/resume', 30.0)  # (found before, not while it runs)
     long = client.call_async(StepSimulation.Request(steps=24000))
     wait_for(lambda: d.now() > stamp_s(reply.sim_time) + 0.1, 30.0, what='the long step to run')
     busy = probe.call(Trigger, '/sim_node/resume', Trigger.Request())

@@ -114,6 +114,10 @@ def test_a_reset_or_a_pause_under_a_goal_aborts_it(arm, probe):
     pause under a goal now ends it, aborted with the reason."""
     from std_srvs.srv import Trigger
 
+    # (Discovered before the goal: on a loaded machine, finding a service took longer than the
+    # goal's 2.5 s of wall time, and the reset came after the goal had succeeded.)
+    for service in ('reset', 'pause', 'resume'):
+        probe.service(Trigger, f'/sim_node/{service}', 30.0)
     for service, why in (('reset', 'the simulation was reset'),
                          ('pause', 'the simulation was paused')):
         feedback = []
