@@ -25,8 +25,9 @@ class CommandGuard:
     """
 
     def __init__(self, limits: Sequence[float], timeout: float) -> None:
-        if any(not (lim > 0.0 and math.isfinite(lim)) for lim in limits):
-            raise ValueError(f'limits must be finite and > 0, got {list(limits)}')
+        if any(not (lim >= 0.0 and math.isfinite(lim)) for lim in limits) or not any(limits):
+            raise ValueError(f'limits must be finite and >= 0 (0: the component stays 0), '
+                             f'not all 0; got {list(limits)}')
         if not (timeout > 0.0 and math.isfinite(timeout)):
             raise ValueError(f'timeout must be finite and > 0, got {timeout}')
         self._limits = tuple(float(lim) for lim in limits)

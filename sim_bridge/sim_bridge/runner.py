@@ -4,14 +4,32 @@ from __future__ import annotations
 import functools
 import math
 from dataclasses import dataclass
-from typing import Callable, Dict, List, Optional, Protocol, Sequence
+from typing import Callable, Dict, List, Optional, Protocol, Sequence, Tuple
 
 import numpy as np
 
-from controllers.cmd_guard import CommandGuard, GuardResult, rate_limited
+from controllers.cmd_guard import CommandGuard, GuardResult, non_finite_fields, rate_limited
 from controllers.joint_trajectory import TrajectoryRequest, TrajectoryResult
 from controllers.lockstep import next_on_grid
 from sim_bridge.world import SimWorld
+
+Twist3 = Tuple[float, float, float]
+"""A base's body twist, (vx, vy, wz) [m/s, m/s, rad/s]: every drive's one shape (a differential
+drive's vy is 0)."""
+
+ZERO: Twist3 = (0.0, 0.0, 0.0)
+
+
+@dataclass(frozen=True)
+class TwistVerdict:
+    """What the runner made of a body twist sent to a base.
+
+    ``accepted``: the base follows ``command`` from the next step on (clamped to its limits);
+    if not, it stops. ``notes``: (kind, text) for each thing the sender should hear: kinds
+    'non-finite', 'old stamp', 'future stamp', 'fault', 'sideways', 'clamped'."""
+    accepted: bool
+    command: Twist3
+    notes: Tuple[Tuple[str, str], ...] = ()
 
 
 class StepSink(Protocol):
@@ -27,8 +45,8 @@ class StepSink(Protocol):
 
     def on_command_timeout(self, robot: str) -> None: ...
 
-    def on_command_applied(self, robot: str, time_ns: int) -> None:
-        """The command a driven robot's wheels follow changed at ``time_ns`` (``applied``)."""
+    def on_command_applied(self, robot: str, time_ns: int, command: Twist3) -> None:
+        """The command a driven robot's wheels follow changed at ``time_ns`` to ``command``."""
 
     def on_world_state(self, time_ns: int) -> None:
         """The world's props (materials) are due; called only for worlds that have them."""
@@ -57,7 +75,7 @@ class NullSink:
     def on_command_timeout(self, robot: str) -> None:
         pass
 
-    def on_command_applied(self, robot: str, time_ns: int) -> None:
+    def on_command_applied(self, robot: str, time_ns: int, command: Twist3) -> None:
         pass
 
     def on_world_state(self, time_ns: int) -> None:
@@ -120,20 +138,18 @@ class SimRunner:
             own = robot.config.limits
             speed = own.max_speed if own.max_speed is not None else limits.max_speed
             turn = own.max_turn if own.max_turn is not None else limits.max_turn
-            # Guarded components: (vx, wz) for a differential drive, (vx, vy, wz) for Mecanum.
-            bounds = (speed, turn) if len(robot.drive.components) == 2 else (speed, speed, turn)
-            self.guards[name] = CommandGuard(bounds, limits.cmd_vel_timeout)
+            # (vx, vy, wz) for every drive; a differential drive's vy is held at 0.
+            sideways = speed if 'linear.y' in robot.drive.components else 0.0
+            self.guards[name] = CommandGuard((speed, sideways, turn), limits.cmd_vel_timeout)
             accel = own.max_accel if own.max_accel is not None else limits.max_accel
             turn_accel = (own.max_turn_accel if own.max_turn_accel is not None
                           else limits.max_turn_accel)
             if accel is not None or turn_accel is not None:
                 accel = math.inf if accel is None else accel
                 turn_accel = math.inf if turn_accel is None else turn_accel
-                per_step = ((accel, turn_accel) if len(bounds) == 2
-                            else (accel, accel, turn_accel))
-                self._max_change[name] = tuple(a * world.time_step for a in per_step)
-        self._applied: Dict[str, tuple] = {name: tuple(0.0 for _ in guard.limits)
-                                           for name, guard in self.guards.items()}
+                self._max_change[name] = tuple(a * world.time_step
+                                               for a in (accel, accel, turn_accel))
+        self._applied: Dict[str, Twist3] = {name: ZERO for name in self.guards}
         self._timed_out: Dict[str, bool] = {name: False for name in self.guards}
         # Robots put back after a non-finite physics state, and why: no commands until reset.
         self.faults: Dict[str, str] = {}
@@ -142,25 +158,66 @@ class SimRunner:
             max(dt_ns, round(1e9 / cam.config.rate)) for cam in world.cameras]
         self._camera_next_ns: List[int] = [0 for _ in world.cameras]
 
-    def applied(self, robot: str) -> tuple:
-        """The command a driven robot's wheels follow now: (vx, wz) or (vx, vy, wz)."""
+    def applied(self, robot: str) -> Twist3:
+        """The command a driven robot's wheels follow now."""
         return self._applied[robot]
 
     def holonomic(self, robot: str) -> bool:
-        return len(self.guards[robot].limits) == 3
+        return self.guards[robot].limits[1] > 0.0
+
+    def judge_twist(self, robot: str, values: Sequence[float],
+                    stamp: Optional[float] = None) -> TwistVerdict:
+        """Take a body twist sent to a driven robot, or stop it: ``values`` are the six numbers
+        of a geometry_msgs/Twist (linear x, y, z, angular x, y, z), ``stamp`` when it was sent
+        [s of simulated time] (None: now).
+
+        A non-finite number in any field means a broken sender, and a stamp further from now
+        than the command timeout (either way) a command not meant for now: both stop the
+        robot, as diff_drive_controller judges a stamp. A differential drive ignores a
+        sideways speed; every drive is clamped to its limits (``command``)."""
+        broken = non_finite_fields(values)
+        if broken:
+            self.reject(robot)
+            return TwistVerdict(False, ZERO, (('non-finite', f'rejected: non-finite {broken}; '
+                                                              'stopping'),))
+        now, timeout = self.world.sim_time, self.guards[robot].timeout
+        if stamp is not None and abs(now - stamp) > timeout:
+            self.reject(robot)
+            return TwistVerdict(False, ZERO, (
+                ('old stamp' if stamp < now else 'future stamp',
+                 f"rejected: stamped {stamp:.3f} s, the simulator's clock reads {now:.3f} s "
+                 f'(beyond cmd_vel_timeout {timeout:g} s; is the sender on simulated time?); '
+                 'stopping'),))
+        vx, vy, wz = float(values[0]), float(values[1]), float(values[5])
+        notes: List[Tuple[str, str]] = []
+        if vy != 0.0 and not self.holonomic(robot):
+            notes.append(('sideways', f'linear.y {vy:.3f} ignored: a differential drive '
+                                      'cannot move sideways'))
+            vy = 0.0
+        result = self.command(robot, vx, vy, wz)
+        if not result.accepted:
+            notes.append(('fault', f'rejected: {result.reason}'))
+        elif result.clamped:
+            notes.append(('clamped', f'{self.shown(robot, (vx, vy, wz))} clamped to '
+                                     f'{self.shown(robot, result.command)} (limits '
+                                     f'{self.shown(robot, self.guards[robot].limits)})'))
+        return TwistVerdict(result.accepted, _twist(result.command), tuple(notes))
+
+    def shown(self, robot: str, twist: Sequence[float]) -> str:
+        """A twist as a robot takes it: (vx, wz) for a differential drive, (vx, vy, wz) for
+        one that moves sideways."""
+        used = twist if self.holonomic(robot) else (twist[0], twist[2])
+        return '(' + ', '.join(f'{v:.3f}' for v in used) + ')'
 
     def command(self, robot: str, vx: float, vy: float, wz: float) -> GuardResult:
         """Take a body twist for a driven robot (or stop on bad input), applied from the next
-        step on (``on_command_applied`` reports when the wheels' command changes).
-
-        The result's command is (vx, wz) for a differential drive, (vx, vy, wz) for Mecanum.
-        """
-        command = (vx, vy, wz) if self.holonomic(robot) else (vx, wz)
+        step on (``on_command_applied`` reports when the wheels' command changes). The result's
+        command is (vx, vy, wz), clamped; a differential drive's vy is held at 0."""
         if robot in self.faults:
             self.guards[robot].stop()
-            return GuardResult(False, tuple(0.0 for _ in command),
+            return GuardResult(False, ZERO,
                                reason=f'{self.faults[robot]}; reset the simulator to go on')
-        result = self.guards[robot].submit(command, self.world.sim_time)
+        result = self.guards[robot].submit((vx, vy, wz), self.world.sim_time)
         self._timed_out[robot] = False
         return result
 
@@ -226,7 +283,7 @@ class SimRunner:
         repaired = self.world.repair_static()
         if name in self.guards:
             self.guards[name].stop()
-            self._applied[name] = tuple(0.0 for _ in self.guards[name].limits)
+            self._applied[name] = ZERO
         return repaired
 
     def advance(self, steps: int, sink: StepSink) -> None:
@@ -245,8 +302,8 @@ class SimRunner:
                     self._timed_out[name] = True
                     sink.on_command_timeout(name)
                 if command != self._applied[name]:
-                    self._apply(name, command)
-                    sink.on_command_applied(name, world.sim_time_ns)
+                    self._apply(name, _twist(command))
+                    sink.on_command_applied(name, world.sim_time_ns, self._applied[name])
             world.step()
             t_ns = world.sim_time_ns
             if t_ns >= self._clock_next_ns:
@@ -284,16 +341,19 @@ class SimRunner:
         self.faults.clear()
         for name, guard in self.guards.items():
             guard.stop()
-            self._applied[name] = tuple(0.0 for _ in guard.limits)
+            self._applied[name] = ZERO
             self._timed_out[name] = False
 
     def stop_all(self) -> None:
         for name, guard in self.guards.items():
             guard.stop()
-            self._apply(name, tuple(0.0 for _ in guard.limits))
+            self._apply(name, ZERO)
 
-    def _apply(self, robot: str, command: tuple) -> None:
-        vx, vy, wz = command if len(command) == 3 else (command[0], 0.0, command[1])
-        self.world.robots[robot].set_body_twist(vx, vy, wz)
-        self._applied[robot] = tuple(command)
+    def _apply(self, robot: str, command: Twist3) -> None:
+        self.world.robots[robot].set_body_twist(*command)
+        self._applied[robot] = command
 
+
+def _twist(values: Sequence[float]) -> Twist3:
+    vx, vy, wz = values
+    return (float(vx), float(vy), float(wz))

@@ -25,7 +25,7 @@ from __future__ import annotations
 
 import functools
 from dataclasses import dataclass
-from typing import Callable, Dict, List, Tuple
+from typing import Dict, List, Tuple
 
 import numpy as np
 from control_msgs.action import FollowJointTrajectory
@@ -43,7 +43,8 @@ from controllers.trajectory_goal import (
     Tolerance,
     check_tolerances,
 )
-from ros_common.stamps import to_seconds
+from ros_common.stamps import stamp_from_ns, to_seconds
+from sim_bridge.messages import topic, trajectory_feedback, trajectory_request
 
 
 @dataclass
@@ -75,11 +76,8 @@ def merged_path_tolerance(joint_names, defaults, goal) -> np.ndarray:
 class TrajectoryActions:
     """One action server per arm controller of the world."""
 
-    def __init__(self, node: Node, world, runner, topic: Callable[[str, str], str],
-                 request_from_msg, stamp: Callable[[], object]) -> None:
+    def __init__(self, node: Node, world, runner) -> None:
         self._node, self._world, self._runner = node, world, runner
-        self._stamp = stamp
-        self._request = request_from_msg
         self._running: Dict[Tuple[str, str], _Running] = {}
         self.servers = []
         for name, robot in world.robots.items():
@@ -129,7 +127,7 @@ class TrajectoryActions:
         goal = handle.request
         group = self._group(key)
         result = self._runner.set_trajectory(
-            *key, self._request(goal.trajectory),
+            *key, trajectory_request(goal.trajectory),
             path_tolerance=merged_path_tolerance(group.joint_names, group.path_tolerance,
                                                  _tolerances(goal.path_tolerance)))
         if not result.accepted:
@@ -199,8 +197,9 @@ class TrajectoryActions:
                 del self._running[key]
                 running.outcome.set_result(Outcome(SUCCESSFUL, 'canceled'))
                 continue
-            running.handle.publish_feedback(_feedback(
-                self._stamp(), group.joint_names, reference, position, velocity))
+            running.handle.publish_feedback(trajectory_feedback(
+                stamp_from_ns(self._world.sim_time_ns), group.joint_names, reference, position,
+                velocity))
             outcome = running.monitor.check(now, reference.positions, reference.velocities,
                                             position, velocity)
             if outcome is None:
@@ -220,22 +219,3 @@ class TrajectoryActions:
 
 def _result(outcome: Outcome):
     return FollowJointTrajectory.Result(error_code=outcome.code, error_string=outcome.message)
-
-
-def fill_points(reference_point, feedback_point, error_point, reference, position,
-                velocity) -> None:
-    """A joint group's reference, feedback and their difference into three
-    trajectory_msgs/JointTrajectoryPoint (what JTC's state and feedback carry)."""
-    reference_point.positions = reference.positions.tolist()
-    reference_point.velocities = reference.velocities.tolist()
-    feedback_point.positions = position.tolist()
-    feedback_point.velocities = velocity.tolist()
-    error_point.positions = (reference.positions - position).tolist()
-    error_point.velocities = (reference.velocities - velocity).tolist()
-
-
-def _feedback(stamp, joint_names, reference, position, velocity):
-    fb = FollowJointTrajectory.Feedback(joint_names=list(joint_names))
-    fb.header.stamp = stamp
-    fill_points(fb.desired, fb.actual, fb.error, reference, position, velocity)
-    return fb

@@ -164,15 +164,12 @@ class SimRobot:
         """(lower, upper, max velocity, max effort) as the URDF gives them."""
         return self._joint_limits[joint]
 
-    def set_body_twist(self, vx: float, vy_or_w: float, wz: Optional[float] = None) -> tuple:
-        """Command the wheel velocity motors for a body twist; returns the wheel targets.
-
-        (v, w) for any drive, or (vx, vy, wz); a differential drive ignores vy.
-        """
+    def set_body_twist(self, vx: float, vy: float, wz: float) -> tuple:
+        """Command the wheel velocity motors for a body twist; returns the wheel targets
+        (a differential drive ignores vy)."""
         if self.drive is None:
             raise WorldError(f'robot "{self.config.name}" has no drive')
-        vy, w = (0.0, vy_or_w) if wz is None else (vy_or_w, wz)
-        return self.drive.command(vx, vy, w)
+        return self.drive.command(vx, vy, wz)
 
     def apply_controllers(self, t: float) -> None:
         for group in self.controllers.values():

@@ -52,4 +52,4 @@ def test_an_unknown_reliability_is_refused_at_start(start_node):
     sim = start_node('sim_node', '-p', 'camera_reliability:=sometimes')
     wait_for(lambda: not sim.alive(), 30.0, what='sim_node to exit')
     assert sim.proc.returncode == 1
-    assert 'camera_reliability must be reliable or best_effort' in sim.output()
+    assert 'camera_reliability must be one of reliable, best_effort' in sim.output()

@@ -81,8 +81,8 @@ def test_acceleration_limits_as_diff_drive_controller_names_them(context, tmp_pa
     dt = 1.0 / 240.0
     cases = [(str(bare), {}, None),
              (str(bare), {'linear.x.max_acceleration': 0.5,
-                          'angular.z.max_acceleration': 3.0}, (0.5 * dt, 3.0 * dt)),
-             (str(source), {'linear.x.max_acceleration': 0.5}, (1.0 * dt, 2.0 * dt))]
+                          'angular.z.max_acceleration': 3.0}, (0.5 * dt, 0.5 * dt, 3.0 * dt)),
+             (str(source), {'linear.x.max_acceleration': 0.5}, (1.0 * dt, 1.0 * dt, 2.0 * dt))]
     for world, params, expected in cases:
         node = make(context, world=world, **params)
         try:

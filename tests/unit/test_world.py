@@ -37,7 +37,7 @@ class Recorder(NullSink):
     def on_command_timeout(self, robot):
         self.timeouts.append(robot)
 
-    def on_command_applied(self, robot, t):
+    def on_command_applied(self, robot, t, command):
         self.applied.append((robot, t))
 
 
@@ -113,7 +113,7 @@ def test_nan_command_stops_the_robot(world):
 def test_clamped_command_drives_at_the_limit(world):
     runner, sink = SimRunner(world, DriveLimits(max_speed=0.2), 100.0), Recorder()
     result = runner.command('mini_robot', 5.0, 0.0, 0.0)
-    assert result.clamped and result.command == (0.2, 0.0)
+    assert result.clamped and result.command == (0.2, 0.0, 0.0)
     runner.advance(round(0.2 / world.time_step), sink)     # 0.2 s to 0.2 m/s at 1 m/s^2
     assert world.robots['mini_robot'].wheel_targets == pytest.approx((0.2 / 0.03,) * 2)
 

@@ -116,8 +116,9 @@ def test_a_step_to_full_speed_is_taken_at_the_acceleration_limits(youbot):
             super().__init__()
             self.commands = []
 
-        def on_command_applied(self, name, t):
-            self.commands.append((t, runner.applied(name)))
+        def on_command_applied(self, name, t, command):
+            assert command == runner.applied(name)
+            self.commands.append((t, command))
 
     sink, speeds, worst_joint = Applied(), [], 0.0
     t0 = runner.world.sim_time_ns

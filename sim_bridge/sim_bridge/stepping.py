@@ -1,0 +1,209 @@
+"""How the simulator's time advances, as services of ``sim_node``: real-time pacing from a
+timer, ``~/pause`` and ``~/resume``, and lock-step ``~/step`` requests (served a chunk at a time,
+answered after their last chunk, each once the commands announced with it are in)."""
+from __future__ import annotations
+
+import collections
+import time
+from dataclasses import dataclass
+from typing import Deque
+
+from rclpy.clock import Clock, ClockType
+from rclpy.node import Node
+from sim_interfaces.srv import StepSimulation
+from std_srvs.srv import Trigger
+
+from controllers.lockstep import CommandBarrier
+from ros_common.deferred_reply import DeferredReplies
+from ros_common.services import SERVICE_QOS
+from ros_common.stamps import stamp_from_ns
+from sim_bridge.pacing import Pacer, RtfMeter
+from sim_bridge.runner import SimRunner, StepSink
+
+MAX_STEPS_PER_REQUEST = 100_000
+
+
+@dataclass(eq=False)
+class _StepJob:
+    """A ~/step request served in chunks, and the reply it will get."""
+    request: StepSimulation.Request
+    response: StepSimulation.Response
+    remaining: int
+    started: bool = False
+
+
+class Stepping:
+    """The node's clockwork: steps the runner (whose outputs go to ``sink``) in real time, or
+    on request in lock-step (``synchronous``) or while paused."""
+
+    def __init__(self, node: Node, runner: SimRunner, sink: StepSink, actions, *,
+                 synchronous: bool, time_step: float, real_time_factor: float,
+                 max_steps_per_tick: int, step_chunk: int, rtf_log_period: float) -> None:
+        self._node, self._runner, self._sink, self._actions = node, runner, sink, actions
+        self._world = runner.world
+        self.synchronous = synchronous
+        self.paused = False
+        self._pacer = Pacer(time_step, real_time_factor, max_steps_per_tick)
+        self._rtf = RtfMeter()
+        self._rtf_log_period = rtf_log_period
+        self._last_rtf_log = time.monotonic()
+        # A step runs once the commands announced with it are in (lockstep.py); until then it
+        # is answered at once with commands_pending, and asked again.
+        self._barrier = CommandBarrier()
+        node.create_service(Trigger, '~/pause', self._on_pause, qos_profile=SERVICE_QOS)
+        node.create_service(Trigger, '~/resume', self._on_resume, qos_profile=SERVICE_QOS)
+        step = node.create_service(StepSimulation, '~/step', self._on_step,
+                                   qos_profile=SERVICE_QOS)
+        # A request of more than step_chunk steps (or one behind it) is served a chunk at a
+        # time from a timer, the node's other callbacks in between, and answered after its
+        # last chunk (the node is never deaf for a long request).
+        self._replies = DeferredReplies(step)
+        self._jobs: Deque[_StepJob] = collections.deque()
+        self._chunk = step_chunk
+        steady = Clock(clock_type=ClockType.STEADY_TIME)
+        self._chunk_timer = node.create_timer(0.001, self._on_chunk, clock=steady)
+        self._chunk_timer.cancel()
+        # The simulator is the time source: it paces itself on the steady wall clock.
+        period = 0.0 if real_time_factor == 0.0 else time_step / real_time_factor
+        self._timer = node.create_timer(period, self._on_tick, clock=steady)
+        if synchronous:
+            # Lock-step steps only on request: a timer firing at the physics rate for nothing
+            # wakes the executor 240 times a second.
+            self._timer.cancel()
+
+    def describe(self) -> str:
+        rtf = self._pacer.real_time_factor
+        return ('lock-step (synchronous)' if self.synchronous else
+                'as fast as possible' if rtf == 0.0 else f'real-time factor {rtf:g}')
+
+    def command_arrived(self) -> None:
+        """A command (cmd_vel, a trajectory) came in: counted for the step that waits for it."""
+        self._barrier.arrived()
+
+    # --- real time ----------------------------------------------------------------------------
+    def _on_tick(self) -> None:
+        if self.synchronous or self.paused:
+            return
+        wall = time.monotonic()
+        if self._pacer.as_fast_as_possible:
+            # Step for about 2 ms, then let the executor serve callbacks.
+            deadline = wall + 0.002
+            steps = 0
+            while steps < self._pacer.max_burst and time.monotonic() < deadline:
+                self._runner.advance(1, self._sink)
+                steps += 1
+        else:
+            steps = self._pacer.steps_due(wall)
+            self._runner.advance(steps, self._sink)
+            self._pacer.record(steps)
+        if steps:
+            self._note_progress()
+
+    def _note_progress(self) -> None:
+        wall = time.monotonic()
+        self._rtf.add(wall, self._world.sim_time)
+        if self._rtf_log_period > 0.0 and wall - self._last_rtf_log >= self._rtf_log_period:
+            self._last_rtf_log = wall
+            rtf = self._rtf.value()
+            if rtf is not None:
+                self._node.get_logger().info(f'real-time factor {rtf:.2f} '
+                                             f'(sim time {self._world.sim_time:.1f} s)')
+
+    def _on_pause(self, _request, response):
+        if self.synchronous:
+            response.success, response.message = False, 'synchronous mode: use ~/step'
+            return response
+        self.paused = True
+        self._timer.cancel()
+        aborted = self._actions.abort_all(
+            'the simulation was paused: the arm holds where it is; send the goal again '
+            'after ~/resume', hold=True)
+        response.success = True
+        response.message = f'paused at {self._world.sim_time:.3f} s' + (
+            f' (goals aborted: {", ".join(aborted)})' if aborted else '')
+        return response
+
+    def _on_resume(self, _request, response):
+        if self.synchronous:
+            response.success, response.message = False, 'synchronous mode: use ~/step'
+        elif self._jobs:
+            # (Both would step the world: the reply's step count would not be the request's.)
+            left = sum(job.remaining for job in self._jobs)
+            response.success, response.message = False, (
+                f'~/step requests are being served ({left} steps left): resume after their '
+                'reply')
+        else:
+            self.paused = False
+            self._pacer.restart()
+            self._rtf.reset()
+            self._timer.reset()
+            response.success, response.message = True, 'resumed'
+        return response
+
+    # --- on request ---------------------------------------------------------------------------
+    def _on_step(self, request, response):
+        if not (self.synchronous or self.paused):
+            response.success = False
+            response.message = 'step needs synchronous:=true or a paused simulation'
+        elif not (1 <= request.steps <= MAX_STEPS_PER_REQUEST):
+            response.success = False
+            response.message = f'steps must be within 1..{MAX_STEPS_PER_REQUEST}'
+        elif self._jobs or request.steps > self._chunk:
+            job = _StepJob(request, response, request.steps)
+            self._jobs.append(job)
+            self._chunk_timer.reset()
+            return self._replies.later(job)
+        elif self._claim_commands(request, response):
+            self._runner.advance(request.steps, self._sink)
+            self._end_step(response)
+        self._stamp(response)
+        return response
+
+    def _stamp(self, response) -> None:
+        response.step_count = self._world.step_count
+        response.sim_time = stamp_from_ns(self._world.sim_time_ns)
+
+    def _claim_commands(self, request, response) -> bool:
+        """Whether the commands announced with a step request are in (taking them if so);
+        if not, ``response`` says so and asks the caller to try again."""
+        if not self._barrier.ready(request.commands):
+            response.success, response.commands_pending = False, True
+            response.message = (f'{self._barrier.received} of the {request.commands} commands '
+                                'announced for this step have arrived; not stepped, ask again')
+            return False
+        claim = self._barrier.claim(request.commands)
+        if request.commands > 0 and claim.surplus:
+            self._node.get_logger().warn(
+                f'{claim.received} commands arrived for a step announced with '
+                f'{claim.expected}: another node commands this lock-step run, which is '
+                'then not reproducible', throttle_duration_sec=5.0)
+        return True
+
+    def _end_step(self, response) -> None:
+        self._runner.tick_clock(self._sink)       # (the batch's end, if off the clock's grid)
+        self._note_progress()
+        response.success = True
+
+    def _on_chunk(self) -> None:
+        """Run the next chunk of the oldest step request waiting; answer it after its last."""
+        if not self._jobs:
+            self._chunk_timer.cancel()
+            return
+        job = self._jobs[0]
+        done = False
+        if not job.started:
+            job.started = True
+            done = not self._claim_commands(job.request, job.response)
+        if not done:
+            steps = min(job.remaining, self._chunk)
+            self._runner.advance(steps, self._sink)
+            job.remaining -= steps
+            done = job.remaining == 0
+            if done:
+                self._end_step(job.response)
+        if done:
+            self._jobs.popleft()
+            self._stamp(job.response)
+            self._replies.send(job, job.response)
+        if not self._jobs:
+            self._chunk_timer.cancel()
