@@ -231,6 +231,21 @@ class LockStepDriver:
             time.sleep(0.001)
             pending.send()
 
+    def ask_until(self, pending: 'PendingStep', answered: Callable[[object], bool],
+                  timeout: float = 30.0):
+        """The first answer to a step request that ``answered`` accepts (or that is not
+        pending), asking again after each pending one: for a test that must see a given
+        pending answer, however long the machine takes to deliver what it waits for."""
+        end = time.monotonic() + timeout
+        while True:
+            wait_for(pending.future.done, max(0.1, end - time.monotonic()),
+                     what='the step reply')
+            reply = pending.future.result()
+            if answered(reply) or not reply.commands_pending:
+                return reply
+            pending.pending_replies += 1
+            pending.send()
+
     def send(self, vx: float, wz: float = 0.0, vy: float = 0.0) -> None:
         msg = self._twist()
         msg.linear.x, msg.linear.y, msg.angular.z = vx, vy, wz

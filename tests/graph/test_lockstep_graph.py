@@ -70,13 +70,19 @@ def test_a_step_whose_commands_are_missing_is_answered_pending_not_run(fresh_sim
     before = lockstep.reply(lockstep.step(1))
     lockstep.send(0.0)
     pending = lockstep.step(BATCH, commands=2)
-    reply = lockstep.reply(pending, timeout=2.0)            # asked again for two seconds
+    # Asked again until the first command is in (DDS may deliver it after the request: the
+    # answer then says 0 of 2), and once more: still pending, nothing run.
+    reply = lockstep.ask_until(pending, lambda r: '1 of the 2 commands' in r.message)
     assert not reply.success and reply.commands_pending
     assert '1 of the 2 commands' in reply.message
-    assert pending.pending_replies > 1
+    asked = pending.pending_replies
+    reply = lockstep.ask_until(pending, lambda r: pending.pending_replies > asked)
+    assert not reply.success and reply.commands_pending
+    assert '1 of the 2 commands' in reply.message
     assert reply.step_count == before.step_count           # nothing ran
     lockstep.send(0.0)                                      # the second one comes after all
-    assert lockstep.reply(pending).success
+    done = lockstep.reply(pending)
+    assert done.success and done.step_count == before.step_count + BATCH
 
 
 def test_a_long_step_request_is_served_in_chunks_while_the_node_serves_the_rest(start_node,
