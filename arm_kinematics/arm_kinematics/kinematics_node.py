@@ -15,7 +15,6 @@ from typing import Optional, Tuple
 import numpy as np
 from diagnostic_msgs.msg import DiagnosticStatus, KeyValue
 from geometry_msgs.msg import PoseStamped
-from rcl_interfaces.msg import ParameterDescriptor
 from rclpy.node import Node
 from rclpy.qos import QoSProfile
 from sensor_msgs.msg import JointState
@@ -27,11 +26,30 @@ from controllers.transforms import matrix_to_quaternion, pose_matrix
 from controllers.youbot_kinematics import YoubotKinematics
 from controllers.zu12_kinematics import Zu12Kinematics
 from ros_common.node_main import run_node
-from ros_common.params import float_range
+from ros_common.params import Param, declare_params
 from ros_common.services import SERVICE_QOS
 from ros_common.stamps import duration_from_seconds
 
 ARMS = {'youbot': (YoubotKinematics, 'gripper_tcp'), 'zu12': (Zu12Kinematics, 'suction_tcp')}
+
+
+PARAMS = (
+    Param('arm', 'youbot', f'Which arm: {sorted(ARMS)}'),
+    Param('tool_frame', '', "Frame whose pose is published and solved for; empty: the arm's "
+          'gripping point (youbot gripper_tcp, zu12 suction_tcp)'),
+    Param('base_pose', [0.0, 0.0, 0.0, 0.0], "x, y, z, yaw of a fixed arm's base_link in the "
+          "world (the world file's pose): targets may then be given in \"world\""),
+    Param('frame_prefix', '', "Prefix of the robot's frame names (as in the world file)"),
+    Param('velocity_scaling', 0.5, 'Default fraction of the joint velocity limits for IK '
+          'motions', 0.01, 1.0),
+    Param('min_duration', 0.5, 'Shortest IK motion [s]', 0.01, 60.0),
+    Param('trajectory_topic', 'arm_controller/joint_trajectory', 'Where IK motions go '
+          '(relative: in the node namespace)'),
+    Param('track_joint_states', True, 'Take joint_states: the current position (the default '
+          'IK seed, the start of a motion that execute plans) and end_effector_pose. false: '
+          'serve only requests that give a seed and plan no motion (a client that knows the '
+          "arm's state, as the pipeline coordinator; 30 messages a second less to take)"),
+)
 
 
 class KinematicsConfigError(ValueError):
@@ -42,38 +60,13 @@ class KinematicsNode(Node):
 
     def __init__(self, **kwargs) -> None:
         super().__init__('kinematics_node', **kwargs)
-        ro = ParameterDescriptor
-        self.declare_parameter('arm', 'youbot', ro(
-            description=f'Which arm: {sorted(ARMS)}', read_only=True))
-        self.declare_parameter('tool_frame', '', ro(
-            description='Frame whose pose is published and solved for; empty: the arm\'s '
-                        'gripping point (youbot gripper_tcp, zu12 suction_tcp)',
-            read_only=True))
-        self.declare_parameter('base_pose', [0.0, 0.0, 0.0, 0.0], ro(
-            description='x, y, z, yaw of a fixed arm\'s base_link in the world (the world '
-                        'file\'s pose): targets may then be given in "world"',
-            read_only=True))
-        self.declare_parameter('frame_prefix', '', ro(
-            description='Prefix of the robot\'s frame names (as in the world file)',
-            read_only=True))
-        self.declare_parameter('velocity_scaling', 0.5, float_range(
-            'Default fraction of the joint velocity limits for IK motions', 0.01, 1.0))
-        self.declare_parameter('min_duration', 0.5, float_range(
-            'Shortest IK motion [s]', 0.01, 60.0))
-        self.declare_parameter('trajectory_topic', 'arm_controller/joint_trajectory', ro(
-            description='Where IK motions go (relative: in the node namespace)', read_only=True))
-        self.declare_parameter('track_joint_states', True, ro(
-            description='Take joint_states: the current position (the default IK seed, the start '
-                        'of a motion that execute plans) and end_effector_pose. false: serve '
-                        'only requests that give a seed and plan no motion (a client that '
-                        'knows the arm\'s state, as the pipeline coordinator; 30 messages a '
-                        'second less to take)', read_only=True))
-        arm = self.get_parameter('arm').value
+        p = declare_params(self, PARAMS)
+        arm = p['arm']
         if arm not in ARMS:
             raise KinematicsConfigError(f'arm "{arm}" unknown; known: {sorted(ARMS)}')
         kinematics, default_tool = ARMS[arm]
-        tool = self.get_parameter('tool_frame').value or default_tool
-        base_pose = [float(v) for v in self.get_parameter('base_pose').value]
+        tool = p['tool_frame'] or default_tool
+        base_pose = [float(v) for v in p['base_pose']]
         if len(base_pose) != 4 or not all(np.isfinite(base_pose)):
             raise KinematicsConfigError(f'base_pose must be 4 finite numbers, got {base_pose}')
         try:
@@ -83,14 +76,15 @@ class KinematicsNode(Node):
                 self._kin = kinematics(tool)
         except ValueError as exc:
             raise KinematicsConfigError(str(exc)) from None
-        self._prefix = self.get_parameter('frame_prefix').value
+        self._prefix = p['frame_prefix']
+        self._motion_defaults = (p['velocity_scaling'], p['min_duration'])
         self._positions: Optional[np.ndarray] = None
         reliable = QoSProfile(depth=10)
         self._pose_pub = self.create_publisher(PoseStamped, 'end_effector_pose', reliable)
-        traj_topic = self.get_parameter('trajectory_topic').value
+        traj_topic = p['trajectory_topic']
         self._traj_pub = self.create_publisher(JointTrajectory, traj_topic, reliable)
         self._status_pub = self.create_publisher(DiagnosticStatus, 'ik_status', reliable)
-        self._tracking = bool(self.get_parameter('track_joint_states').value)
+        self._tracking = bool(p['track_joint_states'])
         if self._tracking:
             self.create_subscription(JointState, 'joint_states', self._on_joint_states,
                                      reliable)
@@ -162,8 +156,7 @@ class KinematicsNode(Node):
         except (KeyError, ValueError) as exc:
             return self._fail(f'bad target: {exc.args[0]}')
         plan = plan_ik(self._kin, pose, execute, duration, scaling, self._positions, seed,
-                       self.get_parameter('velocity_scaling').value,
-                       self.get_parameter('min_duration').value)
+                       *self._motion_defaults)
         if not plan.success:
             return self._fail(plan.message)
         if plan.duration is None or plan.positions is None:

@@ -19,6 +19,7 @@ instead costs a heartbeat period (seconds) per command.
 """
 from __future__ import annotations
 
+import dataclasses
 import functools
 import json
 import math
@@ -32,7 +33,7 @@ import numpy as np
 import rclpy
 from geometry_msgs.msg import Twist
 from nav_msgs.msg import Odometry
-from rcl_interfaces.msg import Parameter, ParameterDescriptor, ParameterType, ParameterValue
+from rcl_interfaces.msg import Parameter, ParameterType, ParameterValue
 from rcl_interfaces.srv import GetParameters, SetParameters
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile
@@ -73,7 +74,7 @@ from coordinator.results import (
 )
 from ros_common.geometry import yaw_of
 from ros_common.node_main import run_task
-from ros_common.params import float_range
+from ros_common.params import Param, declare_params
 from ros_common.services import NoAnswer, call_and_wait
 from ros_common.stamps import duration_from_ns, set_stamp, stamp_from_ns, to_ns
 from world_description import PIPELINE_CELL
@@ -87,6 +88,40 @@ STARTUP_GRACE_S = 1.0      # simulated seconds in which a lost camera frame is t
 GRIP_SERVICES = {'zu12': '/zu12/suction', 'youbot': '/youbot/gripper/grasp'}
 
 
+PARAMS = (
+    Param('world', PIPELINE_CELL, 'World file of the cell (layout, manifest, belt)'),
+    Param('synchronous', False, 'Lock-step: request every simulator step (sim_node '
+          'synchronous:=true)'),
+    Param('sim_node', '/sim_node', 'The simulator node (its step service and belt_speed '
+          'parameter)'),
+    Param('control_rate', 30.0, 'Decisions per simulated second', 1.0, 240.0),
+    Param('time_step', 1.0 / 240.0, "The simulator's physics step [s] (lock-step batches)",
+          1e-4, 0.05),
+    Param('state_publish_rate', 30.0, "The simulator's state_publish_rate [Hz] (lock-step "
+          'waits for its stamps)', 1.0, 1000.0),
+    Param('belt_speed', -1.0, "Belt speed while running [m/s]; -1 takes the world file's",
+          -1.0, 1.0),
+    Param('pick_x', -0.6, 'The Zu 12 picks materials on the belt downstream of this x [m]',
+          -1.0, 1.0),
+    Param('max_retries', 1, 'Extra grasp attempts after a missed grasp'),
+    Param('drive_speed', Settings.drive_speed, "The path dummy's speed [m/s]", 0.05, 0.8),
+    Param('drive_lead', 0.1, 'Real time: how long after an odometry message the base takes the '
+          "command that answers it, beyond what the message is late by this node's clock [s "
+          'of sim time]; the drive predicts the pose that far ahead', 0.0, 0.3),
+    Param('run_timeout', 300.0, 'Longest run [s of sim time]', 10.0, 3600.0),
+    Param('idle_timeout', 20.0, 'Belt running with nothing to pick for this long ends the '
+          'loading [s]', 1.0, 600.0),
+    Param('plan_latency', -1.0, 'Start motions this much after the decision [s of sim time], '
+          'and in real time at least this much after they are sent (the message travels while '
+          'the simulator runs); -1: 0 in lock-step, 1.0 in real time', -1.0, 5.0),
+    Param('service_timeout', 10.0, 'A node that does not answer within this many wall seconds '
+          'has failed', 0.5, 120.0),
+    Param('result_file', '', 'Write the result (JSON) here at the end'),
+    Param('progress_file', '', 'Write the progress (JSON) here once per simulated second'),
+    Param('scenario_seed', -1, 'Recorded with the result (the simulator draws the scenario)'),
+)
+
+
 class CoordinatorError(RuntimeError):
     pass
 
@@ -95,90 +130,43 @@ class CoordinatorNode(Node):
 
     def __init__(self, **kwargs) -> None:
         super().__init__('coordinator_node', **kwargs)
-        ro, rng = ParameterDescriptor, float_range
-        self.declare_parameter('world', PIPELINE_CELL, ro(
-            description='World file of the cell (layout, manifest, belt)', read_only=True))
-        self.declare_parameter('synchronous', False, ro(
-            description='Lock-step: request every simulator step (sim_node synchronous:=true)',
-            read_only=True))
-        self.declare_parameter('sim_node', '/sim_node', ro(
-            description='The simulator node (its step service and belt_speed parameter)',
-            read_only=True))
-        self.declare_parameter('control_rate', 30.0, rng('Decisions per simulated second',
-                                                         1.0, 240.0))
-        self.declare_parameter('time_step', 1.0 / 240.0, rng(
-            "The simulator's physics step [s] (lock-step batches)", 1e-4, 0.05))
-        self.declare_parameter('state_publish_rate', 30.0, rng(
-            "The simulator's state_publish_rate [Hz] (lock-step waits for its stamps)",
-            1.0, 1000.0))
-        self.declare_parameter('belt_speed', -1.0, rng(
-            'Belt speed while running [m/s]; -1 takes the world file\'s', -1.0, 1.0))
-        self.declare_parameter('pick_x', -0.6, rng(
-            'The Zu 12 picks materials on the belt downstream of this x [m]', -1.0, 1.0))
-        self.declare_parameter('max_retries', 1, ro(
-            description='Extra grasp attempts after a missed grasp', read_only=True))
-        self.declare_parameter('drive_speed', Settings.drive_speed, rng(
-            "The path dummy's speed [m/s]", 0.05, 0.8))
-        self.declare_parameter('drive_lead', 0.1, rng(
-            'Real time: how long after an odometry message the base takes the command that '
-            'answers it, beyond what the message is late by this node\'s clock [s of sim time]; '
-            'the drive predicts the pose that far ahead', 0.0, 0.3))
-        self.declare_parameter('run_timeout', 300.0, rng('Longest run [s of sim time]',
-                                                         10.0, 3600.0))
-        self.declare_parameter('idle_timeout', 20.0, rng(
-            'Belt running with nothing to pick for this long ends the loading [s]', 1.0, 600.0))
-        self.declare_parameter('plan_latency', -1.0, rng(
-            'Start motions this much after the decision [s of sim time], and in real time at '
-            'least this much after they are sent (the message travels while the simulator '
-            'runs); -1: 0 in lock-step, 1.0 in real time',
-            -1.0, 5.0))
-        self.declare_parameter('service_timeout', 10.0, rng(
-            'A node that does not answer within this many wall seconds has failed', 0.5, 120.0))
-        self.declare_parameter('result_file', '', ro(
-            description='Write the result (JSON) here at the end', read_only=True))
-        self.declare_parameter('progress_file', '', ro(
-            description='Write the progress (JSON) here once per simulated second',
-            read_only=True))
-        self.declare_parameter('scenario_seed', -1, ro(
-            description='Recorded with the result (the simulator draws the scenario)',
-            read_only=True))
-        get = lambda n: self.get_parameter(n).value  # noqa: E731
-        self.world = load_world(resolve_resource(get('world')))
+        p = declare_params(self, PARAMS)
+        self.world = load_world(resolve_resource(p['world']))
         try:
             layout = layout_from_world(self.world)
         except LayoutError as exc:
-            raise CoordinatorError(f'{get("world")}: {exc}') from exc
-        if get('belt_speed') >= 0.0:
-            layout = _replace(layout, belt_speed=float(get('belt_speed')))
+            raise CoordinatorError(f'{p["world"]}: {exc}') from exc
+        if p['belt_speed'] >= 0.0:
+            layout = dataclasses.replace(layout, belt_speed=float(p['belt_speed']))
         if layout.belt_speed <= 0.0:
             raise CoordinatorError('the belt speed must be > 0 to bring materials')
         self.layout = layout
-        latency = float(get('plan_latency'))
+        latency = float(p['plan_latency'])
         if latency < 0.0:
-            latency = 0.0 if get('synchronous') else 1.0
-        self.settings = Settings(pick_x=float(get('pick_x')), plan_latency=latency,
-                                 max_retries=int(get('max_retries')),
-                                 drive_speed=float(get('drive_speed')),
-                                 run_timeout=float(get('run_timeout')),
-                                 idle_timeout=float(get('idle_timeout')))
+            latency = 0.0 if p['synchronous'] else 1.0
+        self.settings = Settings(pick_x=float(p['pick_x']), plan_latency=latency,
+                                 max_retries=int(p['max_retries']),
+                                 drive_speed=float(p['drive_speed']),
+                                 run_timeout=float(p['run_timeout']),
+                                 idle_timeout=float(p['idle_timeout']))
         if self.settings.max_retries < 0:
             raise CoordinatorError('max_retries must be >= 0')
-        self.synchronous = bool(get('synchronous'))
-        self.rate = float(get('control_rate'))
-        self.dt_ns = round(float(get('time_step')) * 1e9)
+        self.synchronous = bool(p['synchronous'])
+        self.rate = float(p['control_rate'])
+        self.dt_ns = round(float(p['time_step']) * 1e9)
         # Lock-step: the simulated time of the last step the simulator reported [ns].
         self._lockstep_ns = 0
         self.steps_per_tick = max(1, round(1e9 / self.rate / self.dt_ns))
-        state_period = round(1e9 / float(get('state_publish_rate')))
+        state_period = round(1e9 / float(p['state_publish_rate']))
         if self.synchronous and state_period > self.steps_per_tick * self.dt_ns:
             raise CoordinatorError('lock-step needs state_publish_rate >= control_rate')
         cams = [c for c in self.world.cameras if c.name == 'belt_camera']
         self.state_grid = DueGrid(self.dt_ns, state_period)
         self.camera_grid = (DueGrid(self.dt_ns, round(1e9 / cams[0].rate)) if cams else None)
-        self.service_timeout = float(get('service_timeout'))
-        self.result_file = get('result_file')
-        self.progress_file = Path(get('progress_file')) if get('progress_file') else None
-        self.seed = int(get('scenario_seed'))
+        self.service_timeout = float(p['service_timeout'])
+        self.result_file = p['result_file']
+        self.progress_file = Path(p['progress_file']) if p['progress_file'] else None
+        self.seed = int(p['scenario_seed'])
         self.regions = destinations(layout)
 
         self._lock = threading.Condition()
@@ -189,7 +177,7 @@ class CoordinatorNode(Node):
         self._odom: Optional[Tuple[int, Tuple[float, float, float],
                                    Tuple[float, float, float]]] = None
         self._follower: Optional[PathFollower] = None      # real time: the base's drive
-        self._drive_lead = DriveLead(float(get('drive_lead')))
+        self._drive_lead = DriveLead(float(p['drive_lead']))
         self._detections: Dict[int, List[Detection]] = {}
         self._markers: List[Tuple[int, list]] = []
         self._identifications = IdentificationCheck()
@@ -223,7 +211,7 @@ class CoordinatorNode(Node):
         self.state_pub = self.create_publisher(PipelineState, '~/state', latched)
         self.ik = {arm: self.create_client(SolveIK, f'/{arm}/solve_ik') for arm in ARMS}
         self.grips = {arm: self.create_client(SetBool, srv) for arm, srv in GRIP_SERVICES.items()}
-        sim = get('sim_node').rstrip('/')
+        sim = p['sim_node'].rstrip('/')
         self.step_client = self.create_client(StepSimulation, f'{sim}/step')
         self.param_client = self.create_client(SetParameters, f'{sim}/set_parameters')
         self.param_get_client = self.create_client(GetParameters, f'{sim}/get_parameters')
@@ -696,11 +684,6 @@ class CoordinatorNode(Node):
             except OSError as exc:
                 self.get_logger().warn(f'progress file {self.progress_file}: {exc}',
                                        throttle_duration_sec=60.0)
-
-
-def _replace(layout, **changes):
-    from dataclasses import replace
-    return replace(layout, **changes)
 
 
 def _run(node: CoordinatorNode) -> int:

@@ -23,7 +23,6 @@ from typing import Deque, Dict, Optional, Set, Tuple
 
 import foxglove
 from foxglove.websocket import ChannelView, Client
-from rcl_interfaces.msg import IntegerRange, ParameterDescriptor
 from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
@@ -35,8 +34,27 @@ from recording.qos_profiles import adapt_to_publishers
 from recording.types import TypeResolutionError, TypeResolver, message_class
 from ros_common.log_limit import KeyedLimiter
 from ros_common.node_main import run_node
-from ros_common.params import declare_web_access, float_range
+from ros_common.params import Param, declare_params, declare_web_access
 from ros_common.web_access import WebAccessError
+
+PARAMS = (
+    Param('host', '127.0.0.1', 'Address to serve on; the loopback interface unless told '
+          'otherwise (0.0.0.0: every interface, so anyone who reaches it sees the graph)'),
+    Param('port', 8765, 'TCP port of the Foxglove WebSocket server (0: any free port)',
+          0, 65535),
+    Param('topics', [''], 'Topics to stream; empty: every topic, as it appears'),
+    Param('exclude', [''], 'Topics never streamed'),
+    Param('discovery_period', 0.2, 'Wall seconds between looks for topics that appeared or '
+          'went', 0.02, 10.0),
+    Param('message_backlog_size', 16, "Messages the Foxglove SDK queues for the gate's "
+          "connection of a client (the gate drains it at once into the client's outbox); "
+          'past that its oldest are dropped', 1, 1024),
+    Param('queue_depth', 10, 'History depth of the ROS subscriptions', 1, 10000),
+    Param('report_period', 5.0, 'Wall seconds between reports of clients that fell behind',
+          0.1, 3600.0),
+    Param('send_buffer_limit', 10000000, 'Bytes queued for a client (as foxglove_bridge); past '
+          'that its oldest messages are dropped', 1024, 2 ** 31 - 1),
+)
 
 
 class LiveViewError(RuntimeError):
@@ -87,40 +105,12 @@ class LiveView(Node):
 
     def __init__(self, **kwargs) -> None:
         super().__init__('live_view', **kwargs)
-        text = ParameterDescriptor
-        self.declare_parameter('host', '127.0.0.1', text(
-            description='Address to serve on; the loopback interface unless told otherwise '
-                        '(0.0.0.0: every interface, so anyone who reaches it sees the graph)',
-            read_only=True))
-        self.declare_parameter('port', 8765, text(
-            description='TCP port of the Foxglove WebSocket server (0: any free port)',
-            read_only=True, integer_range=[IntegerRange(from_value=0, to_value=65535, step=1)]))
-        self.declare_parameter('topics', [''], text(
-            description='Topics to stream; empty: every topic, as it appears', read_only=True))
-        self.declare_parameter('exclude', [''], text(
-            description='Topics never streamed', read_only=True))
-        self.declare_parameter('discovery_period', 0.2, float_range(
-            'Wall seconds between looks for topics that appeared or went', 0.02, 10.0))
-        self.declare_parameter('message_backlog_size', 16, text(
-            description="Messages the Foxglove SDK queues for the gate's connection of a "
-                        'client (the gate drains it at once into the client\'s outbox); past '
-                        'that its oldest are dropped', read_only=True,
-            integer_range=[IntegerRange(from_value=1, to_value=1024, step=1)]))
-        self.declare_parameter('queue_depth', 10, text(
-            description='History depth of the ROS subscriptions', read_only=True,
-            integer_range=[IntegerRange(from_value=1, to_value=10000, step=1)]))
-        self.declare_parameter('report_period', 5.0, float_range(
-            'Wall seconds between reports of clients that fell behind', 0.1, 3600.0))
-        self.declare_parameter('send_buffer_limit', 10000000, text(
-            description='Bytes queued for a client (as foxglove_bridge); past that its oldest '
-                        'messages are dropped', read_only=True,
-            integer_range=[IntegerRange(from_value=1024, to_value=2 ** 31 - 1, step=1)]))
-        get = lambda name: self.get_parameter(name).value  # noqa: E731
+        p = declare_params(self, PARAMS)
         try:
-            self._filter = TopicFilter(get('topics'), get('exclude'))
+            self._filter = TopicFilter(p['topics'], p['exclude'])
         except ValueError as exc:
             raise LiveViewError(str(exc)) from None
-        self._depth = int(get('queue_depth'))
+        self._depth = int(p['queue_depth'])
         self._types = TypeResolver()
         self._topics: Dict[str, _Topic] = {}
         self._skipped: Dict[str, str] = {}          # topic: the type it could not be streamed as
@@ -133,7 +123,7 @@ class LiveView(Node):
             logger.setLevel(logging.INFO)
         logging.getLogger('foxglove').propagate = False     # (the node's log only)
         foxglove.set_log_level(logging.INFO)
-        host, port = get('host'), int(get('port'))
+        host, port = p['host'], int(p['port'])
         try:
             access, max_clients = declare_web_access(
                 self, host, default_origins(), "clients that are not browsers send none and "
@@ -148,7 +138,7 @@ class LiveView(Node):
             self._server = foxglove.start_server(
                 name='robot-sim live_view', host='127.0.0.1', port=0,
                 server_listener=_Listener(self._requests), supported_encodings=['cdr'],
-                message_backlog_size=int(get('message_backlog_size')),
+                message_backlog_size=int(p['message_backlog_size']),
                 tls_cert=certificate, tls_key=key)
         except Exception as exc:    # (the SDK raises its own error types)
             self._detach_logs()
@@ -156,7 +146,7 @@ class LiveView(Node):
         self._gate_limiter = KeyedLimiter(1.0)
         self._gate_log_lock = threading.Lock()
         self._gate = Gate(access, host, port, self._server.port, certificate,
-                          max_clients, int(get('send_buffer_limit')),
+                          max_clients, int(p['send_buffer_limit']),
                           self.slow_clients, self._gate_log)
         try:
             served = self._gate.start()
@@ -169,8 +159,8 @@ class LiveView(Node):
                                f'{self._server.port} (a certificate only the gate trusts)')
         # Wall-clock timers: the bridge runs whether or not simulated time advances.
         steady = Clock(clock_type=ClockType.STEADY_TIME)
-        self.create_timer(get('discovery_period'), self._update, clock=steady)
-        self.create_timer(get('report_period'), self._report, clock=steady)
+        self.create_timer(p['discovery_period'], self._update, clock=steady)
+        self.create_timer(p['report_period'], self._report, clock=steady)
         self.get_logger().info(
             f'serving the Foxglove WebSocket protocol on {self.url} ({self._filter.describe()}; '
             f'to {self._gate.describe()}); in Foxglove: Open connection > Foxglove WebSocket > '

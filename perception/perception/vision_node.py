@@ -30,7 +30,7 @@ from perception.segmentation import ColorClass, classes_of
 from perception.tracker import Tracker
 from perception.vision import MaterialVision
 from ros_common.node_main import run_node
-from ros_common.params import float_range
+from ros_common.params import Param, declare_params
 from ros_common.stamps import to_seconds
 from world_description import PIPELINE_CELL
 from world_description.camera_geometry import look_at_rotation
@@ -38,6 +38,28 @@ from world_description.resources import resolve_resource
 from world_description.world_config import load_world
 
 ENCODINGS = ('rgb8', 'bgr8')
+
+
+PARAMS = (
+    Param('world', PIPELINE_CELL, 'World file with the camera pose, the conveyor and the '
+          'materials; empty: use the explicit parameters below'),
+    Param('camera', 'belt_camera', 'Name of the camera in the world file'),
+    Param('camera_position', [0.0], 'Optical frame position in the world [m] (without a world '
+          'file)'),
+    Param('camera_look_at', [0.0], 'Point the camera looks at [m] (without a world file)'),
+    Param('support_height', -1.0, "Height of the surface the materials rest on [m]; -1: the "
+          "world file's belt top"),
+    Param('material_size', -1.0, "Edge of the cubic materials [m]; -1: the world file's"),
+    Param('classes', Parameter.Type.STRING_ARRAY, 'Colour classes; each has <name>.hue_ranges, '
+          '<name>.min_saturation, <name>.min_value. Unset: the world file\'s material classes'),
+    Param('track_gate', 0.04, "Largest distance between a track's prediction and a new "
+          'observation [m]', 1e-3, 1.0),
+    Param('track_min_hits', 3, 'Frames before a material is reported', 1, 1000),
+    Param('track_max_missed', 5, 'Frames without a match before a track ends', 0, 1000),
+    Param('frame_id', 'world', 'Frame of the reported positions'),
+    Param('lazy', True, 'Take camera frames only while something reads detections or '
+          'debug_image (the simulator renders a camera only for its readers)'),
+)
 
 
 class VisionConfigError(ValueError):
@@ -48,58 +70,21 @@ class VisionNode(Node):
 
     def __init__(self, **kwargs) -> None:
         super().__init__('vision_node', **kwargs)
-        ro = ParameterDescriptor
-        self.declare_parameter('world', PIPELINE_CELL, ro(
-            description='World file with the camera pose, the conveyor and the materials; '
-                        'empty: use the explicit parameters below', read_only=True))
-        self.declare_parameter('camera', 'belt_camera', ro(
-            description='Name of the camera in the world file', read_only=True))
-        self.declare_parameter('camera_position', [0.0], ro(
-            description='Optical frame position in the world [m] (without a world file)',
-            read_only=True))
-        self.declare_parameter('camera_look_at', [0.0], ro(
-            description='Point the camera looks at [m] (without a world file)', read_only=True))
-        self.declare_parameter('support_height', -1.0, ro(
-            description='Height of the surface the materials rest on [m]; -1: the world '
-                        'file\'s belt top', read_only=True))
-        self.declare_parameter('material_size', -1.0, ro(
-            description='Edge of the cubic materials [m]; -1: the world file\'s',
-            read_only=True))
-        self.declare_parameter('classes', Parameter.Type.STRING_ARRAY, ro(
-            description='Colour classes; each has <name>.hue_ranges, <name>.min_saturation, '
-                        '<name>.min_value. Unset: the world file\'s material classes',
-            read_only=True))
-        self.declare_parameter('track_gate', 0.04, float_range(
-            'Largest distance between a track\'s prediction and a new observation [m]',
-            1e-3, 1.0))
-        self.declare_parameter('track_min_hits', 3, ro(
-            description='Frames before a material is reported', read_only=True))
-        self.declare_parameter('track_max_missed', 5, ro(
-            description='Frames without a match before a track ends', read_only=True))
-        self.declare_parameter('frame_id', 'world', ro(
-            description='Frame of the reported positions', read_only=True))
-        self.declare_parameter('lazy', True, ro(
-            description='Take camera frames only while something reads detections or '
-                        'debug_image (the simulator renders a camera only for its readers)',
-            read_only=True))
-        world = (load_world(resolve_resource(self.get_parameter('world').value))
-                 if self.get_parameter('world').value else None)
+        p = declare_params(self, PARAMS)
+        world = load_world(resolve_resource(p['world'])) if p['world'] else None
         classes = self._classes(world)
-        camera_pose, support, size, yaw = self._geometry(world)
+        camera_pose, support, size, yaw = self._geometry(world, p)
         self._pose, self._support, self._size, self._yaw = camera_pose, support, size, yaw
         self._classes_cfg = classes
-        get = lambda n: self.get_parameter(n).value  # noqa: E731
-        if get('track_min_hits') < 1 or get('track_max_missed') < 0:
-            raise VisionConfigError('track_min_hits must be >= 1 and track_max_missed >= 0')
-        self._tracker = Tracker(get('track_gate'), get('track_min_hits'),
-                                get('track_max_missed'))
-        self._frame_id = get('frame_id')
+        self._tracker = Tracker(p['track_gate'], p['track_min_hits'],
+                                p['track_max_missed'])
+        self._frame_id = p['frame_id']
         self._vision: Optional[MaterialVision] = None
         self._info_key: Optional[Tuple[Any, ...]] = None   # the camera_info in use
         self._latencies: Deque[float] = deque(maxlen=500)
         self._warned: Dict[str, float] = {}
         self._last_stats = time.monotonic()
-        self._lazy = bool(get('lazy'))
+        self._lazy = bool(p['lazy'])
         readers = PublisherEventCallbacks(matched=self._on_readers)
         self._pub = self.create_publisher(MaterialDetectionArray, 'detections',
                                           QoSProfile(depth=10), event_callbacks=readers)
@@ -179,15 +164,14 @@ class VisionNode(Node):
         except ParameterUninitializedException:
             return None
 
-    def _geometry(self, world):
-        get = lambda n: self.get_parameter(n).value  # noqa: E731
-        position, look_at = list(get('camera_position')), list(get('camera_look_at'))
-        support, size, yaw = get('support_height'), get('material_size'), 0.0
+    def _geometry(self, world, p):
+        position, look_at = list(p['camera_position']), list(p['camera_look_at'])
+        support, size, yaw = p['support_height'], p['material_size'], 0.0
         if world is not None:
-            cams = [c for c in world.cameras if c.name == get('camera')]
+            cams = [c for c in world.cameras if c.name == p['camera']]
             if not cams or cams[0].position is None:
-                raise VisionConfigError(f'world {get("world")} has no fixed camera '
-                                        f'"{get("camera")}"')
+                raise VisionConfigError(f'world {p["world"]} has no fixed camera '
+                                        f'"{p["camera"]}"')
             if len(position) != 3:
                 position, look_at = list(cams[0].position), list(cams[0].look_at)
             if world.conveyor is not None:

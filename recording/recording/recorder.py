@@ -7,7 +7,6 @@ import threading
 from pathlib import Path
 from typing import Set
 
-from rcl_interfaces.msg import IntegerRange, ParameterDescriptor
 from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
@@ -17,57 +16,46 @@ from recording.bag_writer import STORAGES, BagError, BagWriter
 from recording.qos_profiles import adapt_to_publishers, bag_qos
 from recording.types import TypeResolutionError, message_class
 from ros_common.node_main import run_node
-from ros_common.params import float_range
+from ros_common.params import Param, declare_params
+
+PARAMS = (
+    Param('topics', [''], 'Topics to record; empty: every topic, as it appears'),
+    Param('exclude', [''], 'Topics never recorded'),
+    Param('output_dir', 'bags', 'Directory that receives the bag directory'),
+    Param('bag_name', '', 'Bag directory name; empty: rosbag2_<date>-<time>. An existing bag '
+          'is never overwritten: _1, _2, ... is appended'),
+    Param('storage', 'mcap', 'Storage plugin: mcap or sqlite3'),
+    Param('compression', 'none', 'none, or zstd: MCAP chunks compressed with zstd (mcap '
+          'storage only)'),
+    Param('chunk_crc', False, 'MCAP chunks carry a CRC-32, so readers tell a damaged chunk '
+          '(about 0.3 ms of CPU per MB)'),
+    Param('flush_period', 0.5, 'Wall seconds between durable flushes: what a SIGKILL can lose',
+          0.05, 10.0),
+    # rosbag2's names and units. A file is closed complete when the next one starts.
+    Param('max_bag_size', 0, 'Split the bag into a new file once the open one holds this many '
+          'bytes of messages; 0: no limit', 0, 2**62),
+    Param('max_bag_duration', 0.0, 'Split the bag into a new file once the open one spans this '
+          'many seconds of message time; 0: no limit', 0.0, 1e9),
+    Param('discovery_period', 0.1, 'Wall seconds between looks for new topics', 0.01, 10.0),
+    Param('queue_depth', 1000, 'Subscription history depth, to absorb bursts', 1, 100000),
+)
 
 
 class Recorder(Node):
 
     def __init__(self, **kwargs) -> None:
         super().__init__('recorder', **kwargs)
-        text = ParameterDescriptor
-        self.declare_parameter('topics', [''], text(
-            description='Topics to record; empty: every topic, as it appears', read_only=True))
-        self.declare_parameter('exclude', [''], text(
-            description='Topics never recorded', read_only=True))
-        self.declare_parameter('output_dir', 'bags', text(
-            description='Directory that receives the bag directory', read_only=True))
-        self.declare_parameter('bag_name', '', text(
-            description='Bag directory name; empty: rosbag2_<date>-<time>. An existing bag is '
-                        'never overwritten: _1, _2, ... is appended', read_only=True))
-        self.declare_parameter('storage', 'mcap', text(
-            description='Storage plugin: mcap or sqlite3', read_only=True))
-        self.declare_parameter('compression', 'none', text(
-            description='none, or zstd: MCAP chunks compressed with zstd (mcap storage only)',
-            read_only=True))
-        self.declare_parameter('chunk_crc', False, text(
-            description='MCAP chunks carry a CRC-32, so readers tell a damaged chunk (about '
-                        '0.3 ms of CPU per MB)', read_only=True))
-        self.declare_parameter('flush_period', 0.5, float_range(
-            'Wall seconds between durable flushes: what a SIGKILL can lose', 0.05, 10.0))
-        # rosbag2's names and units. A file is closed complete when the next one starts.
-        self.declare_parameter('max_bag_size', 0, ParameterDescriptor(
-            description='Split the bag into a new file once the open one holds this many '
-                        'bytes of messages; 0: no limit', read_only=True,
-            integer_range=[IntegerRange(from_value=0, to_value=2**62, step=1)]))
-        self.declare_parameter('max_bag_duration', 0.0, float_range(
-            'Split the bag into a new file once the open one spans this many seconds of '
-            'message time; 0: no limit', 0.0, 1e9))
-        self.declare_parameter('discovery_period', 0.1, float_range(
-            'Wall seconds between looks for new topics', 0.01, 10.0))
-        self.declare_parameter('queue_depth', 1000, ParameterDescriptor(
-            description='Subscription history depth, to absorb bursts', read_only=True,
-            integer_range=[IntegerRange(from_value=1, to_value=100000, step=1)]))
-        get = lambda name: self.get_parameter(name).value  # noqa: E731
-        self._wanted: Set[str] = {t for t in get('topics') if t}
-        self._excluded: Set[str] = {t for t in get('exclude') if t}
-        storage = get('storage')
+        p = declare_params(self, PARAMS)
+        self._wanted: Set[str] = {t for t in p['topics'] if t}
+        self._excluded: Set[str] = {t for t in p['exclude'] if t}
+        storage = p['storage']
         if storage not in STORAGES:
             raise BagError(f'storage must be one of {sorted(STORAGES)}, got "{storage}"')
-        self._depth = get('queue_depth')
-        self._writer = BagWriter(Path(get('output_dir')), get('bag_name') or None, storage,
-                                 compression=get('compression'), chunk_crc=get('chunk_crc'),
-                                 max_bag_size=get('max_bag_size'),
-                                 max_bag_duration=get('max_bag_duration'))
+        self._depth = p['queue_depth']
+        self._writer = BagWriter(Path(p['output_dir']), p['bag_name'] or None, storage,
+                                 compression=p['compression'], chunk_crc=p['chunk_crc'],
+                                 max_bag_size=p['max_bag_size'],
+                                 max_bag_duration=p['max_bag_duration'])
         # A write that fails (a full disk) closes the bag at its last flush and ends the run
         # with exit code 1 (ros_common.node_main.run_node).
         self.exit_request = threading.Event()
@@ -78,8 +66,8 @@ class Recorder(Node):
         self.dropped = 0
         # Wall-clock timers: they must run whether or not simulated time advances.
         steady = Clock(clock_type=ClockType.STEADY_TIME)
-        self.create_timer(get('discovery_period'), self._discover, clock=steady)
-        self.create_timer(get('flush_period'), self._flush, clock=steady)
+        self.create_timer(p['discovery_period'], self._discover, clock=steady)
+        self.create_timer(p['flush_period'], self._flush, clock=steady)
         self.get_logger().info(
             f'recording {sorted(self._wanted) if self._wanted else "all topics"} to '
             f'{self._writer.path} ({storage}'

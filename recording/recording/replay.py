@@ -7,7 +7,6 @@ from pathlib import Path
 from typing import Dict
 
 import rclpy
-from rcl_interfaces.msg import ParameterDescriptor
 from rclpy.duration import Duration
 from rclpy.node import Node
 from rclpy.publisher import Publisher
@@ -20,10 +19,27 @@ from recording.qos_profiles import replay_policies
 from recording.replay_schedule import ReplaySchedule
 from recording.types import TypeResolutionError, message_class
 from ros_common.node_main import run_task
-from ros_common.params import float_range
+from ros_common.params import Param, declare_params
 from ros_common.stamps import set_stamp
 
 SUBSCRIBER_MATCH_SETTLE_S = 0.5
+
+
+PARAMS = (
+    Param('bag', '', 'Bag directory to replay'),
+    Param('rate', 1.0, 'Replay speed factor', 0.01, 100.0),
+    Param('loop', False, 'Start again at the end'),
+    Param('topics', [''], 'Topics to replay; empty: all'),
+    Param('start_offset', 0.0, 'Seconds of the bag to skip at the start', 0.0, 1e6),
+    Param('publish_clock', False, 'Publish /clock from bag time (the recorded /clock is then '
+          'not replayed)'),
+    Param('clock_rate', 100.0, '/clock messages per wall second with publish_clock',
+          1.0, 10000.0),
+    Param('wait_for_subscribers', 0.0, 'Wall seconds to wait until every replayed topic has a '
+          'subscriber', 0.0, 600.0),
+    Param('delay', 0.0, 'Wall seconds to wait before the first message (as ros2 bag play '
+          '--delay)', 0.0, 600.0),
+)
 
 
 class ReplayError(RuntimeError):
@@ -38,37 +54,17 @@ class Replay(Node):
 
     def __init__(self, **kwargs) -> None:
         super().__init__('replay', **kwargs)
-        text = ParameterDescriptor
-        self.declare_parameter('bag', '', text(description='Bag directory to replay',
-                                               read_only=True))
-        self.declare_parameter('rate', 1.0, float_range('Replay speed factor', 0.01, 100.0))
-        self.declare_parameter('loop', False, text(description='Start again at the end',
-                                                   read_only=True))
-        self.declare_parameter('topics', [''], text(
-            description='Topics to replay; empty: all', read_only=True))
-        self.declare_parameter('start_offset', 0.0, float_range(
-            'Seconds of the bag to skip at the start', 0.0, 1e6))
-        self.declare_parameter('publish_clock', False, text(
-            description='Publish /clock from bag time (the recorded /clock is then not '
-                        'replayed)', read_only=True))
-        self.declare_parameter('clock_rate', 100.0, float_range(
-            '/clock messages per wall second with publish_clock', 1.0, 10000.0))
-        self.declare_parameter('wait_for_subscribers', 0.0, float_range(
-            'Wall seconds to wait until every replayed topic has a subscriber', 0.0, 600.0))
-        self.declare_parameter('delay', 0.0, float_range(
-            'Wall seconds to wait before the first message (as ros2 bag play --delay)',
-            0.0, 600.0))
-        get = lambda name: self.get_parameter(name).value  # noqa: E731
-        self.bag = Path(get('bag'))
-        if not get('bag') or not self.bag.is_dir():
-            raise ReplayError(f'bag "{get("bag")}" is not a bag directory')
-        self.rate, self.loop = get('rate'), get('loop')
-        self.start_offset = get('start_offset')
-        self.publish_clock = get('publish_clock')
-        self.clock_period = 1.0 / get('clock_rate')
-        self.wait_for_subscribers = get('wait_for_subscribers')
-        self.delay = get('delay')
-        wanted = {t for t in get('topics') if t}
+        p = declare_params(self, PARAMS)
+        self.bag = Path(p['bag'])
+        if not p['bag'] or not self.bag.is_dir():
+            raise ReplayError(f'bag "{p["bag"]}" is not a bag directory')
+        self.rate, self.loop = p['rate'], p['loop']
+        self.start_offset = p['start_offset']
+        self.publish_clock = p['publish_clock']
+        self.clock_period = 1.0 / p['clock_rate']
+        self.wait_for_subscribers = p['wait_for_subscribers']
+        self.delay = p['delay']
+        wanted = {t for t in p['topics'] if t}
         try:
             self.reader = AnyReader([self.bag])
             self.reader.open()

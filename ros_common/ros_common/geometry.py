@@ -14,13 +14,3 @@ def quaternion_tuple(q) -> Tuple[float, float, float, float]:
 def yaw_of(q) -> float:
     """The yaw of a geometry_msgs Quaternion."""
     return yaw_from_quaternion(quaternion_tuple(q))
-
-
-def set_quaternion(q, xyzw) -> None:
-    """Set a geometry_msgs Quaternion in place from (x, y, z, w)."""
-    q.x, q.y, q.z, q.w = (float(v) for v in xyzw)
-
-
-def pose2d_of(pose) -> Tuple[float, float, float]:
-    """(x, y, yaw) of a geometry_msgs Pose."""
-    return (pose.position.x, pose.position.y, yaw_of(pose.orientation))

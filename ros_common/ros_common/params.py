@@ -10,14 +10,6 @@ from rclpy.node import Node
 from ros_common.web_access import WebAccess
 
 
-def float_range(description: str, lo: float, hi: float,
-                read_only: bool = True) -> ParameterDescriptor:
-    """A described floating-point parameter that rclpy range-checks at declaration."""
-    return ParameterDescriptor(description=description, read_only=read_only,
-                               floating_point_range=[FloatingPointRange(
-                                   from_value=lo, to_value=hi, step=0.0)])
-
-
 @dataclass(frozen=True)
 class Param:
     """One parameter of a node.

@@ -26,7 +26,7 @@ from typing import Any, Dict, List, Optional, Tuple
 import cv2
 import numpy as np
 from nav_msgs.msg import Odometry
-from rcl_interfaces.msg import IntegerRange, ParameterDescriptor, ParameterType
+from rcl_interfaces.msg import ParameterType
 from rcl_interfaces.srv import GetParameters
 from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
@@ -41,7 +41,7 @@ from websockets.http11 import Request, Response
 
 from ros_common.geometry import yaw_of
 from ros_common.node_main import run_node
-from ros_common.params import declare_web_access, float_range
+from ros_common.params import Param, declare_params, declare_web_access
 from ros_common.stamps import to_seconds
 from ros_common.web_access import WebAccessError
 from teleop.panel_core import (
@@ -65,6 +65,29 @@ PATH_POINTS = 2000          # odometry points kept for the drawn path
 PATH_STEP_M = 0.005         # a new path point once the robot moved this far
 
 
+PARAMS = (
+    Param('host', '127.0.0.1', 'Address to serve the page on; loopback unless told otherwise '
+          '(anyone who reaches it can drive the robots)'),
+    Param('port', 8080, 'TCP port of the page (0: any free port)', 0, 65535),
+    Param('simulator', '/sim_node', 'The simulator node whose world lists the robots'),
+    Param('namespace', '', 'The robot driven at start (its namespace); empty: the first base '
+          'of the world'),
+    Param('speed', 0.5, "The slider's start: a fraction of max_speed (the report's buttons: "
+          '0.5)', 0.0, 1.0),
+    Param('report_turns', False, "The report's turn buttons: wheels at +-speed*max_speed/r (a "
+          'diff drive turns at 2*speed*max_speed/wheel_separation) instead of speed*max_turn'),
+    Param('deadman_timeout', 0.3, 'Wall seconds without word from the page that holds a button '
+          'before the robot is stopped (the page repeats every 0.1 s)', 0.05, 5.0),
+    Param('publish_rate', 20.0, 'Rate of cmd_vel while a button is held [Hz]', 1.0, 200.0),
+    Param('stamped', False, 'Publish geometry_msgs/TwistStamped instead of Twist'),
+    Param('camera_rate', 5.0, 'Camera frames sent to the page per second', 0.1, 30.0),
+    Param('max_speed', 0.2, 'Speed at 100 % where neither the world nor the simulator says '
+          '[m/s]', 1e-3, 10.0),
+    Param('max_turn', 0.2, 'Turn rate at 100 % where neither the world nor the simulator says '
+          '[rad/s]', 1e-3, 20.0),
+)
+
+
 class ControlPanelError(RuntimeError):
     """The panel cannot serve (the port taken, the page's files missing)."""
 
@@ -73,50 +96,17 @@ class ControlPanel(Node):
 
     def __init__(self, **kwargs) -> None:
         super().__init__('control_panel', **kwargs)
-        text = ParameterDescriptor
-        self.declare_parameter('host', '127.0.0.1', text(
-            description='Address to serve the page on; loopback unless told otherwise (anyone '
-                        'who reaches it can drive the robots)', read_only=True))
-        self.declare_parameter('port', 8080, text(
-            description='TCP port of the page (0: any free port)', read_only=True,
-            integer_range=[IntegerRange(from_value=0, to_value=65535, step=1)]))
-        self.declare_parameter('simulator', '/sim_node', text(
-            description='The simulator node whose world lists the robots', read_only=True))
-        self.declare_parameter('namespace', '', text(
-            description='The robot driven at start (its namespace); empty: the first base '
-                        'of the world', read_only=True))
-        self.declare_parameter('speed', 0.5, float_range(
-            "The slider's start: a fraction of max_speed (the report's buttons: 0.5)",
-            0.0, 1.0))
-        self.declare_parameter('report_turns', False, text(
-            description="The report's turn buttons: wheels at +-speed*max_speed/r (a diff "
-                        'drive turns at 2*speed*max_speed/wheel_separation) instead of '
-                        'speed*max_turn', read_only=True))
-        self.declare_parameter('deadman_timeout', 0.3, float_range(
-            'Wall seconds without word from the page that holds a button before the robot '
-            'is stopped (the page repeats every 0.1 s)', 0.05, 5.0))
-        self.declare_parameter('publish_rate', 20.0, float_range(
-            'Rate of cmd_vel while a button is held [Hz]', 1.0, 200.0))
-        self.declare_parameter('stamped', False, text(
-            description='Publish geometry_msgs/TwistStamped instead of Twist', read_only=True))
-        self.declare_parameter('camera_rate', 5.0, float_range(
-            'Camera frames sent to the page per second', 0.1, 30.0))
-        self.declare_parameter('max_speed', 0.2, float_range(
-            'Speed at 100 % where neither the world nor the simulator says [m/s]', 1e-3, 10.0))
-        self.declare_parameter('max_turn', 0.2, float_range(
-            'Turn rate at 100 % where neither the world nor the simulator says [rad/s]',
-            1e-3, 20.0))
-        get = lambda name: self.get_parameter(name).value  # noqa: E731
+        p = declare_params(self, PARAMS)
         for name in STATIC.values():
             if not (WEB / name[0]).is_file():
                 raise ControlPanelError(f'the page is missing: {WEB / name[0]}')
         self._lock = threading.Lock()
-        self._wanted_ns = get('namespace')
-        self._speed0, self._report_turns0 = float(get('speed')), bool(get('report_turns'))
-        self._deadman_timeout = float(get('deadman_timeout'))
-        self._stamped = bool(get('stamped'))
-        self._fallback = (float(get('max_speed')), float(get('max_turn')))
-        self._camera_period = 1.0 / float(get('camera_rate'))
+        self._wanted_ns = p['namespace']
+        self._speed0, self._report_turns0 = float(p['speed']), bool(p['report_turns'])
+        self._deadman_timeout = float(p['deadman_timeout'])
+        self._stamped = bool(p['stamped'])
+        self._fallback = (float(p['max_speed']), float(p['max_turn']))
+        self._camera_period = 1.0 / float(p['camera_rate'])
         self.robots: List[PanelRobot] = []
         self.drive: Optional[DeadMan] = None
         self._out: Optional[TwistOut] = None
@@ -139,7 +129,7 @@ class ControlPanel(Node):
         self._loop = asyncio.new_event_loop()
         self._server_ready = threading.Event()
         self._server_error: Optional[BaseException] = None
-        self._host, self._port = get('host'), int(get('port'))
+        self._host, self._port = p['host'], int(p['port'])
         try:
             self._access, self._max_pages = declare_web_access(
                 self, self._host, (), "empty: only the panel's own page may drive", 'max_pages',
@@ -155,12 +145,12 @@ class ControlPanel(Node):
                                     f'{self._server_error or "no answer"}')
         self.url = f'http://{self._host}:{self._port}/'
         # The world, from the simulator: asked until it answers.
-        self._sim = get('simulator')
+        self._sim = p['simulator']
         self._params = self.create_client(GetParameters, f'{self._sim}/get_parameters')
         self._asking = False
         steady = Clock(clock_type=ClockType.STEADY_TIME)
         self._ask_timer = self.create_timer(1.0, self._ask_world, clock=steady)
-        self.create_timer(1.0 / float(get('publish_rate')), self._tick, clock=steady)
+        self.create_timer(1.0 / float(p['publish_rate']), self._tick, clock=steady)
         self.create_timer(0.1, self._telemetry, clock=steady)
         self.create_subscription(PipelineState, '/coordinator_node/state', self._on_state,
                                  QoSProfile(depth=1, durability=1))

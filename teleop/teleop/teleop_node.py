@@ -11,14 +11,13 @@ import tty
 from typing import Optional
 
 import rclpy
-from rcl_interfaces.msg import ParameterDescriptor
 from rclpy.duration import Duration
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.signals import SignalHandlerOptions
 from rclpy.time import Time
 
-from ros_common.params import float_range
+from ros_common.params import Param, declare_params
 from teleop.teleop_core import (
     HELP,
     HOLONOMIC_HELP,
@@ -30,46 +29,39 @@ from teleop.teleop_core import (
 )
 from teleop.twist_out import TwistOut
 
+PARAMS = (
+    Param('max_speed', 0.2, 'Speed at 100 % [m/s]', 1e-3, 10.0),
+    Param('max_turn', 0.2, 'Turn rate at 100 % [rad/s]', 1e-3, 20.0),
+    Param('speed', 0.5, 'Initial speed level, a fraction of max_speed and max_turn (the '
+          'report: 0.5)', 0.0, 1.0),
+    Param('publish_rate', 20.0, 'Rate of cmd_vel while a motion is active [Hz]', 0.5, 200.0),
+    Param('holonomic', False, 'Strafe keys and statements (linear.y) for a Mecanum base'),
+    Param('stamped', False, 'Publish geometry_msgs/TwistStamped instead of Twist'),
+    Param('script', '', 'Timed commands, e.g. "forward 2s, left 1.5s, stop"; empty: keyboard'),
+    Param('wait_for_subscriber', 10.0, 'Script mode: wall seconds to wait for a cmd_vel '
+          'subscriber before starting', 0.0, 600.0),
+)
+
 
 class TeleopNode(Node):
 
     def __init__(self, **kwargs) -> None:
         super().__init__('teleop', **kwargs)
-        self.declare_parameter('max_speed', 0.2, float_range(
-            'Speed at 100 % [m/s]', 1e-3, 10.0))
-        self.declare_parameter('max_turn', 0.2, float_range(
-            'Turn rate at 100 % [rad/s]', 1e-3, 20.0))
-        self.declare_parameter('speed', 0.5, float_range(
-            'Initial speed level, a fraction of max_speed and max_turn (the report: 0.5)',
-            0.0, 1.0))
-        self.declare_parameter('publish_rate', 20.0, float_range(
-            'Rate of cmd_vel while a motion is active [Hz]', 0.5, 200.0))
-        self.declare_parameter('holonomic', False, ParameterDescriptor(
-            description='Strafe keys and statements (linear.y) for a Mecanum base',
-            read_only=True))
-        self.declare_parameter('stamped', False, ParameterDescriptor(
-            description='Publish geometry_msgs/TwistStamped instead of Twist', read_only=True))
-        self.declare_parameter('script', '', ParameterDescriptor(
-            description='Timed commands, e.g. "forward 2s, left 1.5s, stop"; empty: keyboard',
-            read_only=True))
-        self.declare_parameter('wait_for_subscriber', 10.0, float_range(
-            'Script mode: wall seconds to wait for a cmd_vel subscriber before starting',
-            0.0, 600.0))
-        get = lambda name: self.get_parameter(name).value  # noqa: E731
-        self.holonomic = get('holonomic')
-        self.state = TeleopState(get('max_speed'), get('max_turn'), get('speed'),
+        p = declare_params(self, PARAMS)
+        self.holonomic = p['holonomic']
+        self.state = TeleopState(p['max_speed'], p['max_turn'], p['speed'],
                                  holonomic=self.holonomic)
         self.script: Optional[TeleopScript] = None
-        if get('script').strip():
-            self.script = parse_script(get('script'), get('max_speed'), get('max_turn'),
-                                       get('speed'), self.holonomic)
-        self.wait_for_subscriber = get('wait_for_subscriber')
-        self._out = TwistOut(self, 'cmd_vel', get('stamped'))
+        if p['script'].strip():
+            self.script = parse_script(p['script'], p['max_speed'], p['max_turn'],
+                                       p['speed'], self.holonomic)
+        self.wait_for_subscriber = p['wait_for_subscriber']
+        self._out = TwistOut(self, 'cmd_vel', p['stamped'])
         self._pub = self._out.publisher
         self._script_start: Optional[Time] = None
         self._script_step: Optional[ScriptStep] = None
         self.finished = False
-        self._timer = self.create_timer(1.0 / get('publish_rate'), self._on_timer)
+        self._timer = self.create_timer(1.0 / p['publish_rate'], self._on_timer)
         if self.script is not None:
             self._timer.cancel()  # started by start_script() once a subscriber is there
         self.get_logger().info(

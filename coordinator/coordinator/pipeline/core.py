@@ -72,7 +72,6 @@ class Pipeline:
         self.lag = 0.0                    # the longest a pick's plan has taken (real time) [s]
         self.belt_stops = 0               # the belt stopped while loading (its queue full)
         self.now = start_time
-        self.q_now = np.zeros(0)
         self.home_q: Dict[str, np.ndarray] = {}
         self.loader = Loader(self)
         self.transport = Transport(self)
@@ -82,18 +81,10 @@ class Pipeline:
     def finished(self) -> bool:
         return self.result is not None
 
-    @property
-    def loader_state(self) -> LoaderState:
-        return self.loader.state
-
-    @property
-    def transport_state(self) -> TransportState:
-        return self.transport.state
-
     def tick(self, obs: Observation) -> None:
         if self.finished:
             return
-        self.now, self.q_now = obs.now, obs.zu12_q
+        self.now = obs.now
         self.belt.now = obs.now
         try:
             if self.loader.state is LoaderState.START:

@@ -14,43 +14,39 @@ from typing import Optional
 
 import rclpy
 from control_msgs.msg import JointTrajectoryControllerState
-from rcl_interfaces.msg import ParameterDescriptor
 from rclpy.node import Node
 from rclpy.qos import QoSProfile
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
 from controllers.youbot_arm import JOINT_NAMES
 from ros_common.node_main import run_task
-from ros_common.params import float_range
+from ros_common.params import Param, declare_params
 from ros_common.stamps import set_stamp
+
+PARAMS = (
+    Param('controller', 'arm_controller', 'Controller name: topics <controller>/joint_trajectory '
+          'and <controller>/controller_state'),
+    Param('joint_names', list(JOINT_NAMES), 'Joints of the trajectory'),
+    Param('positions', [0.0] * len(JOINT_NAMES), 'Target positions, one per joint [rad or m]'),
+    Param('duration', 2.0, 'Time to reach the target [s]', 0.01, 600.0),
+    Param('tolerance', 0.01, 'Largest accepted final error per joint [rad or m]', 1e-6, 1.0),
+)
 
 
 class ArmMove(Node):
 
     def __init__(self, **kwargs) -> None:
         super().__init__('arm_move', **kwargs)
-        ro = ParameterDescriptor
-        self.declare_parameter('controller', 'arm_controller', ro(
-            description='Controller name: topics <controller>/joint_trajectory and '
-                        '<controller>/controller_state', read_only=True))
-        self.declare_parameter('joint_names', list(JOINT_NAMES), ro(
-            description='Joints of the trajectory', read_only=True))
-        self.declare_parameter('positions', [0.0] * len(JOINT_NAMES), ro(
-            description='Target positions, one per joint [rad or m]', read_only=True))
-        self.declare_parameter('duration', 2.0, float_range('Time to reach the target [s]',
-                                                            0.01, 600.0))
-        self.declare_parameter('tolerance', 0.01, float_range(
-            'Largest accepted final error per joint [rad or m]', 1e-6, 1.0))
-        get = lambda name: self.get_parameter(name).value  # noqa: E731
-        names, positions = list(get('joint_names')), [float(v) for v in get('positions')]
+        p = declare_params(self, PARAMS)
+        names, positions = list(p['joint_names']), [float(v) for v in p['positions']]
         if len(names) != len(positions):
             raise ValueError(f'{len(positions)} positions for {len(names)} joints')
-        self.names, self.target, self.tolerance = names, positions, get('tolerance')
+        self.names, self.target, self.tolerance = names, positions, p['tolerance']
         point = JointTrajectoryPoint(positions=positions)
-        ns = round(get('duration') * 1e9)
+        ns = round(p['duration'] * 1e9)
         set_stamp(point.time_from_start, ns)
         self.trajectory = JointTrajectory(joint_names=names, points=[point])
-        controller = get('controller')
+        controller = p['controller']
         self.pub = self.create_publisher(JointTrajectory, f'{controller}/joint_trajectory',
                                          QoSProfile(depth=10))
         self.create_subscription(JointTrajectoryControllerState,

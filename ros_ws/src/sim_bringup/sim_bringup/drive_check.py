@@ -16,16 +16,27 @@ from typing import List, Optional, Tuple
 import rclpy
 from geometry_msgs.msg import Twist, TwistStamped
 from nav_msgs.msg import Odometry
-from rcl_interfaces.msg import ParameterDescriptor
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile
 
 from controllers.diff_drive import Pose2D, predict_pose, wrap_angle
 from controllers.transforms import yaw_from_quaternion
 from ros_common.node_main import run_task
-from ros_common.params import float_range
+from ros_common.params import Param, declare_params
 from ros_common.stamps import to_seconds
 from teleop.teleop_core import TeleopError, parse_script
+
+PARAMS = (
+    Param('script', '', 'The teleop script being driven (same syntax as teleop)'),
+    Param('max_speed', 0.2, 'The simulator limit and teleop max_speed [m/s]', 1e-3, 10.0),
+    Param('max_turn', 0.2, 'The simulator limit and teleop max_turn [rad/s]', 1e-3, 20.0),
+    Param('speed', 0.5, 'The teleop initial speed level', 0.0, 1.0),
+    Param('position_tolerance', 0.05, 'Pass limit [m]', 0.0, 10.0),
+    Param('yaw_tolerance', 0.1, 'Pass limit [rad]', 0.0, 3.2),
+    Param('settle_time', 1.0, 'Done when no cmd_vel came for this long [s] and the base is at '
+          'rest', 0.1, 60.0),
+    Param('wall_timeout', 300.0, 'Give up after [wall s]', 1.0, 3600.0),
+)
 
 
 class DriveCheck(Node):
@@ -39,34 +50,17 @@ class DriveCheck(Node):
 
     def __init__(self, **kwargs) -> None:
         super().__init__('drive_check', **kwargs)
-        self.declare_parameter('script', '', ParameterDescriptor(
-            description='The teleop script being driven (same syntax as teleop)',
-            read_only=True))
-        self.declare_parameter('max_speed', 0.2, float_range(
-            'The simulator limit and teleop max_speed [m/s]', 1e-3, 10.0))
-        self.declare_parameter('max_turn', 0.2, float_range(
-            'The simulator limit and teleop max_turn [rad/s]', 1e-3, 20.0))
-        self.declare_parameter('speed', 0.5, float_range(
-            'The teleop initial speed level', 0.0, 1.0))
-        self.declare_parameter('position_tolerance', 0.05, float_range(
-            'Pass limit [m]', 0.0, 10.0))
-        self.declare_parameter('yaw_tolerance', 0.1, float_range(
-            'Pass limit [rad]', 0.0, 3.2))
-        self.declare_parameter('settle_time', 1.0, float_range(
-            'Done when no cmd_vel came for this long [s] and the base is at rest', 0.1, 60.0))
-        self.declare_parameter('wall_timeout', 300.0, float_range('Give up after [wall s]', 1.0,
-                                                             3600.0))
-        get = lambda name: self.get_parameter(name).value  # noqa: E731
-        max_speed, max_turn = get('max_speed'), get('max_turn')
-        script = parse_script(get('script'), max_speed, max_turn, get('speed'))
+        p = declare_params(self, PARAMS)
+        max_speed, max_turn = p['max_speed'], p['max_turn']
+        script = parse_script(p['script'], max_speed, max_turn, p['speed'])
         segments = [(max(-max_speed, min(max_speed, s.v)), max(-max_turn, min(max_turn, s.w)),
                      s.duration) for s in script.steps]
         self.predicted = predict_pose(Pose2D(), segments)
         # (simulated time it took effect, v, w), as the simulator says
         self._applied: List[Tuple[float, float, float]] = []
-        self.wall_timeout = get('wall_timeout')
-        self._tol = (get('position_tolerance'), get('yaw_tolerance'))
-        self._settle = get('settle_time')
+        self.wall_timeout = p['wall_timeout']
+        self._tol = (p['position_tolerance'], p['yaw_tolerance'])
+        self._settle = p['settle_time']
         self._moving = False
         self._last_cmd: Optional[Tuple[float, bool]] = None   # (sim time, was it zero)
         self._odom: Optional[Odometry] = None
