@@ -11,7 +11,7 @@ from rosbags.interfaces import Connection, Qos
 from rosbags.rosbag2 import StoragePlugin, WriterError
 from rosbags.rosbag2.enums import CompressionFormat, CompressionMode
 
-from recording.storage import DurableWriter
+from recording.durable_writer import DurableWriter
 from recording.types import TypeResolver
 
 STORAGES = {'mcap': StoragePlugin.MCAP, 'sqlite3': StoragePlugin.SQLITE3}
@@ -53,7 +53,8 @@ class BagWriter:
 
     Messages wait in a 1 MiB chunk in memory (MCAP) or an open transaction (SQLite).
     :meth:`flush` ends the chunk and hands it to the operating system, or commits
-    (``recording.storage``): called every half second, a SIGKILL loses at most that much, and
+    (``recording.durable_writer``): called every half second, a SIGKILL loses at most that
+    much, and
     ``bag_repair`` restores the index.
     """
 
