@@ -31,7 +31,6 @@ from typing import Dict, List, Optional, Sequence, Tuple
 
 import numpy as np
 import rclpy
-from geometry_msgs.msg import Twist
 from nav_msgs.msg import Odometry
 from rcl_interfaces.msg import Parameter, ParameterType, ParameterValue
 from rcl_interfaces.srv import GetParameters, SetParameters
@@ -77,6 +76,7 @@ from ros_common.node_main import run_task
 from ros_common.params import Param, declare_params
 from ros_common.services import NoAnswer, call_and_wait
 from ros_common.stamps import duration_from_ns, set_stamp, stamp_from_ns, to_ns
+from ros_common.twist_out import TwistOut
 from world_description import PIPELINE_CELL
 from world_description.resources import resolve_resource
 from world_description.world_config import load_world
@@ -205,7 +205,7 @@ class CoordinatorNode(Node):
         reliable = QoSProfile(depth=10)
         self.traj_pubs = {arm: self.create_publisher(
             JointTrajectory, f'/{arm}/arm_controller/joint_trajectory', reliable) for arm in ARMS}
-        self.cmd_pub = self.create_publisher(Twist, '/youbot/cmd_vel', reliable)
+        self._cmd_out = TwistOut(self, '/youbot/cmd_vel', stamped=False)
         self.event_pub = self.create_publisher(PipelineEvent, '~/events', QoSProfile(depth=100))
         latched = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL)
         self.state_pub = self.create_publisher(PipelineState, '~/state', latched)
@@ -357,9 +357,7 @@ class CoordinatorNode(Node):
         return None if self.synchronous else self.now()
 
     def drive(self, vx: float, vy: float, wz: float) -> None:
-        msg = Twist()
-        msg.linear.x, msg.linear.y, msg.angular.z = float(vx), float(vy), float(wz)
-        self.cmd_pub.publish(msg)
+        self._cmd_out.publish(vx, vy, wz)
         self._commands.sent()
 
     def follow(self, follower: Optional[PathFollower]) -> bool:

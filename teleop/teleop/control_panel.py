@@ -6,25 +6,18 @@ strafe buttons for a holonomic base, the live camera image, an odometry readout 
 drawn and, when the pipeline coordinator runs, each material's status, the robots' states and
 the elapsed time. The robot is chosen on the page, from the simulator's world.
 
-HTTP and the page's WebSocket (``/ws``) are served by the ``websockets`` package on an asyncio
-loop in a thread of its own; the ROS side (publishing ``cmd_vel``, reading odometry, camera and
-coordinator) runs in the node's executor. The dead-man rule is ``panel_core.DeadMan``.
+HTTP and the page's WebSocket (``/ws``) are served by ``panel_server.PanelServer`` in a thread
+of its own; the ROS side (publishing ``cmd_vel``, reading odometry, the camera's JPEG frames and
+the coordinator) runs in the node's executor. The dead-man rule is ``panel_core.DeadMan``.
 """
 from __future__ import annotations
 
-import asyncio
-import http
-import itertools
-import json
 import math
 import sys
 import threading
 import time
-from pathlib import Path
 from typing import Any, Dict, List, Optional, Tuple
 
-import cv2
-import numpy as np
 from nav_msgs.msg import Odometry
 from rcl_interfaces.msg import ParameterType
 from rcl_interfaces.srv import GetParameters
@@ -32,35 +25,26 @@ from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
 from rclpy.qos import QoSProfile, qos_profile_sensor_data
 from rclpy.subscription import Subscription
-from sensor_msgs.msg import Image
+from sensor_msgs.msg import CompressedImage
 from sim_interfaces.msg import PipelineEvent, PipelineState
-from websockets.asyncio.server import ServerConnection, serve
-from websockets.datastructures import Headers
-from websockets.exceptions import ConnectionClosed
-from websockets.http11 import Request, Response
 
 from ros_common.geometry import yaw_of
 from ros_common.node_main import run_node
 from ros_common.params import Param, declare_params, declare_web_access
 from ros_common.stamps import to_seconds
+from ros_common.twist_out import TwistOut
 from ros_common.web_access import WebAccessError
 from teleop.panel_core import (
     DeadMan,
-    Outbox,
     PanelInputError,
     PanelRobot,
     parse_command,
     robots_of_world,
 )
-from teleop.twist_out import TwistOut
+from teleop.panel_server import PanelServer, PanelServerError
 from world_description.resources import resolve_resource
 from world_description.world_config import WorldConfigError, load_world
 
-WEB = Path(__file__).resolve().parent / 'web'
-STATIC = {'/': ('index.html', 'text/html; charset=utf-8'),
-          '/index.html': ('index.html', 'text/html; charset=utf-8'),
-          '/panel.js': ('panel.js', 'text/javascript; charset=utf-8'),
-          '/panel.css': ('panel.css', 'text/css; charset=utf-8')}
 PATH_POINTS = 2000          # odometry points kept for the drawn path
 PATH_STEP_M = 0.005         # a new path point once the robot moved this far
 
@@ -89,7 +73,7 @@ PARAMS = (
 
 
 class ControlPanelError(RuntimeError):
-    """The panel cannot serve (the port taken, the page's files missing)."""
+    """The panel cannot start (a bad access rule)."""
 
 
 class ControlPanel(Node):
@@ -97,9 +81,6 @@ class ControlPanel(Node):
     def __init__(self, **kwargs) -> None:
         super().__init__('control_panel', **kwargs)
         p = declare_params(self, PARAMS)
-        for name in STATIC.values():
-            if not (WEB / name[0]).is_file():
-                raise ControlPanelError(f'the page is missing: {WEB / name[0]}')
         self._lock = threading.Lock()
         self._wanted_ns = p['namespace']
         self._speed0, self._report_turns0 = float(p['speed']), bool(p['report_turns'])
@@ -115,7 +96,7 @@ class ControlPanel(Node):
         self._odom: Optional[Dict[str, float]] = None
         self._path: List[Tuple[float, float]] = []
         self._jpeg: Optional[bytes] = None
-        self._jpeg_at = -math.inf
+        self._jpeg_at = -math.inf       # (time.monotonic() of the last frame taken)
         self._coordinator: Optional[Dict[str, Any]] = None
         self._materials: Dict[int, Dict[str, Any]] = {}
         self.last_error = ''
@@ -123,27 +104,17 @@ class ControlPanel(Node):
         # flood of choices only), and a hello owed to the pages (their view of the settings).
         self._wanted_robot: Optional[PanelRobot] = None
         self._hello_due = False
-        # Pages: id -> page; the asyncio loop owns them.
-        self._pages: Dict[int, _Page] = {}
-        self._page_ids = itertools.count(1)
-        self._loop = asyncio.new_event_loop()
-        self._server_ready = threading.Event()
-        self._server_error: Optional[BaseException] = None
-        self._host, self._port = p['host'], int(p['port'])
+        host = p['host']
         try:
-            self._access, self._max_pages = declare_web_access(
-                self, self._host, (), "empty: only the panel's own page may drive", 'max_pages',
+            access, max_pages = declare_web_access(
+                self, host, (), "empty: only the panel's own page may drive", 'max_pages',
                 'Pages')
         except WebAccessError as exc:
             raise ControlPanelError(str(exc)) from None
-        self._thread = threading.Thread(target=self._serve, name='control_panel_http',
-                                        daemon=True)
-        self._thread.start()
-        self._server_ready.wait(10.0)
-        if self._server_error is not None or not self._server_ready.is_set():
-            raise ControlPanelError(f'cannot serve on {self._host}:{self._port}: '
-                                    f'{self._server_error or "no answer"}')
-        self.url = f'http://{self._host}:{self._port}/'
+        self._access = access
+        self._server = PanelServer(self, self.get_logger(), host, int(p['port']), access,
+                                   max_pages)
+        self.url = self._server.url
         # The world, from the simulator: asked until it answers.
         self._sim = p['simulator']
         self._params = self.create_client(GetParameters, f'{self._sim}/get_parameters')
@@ -228,7 +199,7 @@ class ControlPanel(Node):
         if text != self.last_error:
             self.last_error = text
             self.get_logger().error(text)
-            self._broadcast('error', {'op': 'error', 'text': text})
+            self._server.broadcast('error', {'op': 'error', 'text': text})
 
     # --- commands -----------------------------------------------------------------------------
     def command(self, page: int, text: Any) -> Optional[str]:
@@ -301,23 +272,15 @@ class ControlPanel(Node):
                 self._path.append((round(odom['x'], 4), round(odom['y'], 4)))
                 del self._path[:-PATH_POINTS]
 
-    def _on_image(self, msg: Image) -> None:
+    def _on_image(self, msg: CompressedImage) -> None:
+        """The simulator's JPEG of the camera (image_transport's compressed transport), passed
+        on as it is, at most ``camera_rate`` a second."""
         now = time.monotonic()
-        if now - self._jpeg_at < self._camera_period:
+        if now - self._jpeg_at < self._camera_period or 'jpeg' not in msg.format:
             return
-        channels = {'rgb8': 3, 'bgr8': 3, 'mono8': 1}.get(msg.encoding)
-        if channels is None or msg.height * msg.step > len(msg.data) or msg.width == 0:
-            return
-        frame: np.ndarray = np.frombuffer(msg.data, np.uint8, msg.height * msg.step).reshape(
-            msg.height, msg.step)[:, :msg.width * channels].reshape(
-            msg.height, msg.width, channels)
-        if msg.encoding == 'rgb8':
-            frame = cv2.cvtColor(frame, cv2.COLOR_RGB2BGR)
-        ok, jpeg = cv2.imencode('.jpg', frame, [cv2.IMWRITE_JPEG_QUALITY, 80])
-        if ok:
-            self._jpeg_at = now
-            with self._lock:
-                self._jpeg = jpeg.tobytes()
+        self._jpeg_at = now
+        with self._lock:
+            self._jpeg = bytes(msg.data)
 
     def _on_state(self, msg: PipelineState) -> None:
         with self._lock:
@@ -339,10 +302,12 @@ class ControlPanel(Node):
     def _camera_wanted(self) -> None:
         """The camera is read only while a page is open (the simulator renders it for us)."""
         robot = self.drive.robot if self.drive else None
-        if self._pages and robot is not None and robot.camera and self._camera_sub is None:
-            self._camera_sub = self.create_subscription(Image, robot.camera, self._on_image,
-                                                        qos_profile_sensor_data)
-        elif not self._pages and self._camera_sub is not None:
+        if (self._server.pages and robot is not None and robot.camera
+                and self._camera_sub is None):
+            self._camera_sub = self.create_subscription(
+                CompressedImage, f'{robot.camera}/compressed', self._on_image,
+                qos_profile_sensor_data)
+        elif not self._server.pages and self._camera_sub is not None:
             self._drop_camera()
 
     def _drop_camera(self) -> None:
@@ -350,7 +315,7 @@ class ControlPanel(Node):
             self.destroy_subscription(self._camera_sub)
             self._camera_sub = None
 
-    def _hello(self) -> Dict[str, Any]:
+    def hello(self) -> Dict[str, Any]:
         with self._lock:
             drive = self.drive
             return {'op': 'hello', 'robots': [r.describe() for r in self.robots],
@@ -361,11 +326,11 @@ class ControlPanel(Node):
 
     def _telemetry(self) -> None:
         self._camera_wanted()
-        if not self._pages:
+        if not self._server.pages:
             return
         if self._hello_due:
             self._hello_due = False
-            self._broadcast('hello', self._hello())
+            self._server.broadcast('hello', self.hello())
         with self._lock:
             drive = self.drive
             state = {'op': 'state', 'odom': self._odom, 'path': list(self._path),
@@ -375,89 +340,9 @@ class ControlPanel(Node):
                      'coordinator': self._coordinator,
                      'materials': sorted(self._materials.values(), key=lambda m: m['id'])}
             jpeg, self._jpeg = self._jpeg, None
-        self._broadcast('state', state)
+        self._server.broadcast('state', state)
         if jpeg is not None:
-            self._broadcast('frame', jpeg)
-
-    # --- the web server (its own thread and asyncio loop) -----------------------------------
-    def _serve(self) -> None:
-        asyncio.set_event_loop(self._loop)
-        try:
-            self._loop.run_until_complete(self._start())
-        except OSError as exc:
-            self._server_error = exc
-            return
-        self._server_ready.set()
-        self._loop.run_forever()
-
-    async def _start(self) -> None:
-        self._server = await serve(self._page, self._host, self._port,
-                                   process_request=self._http, max_size=MAX_FRAME,
-                                   ping_interval=1.0, ping_timeout=2.0)
-        self._port = self._server.sockets[0].getsockname()[1] if self._port == 0 else self._port
-
-    def _http(self, connection: ServerConnection, request: Request) -> Optional[Response]:
-        path = request.path.split('?', 1)[0]
-        websocket = path == '/ws'
-        # Only this server's own names, and a browser's WebSocket only from the panel's own
-        # page (ros_common/web_access.py: pages of other sites, DNS rebinding).
-        refusal = self._access.check(request.headers.get_all('Host'),
-                                     request.headers.get_all('Origin'), websocket)
-        if refusal is not None:
-            self.get_logger().warn(f'refused a request for {path[:100]!r} from '
-                                   f'{_peer(connection)}: {refusal.reason}',
-                                   throttle_duration_sec=1.0)
-            return connection.respond(http.HTTPStatus(refusal.status), refusal.reason + '\n')
-        if websocket:
-            if len(self._pages) >= self._max_pages:
-                self.get_logger().warn(f'refused a page: {len(self._pages)} pages are '
-                                       'connected (max_pages)', throttle_duration_sec=1.0)
-                return connection.respond(http.HTTPStatus.SERVICE_UNAVAILABLE,
-                                          f'{len(self._pages)} pages are connected\n')
-            return None                         # the page's WebSocket
-        if path not in STATIC:
-            return connection.respond(http.HTTPStatus.NOT_FOUND, 'not found\n')
-        name, kind = STATIC[path]
-        body = (WEB / name).read_bytes()
-        return Response(200, 'OK', Headers([('Content-Type', kind),
-                                            ('Content-Length', str(len(body))),
-                                            ('Cache-Control', 'no-store')]), body)
-
-    async def _page(self, connection: ServerConnection) -> None:
-        page = _Page(next(self._page_ids), connection)
-        self._pages[page.id] = page
-        self.get_logger().info(f'page {page.id} connected from {_peer(connection)}')
-        sender = asyncio.ensure_future(page.send_loop())
-        page.post('hello', json.dumps(self._hello()))
-        try:
-            async for text in connection:
-                try:
-                    refused = self.command(page.id, text)
-                except Exception as exc:    # (a bug must not cut the page off)
-                    self.get_logger().error(f'page {page.id}: a message failed: '
-                                            f'{type(exc).__name__}: {exc}',
-                                            throttle_duration_sec=1.0)
-                    refused = f'internal error: {type(exc).__name__}'
-                if refused is not None:
-                    page.outbox.refuse(refused)
-                    page.wake.set()
-        except ConnectionClosed:
-            pass
-        finally:
-            sender.cancel()
-            del self._pages[page.id]
-            self.page_gone(page.id)
-            self.get_logger().info(f'page {page.id} left')
-
-    def _broadcast(self, kind: str, message: Any) -> None:
-        """Post the latest ``kind`` of news to every page (from any thread)."""
-        data = message if isinstance(message, bytes) else json.dumps(message)
-        if self._pages and not self._loop.is_closed():
-            self._loop.call_soon_threadsafe(self._post_all, kind, data)
-
-    def _post_all(self, kind: str, data: Any) -> None:
-        for page in self._pages.values():
-            page.post(kind, data)
+            self._server.broadcast('frame', jpeg)
 
     def finish(self) -> str:
         with self._lock:
@@ -468,42 +353,8 @@ class ControlPanel(Node):
                 twist = None
         if self.context.ok():
             self._publish(twist)
-        if not self._loop.is_closed():
-            self._loop.call_soon_threadsafe(self._loop.stop)
-            self._thread.join(2.0)
+        self._server.close()
         return f'served {self.url}'
-
-
-MAX_FRAME = 64 * 1024           # what a page may send in one message
-
-
-class _Page:
-    """A connected page: its connection, what it is owed (``Outbox``), and the task that
-    sends it, one message at a time, as fast as the page reads."""
-
-    def __init__(self, page_id: int, connection: ServerConnection) -> None:
-        self.id, self.connection = page_id, connection
-        self.outbox = Outbox()
-        self.wake = asyncio.Event()
-
-    def post(self, kind: str, data: Any) -> None:
-        self.outbox.put(kind, data)
-        self.wake.set()
-
-    async def send_loop(self) -> None:
-        try:
-            while True:
-                await self.wake.wait()
-                self.wake.clear()
-                while (data := self.outbox.take()) is not None:
-                    await self.connection.send(data)
-        except ConnectionClosed:
-            pass
-
-
-def _peer(connection: ServerConnection) -> str:
-    address = connection.remote_address
-    return str(address[0]) if address else 'an unknown peer'
 
 
 def _finish(node: ControlPanel) -> None:
@@ -511,7 +362,8 @@ def _finish(node: ControlPanel) -> None:
 
 
 def main(args=None) -> int:
-    return run_node(ControlPanel, 'control_panel', (ControlPanelError,), on_exit=_finish,
+    return run_node(ControlPanel, 'control_panel', (ControlPanelError, PanelServerError),
+                    on_exit=_finish,
                     args=args)
 
 

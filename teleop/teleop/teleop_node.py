@@ -18,6 +18,7 @@ from rclpy.signals import SignalHandlerOptions
 from rclpy.time import Time
 
 from ros_common.params import Param, declare_params
+from ros_common.twist_out import TwistOut
 from teleop.teleop_core import (
     HELP,
     HOLONOMIC_HELP,
@@ -27,7 +28,6 @@ from teleop.teleop_core import (
     TeleopState,
     parse_script,
 )
-from teleop.twist_out import TwistOut
 
 PARAMS = (
     Param('max_speed', 0.2, 'Speed at 100 % [m/s]', 1e-3, 10.0),

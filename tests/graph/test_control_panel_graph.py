@@ -106,6 +106,13 @@ def test_the_reports_panel_drives_the_robot_in_a_browser(start_node, probe, brow
     assert find(By.ID, 'report_turns_option').is_displayed()
     assert text('speed_value') == '50 %'
     assert not find(By.ID, 'cell').is_displayed()           # (no coordinator runs)
+    # The robot's camera, from the simulator's JPEG frames (image_raw/compressed), decoded
+    # by the browser at the camera's size.
+    size = browser.execute_script
+    wait_for(lambda: size("return document.getElementById('camera').naturalWidth") > 0, 30.0,
+             what='a camera frame on the page')
+    assert (size("return document.getElementById('camera').naturalWidth"),
+            size("return document.getElementById('camera').naturalHeight")) == (320, 240)
 
     # 1. Hold forward for 2 s of simulated time, at the slider's 50 %: 0.1 m/s.
     forward = find(By.ID, 'forward')

@@ -1,5 +1,5 @@
 """A cmd_vel publisher of Twist or TwistStamped (stamped now, by the node's clock): what the
-teleop node and the control panel send."""
+teleop node, the control panel and the coordinator send."""
 from __future__ import annotations
 
 from geometry_msgs.msg import Twist, TwistStamped
