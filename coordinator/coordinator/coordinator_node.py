@@ -54,6 +54,7 @@ from coordinator.layout import LayoutError, layout_from_world
 from coordinator.pipeline import (
     Detection,
     Event,
+    EventKind,
     NodeTimeout,
     Observation,
     Pipeline,
@@ -282,6 +283,7 @@ class CoordinatorNode(Node):
             self._markers.append((to_ns(msg.markers[0].header.stamp), truth))
             del self._markers[:-50]
             self._identifications.truth(self._markers[-1][0], truth)
+            self._lock.notify_all()
 
     # --- the ports the state machine acts through --------------------------------------------
     def now(self) -> float:
@@ -372,14 +374,14 @@ class CoordinatorNode(Node):
                             detail=e.detail)
         msg.header.stamp = stamp_from_ns(max(0, round(e.time * 1e9)))
         self.event_pub.publish(msg)
-        if e.kind == 'seen':
+        if e.kind is EventKind.SEEN:
             self._check_identification(e)
-        if e.kind == 'loading_over':
+        if e.kind is EventKind.LOADING_OVER:
             # No material will be seen again: the detections' reader goes, and with it the
             # vision node's frames (it is lazy) and the simulator's rendering of them.
             self.camera_grid = None            # lock-step: no frame is waited for any more
             self._drop_detections()
-        if e.kind != 'state':
+        if e.kind is not EventKind.STATE:
             what = f' {e.color} material {e.material}' if e.material >= 0 else ''
             self.get_logger().info(f'[{e.time:7.2f} s] {e.robot or "pipeline"}: {e.kind}{what}'
                                    f'{" - " + e.detail if e.detail else ""}')
@@ -448,7 +450,8 @@ class CoordinatorNode(Node):
         request = StepSimulation.Request(steps=steps, commands=self._commands.take())
         reply = self._call(self.step_client, request, 'step', idempotent=False)
         # Some announced commands were not in yet (DDS orders only per writer): ask again,
-        # soon at first, then backing off, until they are or the service timeout passes.
+        # soon at first, then backing off, until they are or the service timeout passes (the
+        # condition is the simulator's: nothing here is told when it holds).
         end, pause = time.monotonic() + self.service_timeout, 0.0002
         while not reply.success and reply.commands_pending:
             if time.monotonic() > end:
@@ -470,8 +473,9 @@ class CoordinatorNode(Node):
         if self.synchronous:
             clients.append(self.step_client)
         end = time.monotonic() + self.service_timeout
-        # (rclpy's wait_for_service sleeps in quarters of a second, one client after another:
-        # up to two seconds of a trial's start-up for services that were up long before.)
+        # The graph is looked at every 20 ms: rclpy gives Python no wait on a graph change (its
+        # own wait_for_service sleeps in quarters of a second, one client after another: up to
+        # two seconds of a trial's start-up for services that were up long before).
         while True:
             missing = [c.srv_name for c in clients if not c.service_is_ready()]
             if not missing:
@@ -498,11 +502,12 @@ class CoordinatorNode(Node):
             self._wait_states(after * self.dt_ns, first=True)
             return self._observe(after * self.dt_ns, [])
         end = time.monotonic() + self.service_timeout
-        while not self._have_states() or self.now() == 0.0:
-            if time.monotonic() > end:
+        with self._lock:
+            # (Woken by each state message; the clock runs with them.)
+            if not self._lock.wait_for(lambda: self._have_states() and self.now() > 0.0,
+                                       timeout=self.service_timeout):
                 raise NodeTimeout('no joint_states, grip states and odometry from the '
                                   'simulator (is sim_node running with the cell world?)')
-            time.sleep(0.01)
         # Real time: the belt starts with the first decision, so not before the camera's frames
         # reach this node through the vision node. The graph being up does not say that: the
         # vision node subscribes to the camera only once it sees this node's reader (lazy), and
@@ -540,8 +545,8 @@ class CoordinatorNode(Node):
         return self._observe(after * self.dt_ns, frames)
 
     def _have_states(self) -> bool:
-        with self._lock:
-            return len(self._joints) == 2 and len(self._grip) == 2 and self._odom is not None
+        """Both arms' joints and grips and the base's odometry have come (under the lock)."""
+        return len(self._joints) == 2 and len(self._grip) == 2 and self._odom is not None
 
     def _wait_states(self, stamp_ns: int, first: bool = False) -> None:
         def ready() -> bool:
@@ -600,13 +605,9 @@ class CoordinatorNode(Node):
                     self._step(self.steps_per_tick)
             except NodeTimeout:
                 pass
-        deadline = time.monotonic() + 5.0
-        while time.monotonic() < deadline:
-            with self._lock:
-                if self._markers and self._markers[-1][0] * 1e-9 >= end:
-                    return self._markers[-1][1]
-            time.sleep(0.01)
         with self._lock:
+            self._lock.wait_for(lambda: bool(self._markers)
+                                and self._markers[-1][0] * 1e-9 >= end, timeout=5.0)
             return self._markers[-1][1] if self._markers else []
 
     def _report(self) -> Dict:
@@ -644,12 +645,12 @@ class CoordinatorNode(Node):
         out.update({'scenario_seed': self.seed, 'belt_speed': self.layout.belt_speed,
                     'mode': 'lock-step' if self.synchronous else 'real-time',
                     'youbot_path': [[round(x, 4), round(y, 4)] for x, y in self._path[::3]],
-                    'events': [[round(e.time - self.pipeline.start_time, 4), e.kind, e.robot,
+                    'events': [[round(e.time - self.pipeline.start_time, 4), str(e.kind), e.robot,
                                 e.material, e.color, e.detail]
-                               for e in self.pipeline.events if e.kind != 'state'],
+                               for e in self.pipeline.events if e.kind is not EventKind.STATE],
                     # Each machine's state changes: the report's timeline.
                     'states': [[round(e.time - self.pipeline.start_time, 4), e.robot, e.detail]
-                               for e in self.pipeline.events if e.kind == 'state']})
+                               for e in self.pipeline.events if e.kind is EventKind.STATE]})
         self._publish_state(self.now(), json.dumps(out))
         if self.result_file:
             path = Path(self.result_file)

@@ -19,6 +19,7 @@ from coordinator.pipeline.loader import Loader
 from coordinator.pipeline.model import (
     Detection,
     Event,
+    EventKind,
     LoaderState,
     Material,
     MaterialStatus,
@@ -41,7 +42,8 @@ from coordinator.pipeline.transport import (
 )
 from coordinator.reach import youbot_tool_quaternion
 
-__all__ = ['Detection', 'Event', 'Loader', 'LoaderState', 'Material', 'MaterialStatus', 'Motion',
-           'NodeTimeout', 'Observation', 'Pipeline', 'Points', 'Ports', 'RunResult', 'Settings',
+__all__ = ['Detection', 'Event', 'EventKind', 'Loader', 'LoaderState', 'Material',
+           'MaterialStatus', 'Motion', 'NodeTimeout', 'Observation', 'Pipeline', 'Points',
+           'Ports', 'RunResult', 'Settings',
            'Tally', 'Transport', 'TransportState', 'YOUBOT_CARRY_Q', 'YOUBOT_GRASP_STANDOFF_M',
            'clear_of_the_plate', 'known', 'youbot_tool_quaternion']

@@ -29,6 +29,7 @@ from coordinator.pipeline.model import (
     QUEUE_MARGIN_M,
     SET_DOWN_CLEARANCE_M,
     Event,
+    EventKind,
     LoaderState,
     Material,
     MaterialStatus,
@@ -132,7 +133,7 @@ class Pipeline:
     def count_grasp(self, arm: str, success: bool = False) -> None:
         self.grasps[arm][1 if success else 0] += 1
 
-    def event(self, now: float, kind: str, robot: str = '', m: Optional[Material] = None,
+    def event(self, now: float, kind: EventKind, robot: str = '', m: Optional[Material] = None,
               detail: str = '') -> None:
         e = Event(now, kind, robot, m.id if m else -1, m.color if m else '', detail)
         self.events.append(e)
@@ -182,8 +183,8 @@ class Pipeline:
             return True
         return False if now > motion.end + self.s.settle_margin else None
 
-    def fail(self, now: float, m: Material, kind: str, why: str, robot: str) -> None:
-        m.status = MaterialStatus.MISSED if kind == 'missed' else MaterialStatus.FAILED
+    def fail(self, now: float, m: Material, kind: EventKind, why: str, robot: str) -> None:
+        m.status = MaterialStatus.MISSED if kind is EventKind.MISSED else MaterialStatus.FAILED
         m.failure = why
         self.event(now, kind, robot, m, why)
 
@@ -191,7 +192,7 @@ class Pipeline:
         q = obs.zu12_q if arm == 'zu12' else obs.youbot_q
         self.send(Motion(arm, self.plan(arm, q, [Waypoint(self.home_q[arm].copy())])))
         if not ready:
-            self.event(obs.now, 'returning', arm)
+            self.event(obs.now, EventKind.RETURNING, arm)
 
     def to_come(self, name: str) -> int:
         """Materials of class ``name`` the batch still brings that are not on the plate yet,
@@ -268,7 +269,8 @@ class Pipeline:
                 self.belt_stops += 1            # (stopped for the queue, not at the end)
                 why = ('a lift out of the end stop\'s queue' if self.loader.pauses_belt(now)
                        else 'the queue would overflow the belt')
-            self.event(now, 'belt_started' if running else 'belt_stopped', detail=why)
+            self.event(now, EventKind.BELT_STARTED if running else EventKind.BELT_STOPPED,
+                       detail=why)
 
     def _belt_wanted(self, now: float) -> bool:
         """The belt runs at a uniform speed from the start until loading is over, unless what
@@ -300,7 +302,7 @@ class Pipeline:
                 m = self.materials[d.id] = Material(d.id, d.color, self.belt.seen_at(d, obs.now),
                                                     obs.now, d.hits, detection=d,
                                                     size=self.layout.size_of(d.color))
-                self.event(obs.now, 'seen', 'vision', m,
+                self.event(obs.now, EventKind.SEEN, 'vision', m,
                            f'at {np.round(m.position, 3).tolist()}')
             elif m.status == MaterialStatus.SEEN:
                 m.position, m.stamp, m.hits = self.belt.seen_at(d, obs.now), obs.now, d.hits
@@ -309,7 +311,7 @@ class Pipeline:
         for m in self.materials.values():
             if (m.status == MaterialStatus.SEEN and not self.layout.end_stop
                     and m.position[0] > self.layout.belt_end_x):
-                self.fail(obs.now, m, 'missed', 'went off the belt end unpicked', 'zu12')
+                self.fail(obs.now, m, EventKind.MISSED, 'went off the belt end unpicked', 'zu12')
 
     def _on_belt_area(self, position: Vector) -> bool:
         """Whether a detection lies on the belt. The camera also sees beside it, and downstream
@@ -342,13 +344,13 @@ class Pipeline:
             materials=[{'id': m.id, 'color': m.color, 'status': m.status.value,
                         'attempts': m.attempts, 'unload_attempts': m.unload_attempts,
                         'failure': m.failure} for m in mats])
-        self.event(now, 'finished', detail=f'{status}{": " + message if message else ""}')
+        self.event(now, EventKind.FINISHED, detail=f'{status}{": " + message if message else ""}')
 
     # --- kinematics through the port ----------------------------------------------------------
     def solve(self, arm: str, position, orientation, frame: str, seed) -> Optional[np.ndarray]:
         q, why = self.ports.solve(arm, position, orientation, frame, seed)
         if q is None:
-            self.event(self.now, 'ik_failed', arm,
+            self.event(self.now, EventKind.IK_FAILED, arm,
                        detail=f'{np.round(position, 3).tolist()}: {why}')
         return q
 
@@ -387,7 +389,7 @@ class Pipeline:
                     return plan
                 heavy = True
         why = (f'not held at rest with {payload} kg' if heavy else 'at any one tilt up to 80 deg')
-        self.event(self.now, 'ik_failed', 'youbot',
+        self.event(self.now, EventKind.IK_FAILED, 'youbot',
                    detail=f'{np.round(points[1 if len(points) > 1 else 0], 3).tolist()} via '
                           f'{np.round(points[-1], 3).tolist()} {why}')
         return None

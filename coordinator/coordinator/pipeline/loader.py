@@ -41,6 +41,7 @@ from coordinator.pipeline.model import (
     QUEUE_LIFT_PAUSE_LEAD_S,
     RELEASE_HOLD_S,
     SETTLE_S,
+    EventKind,
     LoaderState,
     Material,
     MaterialStatus,
@@ -183,8 +184,8 @@ class Loader(Machine):
         if accounted >= run.layout.total or (not waiting and self.late(now)):
             why = ('every material handled' if accounted >= run.layout.total else
                    f'nothing new for {run.s.idle_timeout:.0f} s')
-            run.event(now, 'loading_over', 'zu12', detail=why)
-            run.event(now, 'returning', 'zu12')
+            run.event(now, EventKind.LOADING_OVER, 'zu12', detail=why)
+            run.event(now, EventKind.RETURNING, 'zu12')
             return self._move(LoaderState.HOME, obs, [Waypoint(run.home_q['zu12'].copy())])
         m = self._next(waiting)
         if m is not None:
@@ -493,7 +494,8 @@ class Loader(Machine):
             # for that much after this one (the new motion replaces it before it starts).
             took = lag + late
             run.lag = max(run.lag, PLAN_MARGIN * took)
-            run.event(now, 'replanned', 'zu12', m, f'the pick would start {late:.2f} s late')
+            run.event(now, EventKind.REPLANNED, 'zu12', m,
+                      f'the pick would start {late:.2f} s late')
             if self._replans < MAX_REPLANS:
                 self._replans += 1
                 return self._plan_pick(obs, m, spent + took)
@@ -528,7 +530,7 @@ class Loader(Machine):
             # the paper's trials).
             lifted = self._ahead.lift_end if self._ahead is not None else pick.points[-1][0]
             self.belt_pause = (pick.contact + late - QUEUE_LIFT_PAUSE_LEAD_S, lifted)
-        run.event(now, 'tracking', 'zu12', m,
+        run.event(now, EventKind.TRACKING, 'zu12', m,
                   f'contact at {pick.contact:.2f} s, x {pick.track(pick.contact)[0]:.3f}{held}')
 
     def pauses_belt(self, now: float) -> bool:
@@ -547,7 +549,7 @@ class Loader(Machine):
     def _pick_failed(self, obs: Observation, m: Material, why: str) -> None:
         run = self.run
         self.belt_pause = (math.inf, -math.inf)
-        run.fail(obs.now, m, 'grasp_failed', why, 'zu12')
+        run.fail(obs.now, m, EventKind.GRASP_FAILED, why, 'zu12')
         m.slot = m.place = -1           # (a place kept for it is free again)
         self.current = None
         self._ahead = None
@@ -566,7 +568,7 @@ class Loader(Machine):
             # Off the belt from here: what the belt queued behind it moves on.
             run.belt.lifted(m, now)
             run.count_grasp('zu12', success=True)
-            run.event(now, 'picked', 'zu12', m, f'attempt {m.attempts}')
+            run.event(now, EventKind.PICKED, 'zu12', m, f'attempt {m.attempts}')
             if self._ahead is not None:        # on its way to the place already
                 self._adopt(self._ahead.way)
                 self._ahead = None
@@ -597,7 +599,8 @@ class Loader(Machine):
                 return self._place_failed(obs, m, 'the arm did not reach the lift point')
             # (Real time: the simulator took the motion in too late and refused it.) The
             # material rides on, untouched: another attempt, like a missed grasp.
-            run.event(now, 'arm_stalled', 'zu12', m, f'pick attempt {m.attempts} not completed')
+            run.event(now, EventKind.ARM_STALLED, 'zu12', m,
+                      f'pick attempt {m.attempts} not completed')
             if m.attempts <= run.s.max_retries:
                 return self._plan_pick(obs, m)
             return self._pick_failed(obs, m, 'the arm did not reach the material')
@@ -605,14 +608,14 @@ class Loader(Machine):
             run.ports.grip('zu12', False)
             if m.picked:
                 return self._place_failed(obs, m, 'dropped while lifting it')
-            run.event(now, 'grasp_missed', 'zu12', m, f'attempt {m.attempts}')
+            run.event(now, EventKind.GRASP_MISSED, 'zu12', m, f'attempt {m.attempts}')
             if m.attempts <= run.s.max_retries:
                 return self._plan_pick(obs, m)
             return self._pick_failed(obs, m, f'not held after {m.attempts} attempts')
         if not m.picked:                     # (held, but only sealed after the lift began)
             run.belt.lifted(m, now)
             run.count_grasp('zu12', success=True)
-            run.event(now, 'picked', 'zu12', m, f'attempt {m.attempts}')
+            run.event(now, EventKind.PICKED, 'zu12', m, f'attempt {m.attempts}')
         self._plan_place(obs, m)
 
     def _plan_place(self, obs: Observation, m: Material) -> None:
@@ -714,12 +717,12 @@ class Loader(Machine):
             return self._place_failed(obs, m, f'release failed: {why}')
         if not run.layout.carried(m.color):
             m.status = MaterialStatus.PLACED
-            run.event(now, 'placed', 'zu12', m, f'{run.layout.destination(m.color)} slot '
+            run.event(now, EventKind.PLACED, 'zu12', m, f'{run.layout.destination(m.color)} slot '
                                                  f'{m.place}')
         else:
             m.status = MaterialStatus.ON_PLATE
             run.loaded += 1
-            run.event(now, 'loaded', 'zu12', m, f'plate slot {m.slot}')
+            run.event(now, EventKind.LOADED, 'zu12', m, f'plate slot {m.slot}')
         # The cup stays still while the vacuum lets go, then rises: as the start of the next
         # motion, planned now.
         self.current, self._at_release = None, True

@@ -11,6 +11,7 @@ from typing import (
 )
 
 from coordinator.pipeline.model import (
+    EventKind,
     Motion,
     Observation,
     Points,
@@ -36,7 +37,7 @@ class Machine:
     def enter(self, state: Enum, now: float, budget: float) -> None:
         self.state = state
         self.deadline = now + budget
-        self.run.event(now, 'state', self.name, detail=state.value)
+        self.run.event(now, EventKind.STATE, self.name, detail=state.value)
 
     def move(self, state: Enum, obs: Observation, points: Points,
              start: Optional[float] = None) -> None:
@@ -66,5 +67,5 @@ class Machine:
         """Whether the arm's last motion is over: arrived, or stalled (then reported)."""
         arrived = self.arrival(obs)
         if arrived is False:
-            self.run.event(obs.now, 'arm_stalled', self.arm, detail=f'{what} not reached')
+            self.run.event(obs.now, EventKind.ARM_STALLED, self.arm, detail=f'{what} not reached')
         return arrived is not None

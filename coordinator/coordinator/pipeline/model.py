@@ -110,10 +110,43 @@ class Observation:
     youbot_dq: Optional[np.ndarray] = None
 
 
+class EventKind(str, Enum):
+    """What happened (an event's kind; its value is the word the result and
+    ``PipelineEvent.kind`` carry, and what it reads as in text)."""
+    SEEN = 'seen'                           # the vision reported a new material
+    TRACKING = 'tracking'
+    BELT_STARTED = 'belt_started'
+    BELT_STOPPED = 'belt_stopped'
+    PICKED = 'picked'
+    PLACED = 'placed'
+    LOADED = 'loaded'
+    LOADING_OVER = 'loading_over'           # no material will come any more
+    GRASP_MISSED = 'grasp_missed'           # tried again
+    GRASP_FAILED = 'grasp_failed'           # given up
+    IK_FAILED = 'ik_failed'
+    ARM_STALLED = 'arm_stalled'
+    REPLANNED = 'replanned'
+    RETURNING = 'returning'
+    WAITING_FOR_LOAD = 'waiting_for_load'
+    DEPARTING = 'departing'
+    DRIVING = 'driving'
+    DRIVE_STALLED = 'drive_stalled'
+    ARRIVED = 'arrived'
+    UNLOAD_GRASPED = 'unload_grasped'
+    DELIVERED = 'delivered'
+    FAILED = 'failed'
+    MISSED = 'missed'                       # went off the belt's end unpicked
+    FINISHED = 'finished'
+    STATE = 'state'                         # a machine changed state (detail: the new one)
+
+    def __str__(self) -> str:
+        return str(self.value)
+
+
 @dataclass(frozen=True)
 class Event:
     time: float
-    kind: str                     # seen, stopped_belt, picked, placed, delivered, ...
+    kind: EventKind
     robot: str = ''
     material: int = -1
     color: str = ''

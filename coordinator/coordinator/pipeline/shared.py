@@ -19,6 +19,7 @@ from controllers.time_optimal import JointLimits, Waypoint
 from coordinator.layout import CellLayout
 from coordinator.pipeline.belt import BeltModel
 from coordinator.pipeline.model import (
+    EventKind,
     Material,
     Motion,
     Observation,
@@ -43,10 +44,10 @@ class Shared(Protocol):
     loaded: int                        # materials put on the youBot's plate
 
     # --- the record ---------------------------------------------------------------------------
-    def event(self, now: float, kind: str, robot: str = '', m: Optional[Material] = None,
+    def event(self, now: float, kind: EventKind, robot: str = '', m: Optional[Material] = None,
               detail: str = '') -> None: ...
 
-    def fail(self, now: float, m: Material, kind: str, why: str, robot: str) -> None: ...
+    def fail(self, now: float, m: Material, kind: EventKind, why: str, robot: str) -> None: ...
 
     def count_grasp(self, arm: str, success: bool = False) -> None: ...
 

@@ -35,6 +35,7 @@ from coordinator.pipeline.model import (
     RELEASE_HOLD_S,
     SETTLE_S,
     SPRING_BACK_WAIT_S,
+    EventKind,
     Material,
     MaterialStatus,
     Motion,
@@ -129,9 +130,9 @@ class Transport(Machine):
         run.ports.follow(None)
         run.ports.drive(0.0, 0.0, 0.0)
         if not status.finished:
-            run.event(obs.now, 'drive_stalled', 'youbot', detail=(
+            run.event(obs.now, EventKind.DRIVE_STALLED, 'youbot', detail=(
                 f'{status.position_error * 1000:.0f} mm from {self._drive_goal}'))
-        run.event(obs.now, 'arrived', 'youbot', detail=self._drive_goal)
+        run.event(obs.now, EventKind.ARRIVED, 'youbot', detail=self._drive_goal)
 
     def dropped(self, stand: str) -> Set[int]:
         """The stand's pool drop spots used so far."""
@@ -175,7 +176,7 @@ class Transport(Machine):
             self.enter(TransportState.DONE, obs.now, math.inf)
             return
         self.trips += 1
-        run.event(obs.now, 'departing', 'youbot',
+        run.event(obs.now, EventKind.DEPARTING, 'youbot',
                   detail=f'{len(self.queue)} materials, trip {self.trips}')
         # The arm rises to its carry pose while the base drives: folded, it reaches down in
         # front of the base, and its fingers would scrape the floor as the base pitches.
@@ -219,7 +220,7 @@ class Transport(Machine):
             turn=TurnLimits(run.s.drive_turn, run.s.drive_turn_accel))
         self._followed = run.ports.follow(self._follower)
         self._drive_goal, self._target = goal, target
-        run.event(obs.now, 'driving', 'youbot', detail=f'to {goal}, {path.length:.2f} m')
+        run.event(obs.now, EventKind.DRIVING, 'youbot', detail=f'to {goal}, {path.length:.2f} m')
         self._drive_deadline = (obs.now + self._follower.profile.duration
                                 + run.s.drive_margin)
 
@@ -235,7 +236,7 @@ class Transport(Machine):
                 return
             if run.carried_to_come() and not run.loader_done:
                 # More to carry: it waits here, the arm in its carry pose, for the next load.
-                run.event(obs.now, 'waiting_for_load', 'youbot',
+                run.event(obs.now, EventKind.WAITING_FOR_LOAD, 'youbot',
                           detail=f'{run.carried_to_come()} carried materials to come')
                 return self.enter(TransportState.WAIT_LOAD, obs.now, math.inf)
             run.plan_home('youbot', obs)
@@ -448,7 +449,7 @@ class Transport(Machine):
         plan = self._unload_path(m, here, obs.youbot_q, slide=not self.driving)
         if plan is None:
             self.queue.pop(0)
-            run.fail(now, m, 'grasp_failed', 'unload: no IK solution', 'youbot')
+            run.fail(now, m, EventKind.GRASP_FAILED, 'unload: no IK solution', 'youbot')
             return self._next_unload(obs)
         if plan.pose is not None and plan.pose is not here:
             self._follow(obs, plan.pose, (), self._drive_goal)
@@ -473,7 +474,7 @@ class Transport(Machine):
         if arrived is None:
             return
         if not arrived:
-            return self._unload_failed(obs, m, 'grasp_failed',
+            return self._unload_failed(obs, m, EventKind.GRASP_FAILED,
                                        'unload: the arm did not reach the material')
         if not self._armed:
             # Closed only now: its 20 mm reach would take a neighbour on the way down.
@@ -482,25 +483,25 @@ class Transport(Machine):
             return
         if not obs.youbot_armed:
             if self.late(now):
-                return self._unload_failed(obs, m, 'grasp_failed',
+                return self._unload_failed(obs, m, EventKind.GRASP_FAILED,
                                            'unload: the gripper does not report closing')
             return                      # (the grip state from before the gripper closed)
         if not obs.youbot_holding:
             run.ports.grip('youbot', False)
-            run.event(now, 'grasp_missed', 'youbot', m, f'attempt {m.unload_attempts}')
+            run.event(now, EventKind.GRASP_MISSED, 'youbot', m, f'attempt {m.unload_attempts}')
             if m.unload_attempts <= run.s.max_retries:
                 return self._plan_unload(obs, m)
-            return self._unload_failed(obs, m, 'grasp_failed', f'unload: not held after '
+            return self._unload_failed(obs, m, EventKind.GRASP_FAILED, f'unload: not held after '
                                        f'{m.unload_attempts} attempts')
         run.count_grasp('youbot', success=True)
-        run.event(now, 'unload_grasped', 'youbot', m, f'attempt {m.unload_attempts}')
+        run.event(now, EventKind.UNLOAD_GRASPED, 'youbot', m, f'attempt {m.unload_attempts}')
         if self.driving:
             # Up clear of its neighbours, and held there until the base stands.
             self._drop_pending = True
             try:
                 return self.move(TransportState.CARRY, obs, self._lift(obs, m))
             except PlanError as exc:
-                return self._unload_failed(obs, m, 'failed', f'unload: {exc}')
+                return self._unload_failed(obs, m, EventKind.FAILED, f'unload: {exc}')
         self._carry_out(obs, m, known(self._carry, 'the unload path').over,
                             known(self._carry, 'the unload path').drop, lift=True)
 
@@ -534,10 +535,10 @@ class Transport(Machine):
                                           self._held_offset(obs, m)):
                     points = run.plan('youbot', obs.youbot_q, detour)
         except PlanError as exc:
-            return self._unload_failed(obs, m, 'failed', f'unload: {exc}')
+            return self._unload_failed(obs, m, EventKind.FAILED, f'unload: {exc}')
         self.move(TransportState.CARRY, obs, points)
 
-    def _unload_failed(self, obs: Observation, m: Material, kind: str, why: str) -> None:
+    def _unload_failed(self, obs: Observation, m: Material, kind: EventKind, why: str) -> None:
         self._drop_pending = False
         self.run.ports.grip('youbot', False)
         m.left_on_plate = True
@@ -548,7 +549,7 @@ class Transport(Machine):
     def _carry_to_drop(self, obs: Observation) -> None:
         run, m, now = self.run, self.queue[0], obs.now
         if not obs.youbot_holding:
-            return self._unload_failed(obs, m, 'failed', 'unload: dropped on the way')
+            return self._unload_failed(obs, m, EventKind.FAILED, 'unload: dropped on the way')
         arrived = self.arrival(obs)
         if arrived is None:
             return
@@ -556,19 +557,20 @@ class Transport(Machine):
             if self.driving:
                 return              # (held up over the plate until the base stands)
             if not arrived:
-                run.event(now, 'arm_stalled', 'youbot', m, 'the lift off the plate not completed')
+                run.event(now, EventKind.ARM_STALLED, 'youbot', m,
+                          'the lift off the plate not completed')
             # Over to its drop as the base stands now (the drive ends a little off its goal).
             path = (self._unload_path(m, obs.youbot_pose, obs.youbot_q)
                     or known(self._carry, 'the unload path'))
             self._carry, m.place = path, path.place
             return self._carry_out(obs, m, path.over, path.drop)
         if not arrived:
-            run.event(now, 'arm_stalled', 'youbot', m, 'unload motion not completed')
+            run.event(now, EventKind.ARM_STALLED, 'youbot', m, 'unload motion not completed')
             short = self._short_of_drop(obs)
             if short > DROP_REACH_TOLERANCE_M:
                 # Let go where it is, and not told delivered: a 0.44 kg blue whose unload
                 # stalled 2 cm over its plate slot was reported set down on the platform.
-                return self._unload_failed(obs, m, 'failed', f'unload: the arm stalled '
+                return self._unload_failed(obs, m, EventKind.FAILED, f'unload: the arm stalled '
                                            f'{short:.2f} m short of the drop')
         run.ports.grip('youbot', False)
         m.status = MaterialStatus.DELIVERED
@@ -578,7 +580,7 @@ class Transport(Machine):
             where += f' drop {m.place} from {self._drive_goal}'
         else:
             where += f' slot {m.place}'
-        run.event(now, 'delivered', 'youbot', m, where)
+        run.event(now, EventKind.DELIVERED, 'youbot', m, where)
         # The arm stays still while the material falls free of the fingers.
         self.enter(TransportState.RELEASE, now, RELEASE_HOLD_S)
 
