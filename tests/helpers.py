@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import contextlib
+import math
 import os
 import shutil
 import signal
@@ -181,6 +182,23 @@ def cpu_load(processes: Optional[int] = None):
 
 def stamp_s(stamp) -> float:
     return stamp.sec + stamp.nanosec * 1e-9
+
+
+def latest_stamp(messages: List) -> float:
+    """The stamp [s] of the last of a ``Probe.collect`` list of stamped messages (-inf if
+    none; a MarkerArray's is its first marker's)."""
+    if not messages:
+        return -math.inf
+    msg = messages[-1][1]
+    header = msg.markers[0].header if hasattr(msg, 'markers') and msg.markers else msg.header
+    return stamp_s(header.stamp)
+
+
+def wait_for_stamp(messages: List, t: float, timeout: float = 30.0, what: str = '') -> None:
+    """Until ``messages`` holds one stamped at or after ``t`` [s of simulated time]: a test
+    that lets simulated time pass waits for it to pass, not for wall time."""
+    wait_for(lambda: latest_stamp(messages) >= t, timeout,
+             what=what or f'a message stamped {t:.3f} s or later')
 
 
 class PendingStep:

@@ -11,7 +11,7 @@ from sensor_msgs.msg import Image
 from sim_interfaces.msg import MaterialDetectionArray
 from visualization_msgs.msg import MarkerArray
 
-from helpers import wait_for
+from helpers import latest_stamp, wait_for, wait_for_stamp
 from ros_common.stamps import to_seconds
 
 WORLD = 'world:=package://world_description/worlds/pipeline_cell.yaml'
@@ -53,7 +53,8 @@ def test_vision_reports_every_material_once_with_its_colour(cell, start_node, pr
         markers = truth[-1][1].markers
         return len(markers) == 8 and all(m.pose.position.x > -0.1 for m in markers)
     wait_for(all_past_the_camera, 240.0, what='all eight materials past the camera')
-    time.sleep(0.5)
+    # The detections of the frames up to then, still on their way.
+    wait_for_stamp(frames, latest_stamp(truth), what='the detections up to then')
     # Ground truth (10 Hz) carried forward to each frame's stamp at the belt speed. Frames
     # from before the belt ran at a steady speed count for identity and colour only.
     snapshots = [(to_seconds(m.markers[0].header.stamp), {mk.id: mk for mk in m.markers})

@@ -1,7 +1,6 @@
 """The kinematics node over DDS, with the simulator in this process so that the test can read
 PyBullet's ground truth: an IK request moves the simulated arm's gripper to the target."""
 import threading
-import time
 
 import numpy as np
 import pytest
@@ -14,7 +13,7 @@ from sim_interfaces.srv import SolveIK
 
 from controllers.transforms import matrix_to_quaternion, rotation_angle
 from controllers.youbot_kinematics import YoubotKinematics
-from helpers import Probe, moving, wait_for
+from helpers import Probe, latest_stamp, moving, wait_for, wait_for_stamp
 
 RTF = 2.0
 
@@ -86,9 +85,9 @@ def test_kinematics_node_moves_the_simulated_arm_to_an_ik_target(start_node):
         assert reply.position_error < 1e-4 and len(reply.trajectory.points) == 1
         wait_for(lambda: moving(states[-1][1]), 10.0, what='the motion to start')
         wait_for(lambda: not moving(states[-1][1]), 30.0, what='the motion to end')
-        time.sleep(0.5 / RTF)
+        wait_for(lambda: np.linalg.norm(sim.tcp_in_base_link()[:3, 3] - target[:3, 3]) < 0.005,
+                 10.0, what='the tool at the target')
         reached = sim.tcp_in_base_link()
-        assert np.linalg.norm(reached[:3, 3] - target[:3, 3]) < 0.005
         assert rotation_angle(reached[:3, :3].T @ target[:3, :3]) < 0.01
         # An unreachable target (the same arm plane, four times as far): a clear failure.
         pos.x = 0.167 + 4 * (target[0, 3] - 0.167)
@@ -99,7 +98,9 @@ def test_kinematics_node_moves_the_simulated_arm_to_an_ik_target(start_node):
         reply = probe.call(SolveIK, '/youbot/solve_ik', request, timeout=20.0)
         assert not reply.success and 'unknown frame "odom"' in reply.message
         assert 'IK failed' in kin.output() and kin.alive()
-        time.sleep(0.5 / RTF)
+        # Half a second of simulated time later, the arm still holds the target.
+        wait_for_stamp(states, latest_stamp(states) + 0.5, what='0.5 s of simulated time')
+        assert not moving(states[-1][1])
         assert np.linalg.norm(sim.tcp_in_base_link()[:3, 3] - target[:3, 3]) < 0.005
     finally:
         probe.close()
