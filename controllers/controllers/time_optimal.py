@@ -190,31 +190,7 @@ def plan(q0: Vector, waypoints: Sequence[Waypoint], limits: JointLimits,
     v_given, a_given = _state(v0, n, 'start velocity'), _state(a0, n, 'start acceleration')
     v_start = np.zeros(n) if v_given is None else v_given
     a_start = np.zeros(n) if a_given is None else a_given
-    for name in ('velocity', 'acceleration', 'jerk'):
-        limit_values = np.asarray(getattr(limits, name), float)
-        if (limit_values.shape != (n,) or not np.all(np.isfinite(limit_values))
-                or np.any(limit_values <= 0.0)):
-            raise PlanError(f'{name} limits must be {n} positive finite values')
-    qs = [np.asarray(w.q, float) for w in waypoints]
-    if any(q.shape != (n,) or not np.all(np.isfinite(q)) for q in qs) or not np.all(
-            np.isfinite(q_prev)):
-        raise PlanError(f'every waypoint must be {n} finite joint positions')
-    given_v = [_state(w.velocity, n, 'velocity') for w in waypoints]
-    given_a = [_state(w.acceleration, n, 'acceleration') for w in waypoints]
-    for i, w in enumerate(waypoints):
-        if w.at is not None and not np.isfinite(w.at):
-            raise PlanError(f'waypoint {i}: its time must be finite')
-        if w.direct and (w.at is None or given_v[i] is None):
-            raise PlanError(f'waypoint {i}: a direct waypoint needs a time and a velocity')
-        for name, value, limit in (('velocity', given_v[i], limits.velocity),
-                                   ('acceleration', given_a[i], limits.acceleration)):
-            if value is not None and np.any(np.abs(value) > np.asarray(limit) * LIMIT_MARGIN):
-                j = int(np.argmax(np.abs(value) / np.asarray(limit)))
-                raise PlanError(f'waypoint {i}: joint {j + 1} {name} {value[j]:.3f} is beyond '
-                                f'its limit {limit[j] * LIMIT_MARGIN:.3f}')
-    if given_v[-1] is not None and np.any(given_v[-1]) or given_a[-1] is not None and np.any(
-            given_a[-1]):
-        raise PlanError('a motion ends at rest: the last waypoint cannot have a velocity')
+    qs, given_v, given_a = _checked(q_prev, waypoints, limits)
     stops = [w.stop and given_v[i] is None for i, w in enumerate(waypoints)]
     stops[-1] = True
     velocities: List[np.ndarray] = []
@@ -235,45 +211,94 @@ def plan(q0: Vector, waypoints: Sequence[Waypoint], limits: JointLimits,
         a_given_here = given_a[i]
         a_here = a_given_here if a_given_here is not None else np.zeros(n)
         if w.direct:
-            assert w.at is not None             # (checked above: a direct waypoint has one)
-            if w.at <= t + 1e-9:
-                raise PlanError(f'waypoint {i}: a direct waypoint must come after the one '
-                                f'before it ({w.at:.3f} s <= {t:.3f} s)')
-            t = float(w.at)
-            samples.append(Sample(t, qs[i].copy(), velocities[i].copy(), a_here.copy()))
+            t = _direct(samples, i, w, t, qs[i], velocities[i], a_here)
             arrivals.append(t)
-            q_prev, v_prev, a_prev = qs[i], velocities[i], a_here
-            continue
-        min_time = w.min_time if w.at is None else max(w.min_time, w.at - t)
-        if w.at is not None and w.at - t < -1e-9:
-            raise TooLate(f'waypoint {i} is due at {w.at:.3f} s, before the motion gets to '
-                          f'it ({t:.3f} s)', t - w.at)
-        profile = _profile(q_prev, v_prev, qs[i], velocities[i], limits, min_time, a_prev,
-                           a_here)
-        if profile is None and np.any(velocities[i]) and given_v[i] is None:
-            velocities[i] = np.zeros(n)      # pass-through not reachable from here: stop there
-            profile = _profile(q_prev, v_prev, qs[i], velocities[i], limits, min_time, a_prev)
-        if profile is None:
-            raise PlanError(f'no profile to waypoint {i}')
-        duration = float(profile.duration)
-        if w.at is not None and duration > w.at - t + 1e-6:
-            raise TooLate(f'waypoint {i} is due at {w.at:.3f} s; the arm can be there at '
-                          f'{t + duration:.3f} s at the earliest', t + duration - w.at)
-        if duration > 1e-9:         # (a waypoint where the arm already is adds no samples)
-            steps = max(1, int(np.ceil(duration / period - 1e-9)))
-            for k in range(1, steps + 1):
-                tau = duration * k / steps
-                p, v, a = profile.at_time(tau)
-                samples.append(Sample(t + tau, np.asarray(p, float), np.asarray(v, float),
-                                      np.asarray(a, float)))
-            t += duration
-            samples[-1] = Sample(t, qs[i].copy(), velocities[i].copy(), a_here.copy())
-        arrivals.append(t)
-        if stops[i] and w.hold > 0.0:
-            t += w.hold
-            samples.append(Sample(t, qs[i].copy(), np.zeros(n), np.zeros(n)))
+        else:
+            min_time = w.min_time if w.at is None else max(w.min_time, w.at - t)
+            if w.at is not None and w.at - t < -1e-9:
+                raise TooLate(f'waypoint {i} is due at {w.at:.3f} s, before the motion gets '
+                              f'to it ({t:.3f} s)', t - w.at)
+            profile = _profile(q_prev, v_prev, qs[i], velocities[i], limits, min_time, a_prev,
+                               a_here)
+            if profile is None and np.any(velocities[i]) and given_v[i] is None:
+                velocities[i] = np.zeros(n)   # pass-through not reachable from here: stop there
+                profile = _profile(q_prev, v_prev, qs[i], velocities[i], limits, min_time,
+                                   a_prev)
+            if profile is None:
+                raise PlanError(f'no profile to waypoint {i}')
+            t = _sampled(samples, i, w, t, profile, period, qs[i], velocities[i], a_here)
+            arrivals.append(t)
+            if stops[i] and w.hold > 0.0:
+                t += w.hold
+                samples.append(Sample(t, qs[i].copy(), np.zeros(n), np.zeros(n)))
         q_prev, v_prev, a_prev = qs[i], velocities[i], a_here
     return Plan(samples, arrivals)
+
+
+def _checked(q0: np.ndarray, waypoints: Sequence[Waypoint], limits: JointLimits
+             ) -> Tuple[List[np.ndarray], List[Optional[np.ndarray]],
+                        List[Optional[np.ndarray]]]:
+    """The waypoints' positions, given velocities and given accelerations, once the limits
+    and the waypoints are found sound (PlanError says why not)."""
+    n = len(q0)
+    for name in ('velocity', 'acceleration', 'jerk'):
+        limit_values = np.asarray(getattr(limits, name), float)
+        if (limit_values.shape != (n,) or not np.all(np.isfinite(limit_values))
+                or np.any(limit_values <= 0.0)):
+            raise PlanError(f'{name} limits must be {n} positive finite values')
+    qs = [np.asarray(w.q, float) for w in waypoints]
+    if any(q.shape != (n,) or not np.all(np.isfinite(q)) for q in qs) or not np.all(
+            np.isfinite(q0)):
+        raise PlanError(f'every waypoint must be {n} finite joint positions')
+    given_v = [_state(w.velocity, n, 'velocity') for w in waypoints]
+    given_a = [_state(w.acceleration, n, 'acceleration') for w in waypoints]
+    for i, w in enumerate(waypoints):
+        if w.at is not None and not np.isfinite(w.at):
+            raise PlanError(f'waypoint {i}: its time must be finite')
+        if w.direct and (w.at is None or given_v[i] is None):
+            raise PlanError(f'waypoint {i}: a direct waypoint needs a time and a velocity')
+        for name, value, limit in (('velocity', given_v[i], limits.velocity),
+                                   ('acceleration', given_a[i], limits.acceleration)):
+            if value is not None and np.any(np.abs(value) > np.asarray(limit) * LIMIT_MARGIN):
+                j = int(np.argmax(np.abs(value) / np.asarray(limit)))
+                raise PlanError(f'waypoint {i}: joint {j + 1} {name} {value[j]:.3f} is beyond '
+                                f'its limit {limit[j] * LIMIT_MARGIN:.3f}')
+    last_v, last_a = given_v[-1], given_a[-1]
+    if last_v is not None and np.any(last_v) or last_a is not None and np.any(last_a):
+        raise PlanError('a motion ends at rest: the last waypoint cannot have a velocity')
+    return qs, given_v, given_a
+
+
+def _direct(samples: List[Sample], i: int, w: Waypoint, t: float, q: np.ndarray,
+            v: np.ndarray, a: np.ndarray) -> float:
+    """A direct waypoint: the arm is there at its time, as given; returns that time."""
+    assert w.at is not None             # (checked: a direct waypoint has one)
+    if w.at <= t + 1e-9:
+        raise PlanError(f'waypoint {i}: a direct waypoint must come after the one before it '
+                        f'({w.at:.3f} s <= {t:.3f} s)')
+    samples.append(Sample(float(w.at), q.copy(), v.copy(), a.copy()))
+    return float(w.at)
+
+
+def _sampled(samples: List[Sample], i: int, w: Waypoint, t: float, profile: Trajectory,
+             period: float, q: np.ndarray, v: np.ndarray, a: np.ndarray) -> float:
+    """The profile from time ``t`` to waypoint ``i``, sampled every ``period`` and ending
+    exactly at the waypoint; returns the arrival time."""
+    duration = float(profile.duration)
+    if w.at is not None and duration > w.at - t + 1e-6:
+        raise TooLate(f'waypoint {i} is due at {w.at:.3f} s; the arm can be there at '
+                      f'{t + duration:.3f} s at the earliest', t + duration - w.at)
+    if duration <= 1e-9:         # (a waypoint where the arm already is adds no samples)
+        return t
+    steps = max(1, int(np.ceil(duration / period - 1e-9)))
+    for k in range(1, steps + 1):
+        tau = duration * k / steps
+        p, vel, acc = profile.at_time(tau)
+        samples.append(Sample(t + tau, np.asarray(p, float), np.asarray(vel, float),
+                              np.asarray(acc, float)))
+    t += duration
+    samples[-1] = Sample(t, q.copy(), v.copy(), a.copy())
+    return t
 
 
 def timed_path(qs: Sequence[Vector], limits: JointLimits, t0: float,

@@ -693,7 +693,7 @@ def _stop_the_robots(node: CoordinatorNode) -> None:
     try:
         node.follow(None)
         node.drive(0.0, 0.0, 0.0)
-    except Exception:   # noqa: BLE001 - shutting down: the context may be gone already
+    except Exception:
         pass
 
 

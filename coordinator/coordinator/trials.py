@@ -591,6 +591,31 @@ def _show_graph(opts: Dict) -> int:
     return 0
 
 
+def _pool(args: argparse.Namespace, trial_options: Dict) -> Optional[Union[LocalPool, 'RayPool']]:
+    """The pool the campaign's trials run in: local processes, or a Ray cluster (None, and
+    why on stderr, if it cannot be used)."""
+    if args.ray is None:
+        return LocalPool(args.parallel or 1, args.out, trial_options)
+    from coordinator.trials_ray import RayPool  # Ray is imported only with --ray
+    try:
+        return RayPool(args.ray or None, args.out, trial_options, args.cpus_per_trial,
+                       args.collect_bags, args.parallel)
+    except Exception as exc:                     # (Ray's errors have no common base)
+        print(f'[trials] cannot use the Ray cluster {args.ray or "(local)"}: {exc}',
+              file=sys.stderr, flush=True)
+        return None
+
+
+def _finished_line(r: Dict, done: int, total: int, elapsed: float) -> str:
+    """The line that says a trial finished."""
+    where = f' on {r["node"]}' if 'node' in r else ''
+    return (f'[trials] {done}/{total} trial {r["trial"]} seed {r["scenario_seed"]} belt '
+            f'{r["belt_speed"]:.3f}: {r["status"]}, '
+            f'{r.get("completion_time", float("nan")):.1f} s sim, '
+            f'handling {r.get("handling_success_rate", 0.0):.0%}, wall '
+            f'{r["wall_time"]:.0f} s{where} (elapsed {elapsed:.0f} s)')
+
+
 def _campaign(args: argparse.Namespace, given: Dict) -> int:
     """Run the plan into ``args.out`` (held by this runner)."""
     opts = _plan_options(args, given)
@@ -610,18 +635,9 @@ def _campaign(args: argparse.Namespace, given: Dict) -> int:
     trial_options = {'wall_timeout': args.wall_timeout, 'record': args.record, 'code': code,
                      'world': opts['world'], 'time_step': opts['time_step'],
                      'domain_base': args.domain_base}
-    pool: Union[LocalPool, 'RayPool']
-    if args.ray is None:
-        pool = LocalPool(args.parallel or 1, args.out, trial_options)
-    else:
-        from coordinator.trials_ray import RayPool  # Ray is imported only with --ray
-        try:
-            pool = RayPool(args.ray or None, args.out, trial_options, args.cpus_per_trial,
-                           args.collect_bags, args.parallel)
-        except Exception as exc:                     # (Ray's errors have no common base)
-            print(f'[trials] cannot use the Ray cluster {args.ray or "(local)"}: {exc}',
-                  file=sys.stderr, flush=True)
-            return 2
+    pool = _pool(args, trial_options)
+    if pool is None:
+        return 2
     print(f'[trials] {len(plan)} trials, {pool.describe()}, into {args.out}', flush=True)
     total = len(plan) + len(results)
     # On a terminal a live bar; in a log, a line now and then.
@@ -646,13 +662,7 @@ def _campaign(args: argparse.Namespace, given: Dict) -> int:
                 continue
             results.append(r)
             write_csv(results, args.out / 'trials.csv')      # partial results survive
-            elapsed = time.monotonic() - started
-            where = f' on {r["node"]}' if 'node' in r else ''
-            say(f'[trials] {len(results)}/{total} trial {r["trial"]} seed '
-                f'{r["scenario_seed"]} belt {r["belt_speed"]:.3f}: {r["status"]}, '
-                f'{r.get("completion_time", float("nan")):.1f} s sim, '
-                f'handling {r.get("handling_success_rate", 0.0):.0%}, wall '
-                f'{r["wall_time"]:.0f} s{where} (elapsed {elapsed:.0f} s)')
+            say(_finished_line(r, len(results), total, time.monotonic() - started))
             if bar is not None:
                 bar.update(results, *_progress(pool, results, len(pending)), finished=1)
             while pending and pool.has_room():

@@ -45,7 +45,7 @@ def browser(tmp_path):
     yield driver
     try:
         driver.quit()
-    except Exception:  # noqa: BLE001 - a test may have closed it already
+    except Exception:
         pass
 
 

@@ -575,24 +575,34 @@ class Loader(Machine):
                 return self.enter(LoaderState.PLACE, now, run.motion('zu12').end - now
                                   + run.s.settle_margin)
         elif not m.picked and now >= self._leave and self._ahead is not None:
-            # Not held after the dwell: the motion ends at the lift point instead, at rest,
-            # where a missed grasp is judged.
-            ahead, self._ahead = self._ahead, None
-            points = run.motion('zu12').points
-            q_now = min(points, key=lambda p: abs(p[0] - now))[1]
-            after = [p for p in points if p[0] > now + run.s.plan_latency]
-            if float(np.max(np.abs(obs.zu12_q - q_now))) > FOLLOW_TOLERANCE or not after:
-                self.deadline = ahead.lift_end + run.s.settle_margin
-            else:
-                # From where the motion has the arm at its next sample, moving, to rest at the
-                # lift point: the motion's own samples until then, and the stop from there.
-                t1, q1, v1, a1 = after[0]
-                stop = plan(q1, [Waypoint(ahead.q_lift)], run.limits('zu12'), t1, v0=v1, a0=a1)
-                run.send_continuing('zu12', now, t1, stop.points())
-                self.deadline = run.motion('zu12').end + run.s.settle_margin
+            self._stop_at_lift(obs)
         arrived = self.arrival(obs)
-        if arrived is None:
-            return
+        if arrived is not None:
+            self._picked_or_not(obs, m, arrived)
+
+    def _stop_at_lift(self, obs: Observation) -> None:
+        """Not held after the dwell: the motion ends at the lift point instead, at rest, where
+        a missed grasp is judged."""
+        run, now = self.run, obs.now
+        ahead = known(self._ahead, 'the way ahead')
+        self._ahead = None
+        points = run.motion('zu12').points
+        q_now = min(points, key=lambda p: abs(p[0] - now))[1]
+        after = [p for p in points if p[0] > now + run.s.plan_latency]
+        if float(np.max(np.abs(obs.zu12_q - q_now))) > FOLLOW_TOLERANCE or not after:
+            self.deadline = ahead.lift_end + run.s.settle_margin
+        else:
+            # From where the motion has the arm at its next sample, moving, to rest at the
+            # lift point: the motion's own samples until then, and the stop from there.
+            t1, q1, v1, a1 = after[0]
+            stop = plan(q1, [Waypoint(ahead.q_lift)], run.limits('zu12'), t1, v0=v1, a0=a1)
+            run.send_continuing('zu12', now, t1, stop.points())
+            self.deadline = run.motion('zu12').end + run.s.settle_margin
+
+    def _picked_or_not(self, obs: Observation, m: Material, arrived: bool) -> None:
+        """The pick's motion is over (``arrived``: at its end): on to the place with the
+        material held, or another attempt, or a failure."""
+        run, now = self.run, obs.now
         if not arrived:
             run.ports.grip('zu12', False)
             if m.picked:
