@@ -25,13 +25,13 @@ class CameraModel:
         """Unit direction (world) of the ray through pixel (u, v)."""
         d = np.linalg.solve(self.k, np.array([u, v, 1.0]))
         d = self.rotation @ d
-        return d / np.linalg.norm(d)
+        return np.asarray(d / np.linalg.norm(d))
 
     def project(self, points: np.ndarray) -> np.ndarray:
         """Pixels (n x 2) of world points (n x 3) in front of the camera."""
         cam = (np.asarray(points, float) - self.position) @ self.rotation
         uvw = cam @ self.k.T
-        return uvw[:, :2] / uvw[:, 2:3]
+        return np.asarray(uvw[:, :2] / uvw[:, 2:3])
 
 
 # The widest half field of view a pinhole camera_info may describe [degrees].
@@ -74,7 +74,7 @@ def pixel_to_plane(camera: CameraModel, u: float, v: float, plane_z: float) -> n
     t = (plane_z - camera.position[2]) / d[2]
     if t <= 0.0:
         raise ValueError('the plane is behind the camera')
-    return camera.position + t * d
+    return np.asarray(camera.position + t * d)
 
 
 def cube_silhouette_centroid(camera: CameraModel, centre: ArrayLike, size: float,

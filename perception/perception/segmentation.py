@@ -2,7 +2,7 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import List, Optional, Sequence, Tuple
+from typing import Any, List, Optional, Sequence, Tuple
 
 import cv2
 import numpy as np
@@ -38,7 +38,7 @@ class ColorClass:
         return (hue & (s >= self.min_saturation) & (v >= self.min_value)).astype(np.uint8)
 
 
-def classes_of(materials) -> Tuple[ColorClass, ...]:
+def classes_of(materials: Any) -> Tuple[ColorClass, ...]:
     """The camera's classes for a world's materials (world_description's MaterialsConfig): each
     class's hue range (from its colour, or as the world gives it) and its size."""
     return tuple(ColorClass(c.name, (tuple(c.hue),), size=c.size) for c in materials.classes)

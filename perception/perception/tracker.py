@@ -24,7 +24,7 @@ class Track:
     id: int
     # About 4 s at 15 Hz: a long baseline for the velocity, which predicts where to pick.
     history: Deque[Tuple[float, np.ndarray]] = field(default_factory=lambda: deque(maxlen=60))
-    votes: Counter = field(default_factory=Counter)
+    votes: Counter[str] = field(default_factory=Counter)
     hits: int = 0
     missed: int = 0
     last: Optional[Sighting] = None
@@ -33,7 +33,7 @@ class Track:
 
     @property
     def color(self) -> str:
-        return self.votes.most_common(1)[0][0]
+        return str(self.votes.most_common(1)[0][0])
 
     @property
     def position(self) -> np.ndarray:
@@ -53,7 +53,7 @@ class Track:
         denom = float((t * t).sum())
         if denom <= 0.0:
             return np.zeros(3)
-        return (t[:, None] * (p - p.mean(axis=0))).sum(axis=0) / denom
+        return np.asarray((t[:, None] * (p - p.mean(axis=0))).sum(axis=0) / denom)
 
     def predict(self, t: float) -> np.ndarray:
         return self.position + self.velocity() * (t - self.stamp)

@@ -82,7 +82,7 @@ class MaterialVision:
                         cv2.FONT_HERSHEY_SIMPLEX, 0.32, (255, 255, 255), 1, cv2.LINE_AA)
             cv2.putText(out, f'({x:.3f}, {y:.3f})', (u + 6, v + 8), cv2.FONT_HERSHEY_SIMPLEX,
                         0.3, (255, 255, 255), 1, cv2.LINE_AA)
-        return out
+        return np.asarray(out)
 
 
 def camera_model(k: Sequence[float], position: Sequence[float],

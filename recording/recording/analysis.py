@@ -114,7 +114,7 @@ def analyse(bag: Path) -> tuple:
                     paths.setdefault(c.topic, []).append((pose.position.x, pose.position.y))
                     q = pose.orientation
                     yaws[c.topic] = yaw_from_quaternion((q.x, q.y, q.z, q.w))
-        except Exception as exc:  # noqa: BLE001 - rosbags raises several kinds on bad data
+        except Exception as exc:
             raise AnalysisError(f'{bag}: unreadable data ({type(exc).__name__}: {exc}); the '
                                 'bag is truncated or corrupt') from None
         storage = 'mcap' if list(Path(bag).glob('*.mcap')) else 'sqlite3'

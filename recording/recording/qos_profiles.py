@@ -25,7 +25,7 @@ def parse_offered_qos(text: str) -> List[Qos]:
         return []
     try:
         return parse_qos(text)
-    except Exception:  # noqa: BLE001 - malformed QoS metadata must not cost the messages
+    except Exception:
         return []
 
 

@@ -102,7 +102,7 @@ class Replay(Node):
     def run(self) -> int:
         try:
             return self._play()
-        except Exception:  # noqa: BLE001 - classified below
+        except Exception:
             # SIGINT shuts the context down wherever the loop is: a publish or the final ack
             # wait then fails. That is a requested stop, not an error.
             if not self.context.ok():

@@ -23,7 +23,7 @@ class _Later:
 class DeferredReplies:
     """Deferred replies of one rclpy ``Service``."""
 
-    def __init__(self, service) -> None:
+    def __init__(self, service: Any) -> None:
         self._service = service
         self._send = service.send_response
         self._headers: Dict[Any, Any] = {}
@@ -33,7 +33,7 @@ class DeferredReplies:
         """Return this from the service callback to answer the request later, by ``key``."""
         return _Later(key)
 
-    def send(self, key: Any, response) -> None:
+    def send(self, key: Any, response: Any) -> None:
         """Answer the request deferred under ``key``."""
         self._send(response, self._headers.pop(key))
 
@@ -41,7 +41,7 @@ class DeferredReplies:
     def waiting(self) -> int:
         return len(self._headers)
 
-    def _send_or_keep(self, response, header) -> None:
+    def _send_or_keep(self, response: Any, header: Any) -> None:
         if isinstance(response, _Later):
             if response.key in self._headers:
                 raise ValueError(f'a reply is already deferred under {response.key!r}')

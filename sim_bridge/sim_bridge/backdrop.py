@@ -67,10 +67,11 @@ def _visual_shape(p: BulletClient, v: StaticVisual) -> int:
     kwargs = {'rgbaColor': v.rgba, 'visualFramePosition': v.frame_position,
               'visualFrameOrientation': v.frame_orientation}
     if v.geometry == pybullet.GEOM_BOX:
-        return p.createVisualShape(pybullet.GEOM_BOX, halfExtents=[x / 2 for x in d], **kwargs)
+        return int(p.createVisualShape(pybullet.GEOM_BOX, halfExtents=[x / 2 for x in d],
+                                       **kwargs))
     if v.geometry == pybullet.GEOM_SPHERE:
-        return p.createVisualShape(pybullet.GEOM_SPHERE, radius=d[0], **kwargs)
-    return p.createVisualShape(pybullet.GEOM_CYLINDER, length=d[0], radius=d[1], **kwargs)
+        return int(p.createVisualShape(pybullet.GEOM_SPHERE, radius=d[0], **kwargs))
+    return int(p.createVisualShape(pybullet.GEOM_CYLINDER, length=d[0], radius=d[1], **kwargs))
 
 
 class StaticBackdrop:

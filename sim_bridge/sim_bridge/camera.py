@@ -45,7 +45,8 @@ class ImageBuffer:
     of it, a plain memcpy.
     """
 
-    def __init__(self, width: int, height: int, data: Optional[array.array] = None) -> None:
+    def __init__(self, width: int, height: int,
+                 data: Optional['array.array[int]'] = None) -> None:
         self.width, self.height = width, height
         size = width * height * 3
         self.data = data if data is not None else array.array('B', bytes(size))
@@ -54,7 +55,7 @@ class ImageBuffer:
             raise ValueError(f'need an array.array of {size} unsigned bytes')
         self._view = np.frombuffer(self.data, dtype=np.uint8).reshape(height, width, 3)
 
-    def fill_from_rgba(self, rgba: np.ndarray) -> array.array:
+    def fill_from_rgba(self, rgba: np.ndarray) -> 'array.array[int]':
         rgba = np.asarray(rgba, dtype=np.uint8).reshape(self.height, self.width, 4)
         self._view[...] = rgba[:, :, :3]
         return self.data

@@ -13,7 +13,7 @@ from __future__ import annotations
 import math
 import random
 from dataclasses import dataclass
-from typing import List, Optional, Sequence, Tuple
+from typing import Any, List, Optional, Sequence, Tuple
 
 import numpy as np
 import pybullet
@@ -220,7 +220,7 @@ class Suction:
     that comes within reach (as a vacuum cup seals on a part it touches), at once or during a
     later step; switched off, it releases what it holds."""
 
-    def __init__(self, client: BulletClient, robot, link: str, reach: float,
+    def __init__(self, client: BulletClient, robot: Any, link: str, reach: float,
                  max_payload: float) -> None:
         self._p, self._robot = client, robot
         if link not in robot.link_index or robot.link_index[link] == -1:

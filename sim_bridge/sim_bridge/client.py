@@ -13,7 +13,8 @@ from typing import Any
 from pybullet_utils.bullet_client import BulletClient
 
 
-class Client(BulletClient):
+# (pybullet_utils ships no types: its BulletClient is Any to mypy.)
+class Client(BulletClient):  # type: ignore[misc]
     """BulletClient that keeps each bound function it made; ``disconnect`` forgets them (a
     client id is reused by the next connection)."""
 

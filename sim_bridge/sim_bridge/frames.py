@@ -101,7 +101,8 @@ class RobotFrames:
             return []
         client, body = self.robot.client, self.robot.body
         indices = sorted({j.child for j in joints} | {j.parent for j in joints} - {-1})
-        frames: Dict[int, Tuple[tuple, tuple]] = {-1: self.robot.base_link_world()}
+        frames: Dict[int, Tuple[Sequence[float], Tuple[float, float, float, float]]] = {
+            -1: self.robot.base_link_world()}
         for index, state in zip(indices, client.getLinkStates(
                 body, indices, computeForwardKinematics=True)):
             frames[index] = (state[4], state[5])

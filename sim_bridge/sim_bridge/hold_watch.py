@@ -9,7 +9,7 @@ simulator knows the contacts and says which links touch what.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Dict, List, Optional, Tuple
+from typing import Any, Dict, List, Optional, Tuple
 
 import numpy as np
 
@@ -31,7 +31,7 @@ class HoldReport:
 class HoldWatch:
     """Watches every joint group of a world; :meth:`update` returns what changed."""
 
-    def __init__(self, world) -> None:
+    def __init__(self, world: Any) -> None:
         self._world = world
         self._next = 0.0
         self._count: Dict[Tuple[str, str], int] = {}
@@ -57,7 +57,7 @@ class HoldWatch:
         return reports
 
     @staticmethod
-    def hold_error(group) -> Optional[Tuple[str, float]]:
+    def hold_error(group: Any) -> Optional[Tuple[str, float]]:
         """The worst joint and its error, if the group holds still and is off by HOLD_ERROR."""
         desired = group.desired
         if np.any(desired.velocities != 0.0):
@@ -67,7 +67,7 @@ class HoldWatch:
         i = int(np.argmax(error))
         return (group.joint_names[i], float(error[i])) if error[i] > HOLD_ERROR else None
 
-    def explain(self, group, joint: str, error: float) -> str:
+    def explain(self, group: Any, joint: str, error: float) -> str:
         label = f'{group.robot.config.name}/{group.config.name}'
         contacts = self._world.contacts_of(group)
         why = (f'in contact: {", ".join(contacts)}' if contacts else

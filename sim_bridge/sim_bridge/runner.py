@@ -131,7 +131,7 @@ class SimRunner:
         self.world_state_period_ns = max(dt_ns, round(1e9 / world_state_rate))
         self._world_state_next_ns = 0
         self.guards: Dict[str, CommandGuard] = {}
-        self._max_change: Dict[str, tuple] = {}      # per step, for robots with accel limits
+        self._max_change: Dict[str, Tuple[float, ...]] = {}   # per step, with accel limits
         for name, robot in world.robots.items():
             if robot.drive is None:
                 continue

@@ -4,7 +4,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Dict, List, Optional, Sequence, Tuple, Union
+from typing import Any, Dict, FrozenSet, List, Optional, Sequence, Tuple, Union, cast
 
 import numpy as np
 import pybullet
@@ -38,6 +38,9 @@ URDF_FLAGS = pybullet.URDF_USE_INERTIA_FROM_FILE | pybullet.URDF_USE_IMPLICIT_CY
 # A virtual omni-wheel's joint turns 1/sqrt(2) as fast as the Mecanum wheel it stands for.
 OMNI_WHEEL_SCALE = math.sqrt(2.0)
 
+
+# A pose as PyBullet gives it: position, quaternion (x, y, z, w).
+Transform = Tuple[Tuple[float, float, float], Tuple[float, float, float, float]]
 
 class WorldError(RuntimeError):
     """The world cannot be built (missing URDF, unknown joint or link)."""
@@ -93,7 +96,7 @@ class SimRobot:
         self.link_index: Dict[str, int] = {client.getBodyInfo(self.body)[0].decode(): -1}
         self.movable: List[int] = []
         self._joint_names: List[str] = []
-        self._joint_limits: Dict[str, tuple] = {}
+        self._joint_limits: Dict[str, Tuple[float, float, float, float]] = {}
         for j in range(client.getNumJoints(self.body)):
             info = client.getJointInfo(self.body, j)
             name, jtype = info[1].decode(), info[2]
@@ -152,19 +155,19 @@ class SimRobot:
         return list(self._joint_names)
 
     @property
-    def wheel_targets(self) -> tuple:
+    def wheel_targets(self) -> Tuple[float, ...]:
         return self.drive.targets if self.drive is not None else ()
 
     @property
-    def geometry(self):
+    def geometry(self) -> Any:
         """The drive's kinematic geometry (DiffDriveGeometry or MecanumGeometry), or None."""
         return self.drive.geometry if self.drive is not None else None
 
-    def joint_limits(self, joint: str) -> tuple:
+    def joint_limits(self, joint: str) -> Tuple[float, float, float, float]:
         """(lower, upper, max velocity, max effort) as the URDF gives them."""
         return self._joint_limits[joint]
 
-    def set_body_twist(self, vx: float, vy: float, wz: float) -> tuple:
+    def set_body_twist(self, vx: float, vy: float, wz: float) -> Tuple[float, ...]:
         """Command the wheel velocity motors for a body twist; returns the wheel targets
         (a differential drive ignores vy)."""
         if self.drive is None:
@@ -178,9 +181,9 @@ class SimRobot:
     def link_name(self, link: int) -> str:
         if link < 0:
             return self._root_link()
-        return self.client.getJointInfo(self.body, link)[12].decode()
+        return str(self.client.getJointInfo(self.body, link)[12].decode())
 
-    def links_moved_by(self, joints: Sequence[int]) -> frozenset:
+    def links_moved_by(self, joints: Sequence[int]) -> FrozenSet[int]:
         """The links (PyBullet link indices) downstream of any of these joints."""
         moved = set(joints)
         for link in range(self.client.getNumJoints(self.body)):   # (parents come first)
@@ -204,10 +207,11 @@ class SimRobot:
         states = self.client.getJointStates(self.body, [self.joint_index[j] for j in joints])
         return np.array([s[1] for s in states])
 
-    def base_link_world(self) -> Tuple[tuple, tuple]:
+    def base_link_world(self) -> Transform:
         com_pos, com_orn = self.client.getBasePositionAndOrientation(self.body)
         inv_pos, inv_orn = self.client.invertTransform(self._inertial_pos, self._inertial_orn)
-        return self.client.multiplyTransforms(com_pos, com_orn, inv_pos, inv_orn)
+        return cast(Transform, self.client.multiplyTransforms(com_pos, com_orn, inv_pos,
+                                                              inv_orn))
 
     def base_state(self) -> BaseState:
         pos, orn = self.base_link_world()
@@ -275,9 +279,9 @@ class SimRobot:
                              f'joint of the URDF (movable: {self._joint_names})')
         return j
 
-    def _start_com(self) -> Tuple[tuple, tuple]:
-        return self.client.multiplyTransforms(self._start_pos, self._start_orn,
-                                              self._inertial_pos, self._inertial_orn)
+    def _start_com(self) -> Transform:
+        return cast(Transform, self.client.multiplyTransforms(
+            self._start_pos, self._start_orn, self._inertial_pos, self._inertial_orn))
 
 
 class _DiffDrive:
@@ -287,9 +291,9 @@ class _DiffDrive:
                             for j in (config.left_wheel_joint, config.right_wheel_joint))
         self.geometry = DiffDriveGeometry(config.wheel_radius, config.wheel_separation)
         self.components = ('linear.x', 'angular.z')
-        self.targets: tuple = (0.0, 0.0)
+        self.targets: Tuple[float, ...] = (0.0, 0.0)
 
-    def command(self, vx: float, vy: float, wz: float) -> tuple:
+    def command(self, vx: float, vy: float, wz: float) -> Tuple[float, ...]:
         del vy                                     # a differential drive cannot strafe
         targets = diff_wheel_speeds(vx, wz, self.geometry)
         p = self._robot.client
@@ -315,14 +319,14 @@ class _MecanumDrive:
         self.geometry = MecanumGeometry(config.wheel_radius,
                                         config.sum_of_robot_center_projection_on_X_Y_axis)
         self.components = ('linear.x', 'linear.y', 'angular.z')
-        self.targets: tuple = (0.0, 0.0, 0.0, 0.0)
+        self.targets: Tuple[float, ...] = (0.0, 0.0, 0.0, 0.0)
         for joint in self.joints:
             # No friction along the spin axis (link y), which the spin leaves fixed in space.
             robot.client.changeDynamics(robot.body, joint, anisotropicFriction=(1.0, 0.0, 1.0),
                                     lateralFriction=1.0)
             robot.scale_reported_angle(joint, OMNI_WHEEL_SCALE)
 
-    def command(self, vx: float, vy: float, wz: float) -> tuple:
+    def command(self, vx: float, vy: float, wz: float) -> Tuple[float, ...]:
         targets = mecanum_wheel_speeds(vx, vy, wz, self.geometry)
         p = self._robot.client
         for joint, target in zip(self.joints, targets):
@@ -357,9 +361,9 @@ class JointGroup:
                 raise WorldError(f'robot "{robot.config.name}": controller "{config.name}": '
                                  f'{exc}') from None
             accelerations = np.array([given.get(j, np.inf) for j in config.joints])
-        lower, upper, velocity, effort = (np.array([lim[i] for lim in limits])
-                                          for i in range(4))
-        self.limits = JointLimits(lower, upper, velocity, effort, accelerations)
+        lower, upper, velocities, efforts = [np.array([lim[i] for lim in limits])
+                                             for i in range(4)]
+        self.limits = JointLimits(lower, upper, velocities, efforts, accelerations)
         # Per joint; 0: not checked (JTC's constraints.<joint>.trajectory).
         self.path_tolerance = np.full(len(limits), config.path_tolerance)
         # The tolerances of the trajectory being followed (an action goal may set its own).
@@ -370,7 +374,8 @@ class JointGroup:
         self.moved_links = robot.links_moved_by(self.joints)
         self._effort = self.limits.effort.tolist()
         self._max_velocity = self.limits.velocity.tolist()
-        self._motor_targets: Optional[Tuple[list, list]] = None   # as last sent to PyBullet
+        # As last sent to PyBullet:
+        self._motor_targets: Optional[Tuple[List[float], List[float]]] = None
         self.follower = TrajectoryFollower(config.joints, self.limits, np.zeros(len(limits)))
         self.desired = self.follower.sample(0.0)
 
@@ -451,7 +456,7 @@ def build_floor(p: BulletClient, size: float) -> int:
                                  rgbaColor=FLOOR_COLOR, visualFramePosition=(0.0, 0.0, -0.0005))
     floor = p.createMultiBody(0.0, plane, visual)
     p.changeDynamics(floor, -1, lateralFriction=1.0)
-    return floor
+    return int(floor)
 
 
 class SimWorld:
@@ -553,7 +558,8 @@ class SimWorld:
         if self.source is not None:
             self.source.restart()
 
-    def render(self, camera: SimCamera, lighting: Optional[dict] = None) -> np.ndarray:
+    def render(self, camera: SimCamera,
+               lighting: Optional[Dict[str, Any]] = None) -> np.ndarray:
         """Render an RGBA frame (height x width x 4, uint8) with the CPU renderer.
 
         ``lighting``: getCameraImage's light arguments (lightDirection, lightColor,
@@ -583,7 +589,7 @@ class SimWorld:
         return backdrop.fill(rgba, depth)
 
     @staticmethod
-    def _render(client: BulletClient, camera: SimCamera, lighting: Optional[dict]
+    def _render(client: BulletClient, camera: SimCamera, lighting: Optional[Dict[str, Any]]
                 ) -> Tuple[np.ndarray, np.ndarray]:
         c = camera.config
         _, _, rgba, depth, _ = client.getCameraImage(
@@ -642,7 +648,7 @@ class SimWorld:
     def _build_floor(self, size: float) -> None:
         self.floor = build_floor(self._p, size)
 
-    def _add_obstacle(self, obstacle) -> None:
+    def _add_obstacle(self, obstacle: Any) -> None:
         p = self._p
         s = obstacle.size
         if obstacle.shape == 'box':

@@ -52,7 +52,7 @@ class PanelHandler(Protocol):
 class PanelServer:
     """Serves the panel's page until :meth:`close`."""
 
-    def __init__(self, handler: PanelHandler, logger, host: str, port: int,
+    def __init__(self, handler: PanelHandler, logger: Any, host: str, port: int,
                  access: WebAccess, max_pages: int, web: Path = WEB) -> None:
         for name, _kind in STATIC.values():
             if not (web / name).is_file():
