@@ -22,3 +22,13 @@ def test_every_relative_link_of_the_readme_and_the_docs_resolves():
               if not (page.parent / target).exists()]
     assert _relative_links(ROOT / 'README.md'), 'the README links to nothing'
     assert broken == []
+
+
+def test_the_readmes_package_table_names_every_package_and_only_those():
+    """Each row of the README's package table whose folder holds a package.xml names that
+    package; every package of the project has its row."""
+    rows = re.findall(r'^\| `([a-z_]+)/` \| `([a-z_]+)` \|', (ROOT / 'README.md').read_text(),
+                      re.M)
+    packages = {p.parent.name: re.search(r'<name>([^<]+)</name>', p.read_text()).group(1)
+                for p in ROOT.glob('*/package.xml')}
+    assert dict(rows) == packages
