@@ -195,7 +195,7 @@ class VisionNode(Node):
             return
         problem = intrinsics_problem(msg.width, msg.height, msg.k)
         if problem:
-            # (A NaN in K used to pass and blind the node until a valid camera_info came.)
+            # (A NaN in K would blind the node until a valid camera_info came.)
             self.get_logger().warn(
                 f'camera_info ignored: {problem}; '
                 + ('keeping the one in use' if self._vision is not None else 'no frames used'),

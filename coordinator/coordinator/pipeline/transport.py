@@ -357,7 +357,7 @@ class Transport(Machine):
             # Over the drop, at least as high as the lift's top: a swing there keeps what is
             # held over the plate's other materials where a joint motion from the lift's top
             # straight down to a pool drop (lower than the plate) would swing it into the next
-            # one (campaign trial 31). Taken only when that is so (_lift).
+            # one. Taken only when that is so (_lift).
             over = drop.copy()
             over[2] = max(drop[2] + 0.05, lift[-1][2], drop[2] + clear)
             # (Held from the contact on: the arm must hold it still all the way to its drop.)
