@@ -86,10 +86,12 @@ def pipeline_graph(seed: int, belt_speed: float, synchronous: bool = True,
                    world: str = PIPELINE_CELL, real_time_factor: Optional[float] = None,
                    result_file: Optional[Path] = None, progress_file: Optional[Path] = None,
                    record_dir: Optional[Path] = None, bag_name: Optional[str] = 'bag',
-                   time_step: float = TIME_STEP) -> List[GraphNode]:
+                   time_step: float = TIME_STEP,
+                   recorder_ready: Optional[Path] = None) -> List[GraphNode]:
     """The processes of one run of the pipeline scenario, in their start order (the recorder,
     when there is one, first: it must hear the first /clock). A recording goes into
-    ``record_dir``/``bag_name`` (without a name, one with the date and time)."""
+    ``record_dir``/``bag_name`` (without a name, one with the date and time);
+    ``recorder_ready``: the file the recorder writes once it records /clock."""
     sim_time = {'use_sim_time': True}
     rate = tick_rate(time_step) if synchronous else CONTROL_RATE
     sim: Dict[str, ParameterValue] = {
@@ -125,6 +127,8 @@ def pipeline_graph(seed: int, belt_speed: float, synchronous: bool = True,
             **sim_time, 'output_dir': str(record_dir), 'exclude': list(UNRECORDED_TOPICS)}
         if bag_name:
             recorder['bag_name'] = bag_name
+        if recorder_ready is not None:
+            recorder['ready_file'] = str(recorder_ready)
         nodes.append(GraphNode('recorder', 'recording', 'recorder', parameters=recorder))
     nodes += [
         GraphNode('sim_node', 'sim_bridge', 'sim_node', parameters=sim),

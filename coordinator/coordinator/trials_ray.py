@@ -31,7 +31,7 @@ from typing import Any, Dict, List, Optional, Tuple
 import ray
 
 from coordinator.progress import read_progress
-from coordinator.trials import PROGRESS_FILE, code_version, run_leased_trial
+from coordinator.trial_run import PROGRESS_FILE, code_version, run_leased_trial
 
 # Where a worker keeps its trials' directories: <tmp>/run_trials/<campaign>/trial_NNN.
 WORKER_ROOT = 'run_trials'

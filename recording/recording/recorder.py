@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import functools
+import os
 import sys
 import threading
 from pathlib import Path
@@ -38,6 +39,10 @@ PARAMS = (
           'many seconds of message time; 0: no limit', 0.0, 1e9),
     Param('discovery_period', 0.1, 'Wall seconds between looks for new topics', 0.01, 10.0),
     Param('queue_depth', 1000, 'Subscription history depth, to absorb bursts', 1, 100000),
+    Param('ready_file', '', 'Written once every topic of ready_topics is recorded: the signal '
+          'that a launcher waits for before it starts what must be recorded from its first '
+          'message; empty: none'),
+    Param('ready_topics', ['/clock'], 'The topics whose recording ready_file signals'),
 )
 
 
@@ -52,6 +57,10 @@ class Recorder(Node):
         if storage not in STORAGES:
             raise BagError(f'storage must be one of {sorted(STORAGES)}, got "{storage}"')
         self._depth = p['queue_depth']
+        self._ready_file = Path(p['ready_file']) if p['ready_file'] else None
+        self._ready_topics: Set[str] = {t for t in p['ready_topics'] if t}
+        if self._ready_file is not None:
+            self._ready_file.unlink(missing_ok=True)
         self._writer = BagWriter(Path(p['output_dir']), p['bag_name'] or None, storage,
                                  compression=p['compression'], chunk_crc=p['chunk_crc'],
                                  max_bag_size=p['max_bag_size'],
@@ -108,6 +117,9 @@ class Recorder(Node):
         self.create_subscription(msg_class, topic, functools.partial(self._on_message, topic),
                                  qos, raw=True)
         self.get_logger().info(f'recording {topic} [{types[0]}]')
+        if self._ready_file is not None and self._ready_topics <= set(self._writer.topics):
+            _write_atomically(self._ready_file, ' '.join(sorted(self._ready_topics)) + '\n')
+            self._ready_file = None
 
     def _on_message(self, topic: str, data: bytes) -> None:
         if self._failure:
@@ -168,6 +180,13 @@ def _finish(node: Recorder) -> None:
     # SIGINT and SIGTERM end up here: the bag is finalised and readable.
     print(f'[recorder] {node.finish()}', flush=True)
 
+
+
+def _write_atomically(path: Path, text: str) -> None:
+    """``path`` appears whole or not at all (written beside it, then renamed)."""
+    part = path.with_name(path.name + '.part')
+    part.write_text(text)
+    os.replace(part, path)
 
 def main(args=None) -> int:
     return run_node(Recorder, 'recorder', (BagError, OSError), on_exit=_finish, args=args,

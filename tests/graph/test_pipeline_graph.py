@@ -11,7 +11,7 @@ from rclpy.qos import qos_profile_sensor_data
 from sensor_msgs.msg import Image
 
 from coordinator.layout import CellLayout, layout_from_world
-from coordinator.trials import run_trial
+from coordinator.trial_run import run_trial
 from helpers import cpu_load, wait_for
 from world_description import PIPELINE_CELL
 from world_description.resources import resolve_resource

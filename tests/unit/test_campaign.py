@@ -5,6 +5,7 @@ import json
 
 import pytest
 
+import coordinator.trial_run as trial_run
 import coordinator.trials as trials
 from coordinator.campaign import (
     CampaignError,
@@ -23,7 +24,7 @@ def nothing_runs(monkeypatch):
     """Fails the test if a trial is started."""
     def no_trial(*args, **kwargs):
         raise AssertionError('a trial was started')
-    monkeypatch.setattr(trials, 'run_trial', no_trial)
+    monkeypatch.setattr(trial_run, 'run_trial', no_trial)
     monkeypatch.setattr(trials, 'code_version', lambda: 'abc123')
 
 
@@ -151,7 +152,7 @@ def test_a_result_file_that_is_not_a_result(capsys, tmp_path, monkeypatch):
         ran.append(trial)
         return {'trial': trial, 'scenario_seed': seed, 'belt_speed': belt_speed,
                 'status': 'completed', 'completion_time': 61.0, 'wall_time': 9.0, 'code': code}
-    monkeypatch.setattr(trials, 'run_trial', fake_trial)
+    monkeypatch.setattr(trial_run, 'run_trial', fake_trial)
     import coordinator.report
     monkeypatch.setattr(coordinator.report, 'write_report', lambda r, out, s: out / 'report.md')
     assert trials.main(['--resume', str(tmp_path), '--progress-period', '0.01']) == 0

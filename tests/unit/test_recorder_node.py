@@ -101,3 +101,27 @@ def test_replay_of_a_bag_damaged_mid_stream_stops_with_an_error(context, tmp_pat
         assert node.published == 1000
     finally:
         node.destroy_node()
+
+
+def test_the_ready_file_appears_once_every_ready_topic_is_recorded(context, tmp_path):
+    """A launcher waits on this file, not on a log line's wording, before it starts what must
+    be recorded from its first message (run_trials: the coordinator, after /clock)."""
+    from rclpy.qos import QoSProfile
+    from rosgraph_msgs.msg import Clock
+    ready = tmp_path / 'recorder.ready'
+    ready.write_text('stale\n')                           # (left by an earlier run)
+    node = make(context, tmp_path, topics=['/clock', '/t'], ready_file=str(ready),
+                ready_topics=['/clock', '/t'])
+    try:
+        assert not ready.exists()
+        clock_pub = node.create_publisher(Clock, '/clock', QoSProfile(depth=10))
+        node._subscribe('/clock', ['rosgraph_msgs/msg/Clock'], node.get_publishers_info_by_topic(
+            '/clock'))
+        assert not ready.exists()                         # /t is not recorded yet
+        string_pub = node.create_publisher(String, '/t', QoSProfile(depth=10))
+        node._subscribe('/t', ['std_msgs/msg/String'], node.get_publishers_info_by_topic('/t'))
+        assert ready.read_text() == '/clock /t\n'
+        del clock_pub, string_pub
+    finally:
+        node.finish()
+        node.destroy_node()

@@ -177,6 +177,7 @@ def test_a_trial_plan_is_reproducible_and_splits_over_machines():
 
 def test_an_interrupted_campaign_goes_on_where_it_stopped(tmp_path, monkeypatch):
     import coordinator.report
+    import coordinator.trial_run as trial_run
     import coordinator.trials as trials
     plan = trial_plan(4, 0, 7, (0.1, 0.16))
     monkeypatch.setattr(trials, 'code_version', lambda: 'abc123')
@@ -201,7 +202,7 @@ def test_an_interrupted_campaign_goes_on_where_it_stopped(tmp_path, monkeypatch)
                 'status': 'completed', 'completion_time': 61.0, 'wall_time': 90.0,
                 'code': code}
     reported = []
-    monkeypatch.setattr(trials, 'run_trial', fake_trial)
+    monkeypatch.setattr(trial_run, 'run_trial', fake_trial)
     monkeypatch.setattr(coordinator.report, 'write_report',
                         lambda results, out, meta: reported.append(results) or out / 'report.md')
     assert trials.main(['--trials', '4', '--seed0', '7', '--resume', '--out', str(tmp_path),
@@ -217,6 +218,7 @@ def test_a_campaign_stopped_by_the_user_keeps_a_report_and_resumes_with_its_plan
     """Ctrl-C: the running trial is stopped, the finished ones are in the CSV and the report;
     ``--resume DIR`` alone goes on with the same plan, and a plan option that differs from it
     is refused."""
+    import coordinator.trial_run as trial_run
     import coordinator.trials as trials
     monkeypatch.setattr(trials, 'code_version', lambda: 'abc123')
     ran, reports = [], []
@@ -233,8 +235,8 @@ def test_a_campaign_stopped_by_the_user_keeps_a_report_and_resumes_with_its_plan
         (out_dir / f'trial_{trial:03d}').mkdir(parents=True, exist_ok=True)
         (out_dir / f'trial_{trial:03d}' / 'result.json').write_text(json.dumps(result))
         return result
-    monkeypatch.setattr(trials, 'run_trial', fake_trial)
-    monkeypatch.setattr(trials, '_stop_all', lambda: trials._INTERRUPTED.set())
+    monkeypatch.setattr(trial_run, 'run_trial', fake_trial)
+    monkeypatch.setattr(trials, 'stop_all', lambda: trial_run.INTERRUPTED.set())
     import coordinator.report
     monkeypatch.setattr(coordinator.report, 'write_report',
                         lambda results, out, setup: reports.append((results, setup))
@@ -263,29 +265,29 @@ def test_trials_on_one_machine_never_share_a_dds_domain(tmp_path, monkeypatch):
     import subprocess
     import sys
 
-    import coordinator.trials as trials
-    monkeypatch.setattr(trials, 'DOMAIN_LOCK_DIR', tmp_path)
-    with trials.domain_lease(150) as first, trials.domain_lease(150) as second:
+    import coordinator.trial_run as trial_run
+    monkeypatch.setattr(trial_run, 'DOMAIN_LOCK_DIR', tmp_path)
+    with trial_run.domain_lease(150) as first, trial_run.domain_lease(150) as second:
         assert (first, second) == (150, 151)
         holder = subprocess.Popen([sys.executable, '-c', (
-            'import sys, time, coordinator.trials as t, pathlib\n'
+            'import sys, time, coordinator.trial_run as t, pathlib\n'
             f't.DOMAIN_LOCK_DIR = pathlib.Path({str(tmp_path)!r})\n'
             'with t.domain_lease(150) as d:\n'
             '    print(d, flush=True); time.sleep(60)')], stdout=subprocess.PIPE, text=True)
         try:
             assert holder.stdout.readline().strip() == '152'
-            with trials.domain_lease(150) as fourth:
+            with trial_run.domain_lease(150) as fourth:
                 assert fourth == 153
         finally:
             holder.kill()
             holder.wait()
-        with trials.domain_lease(150) as freed:         # the killed holder's domain
+        with trial_run.domain_lease(150) as freed:         # the killed holder's domain
             assert freed == 152
-    with trials.domain_lease(150) as again:
+    with trial_run.domain_lease(150) as again:
         assert again == 150
-    with trials.domain_lease(trials.MAX_DOMAIN) as last:
+    with trial_run.domain_lease(trial_run.MAX_DOMAIN) as last:
         with pytest.raises(RuntimeError, match='no free DDS domain'):
-            with trials.domain_lease(last):
+            with trial_run.domain_lease(last):
                 pass
 
 
@@ -293,13 +295,13 @@ def test_the_code_version_names_the_commit_and_uncommitted_code_changes(tmp_path
     import shutil
     import subprocess
 
-    import coordinator.trials as trials
+    import coordinator.trial_run as trial_run
     if shutil.which('git') is None:
         pytest.skip('git is not installed')
     repo = tmp_path / 'repo'
     (repo / 'pkg').mkdir(parents=True)
     (repo / 'docs').mkdir()
-    shutil.copy(trials.__file__, repo / 'pkg' / 'trials.py')
+    shutil.copy(trial_run.__file__, repo / 'pkg' / 'trials.py')
     (repo / 'docs' / 'result.json').write_text('{}')
 
     def git(*args):

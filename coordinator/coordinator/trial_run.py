@@ -1,0 +1,221 @@
+"""Running one trial: its processes as one group on a DDS domain leased for it, its result and
+the code it ran. ``run_trials`` (trials.py) runs campaigns of them on this machine, and
+``trials_ray.py`` on a Ray cluster; both use this module, which uses neither."""
+from __future__ import annotations
+
+import ctypes
+import fcntl
+import json
+import os
+import signal
+import subprocess
+import sys
+import tempfile
+import threading
+import time
+from contextlib import contextmanager
+from pathlib import Path
+from typing import Callable, Dict, Iterator, Optional
+
+from coordinator.campaign import read_result
+from coordinator.graph import TIME_STEP, pipeline_graph
+from ros_common.dds import with_profile
+from world_description import PIPELINE_CELL
+
+PROGRESS_FILE = 'progress.json'
+RECORDER_READY = 'recorder.ready'     # written by the recorder once it records /clock
+# The highest DDS domain id (Fast DDS's ports for 233 and above exceed 65535 on Linux).
+MAX_DOMAIN = 232
+# Lock files that keep two trials on one machine off the same domain (run_trials processes,
+# Ray workers): one per domain, held while a trial runs.
+DOMAIN_LOCK_DIR = Path(tempfile.gettempdir()) / 'run_trials-domains'
+# Process groups of the trials running now (stopped when the runner is interrupted).
+ACTIVE_GROUPS: set = set()
+# Set when the user stops the campaign: a trial stopped then has no result of its own.
+INTERRUPTED = threading.Event()
+
+
+def code_version() -> str:
+    """The code a trial runs: the checkout's commit, with ``-dirty`` when a tracked file outside
+    docs/ and the Markdown files differs from it (results written into docs/ do not count), or
+    'unknown' outside a git checkout. ``--resume`` reuses a result only of the same code."""
+    here = str(Path(__file__).resolve().parent)
+
+    def git(*args: str) -> Optional[str]:
+        try:
+            out = subprocess.run(['git', '-C', here, *args], capture_output=True, text=True,
+                                 timeout=30.0)
+        except (OSError, subprocess.SubprocessError):
+            return None
+        return out.stdout.strip() if out.returncode == 0 else None
+    commit, root = git('rev-parse', '--short=12', 'HEAD'), git('rev-parse', '--show-toplevel')
+    if not commit or not root:
+        return 'unknown'
+    changed = git('-C', root, 'status', '--porcelain', '--untracked-files=no', '--', '.',
+                  ':(exclude)docs', ':(exclude)*.md')
+    return commit + ('-dirty' if changed is None or changed else '')
+
+
+def run_trial(trial: int, seed: int, belt_speed: float, domain_id: int, out_dir: Path,
+              wall_timeout: float = 900.0, record: bool = False, code: str = '',
+              world: str = PIPELINE_CELL, time_step: float = TIME_STEP) -> Dict:
+    """One trial as a process group; returns its result (or a failure record)."""
+    trial_dir = out_dir / f'trial_{trial:03d}'
+    trial_dir.mkdir(parents=True, exist_ok=True)
+    result_file = trial_dir / 'result.json'
+    result_file.unlink(missing_ok=True)
+    (trial_dir / PROGRESS_FILE).unlink(missing_ok=True)
+    env = with_profile({**os.environ, 'ROS_DOMAIN_ID': str(domain_id),
+                        'ROS_AUTOMATIC_DISCOVERY_RANGE': os.environ.get(
+                            'ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')})
+    graph = pipeline_graph(seed, belt_speed, world=world, result_file=result_file,
+                           progress_file=result_file.with_name(PROGRESS_FILE),
+                           record_dir=trial_dir if record else None, time_step=time_step,
+                           recorder_ready=trial_dir / RECORDER_READY)
+    commands = {node.name: node.command() for node in graph}
+    procs: Dict[str, subprocess.Popen] = {}
+    cpu: Dict[str, float] = {}
+    group: Optional[int] = None
+    start = time.monotonic()
+    try:
+        # (A user's stop is looked for before each process starts and while each is waited
+        # for: a trial being set up when the campaign is stopped starts nothing more.)
+        for name, argv in commands.items():
+            if INTERRUPTED.is_set():
+                break
+            if name == 'coordinator_node' and 'recorder' in procs:
+                # (The recorder hears the first /clock: the coordinator steps only after it.)
+                _wait_for_file(trial_dir / RECORDER_READY, 30.0)
+            log = open(trial_dir / f'{name}.log', 'w')
+            procs[name] = subprocess.Popen(
+                argv, stdout=log, stderr=subprocess.STDOUT, env=env,
+                preexec_fn=_trial_process(0 if group is None else group))
+            log.close()
+            group = procs[name].pid if group is None else group
+            ACTIVE_GROUPS.add(group)
+        coordinator = procs.get('coordinator_node')
+        deadline = time.monotonic() + wall_timeout
+        while (coordinator is not None and coordinator.poll() is None
+               and time.monotonic() < deadline and not INTERRUPTED.wait(0.2)):
+            pass
+        cpu = {name: _cpu_seconds(p.pid) for name, p in procs.items() if p.poll() is None}
+    finally:
+        _stop_group(group, procs, at_once=INTERRUPTED.is_set())
+        ACTIVE_GROUPS.discard(group)
+    wall = time.monotonic() - start
+    result, problem = read_result(result_file)
+    if result is not None:
+        pass
+    elif INTERRUPTED.is_set():     # (stopped by the user: --resume runs it again)
+        result = {'status': 'interrupted', 'completion_time': float('nan'),
+                  'message': 'the campaign was interrupted'}
+    else:
+        exit_code = procs['coordinator_node'].returncode if 'coordinator_node' in procs else None
+        result = {'status': 'error', 'completion_time': float('nan'), 'message':
+                  f'no result (coordinator exit {exit_code}'
+                  + (f'; its result file: {problem}' if problem else '') + f'); see {trial_dir}'}
+    if 'cpu_seconds_self' in result:
+        cpu['coordinator_node'] = result.pop('cpu_seconds_self')
+    result.update({'trial': trial, 'scenario_seed': seed, 'belt_speed': belt_speed,
+                   'wall_time': wall, 'cpu_seconds': cpu, 'code': code or code_version()})
+    result_file.write_text(json.dumps(result, indent=1))
+    return result
+
+
+@contextmanager
+def domain_lease(first: int) -> Iterator[int]:
+    """The first DDS domain from ``first`` on that no other trial on this machine holds, held
+    (by an advisory lock on a file per domain) until the block ends; a crashed holder's lock
+    goes with its process."""
+    DOMAIN_LOCK_DIR.mkdir(mode=0o777, parents=True, exist_ok=True)
+    for domain in range(first, MAX_DOMAIN + 1):
+        lock = open(DOMAIN_LOCK_DIR / f'{domain}.lock', 'a')
+        try:
+            fcntl.flock(lock, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except OSError:
+            lock.close()
+            continue
+        try:
+            yield domain
+        finally:
+            lock.close()               # (releases the lock)
+        return
+    raise RuntimeError(f'no free DDS domain in {first}-{MAX_DOMAIN} on this machine')
+
+
+def run_leased_trial(item: Dict, out_dir: Path, options: Dict) -> Dict:
+    """``run_trial`` for a plan item on a DDS domain of its own (``options``: domain_base,
+    wall_timeout, record, code, world, time_step)."""
+    opts = dict(options)
+    with domain_lease(opts.pop('domain_base')) as domain:
+        return run_trial(item['trial'], item['seed'], item['belt_speed'], domain, out_dir,
+                         **opts)
+
+
+# Linux's prctl, looked up here: a child between fork and exec must not load libraries.
+_PRCTL = ctypes.CDLL(None, use_errno=True).prctl if sys.platform.startswith('linux') else None
+
+
+def _trial_process(group: int) -> Callable[[], None]:
+    """What a trial's process does in the child before exec: join the trial's process group
+    (``group``, or 0: a new one led by itself), so that a trial's processes are stopped
+    together and never mixed with another's (Popen's process_group, which Python 3.10 lacks);
+    and be killed (SIGKILL) with the thread that started it, so that a trial never outlives
+    what started it, such as a Ray worker killed with its node or its driver (Linux's
+    PR_SET_PDEATHSIG, kept across exec)."""
+    def setup() -> None:
+        os.setpgid(0, group)
+        if _PRCTL is not None:
+            _PRCTL(1, signal.SIGKILL)                   # 1: PR_SET_PDEATHSIG
+    return setup
+
+
+def _wait_for_file(path: Path, timeout: float) -> bool:
+    """Until a process writes ``path`` (the recorder's signal that it records /clock), or
+    the campaign is stopped."""
+    end = time.monotonic() + timeout
+    while time.monotonic() < end:
+        if path.exists():
+            return True
+        if INTERRUPTED.wait(0.05):
+            return False
+    return False
+
+
+def _cpu_seconds(pid: int) -> float:
+    """User + system CPU time of a running process (Linux /proc), or NaN."""
+    try:
+        fields = Path(f'/proc/{pid}/stat').read_text().rsplit(')', 1)[1].split()
+        return (int(fields[11]) + int(fields[12])) / os.sysconf('SC_CLK_TCK')
+    except (OSError, IndexError, ValueError):
+        return float('nan')
+
+
+def _stop_group(group: Optional[int], procs: Dict[str, subprocess.Popen],
+                at_once: bool = False) -> None:
+    """Stop a trial's processes: SIGINT, and SIGKILL for those still running 10 s later (or
+    at once: the campaign was stopped)."""
+    if group is None:
+        return
+    steps = ((signal.SIGKILL, 5.0),) if at_once else ((signal.SIGINT, 10.0),
+                                                      (signal.SIGKILL, 5.0))
+    for sig, grace in steps:
+        try:
+            os.killpg(group, sig)
+        except ProcessLookupError:
+            return
+        end = time.monotonic() + grace
+        while time.monotonic() < end and any(p.poll() is None for p in procs.values()):
+            time.sleep(0.05)
+        if all(p.poll() is not None for p in procs.values()):
+            return
+
+
+def stop_all() -> None:
+    """Stop every running trial at once (their results read 'interrupted')."""
+    INTERRUPTED.set()
+    for group in list(ACTIVE_GROUPS):
+        try:
+            os.killpg(group, signal.SIGKILL)
+        except ProcessLookupError:
+            pass
