@@ -11,7 +11,7 @@ import math
 import sys
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
-from typing import Any, Dict, List, Optional
+from typing import Any, Dict, List, Optional, Sequence, Tuple
 
 import numpy as np
 from rosbags.highlevel import AnyReader, AnyReaderError
@@ -87,16 +87,16 @@ def open_reader(bag: Path) -> AnyReader:
         raise AnalysisError(f'{bag} is not a readable rosbag2 bag: {exc}{hint}') from None
 
 
-def analyse(bag: Path) -> tuple:
+def analyse(bag: Path) -> Tuple['Report', Dict[str, Any]]:
     """Read every message once; returns the Report and the odometry paths (x, y arrays)."""
     reader = open_reader(bag)
     try:
         stamps: Dict[str, List[int]] = {}
         sizes: Dict[str, int] = {}
         types: Dict[str, str] = {}
-        paths: Dict[str, list] = {}
+        paths: Dict[str, List[Any]] = {}
         yaws: Dict[str, float] = {}
-        tracking: Dict[str, Dict[str, list]] = {}
+        tracking: Dict[str, Dict[str, List[Any]]] = {}
         for c in reader.connections:
             stamps.setdefault(c.topic, [])
             sizes.setdefault(c.topic, 0)
@@ -155,7 +155,7 @@ def analyse(bag: Path) -> tuple:
         reader.close()
 
 
-def _is_controller_state(connection) -> bool:
+def _is_controller_state(connection: Any) -> bool:
     """A joint trajectory controller's state: control_msgs/JointTrajectoryControllerState or any
     type with its fields (joint_names, reference or desired, feedback or actual)."""
     msgdef = connection.msgdef.data
@@ -166,7 +166,7 @@ def _is_controller_state(connection) -> bool:
                  or 'JointTrajectoryPoint actual' in msgdef))
 
 
-def _add_tracking(msg, joints: Dict[str, list]) -> None:
+def _add_tracking(msg: Any, joints: Dict[str, List[Any]]) -> None:
     reference = getattr(msg, 'reference', None)
     if reference is None or not len(reference.positions):
         reference = getattr(msg, 'desired', None)
@@ -222,7 +222,7 @@ def to_markdown(report: Report) -> str:
     return '\n'.join(lines) + '\n'
 
 
-def main(argv=None) -> int:
+def main(argv: Optional[Sequence[str]] = None) -> int:
     parser = argparse.ArgumentParser(prog='bag_analysis', description=__doc__.splitlines()[0])
     parser.add_argument('bag', type=Path, help='rosbag2 bag directory (mcap or sqlite3)')
     parser.add_argument('-o', '--output', type=Path, help='report directory')

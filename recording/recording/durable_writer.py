@@ -24,7 +24,7 @@ from __future__ import annotations
 import os
 import shutil
 from pathlib import Path
-from typing import Any, Dict, List, Literal, Mapping, Optional, Sequence, Union
+from typing import Any, Dict, List, Literal, Mapping, Optional, Sequence, Type, Union
 
 import yaml
 from rosbags.interfaces import Connection, ConnectionExtRosbag2, Qos
@@ -67,7 +67,7 @@ class DurableWriter(Writer):
     no limit), and :meth:`close_after_failure`. It writes metadata.yaml itself, with a line per
     file, as rosbag2 does for a split bag."""
 
-    STORAGE_PLUGINS: Mapping = {StoragePlugin.MCAP: McapStorage,
+    STORAGE_PLUGINS: Mapping[StoragePlugin, Type[Storage]] = {StoragePlugin.MCAP: McapStorage,
                                 StoragePlugin.SQLITE3: Sqlite3Storage}
 
     def __init__(self, path: Path, *, version: Literal[8, 9], storage_plugin: StoragePlugin,
@@ -237,7 +237,7 @@ class DurableWriter(Writer):
 
 
 def _yaml(data: Any) -> str:
-    return yaml.safe_dump(data, default_flow_style=False, sort_keys=False)
+    return str(yaml.safe_dump(data, default_flow_style=False, sort_keys=False))
 
 
 def _dump_qos(bag_version: int, profiles: Sequence[Qos]) -> str:

@@ -13,7 +13,7 @@ COLORS = [(31, 119, 180), (214, 39, 40), (44, 160, 44), (148, 103, 189), (255, 1
 
 def _nice_step(span: float, target_ticks: int = 6) -> float:
     raw = span / target_ticks
-    magnitude = 10 ** math.floor(math.log10(raw))
+    magnitude: float = 10 ** math.floor(math.log10(raw))
     for m in (1, 2, 5, 10):
         if m * magnitude >= raw:
             return m * magnitude

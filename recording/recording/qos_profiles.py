@@ -1,7 +1,7 @@
 """QoS for recording and replay: what a bag stores, and what to subscribe or publish with."""
 from __future__ import annotations
 
-from typing import List, Sequence
+from typing import List, Sequence, Tuple
 
 from rosbags.interfaces import (
     Qos,
@@ -38,7 +38,7 @@ def bag_qos(reliability: int, durability: int, depth: int) -> Qos:
                _INFINITE, _INFINITE, QosLiveliness.AUTOMATIC, _INFINITE, False)
 
 
-def adapt_to_publishers(policies: Sequence[tuple]) -> tuple:
+def adapt_to_publishers(policies: Sequence[Tuple[int, int]]) -> Tuple[int, int]:
     """(reliability, durability) for a subscription that matches every publisher.
 
     As rosbag2 does: reliable only if all publishers are reliable (a reliable reader does not
@@ -51,7 +51,7 @@ def adapt_to_publishers(policies: Sequence[tuple]) -> tuple:
     return reliability, durability
 
 
-def replay_policies(offered: Sequence[Qos], msgtype: str) -> tuple:
+def replay_policies(offered: Sequence[Qos], msgtype: str) -> Tuple[int, int]:
     """(reliability, durability) to publish a recorded topic with.
 
     The recorded publishers' profiles when the bag has them (the first one), else the sensor

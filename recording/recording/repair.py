@@ -26,7 +26,7 @@ import zlib
 from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Dict, Hashable, Iterator, List, Optional, Tuple, Union
+from typing import Any, Callable, Dict, Hashable, Iterator, List, Optional, Sequence, Tuple, Union
 
 from mcap.data_stream import ReadDataStream
 from mcap.exceptions import EndOfFile, InvalidMagic, McapError
@@ -92,7 +92,7 @@ def scan_mcap(path: Path, file_index: int = 0) -> Scan:
     def items() -> Iterator[Item]:
         schemas: Dict[int, Schema] = {}
 
-        def recovered(record) -> Iterator[Item]:
+        def recovered(record: Any) -> Iterator[Item]:
             if isinstance(record, Schema):
                 schemas[record.id] = record
             elif isinstance(record, McapChannel):
@@ -139,7 +139,8 @@ def scan_mcap(path: Path, file_index: int = 0) -> Scan:
     return scan
 
 
-def _chunk(chunk: Chunk, recovered, scan: Scan) -> Iterator[Item]:
+def _chunk(chunk: Chunk, recovered: Callable[[Any], Iterator[Item]],
+           scan: Scan) -> Iterator[Item]:
     """The records of one chunk, up to the first damaged one."""
     if chunk.uncompressed_size > MAX_CHUNK_BYTES:
         scan.damage.append(f'a chunk claims {chunk.uncompressed_size} bytes: skipped')
@@ -231,7 +232,7 @@ def scan_sqlite(path: Path, file_index: int = 0) -> Scan:
     return scan
 
 
-def _text_rows(rows, scan: Scan) -> Iterator[tuple]:
+def _text_rows(rows: Any, scan: Scan) -> Iterator[Tuple[Any, ...]]:
     """Rows whose text columns (bytes, as read) are UTF-8, decoded; the others are noted."""
     for row in rows:
         try:
@@ -343,7 +344,7 @@ def repair(bag: Path, output: Optional[Path] = None) -> Repaired:
     return Repaired(out, count, truncated, notes)
 
 
-def main(argv=None) -> int:
+def main(argv: Optional[Sequence[str]] = None) -> int:
     parser = argparse.ArgumentParser(prog='bag_repair', description=__doc__.splitlines()[0])
     parser.add_argument('bag', type=Path, help='bag directory left by a killed recorder')
     parser.add_argument('-o', '--output', type=Path, help='new bag directory (must not exist)')

@@ -111,14 +111,14 @@ class McapStorage:
                                data=bytes(data), publish_time=timestamp)
 
     def flush(self) -> None:
-        self._mcap.flush()
+        self._mcap.flush()  # type: ignore[no-untyped-call]
         self.durable_size = self._file.tell()
 
     def close(self, version: int, metadata: str) -> None:
         del version  # (the metadata text carries it)
         try:
             self._mcap.add_metadata('rosbag2', {'serialized_metadata': metadata})
-            self._mcap.finish()
+            self._mcap.finish()  # type: ignore[no-untyped-call]
         finally:
             self._file.close()
 
@@ -132,7 +132,7 @@ class McapStorage:
             Metadata('rosbag2', {'serialized_metadata': metadata}).write(out)
             DataEnd(0).write(out)
             Footer(0, 0, 0).write(out)
-            self._file.write(out.end() + MCAP0_MAGIC)
+            self._file.write(out.end() + MCAP0_MAGIC)  # type: ignore[no-untyped-call]
         finally:
             self._file.close()
 

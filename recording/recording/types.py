@@ -4,7 +4,7 @@ from __future__ import annotations
 import importlib
 import re
 from pathlib import Path
-from typing import Optional, Tuple
+from typing import Any, List, Optional, Tuple
 
 from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 from rosbags.typesys.store import Typestore
@@ -23,7 +23,8 @@ def message_class(msgtype: str) -> type:
         raise TypeResolutionError(f'"{msgtype}" is not a message type name (pkg/msg/Name)')
     try:
         module = importlib.import_module(f'{match.group(1)}.msg')
-        return getattr(module, match.group(2))
+        found: type = getattr(module, match.group(2))
+        return found
     except (ImportError, AttributeError) as exc:
         raise TypeResolutionError(f'cannot import {msgtype}: {exc}') from None
 
@@ -58,7 +59,7 @@ class TypeResolver:
                     self._ensure(name, depth + 1)
 
 
-def _referenced_types(kind, detail) -> list:
+def _referenced_types(kind: Any, detail: Any) -> List[str]:
     # rosbags field descriptions: (NAME, 'pkg/msg/T') or (SEQUENCE/ARRAY, ((NAME, 'pkg/msg/T'), n))
     names = []
     if isinstance(detail, str) and '/msg/' in detail:
