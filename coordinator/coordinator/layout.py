@@ -9,10 +9,11 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field, replace
-from typing import Dict, List, Optional, Set, Tuple
+from typing import Any, Dict, FrozenSet, List, Optional, Sequence, Set, Tuple
 
 import numpy as np
 
+from controllers.arrays import Vector
 from controllers.bezier import Pose2D
 from controllers.youbot_arm import ARM_BASE_IN_BASE_LINK_M
 
@@ -107,12 +108,12 @@ class UnloadStand:
     pose: Pose2D
     row: int                            # the plate row unloaded here: +1 left (y > 0), -1 right
     drops: Tuple[np.ndarray, ...]       # release points of pool materials, one each (world)
-    serves: frozenset = frozenset()     # the destinations unloaded from here
+    serves: FrozenSet[str] = frozenset()     # the destinations unloaded from here
     # How far the base may stand from ``pose`` along its heading, back and forth [m]: its
     # footprint stays clear of the world's obstacles (stand_slide).
     slide: Tuple[float, float] = (0.0, 0.0)
 
-    def abeam(self, point) -> Pose2D:
+    def abeam(self, point: Vector) -> Pose2D:
         """The stand's pose slid along its heading (within ``slide``) to bring the arm's base
         level with ``point`` (world x, y): the nearest it comes to the point. A heavy material
         the arm cannot hold out at the stand's far drops is let go abeam of its base."""
@@ -220,7 +221,7 @@ class CellLayout:
         free = [k for k in self.slot_order(name) if k not in taken]
         if self.destination(name) != POOL or not self.stands:
             return free
-        kept: set = set()
+        kept: Set[Any] = set()
         for row in {st.row for st in self.stands if st.serves - {POOL}}:
             bound = [c for c in self.manifest if self.carried(c) and self.destination(c) != POOL
                      and self.serving(self.destination(c)).row == row]
@@ -246,7 +247,7 @@ def slot_in_world(pose: Pose2D, slot: Tuple[float, float], base_z: float,
                      base_z + PLATE_TOP_IN_BASE_M])
 
 
-def world_to_base(pose: Pose2D, point) -> np.ndarray:
+def world_to_base(pose: Pose2D, point: Vector) -> np.ndarray:
     """A world point in the frame of a base at ``pose`` (planar: z unchanged)."""
     x, y, yaw = pose
     c, s = math.cos(yaw), math.sin(yaw)
@@ -254,7 +255,7 @@ def world_to_base(pose: Pose2D, point) -> np.ndarray:
     return np.array([c * dx + s * dy, -s * dx + c * dy, point[2]])
 
 
-def layout_from_world(world) -> CellLayout:
+def layout_from_world(world: Any) -> CellLayout:
     """The layout of a loaded WorldConfig (world_description.world_config) of the pipeline
     cell; a LayoutError (one line) for a cell whose rules cannot work."""
     if world.conveyor is None or world.materials is None:
@@ -313,7 +314,7 @@ def layout_from_world(world) -> CellLayout:
     return layout
 
 
-def _stands(pool, rules: Dict[str, Rule]) -> Tuple[UnloadStand, ...]:
+def _stands(pool: Any, rules: Dict[str, Rule]) -> Tuple[UnloadStand, ...]:
     """The youBot unloads from two stands west of the pool, side-on to it (Mecanum: it can stand
     any way round): facing south (the pool on its left) for the left row of its plate, then
     facing north (the pool on its right) for the right row. Its wheels (0.209 m from base_link;
@@ -348,7 +349,8 @@ STAND_CLEAR_AHEAD_M, STAND_CLEAR_SIDE_M = 0.05, 0.01
 OBSTACLE_LOW_M = 0.01
 
 
-def stand_slide(pose: Pose2D, obstacles, floor_size: float) -> Tuple[float, float]:
+def stand_slide(pose: Pose2D, obstacles: Sequence[Any], floor_size: float
+                ) -> Tuple[float, float]:
     """How far a base standing at ``pose`` may slide along its heading, back (negative) and
     forth, in STAND_SLIDE_STEP_M steps up to STAND_SLIDE_MAX_M, its footprint (with its
     clearances) clear of every obstacle that stands higher than OBSTACLE_LOW_M and on the
@@ -376,12 +378,12 @@ def stand_slide(pose: Pose2D, obstacles, floor_size: float) -> Tuple[float, floa
     return (ends[0], ends[1])
 
 
-def _height(o) -> float:
+def _height(o: Any) -> float:
     return float(o.size[2] if o.shape == 'box' else o.size[-1] if o.shape == 'cylinder'
                  else 2 * o.size[0])
 
 
-def _footprint(o) -> Tuple[Tuple[float, float], float, Tuple[float, float]]:
+def _footprint(o: Any) -> Tuple[Tuple[float, float], float, Tuple[float, float]]:
     """An obstacle's outline on the floor: centre, yaw and half extents (a round one's
     bounding square)."""
     if o.shape == 'box':
@@ -391,7 +393,7 @@ def _footprint(o) -> Tuple[Tuple[float, float], float, Tuple[float, float]]:
     return ((o.position[0], o.position[1]), o.yaw, half)
 
 
-def _overlap(a, b) -> bool:
+def _overlap(a: Any, b: Any) -> bool:
     """Whether two rectangles (centre, yaw, half extents) overlap (separating axes)."""
     axes = []
     corners = []
@@ -418,7 +420,7 @@ POOL_DROP_EDGE_M = 0.07
 POOL_DROP_MARGIN_M = 0.03
 
 
-def _pool_drops(stands: Tuple[UnloadStand, ...], pool, base_z: float, needed: int,
+def _pool_drops(stands: Tuple[UnloadStand, ...], pool: Any, base_z: float, needed: int,
                 mass: float) -> Tuple[UnloadStand, ...]:
     """The stands with the drop spots their arm reaches: their own, and more after them
     (nearest the wall first) until the pool has ``needed``, none nearer than POOL_DROP_PITCH_M
@@ -447,7 +449,7 @@ def _pool_drops(stands: Tuple[UnloadStand, ...], pool, base_z: float, needed: in
     return tuple(replace(st, drops=tuple(drops[st.name])) for st in stands)
 
 
-def _more_drops(stands: Tuple[UnloadStand, ...], pool, needed: int, reached,
+def _more_drops(stands: Tuple[UnloadStand, ...], pool: Any, needed: int, reached: Any,
                 drops: Dict[str, List[np.ndarray]]) -> Dict[str, List[np.ndarray]]:
     """``drops`` (per stand) with spots added from a fine grid over the pool, the wall's side
     first (the arm's reach), until there are ``needed``: none nearer than POOL_DROP_PITCH_M to
@@ -498,7 +500,7 @@ def _youbot_reaches_from(stand: UnloadStand, point: np.ndarray, base_z: float, m
     return False
 
 
-def _region(layout: CellLayout, obstacle, name: str) -> Tuple[Region, str]:
+def _region(layout: CellLayout, obstacle: Any, name: str) -> Tuple[Region, str]:
     """A destination's region and its slots, each checked in reach of the robot that sets a
     material down there (a LayoutError if none is), and the stand the youBot unloads there from
     (a carried class's destination other than the pool: the nearer stand)."""

@@ -12,7 +12,7 @@ import shutil
 import statistics
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Dict, List, Optional, Sequence
+from typing import Any, Dict, List, Optional, Sequence
 
 # Before any trial has finished, a trial is taken to need this much simulated time [s]
 # (about the median completion of the current schedule, docs/trials/current); afterwards the
@@ -31,16 +31,17 @@ class TrialProgress:
     transport: str = ''
 
 
-def write_progress(path: Path, **fields) -> None:
+def write_progress(path: Path, **fields: Any) -> None:
     """Atomically (a reader never sees half a file)."""
     tmp = path.with_name(path.name + '.tmp')
     tmp.write_text(json.dumps(fields))
     os.replace(tmp, path)
 
 
-def read_progress(path: Path) -> Optional[Dict]:
+def read_progress(path: Path) -> Optional[Dict[str, Any]]:
     try:
-        return json.loads(path.read_text())
+        data = json.loads(path.read_text())
+        return data if isinstance(data, dict) else None
     except (OSError, ValueError):
         return None
 
@@ -88,7 +89,7 @@ def progress_line(done: int, planned: int, running: List[TrialProgress],
             + f'; ETA {format_duration(eta)}')
 
 
-def running_figures(results: Sequence[Dict], short: bool = False) -> str:
+def running_figures(results: Sequence[Dict[str, Any]], short: bool = False) -> str:
     """The campaign's Table-2 figures so far: failures, median completion time, and the
     identification, grasp and handling rates over the finished trials (``short``: for a
     terminal's line)."""
@@ -113,7 +114,7 @@ class CampaignBar:
     from the trials' own pace (tqdm's, from the finished count alone, would read hours for a
     first trial that is nearly done)."""
 
-    def __init__(self, total: int, done: int, stream) -> None:
+    def __init__(self, total: int, done: int, stream: Any) -> None:
         from tqdm import tqdm  # (only for a terminal: logs get lines)
         # The terminal's size at the start (one that reports none: 120 x 24; tqdm hides a bar
         # below a terminal's last line, and a size of 0 lines would hide it).
@@ -124,7 +125,7 @@ class CampaignBar:
         self._bar.set_description_str('[trials]')
         self._stream = stream
 
-    def update(self, results: Sequence[Dict], running: Sequence[TrialProgress],
+    def update(self, results: Sequence[Dict[str, Any]], running: Sequence[TrialProgress],
                eta: Optional[float], finished: int = 0) -> None:
         # The ETA first, the running trials last (a narrow terminal cuts the end off).
         trials = ', '.join(f'#{p.trial} {p.sim_time:.0f} s' for p in running)

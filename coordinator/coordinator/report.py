@@ -3,7 +3,7 @@ from __future__ import annotations
 
 import math
 from pathlib import Path
-from typing import Dict, List, Sequence, Tuple
+from typing import Any, Dict, List, Sequence, Tuple
 
 import cv2
 import numpy as np
@@ -87,7 +87,7 @@ STATE_COLORS = {
 TIMELINE_LANES = (('belt', 'belt'), ('Zu 12', 'loader'), ('youBot', 'transport'))
 
 
-def activity(trial: Dict) -> Dict[str, List[Tuple[float, float, str]]]:
+def activity(trial: Dict[str, Any]) -> Dict[str, List[Tuple[float, float, str]]]:
     """Per lane of the timeline (the belt, the Zu 12, the youBot): (start, end, state) from a
     trial's state changes and belt events, up to its completion time."""
     end = float(trial['completion_time'])
@@ -103,7 +103,7 @@ def activity(trial: Dict) -> Dict[str, List[Tuple[float, float, str]]]:
     return lanes
 
 
-def timeline(trial: Dict, out: Path) -> None:
+def timeline(trial: Dict[str, Any], out: Path) -> None:
     """Each robot's activity over one run: a lane per robot (and the belt), a bar per state."""
     img = _canvas(f'Activity over trial {trial["trial"]} (seed {trial["scenario_seed"]}, belt '
                   f'{trial["belt_speed"]:.3f} m/s): completed in '
@@ -157,7 +157,7 @@ def scenario(world: str) -> str:
     return f'Scenario: `{world}`: {layout.total} materials, {rules}.'
 
 
-def write_report(trials: List[Dict], out_dir: Path, setup: Dict) -> Path:
+def write_report(trials: List[Dict[str, Any]], out_dir: Path, setup: Dict[str, Any]) -> Path:
     ok = [t for t in trials if t.get('status') not in ('error',)]
     s = summary_rows(ok)
     histogram([t['completion_time'] for t in ok], out_dir / 'completion_times.png',

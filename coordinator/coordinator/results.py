@@ -21,7 +21,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import asdict, dataclass
-from typing import Dict, FrozenSet, List, Optional, Sequence, Tuple
+from typing import Any, Dict, FrozenSet, List, Optional, Sequence, Tuple
 
 import numpy as np
 
@@ -50,7 +50,7 @@ def destinations(layout: CellLayout) -> Destinations:
         {c: layout.destination(c) for c in layout.rules})
 
 
-def regions_from_world(world) -> Destinations:
+def regions_from_world(world: Any) -> Destinations:
     """The destinations of a loaded world's classes."""
     return destinations(layout_from_world(world))
 
@@ -85,7 +85,7 @@ def why_not_there(color: str, position: Vector, regions: Destinations) -> str:
 
 
 def not_at_destination(final_truth: Sequence[TruePose], regions: Destinations,
-                       tracks: Optional[Dict[int, int]] = None) -> List[Dict]:
+                       tracks: Optional[Dict[int, int]] = None) -> List[Dict[str, Any]]:
     """Each material (by its order of appearance, the simulator's id) not at its destination,
     and why; with ``tracks`` (simulator id: the coordinator's material id), the id the
     coordinator's log and the result's ``materials`` know it by (-1 if it never saw it)."""
@@ -98,7 +98,7 @@ def not_at_destination(final_truth: Sequence[TruePose], regions: Destinations,
     return out
 
 
-def tracks_of(details: Sequence[Dict]) -> Dict[int, int]:
+def tracks_of(details: Sequence[Dict[str, Any]]) -> Dict[int, int]:
     """Simulator id: the coordinator's material id, from the identifications' details (each
     made on the material nearest its detection, in the snapshot of its moment)."""
     return {d['truth_id']: d['material'] for d in details
@@ -146,7 +146,7 @@ class IdentificationCheck:
         # Per identification: its stamp [s], colour, the coordinator's material id, the nearest
         # true material's simulator id, colour and distance [m] in the snapshot that decided
         # it (None where there was none).
-        self.details: List[Dict] = []
+        self.details: List[Dict[str, Any]] = []
 
     def truth(self, stamp_ns: int, truth: Sequence[TruePose]) -> None:
         """A ground-truth snapshot, stamped."""
@@ -200,7 +200,7 @@ class IdentificationCheck:
 
 
 def score(result: RunResult, final_truth: Sequence[TruePose], identifications: Sequence[bool],
-          regions: Destinations, tracks: Optional[Dict[int, int]] = None) -> Dict:
+          regions: Destinations, tracks: Optional[Dict[int, int]] = None) -> Dict[str, Any]:
     """The run's figures: counts, the three rates and the completion time, as a dict. The
     materials not at their destination are named by their simulator id, and with ``tracks``
     (tracks_of) by the coordinator's too."""
@@ -265,7 +265,7 @@ def _rate(part: int, whole: int) -> float:
     return part / whole if whole else 0.0
 
 
-def summary_rows(trials: List[Dict]) -> Dict[str, float]:
+def summary_rows(trials: List[Dict[str, Any]]) -> Dict[str, float]:
     """Mean rates and median completion time over trials (for the report)."""
     if not trials:
         return {}

@@ -9,7 +9,7 @@ point (``reaches``).
 from __future__ import annotations
 
 import math
-from typing import Callable, Dict, List, Sequence, Tuple
+from typing import Callable, Dict, List, Sequence, Tuple, cast
 
 import numpy as np
 
@@ -153,4 +153,4 @@ class BeltModel:
     def seen_at(self, d: Detection, now: float) -> np.ndarray:
         """A detection carried to ``now``: in the camera's view the belt carries it freely."""
         travel = self.layout.belt_speed * self.running_time(d.stamp, now)
-        return np.asarray(d.position, float) + np.array([travel, 0.0, 0.0])
+        return cast(np.ndarray, np.asarray(d.position, float) + np.array([travel, 0.0, 0.0]))

@@ -318,7 +318,7 @@ class Pipeline:
         of the pick point, where the Zu 12 lifts materials and carries them to their places: a
         material in the cup is not a new one. A new material is confirmed where it enters the
         view, upstream of the pick point (``_see``)."""
-        return abs(position[1] - self.layout.belt_y) <= self.layout.belt_width / 2
+        return bool(abs(position[1] - self.layout.belt_y) <= self.layout.belt_width / 2)
 
     # --- the end ------------------------------------------------------------------------------
     def _finish(self, now: float, status: str, message: str) -> None:
@@ -347,14 +347,16 @@ class Pipeline:
         self.event(now, EventKind.FINISHED, detail=f'{status}{": " + message if message else ""}')
 
     # --- kinematics through the port ----------------------------------------------------------
-    def solve(self, arm: str, position, orientation, frame: str, seed) -> Optional[np.ndarray]:
+    def solve(self, arm: str, position: Vector, orientation: Vector, frame: str,
+              seed: Vector) -> Optional[np.ndarray]:
         q, why = self.ports.solve(arm, position, orientation, frame, seed)
         if q is None:
             self.event(self.now, EventKind.IK_FAILED, arm,
                        detail=f'{np.round(position, 3).tolist()}: {why}')
         return q
 
-    def solve_path(self, arm: str, positions, seed) -> Optional[List[np.ndarray]]:
+    def solve_path(self, arm: str, positions: Sequence[Vector],
+                   seed: Vector) -> Optional[List[np.ndarray]]:
         """Joint positions for the tool pointing down at each of ``positions`` (world), each
         seeded with the one before; None if any has no solution."""
         qs = []

@@ -5,6 +5,7 @@ import math
 from dataclasses import dataclass, field, replace
 from typing import (
     TYPE_CHECKING,
+    Any,
     Callable,
     List,
     Optional,
@@ -120,7 +121,7 @@ def _polar(v: np.ndarray) -> Tuple[float, float]:
     return math.hypot(v[0], v[1]), math.atan2(v[1], v[0])
 
 
-def _crossing(g, samples: int = 200) -> float:
+def _crossing(g: Callable[[float], float], samples: int = 200) -> float:
     """The first fraction f in [0, 1] where g changes sign (bisected), or the end of [0, 1]
     where |g| is smaller if it does not."""
     fs = np.linspace(0.0, 1.0, samples + 1)
@@ -134,7 +135,7 @@ def _crossing(g, samples: int = 200) -> float:
                     hi = mid
                 else:
                     lo = mid
-            return (lo + hi) / 2
+            return float((lo + hi) / 2)
     return 0.0 if abs(gs[0]) <= abs(gs[-1]) else 1.0
 
 
@@ -340,7 +341,8 @@ class Loader(Machine):
             # (From the plate: round the arc, the cup clear of what rides on the belt.)
             edge = (self._edge(hover, self._above, m.size + EDGE_CLEARANCE_M, arc=True)
                     if self._onto_plate else self._edge(hover, self._above, EDGE_CLEARANCE_M))
-            pick.q_edge = run.solve('zu12', edge, DOWN, 'world', self._above_q)
+            pick.q_edge = run.solve('zu12', edge, DOWN, 'world',
+                                    known(self._above_q, 'the point above the place'))
         # (A first guess: the way to the hover point, at rest there; a plan that cannot make
         # it says by how much.)
         way, wait = self._from_release([Waypoint(q_hover)], pick.q_edge)
@@ -442,7 +444,7 @@ class Loader(Machine):
         except PlanError:
             return [Waypoint(q_lift, min_time=timing.lift)]
 
-    def _solve_along(self, path, lift: np.ndarray, seed: np.ndarray
+    def _solve_along(self, path: Any, lift: np.ndarray, seed: np.ndarray
                      ) -> Optional[List[np.ndarray]]:
         """Joints along a pick's path and at its lift point, on one IK branch: near the Zu 12's
         base its elbow can flip between two samples (a path the planner refuses, "joint 3

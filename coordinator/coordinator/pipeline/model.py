@@ -6,6 +6,7 @@ import math
 from dataclasses import dataclass, field
 from enum import Enum
 from typing import (
+    Any,
     Dict,
     List,
     Optional,
@@ -320,7 +321,7 @@ class RunResult:
     missed: int                        # went off the belt end unpicked
     failed: int
     message: str = ''
-    materials: List[Dict] = field(default_factory=list)
+    materials: List[Dict[str, Any]] = field(default_factory=list)
     # Per arm, as the paper splits its rates: the Zu 12's picks, the youBot's unloads.
     zu12_grasp_attempts: int = 0
     zu12_grasp_successes: int = 0

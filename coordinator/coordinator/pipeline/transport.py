@@ -5,12 +5,14 @@ import math
 from dataclasses import dataclass
 from typing import (
     TYPE_CHECKING,
+    Any,
     Dict,
     List,
     Optional,
     Sequence,
     Set,
     Tuple,
+    cast,
 )
 
 import numpy as np
@@ -206,7 +208,7 @@ class Transport(Machine):
         if goal != 'home' and self.queue:
             self._ready_arm(obs, plan)
 
-    def _follow(self, obs: Observation, target: Pose2D, via: Sequence, goal: str) -> None:
+    def _follow(self, obs: Observation, target: Pose2D, via: Sequence[Any], goal: str) -> None:
         """The base off along a path from where it is through ``via`` to ``target`` (at stand
         or home ``goal``)."""
         run = self.run
@@ -426,7 +428,7 @@ class Transport(Machine):
         """Where ``m``, gripped over its plate slot, is from the tool (x, y in base_link): the
         grip is a few millimetres off the slot's centre, the material with it."""
         tool = _YOUBOT_FK.fk(obs.youbot_q)[:2, 3]
-        return np.asarray(self.run.layout.plate_slots[m.slot], float) - tool
+        return cast(np.ndarray, np.asarray(self.run.layout.plate_slots[m.slot], float) - tool)
 
     def _others(self, m: Material) -> List[Tuple[float, float, float]]:
         """The materials on the plate but ``m``: their slots (x, y) and sizes."""
