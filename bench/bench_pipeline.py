@@ -61,9 +61,9 @@ def trials(count: int, parallel: int, out: Path, domain: int, dt: float = DT) ->
     wall = time.perf_counter() - start
     return {'trials': count, 'parallel': parallel, 'wall_seconds': wall,
             'trials_per_hour': 3600.0 * count / wall,
-            'statuses': [r['status'] for r in results], 'runs': [
-                {k: r.get(k) for k in ('completion_time', 'wall_time', 'cpu_seconds',
-                                       'peak_joint_speed')}
+            'statuses': [r.status for r in results], 'runs': [
+                {'completion_time': r.completion_time, 'wall_time': r.run.wall_time,
+                 'cpu_seconds': r.run.cpu_seconds, 'peak_joint_speed': r.peak_joint_speed}
                 for r in results]}
 
 

@@ -17,11 +17,11 @@ from pathlib import Path
 from typing import IO, Any, Dict, Iterator, List, Optional, Tuple
 
 from coordinator.graph import CONTROL_RATE, TIME_STEP
+from coordinator.trial_result import RESULT_FILE, TrialResult, is_int, is_number, read_result
 from world_description import PIPELINE_CELL
 
 CAMPAIGN_FILE = 'campaign.json'
 LOCK_FILE = '.run_trials.lock'
-RESULT_FILE = 'result.json'
 # The options that define a campaign's plan, and their defaults. A campaign keeps them in
 # its directory (CAMPAIGN_FILE), so that ``--resume DIR`` needs nothing else.
 PLAN_DEFAULTS: Dict[str, Any] = {
@@ -36,14 +36,6 @@ class CampaignError(ValueError):
     """A campaign's file or option that cannot be used; the message is the one line to print."""
 
 
-def _is_int(value: Any) -> bool:
-    return isinstance(value, int) and not isinstance(value, bool)
-
-
-def _is_number(value: Any) -> bool:
-    return isinstance(value, (int, float)) and not isinstance(value, bool)
-
-
 def check_plan(plan: Any, source: str) -> Dict[str, Any]:
     """A plan's options (all of them, or some over the defaults) as the runner takes them;
     raises CampaignError naming ``source`` and the first option that is wrong."""
@@ -56,25 +48,25 @@ def check_plan(plan: Any, source: str) -> Dict[str, Any]:
 
     def bad(key: str, what: str) -> CampaignError:
         return CampaignError(f'{source}: {key} must be {what}, got {plan[key]!r:.60}')
-    if 'trials' in plan and not (_is_int(plan['trials']) and 1 <= plan['trials'] <= MAX_TRIALS):
+    if 'trials' in plan and not (is_int(plan['trials']) and 1 <= plan['trials'] <= MAX_TRIALS):
         raise bad('trials', f'an integer within 1..{MAX_TRIALS}')
-    if 'seed0' in plan and not _is_int(plan['seed0']):
+    if 'seed0' in plan and not is_int(plan['seed0']):
         raise bad('seed0', 'an integer')
-    if 'first_trial' in plan and not (_is_int(plan['first_trial']) and plan['first_trial'] >= 0):
+    if 'first_trial' in plan and not (is_int(plan['first_trial']) and plan['first_trial'] >= 0):
         raise bad('first_trial', 'an integer >= 0')
     seeds = plan.get('seeds')
     if seeds is not None and not (isinstance(seeds, list) and 1 <= len(seeds) <= MAX_TRIALS
-                                  and all(_is_int(s) and 0 <= s <= MAX_SEED for s in seeds)):
+                                  and all(is_int(s) and 0 <= s <= MAX_SEED for s in seeds)):
         raise bad('seeds', f'a list of integers within 0..{MAX_SEED}')
     if 'belt_speed' in plan:
         speeds = plan['belt_speed']
         if not (isinstance(speeds, (list, tuple)) and len(speeds) == 2
-                and all(_is_number(v) and math.isfinite(v) for v in speeds)
+                and all(is_number(v) and math.isfinite(v) for v in speeds)
                 and 0.0 < speeds[0] <= speeds[1] <= MAX_BELT_SPEED):
             raise bad('belt_speed', f'[LO, HI] with 0 < LO <= HI <= {MAX_BELT_SPEED} m/s')
     if 'world' in plan and not (isinstance(plan['world'], str) and plan['world'].strip()):
         raise bad('world', 'the path or package:// address of a world file')
-    if 'time_step' in plan and not (_is_number(plan['time_step'])
+    if 'time_step' in plan and not (is_number(plan['time_step'])
                                     and 1e-4 <= plan['time_step'] <= 1.0 / CONTROL_RATE):
         raise bad('time_step', f'within [0.0001, {1.0 / CONTROL_RATE:.4f}] s (a physics step '
                   'at least once per control tick)')
@@ -110,48 +102,7 @@ def write_campaign(out: Path, plan: Dict[str, Any], code: str) -> None:
     os.replace(scratch, path)
 
 
-# A result's fields that the CSV and the report read, and what each must be.
-_RESULT_NUMBERS = ('belt_speed', 'completion_time', 'wall_time')
-_RESULT_RATES = ('identification_rate', 'grasp_success_rate', 'handling_success_rate')
-
-
-def result_problem(result: Any) -> Optional[str]:
-    """What is wrong with a trial's result record, or None if the runner can use it."""
-    if not isinstance(result, dict):
-        return f'not a trial result (a JSON {type(result).__name__})'
-    if not isinstance(result.get('status'), str) or not result['status']:
-        return 'no status'
-    for key in ('trial', 'scenario_seed'):
-        if key in result and not (_is_int(result[key]) and result[key] >= 0):
-            return f'{key} is {result[key]!r:.40}, not an integer >= 0'
-    for key in _RESULT_NUMBERS:
-        if key in result and not _is_number(result[key]):
-            return f'{key} is {result[key]!r:.40}, not a number'
-    for key in _RESULT_RATES:
-        value = result.get(key)
-        if value is not None and not (_is_number(value) and (
-                math.isnan(value) or 0.0 <= value <= 1.0)):
-            return f'{key} is {value!r:.40}, not a rate within 0..1'
-    return None
-
-
-def read_result(path: Path) -> Tuple[Optional[Dict[str, Any]], Optional[str]]:
-    """A trial's result and None, or None and why it cannot be used (None, None: no file)."""
-    try:
-        text = path.read_text()
-    except FileNotFoundError:
-        return None, None
-    except (OSError, UnicodeDecodeError) as exc:
-        return None, f'cannot be read: {exc}'
-    try:
-        result = json.loads(text)
-    except (ValueError, RecursionError) as exc:
-        return None, f'not JSON: {str(exc)[:80]}'
-    problem = result_problem(result)
-    return (None, problem) if problem else (result, None)
-
-
-def trial_results(out: Path) -> Tuple[List[Dict[str, Any]], List[str]]:
+def trial_results(out: Path) -> Tuple[List[TrialResult], List[str]]:
     """Every usable result in a campaign directory (with its trial number), and a line for
     each one that is not."""
     results, problems = [], []
@@ -162,11 +113,12 @@ def trial_results(out: Path) -> Tuple[List[Dict[str, Any]], List[str]]:
             continue
         if result is None:
             continue
-        try:
-            result.setdefault('trial', int(path.parent.name.split('_')[1]))
-        except (IndexError, ValueError):
-            problems.append(f'{path}: not in a trial_NNN directory')
-            continue
+        if result.trial is None:
+            try:
+                result = result.with_run(trial=int(path.parent.name.split('_')[1]))
+            except (IndexError, ValueError):
+                problems.append(f'{path}: not in a trial_NNN directory')
+                continue
         results.append(result)
     return results, problems
 

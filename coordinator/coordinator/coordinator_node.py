@@ -21,7 +21,6 @@ from __future__ import annotations
 
 import dataclasses
 import functools
-import json
 import math
 import sys
 import threading
@@ -66,12 +65,11 @@ from coordinator.progress import write_progress
 from coordinator.results import (
     IdentificationCheck,
     PeakJointSpeed,
-    at_destination,
+    RunTrace,
+    build_result,
     destinations,
-    score,
-    tracks_of,
-    why_not_there,
 )
+from coordinator.trial_result import TrialResult, code_version
 from ros_common.geometry import yaw_of
 from ros_common.node_main import run_task
 from ros_common.params import Param, declare_params
@@ -169,6 +167,7 @@ class CoordinatorNode(Node):
         self.progress_file = Path(p['progress_file']) if p['progress_file'] else None
         self.seed = int(p['scenario_seed'])
         self.regions = destinations(layout)
+        self._started = time.monotonic()
 
         self._lock = threading.Condition()
         # arm: (stamp [ns], positions, velocities if the message has them)
@@ -403,7 +402,7 @@ class CoordinatorNode(Node):
                 self._identifications.seen(round(d.stamp * 1e9), d.position, d.color, m.id)
 
     # --- the loop -----------------------------------------------------------------------------
-    def run(self) -> Dict:
+    def run(self) -> TrialResult:
         try:
             obs = self._first_observation()
         except NodeTimeout as exc:
@@ -610,58 +609,35 @@ class CoordinatorNode(Node):
                                 and self._markers[-1][0] * 1e-9 >= end, timeout=5.0)
             return self._markers[-1][1] if self._markers else []
 
-    def _report(self) -> Dict:
+    def _report(self) -> TrialResult:
         result = known(self.pipeline.result, 'the result')
         truth = self._final_truth()
         with self._lock:
             identified = self._identifications.finish()
-            details = list(self._identifications.details)
-        tracks = tracks_of(details)
-        out = score(result, truth, identified, self.regions, tracks)
-        # The published state and the exit code say what the ground truth says.
-        result.status, result.message = out['status'], out['message']
-        out['identifications'] = details
-        # Each material of the coordinator's by the simulator's id too (-1: never matched).
-        sim_id = {material: k for k, material in tracks.items()}
-        for m in out['materials']:
-            m['sim_id'] = sim_id.get(m['id'], -1)
-        out['final_materials'] = [
-            {'id': k, 'material': tracks.get(k, -1), 'color': color,
-             'position': [round(float(v), 4) for v in p],
-             'at_destination': at_destination(color, p, self.regions),
-             'why': why_not_there(color, p, self.regions)} for k, (color, p) in enumerate(truth)]
-        with self._lock:
-            out['peak_joint_speed'] = {
-                arm: {'fraction_of_limit': round(p.fraction, 4),
-                      'joint': ARMS[arm][p.joint] if p.joint >= 0 else '',
-                      'time': (round(p.time - self.pipeline.start_time, 4)
-                               if math.isfinite(p.time) else None)}
-                for arm, p in self._peak.items()}
-            if not self.synchronous:
+            trace = RunTrace(
+                seed=self.seed, belt_speed=self.layout.belt_speed,
+                mode='lock-step' if self.synchronous else 'real-time',
+                start=self.pipeline.start_time,
+                identification_details=list(self._identifications.details),
+                peaks=dict(self._peak), joint_names=ARMS, youbot_path=list(self._path),
+                events=list(self.pipeline.events),
                 # How old the odometry was when the drive acted on it [s] (simulated time).
-                out['odometry_age'] = self._drive_lead.summary()
-        # (Its own CPU time: the trial runner measures the other nodes', which run on.)
-        out['cpu_seconds_self'] = round(time.process_time(), 2)
-        out.update({'scenario_seed': self.seed, 'belt_speed': self.layout.belt_speed,
-                    'mode': 'lock-step' if self.synchronous else 'real-time',
-                    'youbot_path': [[round(x, 4), round(y, 4)] for x, y in self._path[::3]],
-                    'events': [[round(e.time - self.pipeline.start_time, 4), str(e.kind), e.robot,
-                                e.material, e.color, e.detail]
-                               for e in self.pipeline.events if e.kind is not EventKind.STATE],
-                    # Each machine's state changes: the report's timeline.
-                    'states': [[round(e.time - self.pipeline.start_time, 4), e.robot, e.detail]
-                               for e in self.pipeline.events if e.kind is EventKind.STATE]})
-        self._publish_state(self.now(), json.dumps(out))
+                odometry_age=None if self.synchronous else self._drive_lead.summary())
+        out = build_result(result, truth, identified, self.regions, trace).with_run(
+            code=code_version(), wall_time=round(time.monotonic() - self._started, 2),
+            # (Its own CPU time: a trial runner measures the other nodes', which run on.)
+            cpu_seconds={'coordinator_node': round(time.process_time(), 2)})
+        # The published state and the exit code say what the ground truth says.
+        result.status, result.message = out.status, out.message
+        self._publish_state(self.now(), out.to_json())
         if self.result_file:
-            path = Path(self.result_file)
-            path.parent.mkdir(parents=True, exist_ok=True)
-            path.write_text(json.dumps(out, indent=1))
+            out.write(Path(self.result_file))
         self.get_logger().info(
-            f'run {result.status} in {result.completion_time:.1f} s (sim): identification '
-            f'{out["identification_rate"]:.0%}, grasp {out["grasp_success_rate"]:.0%} '
-            f'({result.grasp_successes}/{result.grasp_attempts}), handling '
-            f'{out["handling_success_rate"]:.0%} ({out["handled_verified"]}/{result.total})'
-            + (f'; {result.message}' if result.message else ''))
+            f'run {out.status} in {out.completion_time:.1f} s (sim): identification '
+            f'{out.identification_rate:.0%}, grasp {out.grasp_success_rate:.0%} '
+            f'({out.grasp_successes}/{out.grasp_attempts}), handling '
+            f'{out.handling_success_rate:.0%} ({out.handled_verified}/{out.total})'
+            + (f'; {out.message}' if out.message else ''))
         return out
 
     def _publish_state(self, now: float, result_json: str = '') -> None:
@@ -686,7 +662,7 @@ class CoordinatorNode(Node):
 
 
 def _run(node: CoordinatorNode) -> int:
-    return 0 if node.run()['status'] == 'completed' else 1
+    return 0 if node.run().status == 'completed' else 1
 
 
 def _stop_the_robots(node: CoordinatorNode) -> None:

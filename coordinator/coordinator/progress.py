@@ -7,12 +7,15 @@ so that a user never waits minutes in silence.
 from __future__ import annotations
 
 import json
+import math
 import os
 import shutil
 import statistics
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Dict, List, Optional, Sequence
+
+from coordinator.trial_result import TrialResult
 
 # Before any trial has finished, a trial is taken to need this much simulated time [s]
 # (about the median completion of the current schedule, docs/trials/current); afterwards the
@@ -89,18 +92,18 @@ def progress_line(done: int, planned: int, running: List[TrialProgress],
             + f'; ETA {format_duration(eta)}')
 
 
-def running_figures(results: Sequence[Dict[str, Any]], short: bool = False) -> str:
+def running_figures(results: Sequence[TrialResult], short: bool = False) -> str:
     """The campaign's Table-2 figures so far: failures, median completion time, and the
     identification, grasp and handling rates over the finished trials (``short``: for a
     terminal's line)."""
-    scored = [r for r in results if 'identification_rate' in r]
-    failed = sum(1 for r in results if r.get('status') != 'completed')
-    done = [r['completion_time'] for r in results if r.get('status') == 'completed']
+    scored = [r for r in results if math.isfinite(r.identification_rate)]
+    failed = sum(1 for r in results if r.status != 'completed')
+    done = [r.completion_time for r in results if r.status == 'completed']
     parts = [f'{failed} failed' if short else f'{failed} not completed']
     if done:
         parts.append(f'median {statistics.median(done):.1f} s')
     if scored:
-        rates = [100 * statistics.mean(r[k] for r in scored) for k in (
+        rates = [100 * statistics.mean(getattr(r, k) for r in scored) for k in (
             'identification_rate', 'grasp_success_rate', 'handling_success_rate')]
         parts.append(('ident {:.0f}% grasp {:.0f}% handling {:.0f}%' if short else
                       'identification {:.1f} %, grasp {:.1f} %, handling {:.1f} %'
@@ -125,7 +128,7 @@ class CampaignBar:
         self._bar.set_description_str('[trials]')
         self._stream = stream
 
-    def update(self, results: Sequence[Dict[str, Any]], running: Sequence[TrialProgress],
+    def update(self, results: Sequence[TrialResult], running: Sequence[TrialProgress],
                eta: Optional[float], finished: int = 0) -> None:
         # The ETA first, the running trials last (a narrow terminal cuts the end off).
         trials = ', '.join(f'#{p.trial} {p.sim_time:.0f} s' for p in running)

@@ -9,6 +9,7 @@ import cv2
 import numpy as np
 
 from coordinator.results import summary_rows
+from coordinator.trial_result import TrialResult
 from recording.plot import plot_paths
 
 # The paper's Table 2: trials, completion time [s], identification, grasp, handling [%].
@@ -87,29 +88,29 @@ STATE_COLORS = {
 TIMELINE_LANES = (('belt', 'belt'), ('Zu 12', 'loader'), ('youBot', 'transport'))
 
 
-def activity(trial: Dict[str, Any]) -> Dict[str, List[Tuple[float, float, str]]]:
+def activity(trial: TrialResult) -> Dict[str, List[Tuple[float, float, str]]]:
     """Per lane of the timeline (the belt, the Zu 12, the youBot): (start, end, state) from a
     trial's state changes and belt events, up to its completion time."""
-    end = float(trial['completion_time'])
+    end = float(trial.completion_time)
     lanes: Dict[str, List[Tuple[float, float, str]]] = {}
     for label, machine in TIMELINE_LANES[1:]:
-        changes = [(float(t), state) for t, who, state in trial.get('states', ())
+        changes = [(float(t), state) for t, who, state in trial.states
                    if who == machine]
         lanes[label] = [(t0, t1, state) for (t0, state), (t1, _) in
                         zip(changes, changes[1:] + [(end, '')]) if t1 > t0 and state != 'done']
-    belt = [float(e[0]) for e in trial.get('events', ()) if e[1] == 'belt_started']
-    stop = [float(e[0]) for e in trial.get('events', ()) if e[1] == 'belt_stopped']
+    belt = [float(e[0]) for e in trial.events if e[1] == 'belt_started']
+    stop = [float(e[0]) for e in trial.events if e[1] == 'belt_stopped']
     lanes['belt'] = [(t0, min([t for t in stop if t >= t0] + [end]), 'running') for t0 in belt]
     return lanes
 
 
-def timeline(trial: Dict[str, Any], out: Path) -> None:
+def timeline(trial: TrialResult, out: Path) -> None:
     """Each robot's activity over one run: a lane per robot (and the belt), a bar per state."""
-    img = _canvas(f'Activity over trial {trial["trial"]} (seed {trial["scenario_seed"]}, belt '
-                  f'{trial["belt_speed"]:.3f} m/s): completed in '
-                  f'{trial["completion_time"]:.1f} s', (900, 330))
+    img = _canvas(f'Activity over trial {trial.trial} (seed {trial.scenario_seed}, belt '
+                  f'{trial.belt_speed:.3f} m/s): completed in '
+                  f'{trial.completion_time:.1f} s', (900, 330))
     left, top, w, lane_h = 90, 50, 780, 50
-    end = max(1.0, float(trial['completion_time']))
+    end = max(1.0, float(trial.completion_time))
     lanes = activity(trial)
     for i, (label, _) in enumerate(TIMELINE_LANES):
         y0 = top + i * (lane_h + 10)
@@ -157,10 +158,44 @@ def scenario(world: str) -> str:
     return f'Scenario: `{world}`: {layout.total} materials, {rules}.'
 
 
-def write_report(trials: List[Dict[str, Any]], out_dir: Path, setup: Dict[str, Any]) -> Path:
-    ok = [t for t in trials if t.get('status') not in ('error',)]
+def write_report(trials: Sequence[TrialResult], out_dir: Path, setup: Dict[str, Any]) -> Path:
+    """The campaign's report (``report.md``) and its plots, in ``out_dir``. ``setup``: how the
+    trials were run (note, or seed0, belt_speed, parallel, wall_time; world)."""
+    ok = [t for t in trials if t.status != 'error']
     s = summary_rows(ok)
-    histogram([t['completion_time'] for t in ok], out_dir / 'completion_times.png',
+    shown = _plots(ok, s, out_dir)
+    lines = ['# Pipeline trials', '', setup['note'] if 'note' in setup else (
+        f'{len(trials)} trials (lock-step), plan seed {setup.get("seed0")}, belt speed '
+        f'{setup.get("belt_speed")} m/s, {setup.get("parallel")} in parallel, wall time '
+        f'{setup.get("wall_time", 0.0):.0f} s.'), '']
+    if setup.get('world'):
+        lines[-1:-1] = [scenario(str(setup['world'])), '']
+    codes = sorted({t.run.code for t in trials})
+    lines[-1:-1] = [f'Code: {", ".join(codes)}' + (
+        ' (the trials were run by different code)' if len(codes) > 1 else '') + '.']
+    if s:
+        lines += _table(s)
+    bad = [t for t in trials if t.status != 'completed']
+    if bad:
+        lines += ['## Runs that did not complete', '']
+        lines += [f'- trial {t.trial} (seed {t.scenario_seed}, belt {t.belt_speed:.3f}): '
+                  f'{t.status} {t.message}; '
+                  + ', '.join(f'{m["color"]} {m["id"]}: {m["status"]} ({m["failure"]})'
+                              for m in t.materials if m.get('failure'))
+                  for t in bad]
+        lines.append('')
+    lines += _definitions(sorted({t.total for t in trials if t.total}) or [8])
+    if shown:
+        lines += ['The trial of median completion time, each robot\'s activity over it:', '',
+                  '![timeline](timeline.png)', '']
+    path = out_dir / 'report.md'
+    path.write_text('\n'.join(lines))
+    return path
+
+
+def _plots(ok: Sequence[TrialResult], s: Dict[str, float], out_dir: Path) -> bool:
+    """The report's plots; whether it has a timeline."""
+    histogram([t.completion_time for t in ok], out_dir / 'completion_times.png',
               'Completion time per trial (simulated seconds)', 'completion time [s]',
               ('paper best 61 s', 61.0))
     if s:
@@ -168,66 +203,48 @@ def write_report(trials: List[Dict[str, Any]], out_dir: Path, setup: Dict[str, A
               ('grasp', 100 * s['grasp_success_rate'], 99.0),
               ('handling', 100 * s['handling_success_rate'], 100.0)],
              out_dir / 'success_rates.png', 'Success rates [%]')
-    paths = {f'trial {t["trial"]}': np.asarray(t.get('youbot_path') or np.zeros((0, 2)))
-             for t in sorted(ok, key=lambda t: t['trial'])[:5]}
+    paths = {f'trial {t.trial}': np.asarray(t.youbot_path or np.zeros((0, 2)))
+             for t in sorted(ok, key=lambda t: t.trial or 0)[:5]}
     if paths:
         plot_paths(paths, out_dir / 'youbot_paths.png', "The youBot's paths over the cell")
-    shown = sorted((t for t in ok if t.get('states')), key=lambda t: t['completion_time'])
+    shown = sorted((t for t in ok if t.states), key=lambda t: t.completion_time)
     if shown:        # the trial of median completion time
         timeline(shown[len(shown) // 2], out_dir / 'timeline.png')
-    lines = ['# Pipeline trials', '', setup['note'] if 'note' in setup else (
-        f'{len(trials)} trials (lock-step), plan seed {setup.get("seed0")}, belt speed '
-        f'{setup.get("belt_speed")} m/s, {setup.get("parallel")} in parallel, wall time '
-        f'{setup.get("wall_time", 0.0):.0f} s.'), '']
-    if setup.get('world'):
-        lines[-1:-1] = [scenario(str(setup['world'])), '']
-    codes = sorted({str(t.get('code', 'unknown')) for t in trials})
-    lines[-1:-1] = [f'Code: {", ".join(codes)}' + (
-        ' (the trials were run by different code)' if len(codes) > 1 else '') + '.']
-    if s:
-        lines += ['| | trials | completion time (s, median) | identification (%) | grasp (%) | '
-                  'handling (%) |', '|---|---|---|---|---|---|',
-                  f'| **these trials** | {s["trials"]} | {s["median_completion_time"]:.1f} '
-                  f'(p90 {s["p90_completion_time"]:.1f}) | {100 * s["identification_rate"]:.1f}'
-                  f' | {100 * s["grasp_success_rate"]:.1f} | '
-                  f'{100 * s["handling_success_rate"]:.1f} |',
-                  f'| these trials, split as the paper: grasp = the Zu 12\'s, handling = the '
-                  f'youBot\'s transport | | | {100 * s["identification_rate"]:.1f} | '
-                  f'{100 * s["zu12_grasp_rate"]:.1f} (youBot '
-                  f'{100 * s["youbot_grasp_rate"]:.1f}) | {100 * s["transport_rate"]:.1f} |']
-        lines += [f'| paper, trials {r[0]} | | {r[1]} | {r[2]} | {r[3]} | {r[4]} |'
-                  for r in PAPER_TABLE_2]
-        lines += ['', f'Completed runs (every material at its destination): {s["completed"]} of '
-                  f'{s["trials"]}.', '',
-                  f'Peak joint speed in the joint states the simulator published (all trials, '
-                  f'as a fraction of each joint\'s published limit): Zu 12 '
-                  f'{s["peak_joint_speed_zu12"]:.3f}, youBot {s["peak_joint_speed_youbot"]:.3f}.',
-                  '']
-    bad = [t for t in trials if t.get('status') != 'completed']
-    if bad:
-        lines += ['## Runs that did not complete', '']
-        lines += [f'- trial {t["trial"]} (seed {t["scenario_seed"]}, belt '
-                  f'{t["belt_speed"]:.3f}): {t["status"]} {t.get("message", "")}; '
-                  + ', '.join(f'{m["color"]} {m["id"]}: {m["status"]} ({m["failure"]})'
-                              for m in t.get('materials', []) if m.get('failure'))
-                  for t in bad]
-        lines.append('')
-    totals = sorted({int(t['total']) for t in trials if t.get('total')}) or [8]
+    return bool(shown)
+
+
+def _table(s: Dict[str, float]) -> List[str]:
+    """The trials' figures beside the paper's Table 2."""
+    lines = ['| | trials | completion time (s, median) | identification (%) | grasp (%) | '
+             'handling (%) |', '|---|---|---|---|---|---|',
+             f'| **these trials** | {s["trials"]:.0f} | {s["median_completion_time"]:.1f} '
+             f'(p90 {s["p90_completion_time"]:.1f}) | {100 * s["identification_rate"]:.1f}'
+             f' | {100 * s["grasp_success_rate"]:.1f} | '
+             f'{100 * s["handling_success_rate"]:.1f} |',
+             f'| these trials, split as the paper: grasp = the Zu 12\'s, handling = the '
+             f'youBot\'s transport | | | {100 * s["identification_rate"]:.1f} | '
+             f'{100 * s["zu12_grasp_rate"]:.1f} (youBot '
+             f'{100 * s["youbot_grasp_rate"]:.1f}) | {100 * s["transport_rate"]:.1f} |']
+    lines += [f'| paper, trials {r[0]} | | {r[1]} | {r[2]} | {r[3]} | {r[4]} |'
+              for r in PAPER_TABLE_2]
+    return lines + [
+        '', f'Completed runs (every material at its destination): {s["completed"]:.0f} of '
+        f'{s["trials"]:.0f}.', '',
+        f'Peak joint speed in the joint states the simulator published (all trials, as a '
+        f'fraction of each joint\'s published limit): Zu 12 {s["peak_joint_speed_zu12"]:.3f}, '
+        f'youBot {s["peak_joint_speed_youbot"]:.3f}.', '']
+
+
+def _definitions(totals: Sequence[int]) -> List[str]:
     per = '/'.join(map(str, totals))
-    lines += [f'Definitions: identification = materials whose track had their true colour / '
-              f'{per} (the materials of a trial); grasp = successful grasps / attempts (both '
-              'arms); handling = materials resting at their destination at the end (checked '
-              f'against the simulator\'s ground truth) / {per}. Split: the Zu 12\'s grasp = '
-              'its successful picks / pick attempts; the youBot\'s transport = materials '
-              'loaded onto its plate that rest at their destination / materials loaded onto '
-              'its plate; completion time = simulated seconds until both robots are back '
-              'home. The '
-              "paper's last row prints 10 % handling (a typo for 100 %, by the rows before it).",
-              '', '![completion times](completion_times.png) ![success rates](success_rates.png)'
-              ' ![youBot paths](youbot_paths.png)', '']
-    if shown:
-        lines += ['The trial of median completion time, each robot\'s activity over it:', '',
-                  '![timeline](timeline.png)', '']
-    path = out_dir / 'report.md'
-    path.write_text('\n'.join(lines))
-    return path
+    return [f'Definitions: identification = materials whose track had their true colour / '
+            f'{per} (the materials of a trial); grasp = successful grasps / attempts (both '
+            'arms); handling = materials resting at their destination at the end (checked '
+            f'against the simulator\'s ground truth) / {per}. Split: the Zu 12\'s grasp = '
+            'its successful picks / pick attempts; the youBot\'s transport = materials '
+            'loaded onto its plate that rest at their destination / materials loaded onto '
+            'its plate; completion time = simulated seconds until both robots are back '
+            'home. The '
+            "paper's last row prints 10 % handling (a typo for 100 %, by the rows before it).",
+            '', '![completion times](completion_times.png) ![success rates](success_rates.png)'
+            ' ![youBot paths](youbot_paths.png)', '']

@@ -20,14 +20,15 @@ Definitions (docs/pipeline.md repeats them):
 from __future__ import annotations
 
 import math
-from dataclasses import asdict, dataclass
-from typing import Any, Dict, FrozenSet, List, Optional, Sequence, Tuple
+from dataclasses import asdict, dataclass, replace
+from typing import Any, Dict, FrozenSet, List, Mapping, Optional, Sequence, Tuple
 
 import numpy as np
 
 from controllers.arrays import Vector
 from coordinator.layout import CellLayout, layout_from_world
-from coordinator.pipeline import RunResult
+from coordinator.pipeline import Event, EventKind, RunResult
+from coordinator.trial_result import TrialResult
 
 TruePose = Tuple[str, np.ndarray]            # (true colour, centre position)
 
@@ -200,44 +201,87 @@ class IdentificationCheck:
 
 
 def score(result: RunResult, final_truth: Sequence[TruePose], identifications: Sequence[bool],
-          regions: Destinations, tracks: Optional[Dict[int, int]] = None) -> Dict[str, Any]:
-    """The run's figures: counts, the three rates and the completion time, as a dict. The
-    materials not at their destination are named by their simulator id, and with ``tracks``
-    (tracks_of) by the coordinator's too."""
+          regions: Destinations, tracks: Optional[Dict[int, int]] = None) -> TrialResult:
+    """The run's figures: counts, the three rates and the completion time. The materials not at
+    their destination are named by their simulator id, and with ``tracks`` (tracks_of) by the
+    coordinator's too."""
     total = max(result.total, 1)
     handled = sum(1 for color, p in final_truth if at_destination(color, p, regions))
     correct = sum(1 for ok in identifications if ok)
-    out = asdict(result)
     missing = not_at_destination(final_truth, regions, tracks)
-    out['not_at_destination'] = missing
     told = [f'material {m["id"]} ({m["color"]}'
             + (f', the coordinator\'s {m["material"]}' if m['material'] >= 0 else '')
             + f') {m["why"]}' for m in missing]
     if len(final_truth) < result.total:
         told.append(f'{result.total - len(final_truth)} of the {result.total} materials never '
                     'appeared')
+    status, message = result.status, result.message
     if told:
         # (The coordinator may have believed every material delivered: the simulator's ground
         # truth says otherwise, and the run did not complete.)
-        if result.status == 'completed':
-            out['status'] = 'incomplete'
-        out['message'] = '; '.join(([result.message] if result.message else []) + told)
+        if status == 'completed':
+            status = 'incomplete'
+        message = '; '.join(([message] if message else []) + told)
     plate_bound = sum(1 for color, p in final_truth
                       if color in regions.carried and at_destination(color, p, regions))
-    out.update({
+    counts = {k: v for k, v in asdict(result).items() if k not in ('status', 'message')}
+    return TrialResult(
+        status=status, message=message, **counts, not_at_destination=missing,
         # The paper's split: the Zu 12's recognition and grasps, the youBot's transport.
-        'zu12_grasp_rate': _rate(result.zu12_grasp_successes, result.zu12_grasp_attempts),
-        'youbot_grasp_rate': _rate(result.youbot_grasp_successes,
-                                   result.youbot_grasp_attempts),
-        'transport_rate': _rate(min(plate_bound, result.loaded), result.loaded),
-        'identified_correct': correct,
-        'handled_verified': handled,
-        'identification_rate': correct / total,
-        'grasp_success_rate': (result.grasp_successes / result.grasp_attempts
-                               if result.grasp_attempts else 0.0),
-        'handling_success_rate': handled / total,
-    })
-    return out
+        zu12_grasp_rate=_rate(result.zu12_grasp_successes, result.zu12_grasp_attempts),
+        youbot_grasp_rate=_rate(result.youbot_grasp_successes, result.youbot_grasp_attempts),
+        transport_rate=_rate(min(plate_bound, result.loaded), result.loaded),
+        identified_correct=correct, handled_verified=handled,
+        identification_rate=correct / total,
+        grasp_success_rate=_rate(result.grasp_successes, result.grasp_attempts),
+        handling_success_rate=handled / total)
+
+
+@dataclass(frozen=True)
+class RunTrace:
+    """What a run went through, beside its counts: the scenario, the identifications'
+    details, each arm's peak joint speed, the youBot's path, the events and state changes (times
+    in simulated seconds, ``start`` the run's start)."""
+    seed: Optional[int]
+    belt_speed: float
+    mode: str
+    start: float
+    identification_details: Sequence[Dict[str, Any]]
+    peaks: Mapping[str, 'PeakJointSpeed']
+    joint_names: Mapping[str, Sequence[str]]
+    youbot_path: Sequence[Tuple[float, float]]
+    events: Sequence[Event]
+    odometry_age: Optional[Dict[str, float]] = None
+
+
+def build_result(result: RunResult, final_truth: Sequence[TruePose],
+                 identifications: Sequence[bool], regions: Destinations,
+                 trace: RunTrace) -> TrialResult:
+    """A run's result record: its score (``score``), each material by both ids, where every
+    material rests and why it is not at its destination, and what the run went through."""
+    tracks = tracks_of(trace.identification_details)
+    out = score(result, final_truth, identifications, regions, tracks)
+    sim_id = {material: k for k, material in tracks.items()}
+    materials = [{**m, 'sim_id': sim_id.get(m['id'], -1)} for m in out.materials]
+    final = [{'id': k, 'material': tracks.get(k, -1), 'color': color,
+              'position': [round(float(v), 4) for v in p],
+              'at_destination': at_destination(color, p, regions),
+              'why': why_not_there(color, p, regions)} for k, (color, p) in enumerate(final_truth)]
+    start = trace.start
+    peaks = {arm: {'fraction_of_limit': round(p.fraction, 4),
+                   'joint': trace.joint_names[arm][p.joint] if p.joint >= 0 else '',
+                   'time': round(p.time - start, 4) if math.isfinite(p.time) else None}
+             for arm, p in trace.peaks.items()}
+    return replace(
+        out, materials=materials, identifications=list(trace.identification_details),
+        final_materials=final, peak_joint_speed=peaks, odometry_age=trace.odometry_age,
+        scenario_seed=trace.seed, belt_speed=trace.belt_speed, mode=trace.mode,
+        youbot_path=[[round(x, 4), round(y, 4)] for x, y in trace.youbot_path[::3]],
+        events=[[round(e.time - start, 4), str(e.kind), e.robot, e.material, e.color, e.detail]
+                for e in trace.events if e.kind is not EventKind.STATE],
+        # Each machine's state changes: the report's timeline.
+        states=[[round(e.time - start, 4), e.robot, e.detail]
+                for e in trace.events if e.kind is EventKind.STATE])
 
 
 class PeakJointSpeed:
@@ -265,23 +309,22 @@ def _rate(part: int, whole: int) -> float:
     return part / whole if whole else 0.0
 
 
-def summary_rows(trials: List[Dict[str, Any]]) -> Dict[str, float]:
+def summary_rows(trials: Sequence[TrialResult]) -> Dict[str, float]:
     """Mean rates and median completion time over trials (for the report)."""
     if not trials:
         return {}
-    times = [t['completion_time'] for t in trials]
+    times = [t.completion_time for t in trials]
+    rates = {k: float(np.mean([getattr(t, k) for t in trials]))
+             for k in ('identification_rate', 'grasp_success_rate', 'handling_success_rate',
+                       'zu12_grasp_rate', 'youbot_grasp_rate', 'transport_rate')}
     return {
         'trials': len(trials),
-        'completed': sum(1 for t in trials if t['status'] == 'completed'),
+        'completed': sum(1 for t in trials if t.status == 'completed'),
         'median_completion_time': float(np.median(times)),
         'p90_completion_time': float(np.percentile(times, 90)),
-        'identification_rate': float(np.mean([t['identification_rate'] for t in trials])),
-        'grasp_success_rate': float(np.mean([t['grasp_success_rate'] for t in trials])),
-        'handling_success_rate': float(np.mean([t['handling_success_rate'] for t in trials])),
-        **{k: float(np.mean([t.get(k, 0.0) for t in trials]))
-           for k in ('zu12_grasp_rate', 'youbot_grasp_rate', 'transport_rate')},
+        **rates,
         # The largest over all trials: the limits hold only if they hold in every run.
         **{f'peak_joint_speed_{arm}': max(
-            (t.get('peak_joint_speed', {}).get(arm, {}).get('fraction_of_limit', 0.0)
-             for t in trials), default=0.0) for arm in ('zu12', 'youbot')},
+            (t.peak_joint_speed.get(arm, {}).get('fraction_of_limit', 0.0) for t in trials),
+            default=0.0) for arm in ('zu12', 'youbot')},
     }

@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import ctypes
 import fcntl
-import json
 import os
 import signal
 import subprocess
@@ -14,15 +13,23 @@ import tempfile
 import threading
 import time
 from contextlib import contextmanager
+from dataclasses import asdict
 from pathlib import Path
-from typing import Callable, Dict, Iterator, Optional
+from typing import Any, Callable, Dict, Iterator, Optional, Set, TypedDict
 
-from coordinator.campaign import read_result
 from coordinator.graph import TIME_STEP, pipeline_graph
+from coordinator.trial_result import (
+    RESULT_FILE,
+    RunInfo,
+    TrialResult,
+    code_version,
+    read_result,
+)
 from ros_common.dds import with_profile
 from world_description import PIPELINE_CELL
 
 PROGRESS_FILE = 'progress.json'
+OUTCOME_FILE = 'coordinator_result.json'   # the coordinator's record, before the runner's
 RECORDER_READY = 'recorder.ready'     # written by the recorder once it records /clock
 # The highest DDS domain id (Fast DDS's ports for 233 and above exceed 65535 on Linux).
 MAX_DOMAIN = 232
@@ -30,50 +37,31 @@ MAX_DOMAIN = 232
 # Ray workers): one per domain, held while a trial runs.
 DOMAIN_LOCK_DIR = Path(tempfile.gettempdir()) / 'run_trials-domains'
 # Process groups of the trials running now (stopped when the runner is interrupted).
-ACTIVE_GROUPS: set = set()
+ACTIVE_GROUPS: Set[int] = set()
 # Set when the user stops the campaign: a trial stopped then has no result of its own.
 INTERRUPTED = threading.Event()
 
 
-def code_version() -> str:
-    """The code a trial runs: the checkout's commit, with ``-dirty`` when a tracked file outside
-    docs/ and the Markdown files differs from it (results written into docs/ do not count), or
-    'unknown' outside a git checkout. ``--resume`` reuses a result only of the same code."""
-    here = str(Path(__file__).resolve().parent)
-
-    def git(*args: str) -> Optional[str]:
-        try:
-            out = subprocess.run(['git', '-C', here, *args], capture_output=True, text=True,
-                                 timeout=30.0)
-        except (OSError, subprocess.SubprocessError):
-            return None
-        return out.stdout.strip() if out.returncode == 0 else None
-    commit, root = git('rev-parse', '--short=12', 'HEAD'), git('rev-parse', '--show-toplevel')
-    if not commit or not root:
-        return 'unknown'
-    changed = git('-C', root, 'status', '--porcelain', '--untracked-files=no', '--', '.',
-                  ':(exclude)docs', ':(exclude)*.md')
-    return commit + ('-dirty' if changed is None or changed else '')
-
-
 def run_trial(trial: int, seed: int, belt_speed: float, domain_id: int, out_dir: Path,
               wall_timeout: float = 900.0, record: bool = False, code: str = '',
-              world: str = PIPELINE_CELL, time_step: float = TIME_STEP) -> Dict:
-    """One trial as a process group; returns its result (or a failure record)."""
+              world: str = PIPELINE_CELL, time_step: float = TIME_STEP) -> TrialResult:
+    """One trial as a process group; returns its result (or a failure record), written to
+    the trial's ``result.json``."""
     trial_dir = out_dir / f'trial_{trial:03d}'
     trial_dir.mkdir(parents=True, exist_ok=True)
-    result_file = trial_dir / 'result.json'
-    result_file.unlink(missing_ok=True)
-    (trial_dir / PROGRESS_FILE).unlink(missing_ok=True)
+    result_file = trial_dir / RESULT_FILE
+    outcome_file = trial_dir / OUTCOME_FILE
+    for stale in (result_file, outcome_file, trial_dir / PROGRESS_FILE):
+        stale.unlink(missing_ok=True)
     env = with_profile({**os.environ, 'ROS_DOMAIN_ID': str(domain_id),
                         'ROS_AUTOMATIC_DISCOVERY_RANGE': os.environ.get(
                             'ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')})
-    graph = pipeline_graph(seed, belt_speed, world=world, result_file=result_file,
-                           progress_file=result_file.with_name(PROGRESS_FILE),
+    graph = pipeline_graph(seed, belt_speed, world=world, result_file=outcome_file,
+                           progress_file=trial_dir / PROGRESS_FILE,
                            record_dir=trial_dir if record else None, time_step=time_step,
                            recorder_ready=trial_dir / RECORDER_READY)
     commands = {node.name: node.command() for node in graph}
-    procs: Dict[str, subprocess.Popen] = {}
+    procs: Dict[str, 'subprocess.Popen[bytes]'] = {}
     cpu: Dict[str, float] = {}
     group: Optional[int] = None
     start = time.monotonic()
@@ -102,24 +90,38 @@ def run_trial(trial: int, seed: int, belt_speed: float, domain_id: int, out_dir:
     finally:
         _stop_group(group, procs, at_once=INTERRUPTED.is_set())
         ACTIVE_GROUPS.discard(group)
-    wall = time.monotonic() - start
-    result, problem = read_result(result_file)
-    if result is not None:
-        pass
-    elif INTERRUPTED.is_set():     # (stopped by the user: --resume runs it again)
-        result = {'status': 'interrupted', 'completion_time': float('nan'),
-                  'message': 'the campaign was interrupted'}
-    else:
-        exit_code = procs['coordinator_node'].returncode if 'coordinator_node' in procs else None
-        result = {'status': 'error', 'completion_time': float('nan'), 'message':
-                  f'no result (coordinator exit {exit_code}'
-                  + (f'; its result file: {problem}' if problem else '') + f'); see {trial_dir}'}
-    if 'cpu_seconds_self' in result:
-        cpu['coordinator_node'] = result.pop('cpu_seconds_self')
-    result.update({'trial': trial, 'scenario_seed': seed, 'belt_speed': belt_speed,
-                   'wall_time': wall, 'cpu_seconds': cpu, 'code': code or code_version()})
-    result_file.write_text(json.dumps(result, indent=1))
+    run = RunInfo(trial=trial, code=code or code_version(),
+                  wall_time=time.monotonic() - start, cpu_seconds=cpu)
+    coordinator = procs.get('coordinator_node')
+    result = _record(trial_dir, run, seed, belt_speed,
+                     coordinator.returncode if coordinator is not None else None)
+    result.write(result_file)
+    outcome_file.unlink(missing_ok=True)
     return result
+
+
+def _record(trial_dir: Path, run: RunInfo, seed: int, belt_speed: float,
+            exit_code: Optional[int]) -> TrialResult:
+    """The trial's record: the coordinator's, with the run's metadata; or, without one, why."""
+    outcome, problem = read_result(trial_dir / OUTCOME_FILE)
+    if outcome is not None:
+        # (The coordinator measured its own CPU time; the runner the others', still running.)
+        return outcome.with_run(**{**asdict(run), 'cpu_seconds': {
+            **run.cpu_seconds, **outcome.run.cpu_seconds}})
+    if INTERRUPTED.is_set():     # (stopped by the user: --resume runs it again)
+        return TrialResult.failure('interrupted', 'the campaign was interrupted', run.trial,
+                                   seed, belt_speed, run)
+    return TrialResult.failure(
+        'error', f'no result (coordinator exit {exit_code}'
+        + (f'; its result file: {problem}' if problem else '') + f'); see {trial_dir}',
+        run.trial, seed, belt_speed, run)
+
+
+class PlanItem(TypedDict):
+    """A trial of a campaign's plan."""
+    trial: int
+    seed: int
+    belt_speed: float
 
 
 @contextmanager
@@ -143,7 +145,7 @@ def domain_lease(first: int) -> Iterator[int]:
     raise RuntimeError(f'no free DDS domain in {first}-{MAX_DOMAIN} on this machine')
 
 
-def run_leased_trial(item: Dict, out_dir: Path, options: Dict) -> Dict:
+def run_leased_trial(item: PlanItem, out_dir: Path, options: Dict[str, Any]) -> TrialResult:
     """``run_trial`` for a plan item on a DDS domain of its own (``options``: domain_base,
     wall_timeout, record, code, world, time_step)."""
     opts = dict(options)
@@ -191,7 +193,7 @@ def _cpu_seconds(pid: int) -> float:
         return float('nan')
 
 
-def _stop_group(group: Optional[int], procs: Dict[str, subprocess.Popen],
+def _stop_group(group: Optional[int], procs: Dict[str, 'subprocess.Popen[bytes]'],
                 at_once: bool = False) -> None:
     """Stop a trial's processes: SIGINT, and SIGKILL for those still running 10 s later (or
     at once: the campaign was stopped)."""

@@ -17,19 +17,17 @@ import shlex
 import signal
 import sys
 import time
-from concurrent.futures import FIRST_COMPLETED, ThreadPoolExecutor, wait
+from concurrent.futures import FIRST_COMPLETED, Future, ThreadPoolExecutor, wait
 from pathlib import Path
-from typing import Dict, List, Mapping, NoReturn, Optional, Protocol, Sequence, Tuple
+from typing import Any, Dict, List, Mapping, NoReturn, Optional, Protocol, Sequence, Tuple
 
 from coordinator.campaign import (
     CAMPAIGN_FILE,
     PLAN_DEFAULTS,
-    RESULT_FILE,
     CampaignError,
     campaign_lock,
     check_plan,
     read_campaign,
-    read_result,
     trial_results,
     write_campaign,
 )
@@ -42,21 +40,24 @@ from coordinator.progress import (
     read_progress,
     running_figures,
 )
+from coordinator.trial_result import (
+    CSV_FIELDS,
+    RESULT_FILE,
+    TrialResult,
+    code_version,
+    read_result,
+)
 from coordinator.trial_run import (
     INTERRUPTED,
     MAX_DOMAIN,
     PROGRESS_FILE,
-    code_version,
+    PlanItem,
     run_leased_trial,
     stop_all,
 )
 from world_description import PIPELINE_CELL
 
 PROGRESS_PERIOD_S = 10.0     # wall seconds between two progress lines
-CSV_FIELDS = ('trial', 'scenario_seed', 'belt_speed', 'status', 'completion_time',
-              'identification_rate', 'grasp_success_rate', 'handling_success_rate', 'identified',
-              'identified_correct', 'picked', 'delivered', 'handled_verified', 'grasp_attempts',
-              'grasp_successes', 'missed', 'failed', 'wall_time', 'message')
 
 
 class Pool(Protocol):
@@ -75,12 +76,12 @@ class Pool(Protocol):
 
     def busy(self) -> bool: ...
 
-    def submit(self, item: Dict) -> None: ...
+    def submit(self, item: PlanItem) -> None: ...
 
-    def wait(self, timeout: float) -> Optional[Dict]:
+    def wait(self, timeout: float) -> Optional[TrialResult]:
         """The next finished trial's result, or None after ``timeout`` seconds."""
 
-    def progress(self) -> Mapping[int, Optional[Dict]]:
+    def progress(self) -> Mapping[int, Optional[Dict[str, Any]]]:
         """The running trials' progress, by trial."""
 
     def stop(self) -> None:
@@ -88,17 +89,17 @@ class Pool(Protocol):
 
     def close(self) -> None: ...
 
-    def drain(self) -> List[Dict]:
+    def drain(self) -> List[TrialResult]:
         """After ``close``: the results of the trials that were running, now ended."""
 
 
 class LocalPool:
     """Trials as process groups on this machine, ``parallel`` at a time."""
 
-    def __init__(self, parallel: int, out: Path, options: Dict) -> None:
+    def __init__(self, parallel: int, out: Path, options: Dict[str, Any]) -> None:
         self.capacity, self._out, self._options = parallel, out, options
         self._pool = ThreadPoolExecutor(parallel)
-        self._futures: Dict = {}
+        self._futures: Dict['Future[TrialResult]', PlanItem] = {}
         self.running: Dict[int, float] = {}          # trial -> when it started (monotonic)
 
     def describe(self) -> str:
@@ -110,12 +111,12 @@ class LocalPool:
     def busy(self) -> bool:
         return bool(self._futures)
 
-    def submit(self, item: Dict) -> None:
+    def submit(self, item: PlanItem) -> None:
         self.running[item['trial']] = time.monotonic()
         self._futures[self._pool.submit(run_leased_trial, item, self._out,
                                         self._options)] = item
 
-    def wait(self, timeout: float) -> Optional[Dict]:
+    def wait(self, timeout: float) -> Optional[TrialResult]:
         """The next finished trial's result, or None after ``timeout`` seconds."""
         finished, _ = wait(self._futures, timeout=timeout, return_when=FIRST_COMPLETED)
         if not finished:
@@ -125,7 +126,7 @@ class LocalPool:
         self.running.pop(item['trial'], None)
         return done.result()
 
-    def progress(self) -> Dict[int, Optional[Dict]]:
+    def progress(self) -> Dict[int, Optional[Dict[str, Any]]]:
         """The running trials' progress files, by trial (None: none yet)."""
         return {trial: read_progress(self._out / f'trial_{trial:03d}' / PROGRESS_FILE)
                 for trial in self.running}
@@ -137,7 +138,7 @@ class LocalPool:
     def close(self) -> None:
         self._pool.shutdown(wait=True)
 
-    def drain(self) -> List[Dict]:
+    def drain(self) -> List[TrialResult]:
         """After ``close``: the results of the trials that were running, now ended."""
         out = []
         for future in list(self._futures):
@@ -147,7 +148,7 @@ class LocalPool:
         return out
 
 
-def _progress(pool: Pool, results: List[Dict], pending: int
+def _progress(pool: Pool, results: List[TrialResult], pending: int
               ) -> Tuple[List[TrialProgress], Optional[float]]:
     """Every running trial's simulated time and deliveries, and the campaign's ETA."""
     now, states = time.monotonic(), []
@@ -157,31 +158,32 @@ def _progress(pool: Pool, results: List[Dict], pending: int
         states.append(TrialProgress(trial, float(p.get('sim_time', 0.0)),
                                     int(p.get('delivered', 0)), int(p.get('total', 0)),
                                     now - since, p.get('loader', '-'), p.get('transport', '-')))
-    ok = [r for r in results if r['status'] == 'completed']
-    eta = eta_seconds(states, [r['wall_time'] for r in results],
-                      [r['completion_time'] for r in ok], pending, pool.capacity)
+    ok = [r for r in results if r.status == 'completed']
+    eta = eta_seconds(states, [r.run.wall_time for r in results],
+                      [r.completion_time for r in ok], pending, pool.capacity)
     return states, eta
 
 
-def trial_plan(count: int, first: int, seed0: int, belt_range: Sequence[float]) -> List[Dict]:
+def trial_plan(count: int, first: int, seed0: int, belt_range: Sequence[float]
+               ) -> List[PlanItem]:
     rng = random.Random(seed0)
-    plan = []
+    plan: List[PlanItem] = []
     for k in range(first + count):
         seed = rng.randrange(1, 2 ** 31 - 1)
         speed = round(rng.uniform(*belt_range), 4)
         if k >= first:
-            plan.append({'trial': k, 'seed': seed, 'belt_speed': speed})
+            plan.append(PlanItem(trial=k, seed=seed, belt_speed=speed))
     return plan
 
 
-def write_csv(trials: List[Dict], path: Path) -> None:
+def write_csv(trials: Sequence[TrialResult], path: Path) -> None:
     """The trials' rows, written whole or not at all (a signal mid-write leaves the last)."""
     scratch = path.with_name(path.name + '.new')
     with open(scratch, 'w', newline='') as f:
-        writer = csv.DictWriter(f, CSV_FIELDS, extrasaction='ignore')
+        writer = csv.DictWriter(f, CSV_FIELDS)
         writer.writeheader()
-        for t in sorted(trials, key=lambda t: t['trial']):
-            writer.writerow({k: t.get(k, '') for k in CSV_FIELDS})
+        for t in sorted(trials, key=lambda t: t.trial or 0):
+            writer.writerow(t.to_row())
     os.replace(scratch, path)
 
 
@@ -197,7 +199,7 @@ def _rebuild(out: Path) -> int:
         return 1
     write_csv(results, out / 'trials.csv')
     from coordinator.report import write_report
-    speeds = [r['belt_speed'] for r in results if 'belt_speed' in r]
+    speeds = [r.belt_speed for r in results if math.isfinite(r.belt_speed)]
     note = (f'{len(results)} trials (lock-step), rebuilt from their results; belt speeds '
             f'{min(speeds):.3f}-{max(speeds):.3f} m/s; seeds and wall times in trials.csv.'
             if speeds else f'{len(results)} trials, rebuilt from their results.')
@@ -211,7 +213,7 @@ def _rebuild(out: Path) -> int:
     return 0
 
 
-def _finished(out: Path, item: Dict, code: str) -> Optional[Dict]:
+def _finished(out: Path, item: PlanItem, code: str) -> Optional[TrialResult]:
     """The result of a planned trial already in ``out`` (same seed and belt speed, made by the
     same code), if any; a result file that cannot be used is said so, and the trial runs
     again."""
@@ -221,14 +223,13 @@ def _finished(out: Path, item: Dict, code: str) -> Optional[Dict]:
         print(f'[trials] {path}: {problem}; trial {item["trial"]} runs again', flush=True)
     if r is None:
         return None
-    if (r.get('scenario_seed') != item['seed'] or r.get('belt_speed') != item['belt_speed']
-            or r.get('status') == 'interrupted' or r.get('code') != code):
+    if (r.scenario_seed != item['seed'] or r.belt_speed != item['belt_speed']
+            or r.status == 'interrupted' or r.run.code != code):
         return None
-    r.setdefault('trial', item['trial'])
-    return r
+    return r if r.trial is not None else r.with_run(trial=item['trial'])
 
 
-def _terminated(signum, frame) -> None:
+def _terminated(signum: int, frame: Any) -> None:
     raise KeyboardInterrupt   # SIGTERM stops the running trials as Ctrl-C does
 
 
@@ -243,17 +244,17 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
         return 130
 
 
-def _given_plan(args: argparse.Namespace) -> Dict:
+def _given_plan(args: argparse.Namespace) -> Dict[str, Any]:
     """The plan's options given on the command line, checked (CampaignError)."""
     return check_plan({k: (list(v) if isinstance(v, (tuple, list)) else v)
                        for k in PLAN_DEFAULTS if (v := getattr(args, k)) is not None},
                       'the command line')
 
 
-def _plan_options(args: argparse.Namespace, given: Dict) -> Dict:
+def _plan_options(args: argparse.Namespace, given: Dict[str, Any]) -> Dict[str, Any]:
     """The plan: as given, else as the campaign being resumed had it, else the defaults; every
     option checked (CampaignError)."""
-    stored: Dict = {}
+    stored: Dict[str, Any] = {}
     if args.resume is not None:
         stored = read_campaign(args.out) or {}
         if not stored:
@@ -293,7 +294,7 @@ class _Parser(argparse.ArgumentParser):
         self.exit(2, f'{self.prog}: error: {message} (run_trials --help lists the options)\n')
 
 
-def _main(argv: Optional[Sequence[str]]) -> int:
+def _parser() -> '_Parser':
     parser = _Parser(prog='run_trials', description=__doc__.splitlines()[0])
     parser.add_argument('--trials', type=int, default=None, help='trials in the plan (10)')
     parser.add_argument('--parallel', type=int, default=None,
@@ -344,19 +345,14 @@ def _main(argv: Optional[Sequence[str]]) -> int:
                              'plan: skip the trials whose result is there (same seed and belt '
                              'speed, and made by the same code: the same commit, with no '
                              'uncommitted changes)')
+    return parser
+
+
+def _main(argv: Optional[Sequence[str]]) -> int:
+    parser = _parser()
     args = parser.parse_args(argv)
     _check_arguments(args, parser)
-    if args.resume:
-        if args.out is not None and args.out != Path(args.resume):
-            parser.error(f'--resume {args.resume} and --out {args.out} name two directories')
-        args.out = Path(args.resume)
-    if args.out is None:
-        if args.resume is not None or args.report_only:
-            parser.error('name the campaign directory: --resume DIR, or --out DIR')
-        args.out = Path('runs') / time.strftime('trials-%Y%m%d-%H%M%S')
-    if (args.resume is not None or args.report_only) and not args.out.is_dir():
-        parser.error(f'{args.out} is not a campaign directory (nothing to '
-                     f'{"resume" if args.resume is not None else "report"})')
+    _campaign_directory(args, parser)
     try:
         given = _given_plan(args)
         if args.show_graph:
@@ -374,6 +370,21 @@ def _main(argv: Optional[Sequence[str]]) -> int:
     except CampaignError as exc:
         print(f'run_trials: error: {exc}', file=sys.stderr, flush=True)
         return 2
+
+
+def _campaign_directory(args: argparse.Namespace, parser: argparse.ArgumentParser) -> None:
+    """``args.out``: the directory named by --resume or --out, or a new one under runs/."""
+    if args.resume:
+        if args.out is not None and args.out != Path(args.resume):
+            parser.error(f'--resume {args.resume} and --out {args.out} name two directories')
+        args.out = Path(args.resume)
+    if args.out is None:
+        if args.resume is not None or args.report_only:
+            parser.error('name the campaign directory: --resume DIR, or --out DIR')
+        args.out = Path('runs') / time.strftime('trials-%Y%m%d-%H%M%S')
+    if (args.resume is not None or args.report_only) and not args.out.is_dir():
+        parser.error(f'{args.out} is not a campaign directory (nothing to '
+                     f'{"resume" if args.resume is not None else "report"})')
 
 
 def _check_arguments(args: argparse.Namespace, parser: argparse.ArgumentParser) -> None:
@@ -397,7 +408,7 @@ def _check_arguments(args: argparse.Namespace, parser: argparse.ArgumentParser) 
         parser.error('--cpus-per-trial must be > 0')
 
 
-def _plan(opts: Dict) -> List[Dict]:
+def _plan(opts: Dict[str, Any]) -> List[PlanItem]:
     lo, hi = opts['belt_speed']
     plan = trial_plan(opts['trials'], opts['first_trial'], opts['seed0'], (lo, hi))
     if opts['seeds'] is not None:
@@ -406,7 +417,7 @@ def _plan(opts: Dict) -> List[Dict]:
     return plan
 
 
-def _show_graph(opts: Dict) -> int:
+def _show_graph(opts: Dict[str, Any]) -> int:
     check_world(opts['world'])
     first = _plan(opts)[0]
     print(f"# trial {first['trial']}: seed {first['seed']}, belt {first['belt_speed']} m/s")
@@ -416,7 +427,7 @@ def _show_graph(opts: Dict) -> int:
     return 0
 
 
-def _pool(args: argparse.Namespace, trial_options: Dict) -> Optional[Pool]:
+def _pool(args: argparse.Namespace, trial_options: Dict[str, Any]) -> Optional[Pool]:
     """The pool the campaign's trials run in: local processes, or a Ray cluster (None, and
     why on stderr, if it cannot be used)."""
     if args.ray is None:
@@ -431,28 +442,28 @@ def _pool(args: argparse.Namespace, trial_options: Dict) -> Optional[Pool]:
         return None
 
 
-def _finished_line(r: Dict, done: int, total: int, elapsed: float) -> str:
+def _finished_line(r: TrialResult, done: int, total: int, elapsed: float) -> str:
     """The line that says a trial finished."""
-    where = f' on {r["node"]}' if 'node' in r else ''
-    return (f'[trials] {done}/{total} trial {r["trial"]} seed {r["scenario_seed"]} belt '
-            f'{r["belt_speed"]:.3f}: {r["status"]}, '
-            f'{r.get("completion_time", float("nan")):.1f} s sim, '
-            f'handling {r.get("handling_success_rate", 0.0):.0%}, wall '
-            f'{r["wall_time"]:.0f} s{where} (elapsed {elapsed:.0f} s)')
+    where = f' on {r.run.node}' if r.run.node else ''
+    handling = (f'{r.handling_success_rate:.0%}' if math.isfinite(r.handling_success_rate)
+                else '-')
+    return (f'[trials] {done}/{total} trial {r.trial} seed {r.scenario_seed} belt '
+            f'{r.belt_speed:.3f}: {r.status}, {r.completion_time:.1f} s sim, '
+            f'handling {handling}, wall {r.run.wall_time:.0f} s{where} (elapsed {elapsed:.0f} s)')
 
 
-def _campaign(args: argparse.Namespace, given: Dict) -> int:
+def _campaign(args: argparse.Namespace, given: Dict[str, Any]) -> int:
     """Run the plan into ``args.out`` (held by this runner)."""
     opts = _plan_options(args, given)
     if args.resume is not None:
         check_world(opts['world'])
     lo, hi = opts['belt_speed']
     plan = _plan(opts)
-    results: List[Dict] = []
+    results: List[TrialResult] = []
     code = code_version()
     if args.resume is not None:
         done = [r for r in (_finished(args.out, item, code) for item in plan) if r is not None]
-        plan = [item for item in plan if item['trial'] not in {r['trial'] for r in done}]
+        plan = [item for item in plan if item['trial'] not in {r.trial for r in done}]
         results.extend(done)
         print(f'[trials] resuming: {len(done)} trials of the plan already in {args.out} '
               f'made by this code ({code})', flush=True)
@@ -465,13 +476,35 @@ def _campaign(args: argparse.Namespace, given: Dict) -> int:
         return 2
     print(f'[trials] {len(plan)} trials, {pool.describe()}, into {args.out}', flush=True)
     total = len(plan) + len(results)
+    started = time.monotonic()
+    interrupted = _run_plan(pool, list(plan), results, total, args)
+    write_csv(results, args.out / 'trials.csv')
+    from coordinator.report import write_report
+    setup = {'seed0': opts['seed0'], 'belt_speed': (lo, hi), 'parallel': pool.capacity,
+             'wall_time': time.monotonic() - started, 'code': code, 'world': opts['world']}
+    if interrupted:
+        setup['note'] = (f'Interrupted: {len(results)} of the {total} trials of the plan '
+                         f'finished (plan seed {opts["seed0"]}, belt {lo}-{hi} m/s); '
+                         f'`run_trials --resume {args.out}` runs the others.')
+    report = write_report(results, args.out, setup) if results else None
+    print(f'[trials] CSV {args.out / "trials.csv"}, report {report}', flush=True)
+    if interrupted:
+        print(f'[trials] interrupted: running trials stopped; {len(results)} finished, in the '
+              f'CSV and report; run_trials --resume {args.out} goes on', flush=True)
+        return 130
+    return 0 if all(r.status == 'completed' for r in results) else 1
+
+
+def _run_plan(pool: Pool, pending: List[PlanItem], results: List[TrialResult], total: int,
+              args: argparse.Namespace) -> bool:
+    """Run the pending trials on the pool, each result added to ``results`` (and the CSV) as it
+    comes in; whether the user stopped the campaign."""
     # On a terminal a live bar; in a log, a line now and then.
     bar = (CampaignBar(total, len(results), sys.stderr)
            if args.bar == 'on' or args.bar == 'auto' and sys.stderr.isatty() else None)
     say = bar.write if bar is not None else (lambda line: print(line, flush=True))
     started = time.monotonic()
     interrupted = False
-    pending = list(plan)
     try:
         while pending and pool.has_room():
             pool.submit(pending.pop(0))
@@ -504,22 +537,8 @@ def _campaign(args: argparse.Namespace, given: Dict) -> int:
     if interrupted:
         # (Trials that ended while the campaign stopped: their results are in their
         # directories, and so in the CSV.)
-        results.extend(r for r in pool.drain() if r.get('status') != 'interrupted')
-    write_csv(results, args.out / 'trials.csv')
-    from coordinator.report import write_report
-    setup = {'seed0': opts['seed0'], 'belt_speed': (lo, hi), 'parallel': pool.capacity,
-             'wall_time': time.monotonic() - started, 'code': code, 'world': opts['world']}
-    if interrupted:
-        setup['note'] = (f'Interrupted: {len(results)} of the {total} trials of the plan '
-                         f'finished (plan seed {opts["seed0"]}, belt {lo}-{hi} m/s); '
-                         f'`run_trials --resume {args.out}` runs the others.')
-    report = write_report(results, args.out, setup) if results else None
-    print(f'[trials] CSV {args.out / "trials.csv"}, report {report}', flush=True)
-    if interrupted:
-        print(f'[trials] interrupted: running trials stopped; {len(results)} finished, in the '
-              f'CSV and report; run_trials --resume {args.out} goes on', flush=True)
-        return 130
-    return 0 if all(r['status'] == 'completed' for r in results) else 1
+        results.extend(r for r in pool.drain() if r.status != 'interrupted')
+    return interrupted
 
 
 if __name__ == '__main__':

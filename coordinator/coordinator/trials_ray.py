@@ -16,7 +16,6 @@ This module is imported only with ``--ray``.
 """
 from __future__ import annotations
 
-import json
 import logging
 import os
 import shutil
@@ -31,7 +30,8 @@ from typing import Any, Dict, List, Optional, Tuple
 import ray
 
 from coordinator.progress import read_progress
-from coordinator.trial_run import PROGRESS_FILE, code_version, run_leased_trial
+from coordinator.trial_result import RESULT_FILE, RunInfo, TrialResult, code_version
+from coordinator.trial_run import PROGRESS_FILE, PlanItem, run_leased_trial
 
 # Where a worker keeps its trials' directories: <tmp>/run_trials/<campaign>/trial_NNN.
 WORKER_ROOT = 'run_trials'
@@ -46,15 +46,15 @@ class ProgressBoard:
     progress files on the workers)."""
 
     def __init__(self) -> None:
-        self._reports: Dict[int, Dict] = {}
+        self._reports: Dict[int, Dict[str, Any]] = {}
 
-    def report(self, trial: int, progress: Optional[Dict]) -> None:
+    def report(self, trial: int, progress: Optional[Dict[str, Any]]) -> None:
         if progress is None:
             self._reports.pop(trial, None)
         else:
             self._reports[trial] = progress
 
-    def snapshot(self) -> Dict[int, Dict]:
+    def snapshot(self) -> Dict[int, Dict[str, Any]]:
         return dict(self._reports)
 
 
@@ -62,7 +62,7 @@ class ProgressBoard:
 RemoteProgressBoard = ray.remote(num_cpus=0)(ProgressBoard)
 
 
-def _report_progress(board, trial: int, path: Path, done: threading.Event) -> None:
+def _report_progress(board: Any, trial: int, path: Path, done: threading.Event) -> None:
     """Send the trial's progress file to the board every PROGRESS_PERIOD_S until ``done``."""
     while not done.wait(PROGRESS_PERIOD_S):
         progress = read_progress(path)
@@ -71,21 +71,24 @@ def _report_progress(board, trial: int, path: Path, done: threading.Event) -> No
     board.report.remote(trial, None)
 
 
-def run_trial_task(item: Dict, campaign: str, options: Dict, collect_bags: bool, board=None
-                   ) -> Tuple[Dict, Dict[str, bytes]]:
+def _failure(item: PlanItem, message: str, host: str = '') -> TrialResult:
+    """The record of a planned trial that did not run."""
+    return TrialResult.failure('error', message, item['trial'], item['seed'],
+                               item['belt_speed'], RunInfo(wall_time=0.0, node=host))
+
+
+def run_trial_task(item: PlanItem, campaign: str, options: Dict[str, Any], collect_bags: bool,
+                   board: Any = None) -> Tuple[TrialResult, Dict[str, bytes]]:
     """One trial on this node (a Ray task): its result, with where it ran, and its files by
-    path within the trial's directory."""
+    path within the trial's directory (but its result, which the driver writes)."""
     host = socket.gethostname()
-    failure = {'trial': item['trial'], 'scenario_seed': item['seed'],
-               'belt_speed': item['belt_speed'], 'status': 'error',
-               'completion_time': float('nan'), 'wall_time': 0.0, 'node': host}
     if shutil.which('sim_node') is None:
-        return {**failure, 'message': f'sim_node is not on PATH on {host}: start Ray there from '
-                'a shell that sourced scripts/env.sh'}, {}
+        return _failure(item, f'sim_node is not on PATH on {host}: start Ray there from a '
+                        'shell that sourced scripts/env.sh', host), {}
     code = code_version()
     if code != options['code']:
-        return {**failure, 'message': f'{host} runs code {code}, the driver {options["code"]}: '
-                'check out and build the same commit on every node'}, {}
+        return _failure(item, f'{host} runs code {code}, the driver {options["code"]}: check '
+                        'out and build the same commit on every node', host), {}
     work = Path(tempfile.gettempdir()) / WORKER_ROOT / campaign
     trial_dir = work / f'trial_{item["trial"]:03d}'
     done = threading.Event()
@@ -99,12 +102,13 @@ def run_trial_task(item: Dict, campaign: str, options: Dict, collect_bags: bool,
     files = {}
     for path in sorted(trial_dir.rglob('*')):
         relative = path.relative_to(trial_dir)
-        if path.is_file() and (collect_bags or relative.parts[0] != 'bag'):
+        if (path.is_file() and (collect_bags or relative.parts[0] != 'bag')
+                and str(relative) != RESULT_FILE):
             files[str(relative)] = path.read_bytes()
-    result.update(node=host, ray_node=ray.get_runtime_context().get_node_id(),
-                  niceness=os.nice(0))
+    result = result.with_run(node=host, ray_node=ray.get_runtime_context().get_node_id(),
+                             niceness=os.nice(0))
     if options['record'] and not collect_bags:
-        result['bag'] = f'{host}:{trial_dir / "bag"}'
+        result = result.with_run(bag=f'{host}:{trial_dir / "bag"}')
     else:
         shutil.rmtree(trial_dir, ignore_errors=True)
     return result, files
@@ -113,7 +117,7 @@ def run_trial_task(item: Dict, campaign: str, options: Dict, collect_bags: bool,
 class RayPool:
     """Trials as tasks on a Ray cluster, as many at a time as its CPUs allow (or ``limit``)."""
 
-    def __init__(self, address: Optional[str], out: Path, options: Dict,
+    def __init__(self, address: Optional[str], out: Path, options: Dict[str, Any],
                  cpus_per_trial: Optional[float] = None, collect_bags: bool = False,
                  limit: Optional[int] = None) -> None:
         on_term = signal.getsignal(signal.SIGTERM)
@@ -133,7 +137,7 @@ class RayPool:
         self._final_capacity: Optional[int] = None     # once disconnected
         # (An actor handle: Ray's type information does not cover its methods' .remote.)
         self._board: Any = RemoteProgressBoard.remote()
-        self._refs: Dict = {}                          # ObjectRef -> plan item
+        self._refs: Dict[Any, PlanItem] = {}             # ObjectRef -> plan item
         self.running: Dict[int, float] = {}            # trial -> when it was submitted
 
     @property
@@ -141,11 +145,12 @@ class RayPool:
         """Trials the cluster runs at once now (its CPUs, which may grow or shrink)."""
         if self._final_capacity is not None:
             return self._final_capacity
-        slots = int(ray.cluster_resources().get('CPU', 0.0) // self._cpus)
+        slots = int(ray.cluster_resources().get('CPU', 0.0)  # type: ignore[no-untyped-call]
+                    // self._cpus)
         return max(1, min(slots, self._limit) if self._limit else slots)
 
     def describe(self) -> str:
-        nodes = [n for n in ray.nodes() if n.get('Alive')]
+        nodes = [n for n in ray.nodes() if n.get('Alive')]  # type: ignore[no-untyped-call]
         return (f'on a Ray cluster of {len(nodes)} node(s), {self.capacity} at a time '
                 f'({self._cpus:g} CPU per trial)')
 
@@ -155,13 +160,13 @@ class RayPool:
     def busy(self) -> bool:
         return bool(self._refs)
 
-    def submit(self, item: Dict) -> None:
+    def submit(self, item: PlanItem) -> None:
         self.running[item['trial']] = time.monotonic()
         ref = self._task.remote(item, self._campaign, self._options, self._collect,
                                 self._board)
         self._refs[ref] = item
 
-    def wait(self, timeout: float) -> Optional[Dict]:
+    def wait(self, timeout: float) -> Optional[TrialResult]:
         """The next finished trial's result (its files written into the campaign directory),
         or None after ``timeout`` seconds."""
         ready, _ = ray.wait(list(self._refs), num_returns=1, timeout=timeout)
@@ -169,36 +174,37 @@ class RayPool:
             return None
         item = self._refs.pop(ready[0])
         self.running.pop(item['trial'], None)
+        result: TrialResult
+        files: Dict[str, bytes]
         try:
             result, files = ray.get(ready[0])
         except ray.exceptions.RayError as exc:        # the task or its node failed
-            result, files = {'trial': item['trial'], 'scenario_seed': item['seed'],
-                             'belt_speed': item['belt_speed'], 'status': 'error',
-                             'completion_time': float('nan'), 'wall_time': 0.0,
-                             'message': f'the Ray task failed: {exc}'.splitlines()[0]}, {}
+            result, files = _failure(item, f'the Ray task failed: {exc}'.splitlines()[0]), {}
         self._write(item['trial'], result, files)
         return result
 
-    def _write(self, trial: int, result: Dict, files: Dict[str, bytes]) -> None:
+    def _write(self, trial: int, result: TrialResult, files: Dict[str, bytes]) -> None:
         trial_dir = self._out / f'trial_{trial:03d}'
         trial_dir.mkdir(parents=True, exist_ok=True)
         for name, data in files.items():
             path = trial_dir / name
             path.parent.mkdir(parents=True, exist_ok=True)
             path.write_bytes(data)
-        (trial_dir / 'result.json').write_text(json.dumps(result, indent=1))
+        result.write(trial_dir / RESULT_FILE)
 
-    def progress(self) -> Dict[int, Dict]:
+    def progress(self) -> Dict[int, Dict[str, Any]]:
         """The running trials' progress, as their tasks last reported it."""
         try:
-            return ray.get(self._board.snapshot.remote(), timeout=5.0)
+            snapshot: Dict[int, Dict[str, Any]] = ray.get(self._board.snapshot.remote(),
+                                                          timeout=5.0)
+            return snapshot
         except ray.exceptions.RayError:
             return {}
 
     def stop(self) -> None:
         """Cancel every trial: a running task is interrupted, which stops its process
         group."""
-        refs: List = list(self._refs)
+        refs: List[Any] = list(self._refs)
         for ref in refs:
             ray.cancel(ref)
         ray.wait(refs, num_returns=len(refs), timeout=CANCEL_GRACE_S)
@@ -209,6 +215,6 @@ class RayPool:
         self._final_capacity = self.capacity
         ray.shutdown()
 
-    def drain(self) -> List[Dict]:
+    def drain(self) -> List[TrialResult]:
         """After ``stop``: no results (canceled tasks return none; --resume runs them)."""
         return []

@@ -11,7 +11,7 @@ from rclpy.qos import qos_profile_sensor_data
 from sensor_msgs.msg import Image
 
 from coordinator.layout import CellLayout, layout_from_world
-from coordinator.trial_run import run_trial
+from coordinator.trial_run import OUTCOME_FILE, run_trial
 from helpers import cpu_load, wait_for
 from world_description import PIPELINE_CELL
 from world_description.resources import resolve_resource
@@ -33,8 +33,21 @@ def two_runs(tmp_path_factory):
     base = int(os.environ.get('ROS_DOMAIN_ID', '0'))
     domains = random.Random(base).sample([d for d in range(100, 160) if d != base], 2)
     with cpu_load():
-        return [run_trial(k, SEED, BELT, domains[k], out, wall_timeout=900.0)
-                for k in range(2)]
+        results = [run_trial(k, SEED, BELT, domains[k], out, wall_timeout=900.0)
+                   for k in range(2)]
+    # Each trial's record as its result.json holds it, written once, by the runner: what
+    # run_trial returned, with the run's metadata in a block of its own (the coordinator's
+    # hand-over file gone).
+    records = []
+    for k, result in enumerate(results):
+        trial_dir = out / f'trial_{k:03d}'
+        record = json.loads((trial_dir / 'result.json').read_text())
+        assert record == result.to_dict() and not (trial_dir / OUTCOME_FILE).exists()
+        run = record['run']
+        assert run['trial'] == k and run['wall_time'] > 0 and run['code']
+        assert {'sim_node', 'coordinator_node', 'vision_node'} <= set(run['cpu_seconds'])
+        records.append(record)
+    return records
 
 
 def test_a_lock_step_run_delivers_every_material(two_runs):

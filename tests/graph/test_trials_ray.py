@@ -61,10 +61,10 @@ def test_a_campaign_on_two_ray_nodes_matches_the_same_seeds_run_locally(tmp_path
         [{k: r[k] for k in COMPARED} for r in local]
     results = [json.loads((tmp_path / 'ray' / f'trial_{k:03d}' / 'result.json').read_text())
                for k in range(len(SEEDS))]
-    assert len({r['ray_node'] for r in results}) == 2, 'the trials did not use both nodes'
+    assert len({r['run']['ray_node'] for r in results}) == 2, 'the trials did not use both nodes'
     # At the niceness of a process started here, not Ray's 15 for its workers (on a busy
     # machine a trial would crawl).
-    assert {r['niceness'] for r in results} == {os.nice(0)}
+    assert {r['run']['niceness'] for r in results} == {os.nice(0)}
     for k in range(len(SEEDS)):
         trial_dir = tmp_path / 'ray' / f'trial_{k:03d}'
         for name in ('sim_node.log', 'coordinator_node.log', 'vision_node.log'):

@@ -12,9 +12,9 @@ from coordinator.campaign import (
     campaign_lock,
     check_plan,
     read_campaign,
-    result_problem,
     trial_results,
 )
+from coordinator.trial_result import ResultError, RunInfo, TrialResult
 
 WORLD_LINE = 'run_trials: error: --world'
 
@@ -150,8 +150,8 @@ def test_a_result_file_that_is_not_a_result(capsys, tmp_path, monkeypatch):
     def fake_trial(trial, seed, belt_speed, domain_id, out_dir, wall_timeout, record, code,
                    world, time_step):
         ran.append(trial)
-        return {'trial': trial, 'scenario_seed': seed, 'belt_speed': belt_speed,
-                'status': 'completed', 'completion_time': 61.0, 'wall_time': 9.0, 'code': code}
+        return TrialResult('completed', 61.0, scenario_seed=seed, belt_speed=belt_speed,
+                           run=RunInfo(trial=trial, wall_time=9.0, code=code))
     monkeypatch.setattr(trial_run, 'run_trial', fake_trial)
     import coordinator.report
     monkeypatch.setattr(coordinator.report, 'write_report', lambda r, out, s: out / 'report.md')
@@ -160,13 +160,28 @@ def test_a_result_file_that_is_not_a_result(capsys, tmp_path, monkeypatch):
     assert 'trial 0 runs again' in capsys.readouterr().out
 
 
+def result_problem(data):
+    try:
+        TrialResult.from_dict(data)
+    except ResultError as exc:
+        return str(exc)
+    return None
+
+
 def test_results_are_checked_field_by_field():
-    good = {'trial': 3, 'scenario_seed': 5, 'belt_speed': 0.12, 'status': 'completed',
-            'completion_time': float('nan'), 'wall_time': 9.0, 'handling_success_rate': 1.0}
+    good = {'scenario_seed': 5, 'belt_speed': 0.12, 'status': 'completed',
+            'completion_time': float('nan'), 'handling_success_rate': 1.0,
+            'run': {'trial': 3, 'wall_time': 9.0, 'code': 'abc'}}
     assert result_problem(good) is None
+    # The first layout, with the run's metadata at the top level, reads into the same record.
+    flat = {**{k: v for k, v in good.items() if k != 'run'}, **good['run']}
+    assert TrialResult.from_dict(flat).run == TrialResult.from_dict(good).run
     for change, fragment in (({'status': 5}, 'no status'), ({'trial': -1}, 'trial is'),
+                             ({'run': {'trial': 'x'}}, 'trial is'),
                              ({'scenario_seed': 'a'}, 'scenario_seed is'),
                              ({'belt_speed': None}, 'belt_speed is'),
+                             ({'run': {'wall_time': '1'}}, 'wall_time is'),
+                             ({'run': {'cpu_seconds': {'sim_node': 'a'}}}, 'cpu_seconds is'),
                              ({'handling_success_rate': 2.0}, 'not a rate')):
         assert fragment in result_problem({**good, **change})
     assert 'JSON str' in result_problem('abc')
@@ -196,6 +211,6 @@ def test_trial_results_skip_nothing_silently(tmp_path):
     (tmp_path / 'trial_001').mkdir()
     (tmp_path / 'trial_001' / 'result.json').write_text('{"status": ')
     results, problems = trial_results(tmp_path)
-    assert [r['trial'] for r in results] == [0]
+    assert [r.trial for r in results] == [0]
     assert len(problems) == 1 and 'trial_001/result.json: not JSON' in problems[0]
     assert read_campaign(tmp_path) is None

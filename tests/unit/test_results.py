@@ -19,6 +19,7 @@ from coordinator.results import (
     summary_rows,
     tracks_of,
 )
+from coordinator.trial_result import RunInfo, TrialResult
 from coordinator.trials import trial_plan, write_csv
 from world_description.resources import resolve_resource
 from world_description.world_config import load_world
@@ -73,10 +74,10 @@ def test_score_takes_handling_from_ground_truth_not_from_the_coordinator(regions
     truth = [('orange', IN_POOL)] * 6 + [
         ('purple', np.array([-0.5, 0.3, 0.027])), ('blue', BESIDE_PLATFORM)]
     out = score(_result(), truth, [True] * 7 + [False], regions)
-    assert out['delivered'] == 8                       # what the coordinator believed
-    assert out['handled_verified'] == 7 and out['handling_success_rate'] == 7 / 8
-    assert out['identification_rate'] == 7 / 8
-    assert out['grasp_success_rate'] == 15 / 16
+    assert out.delivered == 8                       # what the coordinator believed
+    assert out.handled_verified == 7 and out.handling_success_rate == 7 / 8
+    assert out.identification_rate == 7 / 8
+    assert out.grasp_success_rate == 15 / 16
 
 
 def test_the_rates_split_as_the_paper_splits_them(regions):
@@ -88,12 +89,12 @@ def test_the_rates_split_as_the_paper_splits_them(regions):
              + [('orange', IN_POOL + [0.01 * k, 0, 0.0]) for k in range(5)]
              + [('orange', np.array([1.0, 0.0, 0.025]))])
     out = score(r, truth, [True] * 8, regions)
-    assert out['zu12_grasp_rate'] == pytest.approx(8 / 9)
-    assert out['youbot_grasp_rate'] == pytest.approx(7 / 8)
-    assert out['transport_rate'] == pytest.approx(6 / 7)
-    assert out['handling_success_rate'] == pytest.approx(7 / 8)
+    assert out.zu12_grasp_rate == pytest.approx(8 / 9)
+    assert out.youbot_grasp_rate == pytest.approx(7 / 8)
+    assert out.transport_rate == pytest.approx(6 / 7)
+    assert out.handling_success_rate == pytest.approx(7 / 8)
     # Nothing loaded: no transport to rate, not a division by zero.
-    assert score(_result(), truth, [True] * 8, regions)['transport_rate'] == 0.0
+    assert score(_result(), truth, [True] * 8, regions).transport_rate == 0.0
 
 
 def test_the_peak_joint_speed_is_the_largest_fraction_of_any_joints_limit():
@@ -118,6 +119,7 @@ def test_summary_and_report(tmp_path):
                        'materials': [{'id': 3, 'color': 'blue', 'status': 'failed',
                                       'failure': 'not held after 2 attempts'}]
                        if handling < 1.0 else [], 'wall_time': 80.0})
+    trials = [TrialResult.from_dict(t) for t in trials]
     s = summary_rows(trials)
     assert s['median_completion_time'] == 140.0 and s['completed'] == 2
     assert s['handling_success_rate'] == pytest.approx((2 + 0.875) / 3)
@@ -149,6 +151,7 @@ def test_the_report_draws_each_robots_activity_over_the_median_trial(tmp_path):
                        [31.0, 'transport', 'drive'], [40.0, 'transport', 'grasp'],
                        [end - 5.0, 'transport', 'drive'], [end - 1.0, 'transport', 'fold'],
                        [end, 'transport', 'done']]})
+    trials = [TrialResult.from_dict(t) for t in trials]
     lanes = activity(trials[0])
     assert lanes['belt'] == [(0.0, 30.0, 'running')]
     assert lanes['Zu 12'][-1] == (30.0, 33.0, 'home')         # nothing drawn once done
@@ -198,9 +201,8 @@ def test_an_interrupted_campaign_goes_on_where_it_stopped(tmp_path, monkeypatch)
                    world, time_step):
         assert code == 'abc123'
         ran.append(trial)
-        return {'trial': trial, 'scenario_seed': seed, 'belt_speed': belt_speed,
-                'status': 'completed', 'completion_time': 61.0, 'wall_time': 90.0,
-                'code': code}
+        return TrialResult('completed', 61.0, scenario_seed=seed, belt_speed=belt_speed,
+                           run=RunInfo(trial=trial, wall_time=90.0, code=code))
     reported = []
     monkeypatch.setattr(trial_run, 'run_trial', fake_trial)
     monkeypatch.setattr(coordinator.report, 'write_report',
@@ -208,7 +210,7 @@ def test_an_interrupted_campaign_goes_on_where_it_stopped(tmp_path, monkeypatch)
     assert trials.main(['--trials', '4', '--seed0', '7', '--resume', '--out', str(tmp_path),
                         '--progress-period', '0.01']) == 0
     assert sorted(ran) == [1, 2, 3]
-    assert sorted(r['trial'] for r in reported[0]) == [0, 1, 2, 3]
+    assert sorted(r.trial for r in reported[0]) == [0, 1, 2, 3]
     with open(tmp_path / 'trials.csv') as f:
         assert [row['trial'] for row in csv.DictReader(f)] == ['0', '1', '2', '3']
 
@@ -229,11 +231,9 @@ def test_a_campaign_stopped_by_the_user_keeps_a_report_and_resumes_with_its_plan
             ran.append(1)
             raise KeyboardInterrupt          # (the user's Ctrl-C, as the pool passes it on)
         ran.append(trial)
-        result = {'trial': trial, 'scenario_seed': seed, 'belt_speed': belt_speed,
-                  'status': 'completed', 'completion_time': 60.0, 'wall_time': 90.0,
-                  'code': code}
-        (out_dir / f'trial_{trial:03d}').mkdir(parents=True, exist_ok=True)
-        (out_dir / f'trial_{trial:03d}' / 'result.json').write_text(json.dumps(result))
+        result = TrialResult('completed', 60.0, scenario_seed=seed, belt_speed=belt_speed,
+                             run=RunInfo(trial=trial, wall_time=90.0, code=code))
+        result.write(out_dir / f'trial_{trial:03d}' / 'result.json')
         return result
     monkeypatch.setattr(trial_run, 'run_trial', fake_trial)
     monkeypatch.setattr(trials, 'stop_all', lambda: trial_run.INTERRUPTED.set())
@@ -247,14 +247,14 @@ def test_a_campaign_stopped_by_the_user_keeps_a_report_and_resumes_with_its_plan
     with open(out / 'trials.csv') as f:
         assert [row['trial'] for row in csv.DictReader(f)] == ['0']
     results, setup = reports[-1]
-    assert [r['trial'] for r in results] == [0] and 'Interrupted: 1 of the 3' in setup['note']
+    assert [r.trial for r in results] == [0] and 'Interrupted: 1 of the 3' in setup['note']
     assert trials.main(['--resume', str(out), '--trials', '4']) == 2     # (not its plan)
     assert trials.main(['--resume', str(out), '--progress-period', '0.01']) == 0
     assert ran == [0, 1, 1, 2]
     results, setup = reports[-1]
     plan = trial_plan(3, 0, 7, (0.11, 0.15))
-    assert [(r['trial'], r['scenario_seed'], r['belt_speed']) for r in
-            sorted(results, key=lambda r: r['trial'])] == [
+    assert [(r.trial, r.scenario_seed, r.belt_speed) for r in
+            sorted(results, key=lambda r: r.trial)] == [
         (p['trial'], p['seed'], p['belt_speed']) for p in plan]
     assert 'note' not in setup
 
@@ -291,17 +291,18 @@ def test_trials_on_one_machine_never_share_a_dds_domain(tmp_path, monkeypatch):
                 pass
 
 
-def test_the_code_version_names_the_commit_and_uncommitted_code_changes(tmp_path):
+def test_the_code_version_names_the_commit_and_uncommitted_code_changes(tmp_path, monkeypatch):
     import shutil
     import subprocess
+    import sys
 
-    import coordinator.trial_run as trial_run
+    import coordinator.trial_result as trial_result
     if shutil.which('git') is None:
         pytest.skip('git is not installed')
     repo = tmp_path / 'repo'
     (repo / 'pkg').mkdir(parents=True)
     (repo / 'docs').mkdir()
-    shutil.copy(trial_run.__file__, repo / 'pkg' / 'trials.py')
+    shutil.copy(trial_result.__file__, repo / 'pkg' / 'trials.py')
     (repo / 'docs' / 'result.json').write_text('{}')
 
     def git(*args):
@@ -312,6 +313,7 @@ def test_the_code_version_names_the_commit_and_uncommitted_code_changes(tmp_path
     git('commit', '-qm', 'one')
     spec = importlib.util.spec_from_file_location('copied_trials', repo / 'pkg' / 'trials.py')
     copied = importlib.util.module_from_spec(spec)
+    monkeypatch.setitem(sys.modules, spec.name, copied)       # (its dataclasses look it up)
     spec.loader.exec_module(copied)
     commit = copied.code_version()
     assert re.fullmatch(r'[0-9a-f]{12}', commit)
@@ -404,20 +406,20 @@ def test_a_run_is_completed_only_if_the_ground_truth_has_every_material_at_its_d
              + [('orange', IN_POOL + [0.06 * k, 0, 0.0]) for k in range(4)]
              + [('orange', np.array([1.7, -1.3, 0.027])), ('blue', ON_PLATFORM)])
     out = score(_result(total=8), truth, [True] * 8, regions)
-    assert out['status'] == 'incomplete' and out['handled_verified'] == 6
-    missing = {m['id']: m for m in out['not_at_destination']}
+    assert out.status == 'incomplete' and out.handled_verified == 6
+    missing = {m['id']: m for m in out.not_at_destination}
     assert sorted(missing) == [1, 6]
     assert missing[1]['why'].startswith('on ground_target but 0.075 m over its face, on another')
     assert missing[6]['why'] == 'not on pool_floor: at (1.700, -1.300, 0.027)'
-    assert 'material 1 (purple) on ground_target' in out['message']
+    assert 'material 1 (purple) on ground_target' in out.message
     # Named by the coordinator's id too, where it saw the material (its log's, its result's).
     named = score(_result(total=8), truth, [True] * 8, regions, {1: 12, 0: 3})
-    assert 'material 1 (purple, the coordinator\'s 12) on ground_target' in named['message']
-    assert 'material 6 (orange) not on pool_floor' in named['message']
-    assert [m['material'] for m in named['not_at_destination']] == [12, -1]
+    assert 'material 1 (purple, the coordinator\'s 12) on ground_target' in named.message
+    assert 'material 6 (orange) not on pool_floor' in named.message
+    assert [m['material'] for m in named.not_at_destination] == [12, -1]
     # All there: completed, nothing named.
     good = [truth[0]] + truth[2:6] + [('orange', IN_POOL + [0.0, 0.08, 0.0]), truth[7]]
     ok = score(_result(total=7), good, [True] * 7, regions)
-    assert ok['status'] == 'completed' and ok['not_at_destination'] == []
+    assert ok.status == 'completed' and ok.not_at_destination == []
     # A material that never appeared is not at its destination either.
-    assert score(_result(total=8), good, [True] * 7, regions)['status'] == 'incomplete'
+    assert score(_result(total=8), good, [True] * 7, regions).status == 'incomplete'

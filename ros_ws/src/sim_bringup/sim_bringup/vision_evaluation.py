@@ -5,17 +5,18 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass, field
-from typing import Dict, List, Set, Tuple
+from typing import Any, Dict, List, Set, Tuple
 
 import numpy as np
 
+from controllers.arrays import Vector
 from perception.projection import CameraModel
 from perception.segmentation import classes_of
 from perception.vision import MaterialVision
 from sim_bridge.world import SimWorld
 from world_description.camera_geometry import look_at_rotation
 from world_description.resources import resolve_resource
-from world_description.world_config import load_world
+from world_description.world_config import CameraConfig, load_world
 
 WORLD = 'package://world_description/worlds/pipeline_cell.yaml'
 
@@ -48,7 +49,7 @@ def noisy(rgb: np.ndarray, rng: np.random.Generator, strength: float) -> np.ndar
     return np.clip(out, 0, 255).astype(np.uint8)
 
 
-def random_lighting(rng: np.random.Generator) -> dict:
+def random_lighting(rng: np.random.Generator) -> Dict[str, Any]:
     direction = rng.normal(size=3)
     direction[2] = abs(direction[2]) + 0.5
     return {'lightDirection': (direction / np.linalg.norm(direction)).tolist(),
@@ -73,7 +74,8 @@ def evaluate(runs: int, frames_per_run: int, seed: int = 0, noise: float = 1.0) 
     return acc
 
 
-def _run(world: SimWorld, rng, frames: int, noise: float, acc: Accuracy, run: int) -> None:
+def _run(world: SimWorld, rng: np.random.Generator, frames: int, noise: float, acc: Accuracy,
+         run: int) -> None:
     camera = world.cameras[0]
     c, source, conveyor = camera.config, world.source, world.conveyor
     if source is None or conveyor is None or c.position is None or c.look_at is None:
@@ -122,7 +124,7 @@ def _run(world: SimWorld, rng, frames: int, noise: float, acc: Accuracy, run: in
             acc.tracks.setdefault((run, track.id), set()).add(nearest)
 
 
-def _fully_in_view(model: CameraModel, centre, size: float, c) -> bool:
+def _fully_in_view(model: CameraModel, centre: Vector, size: float, c: CameraConfig) -> bool:
     h = size / 2
     corners = np.array([[x, y, z] for x in (-h, h) for y in (-h, h) for z in (-h, h)])
     px = model.project(corners + centre)
