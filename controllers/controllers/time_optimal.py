@@ -317,7 +317,26 @@ def timed_path(qs: Sequence[Vector], limits: JointLimits, t0: float,
         raise PlanError('a timed path needs two or more points of finite joint positions')
     if not 0.0 <= end_speed <= 1.0:
         raise PlanError(f'the end speed is a fraction within [0, 1], got {end_speed}')
-    # A cubic fitted to the points, corrected to pass through the path's ends exactly.
+    coef = _path_cubic(points)
+    profile = _path_profile(coef, limits, end_speed, min_time)
+    duration = float(profile.duration)
+    steps = max(1, int(np.ceil(duration / period - 1e-9)))
+    waypoints = []
+    for k in range(1, steps + 1):
+        t = duration * k / steps
+        (s,), (s1,), (s2,) = profile.at_time(t)
+        q, q1, q2 = (np.polynomial.polynomial.polyval(min(max(s, 0.0), 1.0), c)
+                     for c in coef[:3])
+        v, a = q1 * s1, q2 * s1**2 + q1 * s2
+        if k == steps and end_speed == 0.0:
+            v, a = np.zeros_like(v), np.zeros_like(a)        # (zero but for rounding)
+        waypoints.append(Waypoint(q, velocity=v, acceleration=a, at=t0 + t, direct=True))
+    return waypoints
+
+
+def _path_cubic(points: np.ndarray) -> List[np.ndarray]:
+    """A cubic in the path's length fraction fitted to its points, corrected to pass through
+    its ends exactly: its coefficients and those of its first three derivatives."""
     fit = np.polynomial.polynomial.polyfit(np.linspace(0.0, 1.0, len(points)), points,
                                            min(len(points) - 1, 3))
     if len(fit) < 2:
@@ -329,6 +348,14 @@ def timed_path(qs: Sequence[Vector], limits: JointLimits, t0: float,
     coef = [fit]
     for _ in range(3):
         coef.append(np.polynomial.polynomial.polyder(coef[-1]))
+    return coef
+
+
+def _path_profile(coef: Sequence[np.ndarray], limits: JointLimits, end_speed: float,
+                  min_time: float) -> Trajectory:
+    """The time-optimal profile of the path's length fraction (ruckig, one degree of
+    freedom): from rest at 0 to 1, ending at ``end_speed``, within limits that keep every
+    joint within its own."""
     grid = np.linspace(0.0, 1.0, 201)
     # The largest |dq/ds|, |d2q/ds2| and |d3q/ds3| of each joint along the path (s: its length
     # fraction). With them, limits on the path's speed s', acceleration s'' and jerk s''' keep
@@ -365,19 +392,7 @@ def timed_path(qs: Sequence[Vector], limits: JointLimits, t0: float,
             profile = candidate
     if profile is None:
         raise PlanError('no speed along the path keeps the joints within their limits')
-    duration = float(profile.duration)
-    steps = max(1, int(np.ceil(duration / period - 1e-9)))
-    waypoints = []
-    for k in range(1, steps + 1):
-        t = duration * k / steps
-        (s,), (s1,), (s2,) = profile.at_time(t)
-        q, q1, q2 = (np.polynomial.polynomial.polyval(min(max(s, 0.0), 1.0), c)
-                     for c in coef[:3])
-        v, a = q1 * s1, q2 * s1**2 + q1 * s2
-        if k == steps and end_speed == 0.0:
-            v, a = np.zeros_like(v), np.zeros_like(a)        # (zero but for rounding)
-        waypoints.append(Waypoint(q, velocity=v, acceleration=a, at=t0 + t, direct=True))
-    return waypoints
+    return profile
 
 
 def _state(value: Optional[ArrayLike], n: int, what: str) -> Optional[np.ndarray]:

@@ -9,7 +9,7 @@ turned by pi, elbow up or down).
 from __future__ import annotations
 
 import math
-from typing import List, Optional
+from typing import List, Optional, Set
 
 import numpy as np
 
@@ -49,37 +49,11 @@ def solve_ik(target: np.ndarray, q_seed: Optional[Vector] = None,
         horizontal = math.hypot(ax, ay)
         bases = [math.atan2(ay, ax) if horizontal > 1e-9 else seed[0]]
     lower, upper = chain.limit_lists
-    candidates, reasons = [], set()
+    candidates: List[Optional[List[float]]] = []
+    reasons: Set[str] = set()
     for base in bases:
         for theta1, sign in ((base, 1.0), (_wrap(base + math.pi), -1.0)):
-            c1, s1 = math.cos(theta1), math.sin(theta1)
-            if abs(-s1 * ax + c1 * ay) > PLANE_TOLERANCE:      # approach . the plane's normal
-                reasons.add('approach direction not in the arm plane (a 5-joint arm cannot)')
-                continue
-            r = sign * radial - _SHOULDER_R
-            z = wz - _SHOULDER_Z
-            c3 = (r * r + z * z - _L2 * _L2 - _L3 * _L3) / (2 * _L2 * _L3)
-            if c3 > 1 + 1e-12 or c3 < -1 - 1e-12:
-                reasons.add('out of reach')
-                continue
-            c3 = max(-1.0, min(1.0, c3))
-            along = c1 * ax + s1 * ay                     # the approach in the plane
-            psi = math.atan2(az, along)
-            # theta5: the remaining rotation about the approach, from the tool's x axis with
-            # joint 5 at zero (n) to the target's (x): atan2((n x x) . a, n . x). With
-            # phi = theta2 + theta3 + theta4 = psi - pi/2, n = x4 = (c1 cos phi, s1 cos phi,
-            # sin phi) and (cos phi, sin phi) = (az, -along) for a unit approach in the plane.
-            n0, n1, n2 = c1 * az, s1 * az, -along
-            cross_a = ((n1 * r20 - n2 * r10) * ax + (n2 * r00 - n0 * r20) * ay
-                       + (n0 * r10 - n1 * r00) * az)
-            theta5 = math.atan2(cross_a, n0 * r00 + n1 * r10 + n2 * r20)
-            elbow = math.acos(c3)
-            for theta3 in ((elbow, -elbow) if elbow else (elbow,)):
-                theta2 = math.atan2(z, r) - math.atan2(_L3 * math.sin(theta3),
-                                                       _L2 + _L3 * math.cos(theta3))
-                theta4 = _wrap(psi - math.pi / 2 - theta2 - theta3)
-                candidates.append(_into_limits([theta1, _wrap(theta2), theta3, theta4, theta5],
-                                               lower, upper))
+            candidates += _in_plane(theta1, sign * radial, wz, rows, lower, upper, reasons)
     if not candidates:
         return IKResult(False, reason=' and '.join(sorted(reasons)) or 'no solution')
     valid = [q for q in candidates if q is not None]
@@ -97,6 +71,44 @@ def solve_ik(target: np.ndarray, q_seed: Optional[Vector] = None,
         return IKResult(False, answer, 'no exact solution for this pose', pos_err, rot_err,
                         solutions)
     return IKResult(True, answer, '', pos_err, rot_err, solutions, reached)
+
+
+def _in_plane(theta1: float, r_wrist: float, z_wrist: float, rows: List[List[float]],
+              lower: List[float], upper: List[float],
+              reasons: Set[str]) -> List[Optional[List[float]]]:
+    """The solutions with joint 1 at ``theta1`` (the wrist centre ``r_wrist`` out along the
+    arm's plane, ``z_wrist`` high), each within the joint limits or None; why there are none,
+    in ``reasons``."""
+    (r00, _, ax, _), (r10, _, ay, _), (r20, _, az, _), _ = rows
+    c1, s1 = math.cos(theta1), math.sin(theta1)
+    if abs(-s1 * ax + c1 * ay) > PLANE_TOLERANCE:      # approach . the plane's normal
+        reasons.add('approach direction not in the arm plane (a 5-joint arm cannot)')
+        return []
+    r = r_wrist - _SHOULDER_R
+    z = z_wrist - _SHOULDER_Z
+    c3 = (r * r + z * z - _L2 * _L2 - _L3 * _L3) / (2 * _L2 * _L3)
+    if c3 > 1 + 1e-12 or c3 < -1 - 1e-12:
+        reasons.add('out of reach')
+        return []
+    c3 = max(-1.0, min(1.0, c3))
+    along = c1 * ax + s1 * ay                     # the approach in the plane
+    psi = math.atan2(az, along)
+    # theta5: the remaining rotation about the approach, from the tool's x axis with joint 5 at
+    # zero (n) to the target's (x): atan2((n x x) . a, n . x). With
+    # phi = theta2 + theta3 + theta4 = psi - pi/2, n = x4 = (c1 cos phi, s1 cos phi, sin phi)
+    # and (cos phi, sin phi) = (az, -along) for a unit approach in the plane.
+    n0, n1, n2 = c1 * az, s1 * az, -along
+    cross_a = ((n1 * r20 - n2 * r10) * ax + (n2 * r00 - n0 * r20) * ay
+               + (n0 * r10 - n1 * r00) * az)
+    theta5 = math.atan2(cross_a, n0 * r00 + n1 * r10 + n2 * r20)
+    elbow = math.acos(c3)
+    out = []
+    for theta3 in ((elbow, -elbow) if elbow else (elbow,)):
+        theta2 = math.atan2(z, r) - math.atan2(_L3 * math.sin(theta3),
+                                               _L2 + _L3 * math.cos(theta3))
+        theta4 = _wrap(psi - math.pi / 2 - theta2 - theta3)
+        out.append(_into_limits([theta1, _wrap(theta2), theta3, theta4, theta5], lower, upper))
+    return out
 
 
 def _into_limits(q: List[float], lower: List[float], upper: List[float]

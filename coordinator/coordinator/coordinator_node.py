@@ -49,7 +49,7 @@ from controllers.youbot_arm import JOINT_NAMES as YOUBOT_JOINTS
 from controllers.youbot_arm import JOINT_VELOCITY_LIMIT as YOUBOT_VELOCITY_LIMIT
 from controllers.zu12_arm import JOINT_NAMES as ZU12_JOINTS
 from controllers.zu12_arm import JOINT_VELOCITY_LIMITS as ZU12_VELOCITY_LIMITS
-from coordinator.layout import LayoutError, layout_from_world
+from coordinator.layout import CellLayout, LayoutError, layout_from_world
 from coordinator.pipeline import (
     Detection,
     Event,
@@ -78,7 +78,7 @@ from ros_common.stamps import duration_from_ns, set_stamp, stamp_from_ns, to_ns
 from ros_common.twist_out import TwistOut
 from world_description import PIPELINE_CELL
 from world_description.resources import resolve_resource
-from world_description.world_config import load_world
+from world_description.world_config import WorldConfig, load_world
 
 ARMS = {'zu12': ZU12_JOINTS, 'youbot': YOUBOT_JOINTS}
 CAMERA_TOPIC = '/belt_camera/image_raw'
@@ -125,31 +125,40 @@ class CoordinatorError(RuntimeError):
     pass
 
 
+def _layout(world: WorldConfig, p: Dict) -> CellLayout:
+    """The cell as the world lays it out, at the belt speed the parameters give."""
+    try:
+        layout = layout_from_world(world)
+    except LayoutError as exc:
+        raise CoordinatorError(f'{p["world"]}: {exc}') from exc
+    if p['belt_speed'] >= 0.0:
+        layout = dataclasses.replace(layout, belt_speed=float(p['belt_speed']))
+    if layout.belt_speed <= 0.0:
+        raise CoordinatorError('the belt speed must be > 0 to bring materials')
+    return layout
+
+
+def _settings(p: Dict) -> Settings:
+    latency = float(p['plan_latency'])
+    if latency < 0.0:
+        latency = 0.0 if p['synchronous'] else 1.0
+    settings = Settings(pick_x=float(p['pick_x']), plan_latency=latency,
+                        max_retries=int(p['max_retries']), drive_speed=float(p['drive_speed']),
+                        run_timeout=float(p['run_timeout']),
+                        idle_timeout=float(p['idle_timeout']))
+    if settings.max_retries < 0:
+        raise CoordinatorError('max_retries must be >= 0')
+    return settings
+
+
 class CoordinatorNode(Node):
 
     def __init__(self, **kwargs) -> None:
         super().__init__('coordinator_node', **kwargs)
         p = declare_params(self, PARAMS)
         self.world = load_world(resolve_resource(p['world']))
-        try:
-            layout = layout_from_world(self.world)
-        except LayoutError as exc:
-            raise CoordinatorError(f'{p["world"]}: {exc}') from exc
-        if p['belt_speed'] >= 0.0:
-            layout = dataclasses.replace(layout, belt_speed=float(p['belt_speed']))
-        if layout.belt_speed <= 0.0:
-            raise CoordinatorError('the belt speed must be > 0 to bring materials')
-        self.layout = layout
-        latency = float(p['plan_latency'])
-        if latency < 0.0:
-            latency = 0.0 if p['synchronous'] else 1.0
-        self.settings = Settings(pick_x=float(p['pick_x']), plan_latency=latency,
-                                 max_retries=int(p['max_retries']),
-                                 drive_speed=float(p['drive_speed']),
-                                 run_timeout=float(p['run_timeout']),
-                                 idle_timeout=float(p['idle_timeout']))
-        if self.settings.max_retries < 0:
-            raise CoordinatorError('max_retries must be >= 0')
+        self.layout = layout = _layout(self.world, p)
+        self.settings = _settings(p)
         self.synchronous = bool(p['synchronous'])
         self.rate = float(p['control_rate'])
         self.dt_ns = round(float(p['time_step']) * 1e9)
@@ -189,6 +198,14 @@ class CoordinatorNode(Node):
         self._path: List[Tuple[float, float]] = []
         self._peak = {'zu12': PeakJointSpeed(ZU12_VELOCITY_LIMITS),
                       'youbot': PeakJointSpeed([YOUBOT_VELOCITY_LIMIT] * len(YOUBOT_JOINTS))}
+        self._connect(p['sim_node'].rstrip('/'))
+        self.get_logger().info(
+            f'{"lock-step" if self.synchronous else "real-time"} at {self.rate:g} Hz '
+            f'({self.steps_per_tick} steps per decision); belt {layout.belt_speed:.3f} m/s, '
+            f'{layout.total} materials {layout.manifest}; picks from x = {self.settings.pick_x} m')
+
+    def _connect(self, sim: str) -> None:
+        """The node's subscriptions, publishers and clients (``sim``: the simulator's name)."""
         qos = QoSProfile(depth=100)
         for arm, names in ARMS.items():
             self.create_subscription(JointState, f'/{arm}/joint_states',
@@ -211,14 +228,9 @@ class CoordinatorNode(Node):
         self.state_pub = self.create_publisher(PipelineState, '~/state', latched)
         self.ik = {arm: self.create_client(SolveIK, f'/{arm}/solve_ik') for arm in ARMS}
         self.grips = {arm: self.create_client(SetBool, srv) for arm, srv in GRIP_SERVICES.items()}
-        sim = p['sim_node'].rstrip('/')
         self.step_client = self.create_client(StepSimulation, f'{sim}/step')
         self.param_client = self.create_client(SetParameters, f'{sim}/set_parameters')
         self.param_get_client = self.create_client(GetParameters, f'{sim}/get_parameters')
-        self.get_logger().info(
-            f'{"lock-step" if self.synchronous else "real-time"} at {self.rate:g} Hz '
-            f'({self.steps_per_tick} steps per decision); belt {layout.belt_speed:.3f} m/s, '
-            f'{layout.total} materials {layout.manifest}; picks from x = {self.settings.pick_x} m')
 
     # --- inputs -------------------------------------------------------------------------------
     def _on_joints(self, arm: str, names: Sequence[str], msg: JointState) -> None:

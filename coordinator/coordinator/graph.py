@@ -82,18 +82,9 @@ def parameter_text(value: ParameterValue) -> str:
     return str(value)
 
 
-def pipeline_graph(seed: int, belt_speed: float, synchronous: bool = True,
-                   world: str = PIPELINE_CELL, real_time_factor: Optional[float] = None,
-                   result_file: Optional[Path] = None, progress_file: Optional[Path] = None,
-                   record_dir: Optional[Path] = None, bag_name: Optional[str] = 'bag',
-                   time_step: float = TIME_STEP,
-                   recorder_ready: Optional[Path] = None) -> List[GraphNode]:
-    """The processes of one run of the pipeline scenario, in their start order (the recorder,
-    when there is one, first: it must hear the first /clock). A recording goes into
-    ``record_dir``/``bag_name`` (without a name, one with the date and time);
-    ``recorder_ready``: the file the recorder writes once it records /clock."""
-    sim_time = {'use_sim_time': True}
-    rate = tick_rate(time_step) if synchronous else CONTROL_RATE
+def _sim_parameters(seed: int, belt_speed: float, synchronous: bool, world: str, rate: float,
+                    time_step: float, real_time_factor: Optional[float]
+                    ) -> Dict[str, ParameterValue]:
     sim: Dict[str, ParameterValue] = {
         'world': world, 'synchronous': synchronous, 'state_publish_rate': rate,
         'time_step': time_step,
@@ -108,6 +99,23 @@ def pipeline_graph(seed: int, belt_speed: float, synchronous: bool = True,
     # (The bases' speed limits come from the world file's drive sections.)
     if real_time_factor is not None:
         sim['real_time_factor'] = real_time_factor
+    return sim
+
+
+def pipeline_graph(seed: int, belt_speed: float, synchronous: bool = True,
+                   world: str = PIPELINE_CELL, real_time_factor: Optional[float] = None,
+                   result_file: Optional[Path] = None, progress_file: Optional[Path] = None,
+                   record_dir: Optional[Path] = None, bag_name: Optional[str] = 'bag',
+                   time_step: float = TIME_STEP,
+                   recorder_ready: Optional[Path] = None) -> List[GraphNode]:
+    """The processes of one run of the pipeline scenario, in their start order (the recorder,
+    when there is one, first: it must hear the first /clock). A recording goes into
+    ``record_dir``/``bag_name`` (without a name, one with the date and time);
+    ``recorder_ready``: the file the recorder writes once it records /clock."""
+    sim_time = {'use_sim_time': True}
+    rate = tick_rate(time_step) if synchronous else CONTROL_RATE
+    sim = _sim_parameters(seed, belt_speed, synchronous, world, rate, time_step,
+                          real_time_factor)
     # (Lock-step: the coordinator's time is the simulator's step count; it takes no /clock.)
     coordinator: Dict[str, ParameterValue] = {
         **({} if synchronous else sim_time), 'synchronous': synchronous,
