@@ -19,7 +19,7 @@ import sys
 import threading
 import time
 from dataclasses import dataclass, field
-from typing import Deque, Dict, Optional, Set, Tuple
+from typing import Any, Deque, Dict, Optional, Set, Tuple
 
 import foxglove
 from foxglove.websocket import ChannelView, Client
@@ -123,6 +123,20 @@ class LiveView(Node):
             logger.setLevel(logging.INFO)
         logging.getLogger('foxglove').propagate = False     # (the node's log only)
         foxglove.set_log_level(logging.INFO)
+        self._serve(p)
+        # Wall-clock timers: the bridge runs whether or not simulated time advances.
+        steady = Clock(clock_type=ClockType.STEADY_TIME)
+        self.create_timer(p['discovery_period'], self._update, clock=steady)
+        self.create_timer(p['report_period'], self._report, clock=steady)
+        self.get_logger().info(
+            f'serving the Foxglove WebSocket protocol on {self.url} ({self._filter.describe()}; '
+            f'to {self._gate.describe()}); in Foxglove: Open connection > Foxglove WebSocket > '
+            f'{self.url}')
+        self._update()
+
+    def _serve(self, p: Dict[str, Any]) -> None:
+        """The SDK's server, on loopback behind TLS that only the gate trusts (gate.py), and the
+        gate in front of it, at the parameters' host and port."""
         host, port = p['host'], int(p['port'])
         try:
             access, max_clients = declare_web_access(
@@ -132,7 +146,6 @@ class LiveView(Node):
         except WebAccessError as exc:
             self._detach_logs()
             raise LiveViewError(str(exc)) from None
-        # The SDK's server, on loopback behind TLS that only the gate trusts (gate.py).
         certificate, key = self_signed_certificate()
         try:
             self._server = foxglove.start_server(
@@ -157,15 +170,6 @@ class LiveView(Node):
         self.url = f'ws://{host}:{served}'
         self.get_logger().info(f'the Foxglove server behind the gate: wss://127.0.0.1:'
                                f'{self._server.port} (a certificate only the gate trusts)')
-        # Wall-clock timers: the bridge runs whether or not simulated time advances.
-        steady = Clock(clock_type=ClockType.STEADY_TIME)
-        self.create_timer(p['discovery_period'], self._update, clock=steady)
-        self.create_timer(p['report_period'], self._report, clock=steady)
-        self.get_logger().info(
-            f'serving the Foxglove WebSocket protocol on {self.url} ({self._filter.describe()}; '
-            f'to {self._gate.describe()}); in Foxglove: Open connection > Foxglove WebSocket > '
-            f'{self.url}')
-        self._update()
 
     # --- the graph --------------------------------------------------------------------------
     def _update(self) -> None:

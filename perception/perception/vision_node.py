@@ -218,12 +218,22 @@ class VisionNode(Node):
             self._pub.publish(skipped)
             return
         start = time.perf_counter()
-        t = to_seconds(msg.header.stamp)
-        result = vision.process(t, frame)
+        result = vision.process(to_seconds(msg.header.stamp), frame)
+        self._pub.publish(self._detections(msg, result.tracks))
+        self._latencies.append(time.perf_counter() - start)
+        if self._debug_pub.get_subscription_count() > 0:
+            debug = vision.annotate(frame, result)
+            self._debug_pub.publish(Image(header=msg.header, height=debug.shape[0],
+                                          width=debug.shape[1], encoding='rgb8',
+                                          step=3 * debug.shape[1], data=debug.tobytes()))
+        self._log_stats()
+
+    def _detections(self, msg: Image, tracks) -> MaterialDetectionArray:
+        """The frame's answer: every track seen so far, at the frame's stamp."""
         out = MaterialDetectionArray()
         out.header.stamp = msg.header.stamp
         out.header.frame_id = self._frame_id
-        for track in result.tracks:
+        for track in tracks:
             if track.last is None:          # (a reported track has been seen)
                 continue
             d = MaterialDetection(id=track.id, color=track.color, u=track.last.u,
@@ -232,14 +242,7 @@ class VisionNode(Node):
             d.position.x, d.position.y, d.position.z = (float(v) for v in track.position)
             d.velocity.x, d.velocity.y, d.velocity.z = (float(v) for v in track.velocity())
             out.detections.append(d)
-        self._pub.publish(out)
-        self._latencies.append(time.perf_counter() - start)
-        if self._debug_pub.get_subscription_count() > 0:
-            debug = vision.annotate(frame, result)
-            self._debug_pub.publish(Image(header=msg.header, height=debug.shape[0],
-                                          width=debug.shape[1], encoding='rgb8',
-                                          step=3 * debug.shape[1], data=debug.tobytes()))
-        self._log_stats()
+        return out
 
     def _frame(self, msg: Image) -> Optional[np.ndarray]:
         """The image as an RGB array, or None (with a throttled warning) if unusable."""

@@ -87,65 +87,29 @@ def open_reader(bag: Path) -> AnyReader:
         raise AnalysisError(f'{bag} is not a readable rosbag2 bag: {exc}{hint}') from None
 
 
+@dataclass
+class _Scan:
+    """What one pass over a bag's messages gathers, per topic."""
+    stamps: Dict[str, List[int]] = field(default_factory=dict)
+    sizes: Dict[str, int] = field(default_factory=dict)
+    types: Dict[str, str] = field(default_factory=dict)
+    paths: Dict[str, List[Any]] = field(default_factory=dict)
+    yaws: Dict[str, float] = field(default_factory=dict)
+    tracking: Dict[str, Dict[str, List[Any]]] = field(default_factory=dict)
+
+
 def analyse(bag: Path) -> Tuple['Report', Dict[str, Any]]:
     """Read every message once; returns the Report and the odometry paths (x, y arrays)."""
     reader = open_reader(bag)
     try:
-        stamps: Dict[str, List[int]] = {}
-        sizes: Dict[str, int] = {}
-        types: Dict[str, str] = {}
-        paths: Dict[str, List[Any]] = {}
-        yaws: Dict[str, float] = {}
-        tracking: Dict[str, Dict[str, List[Any]]] = {}
-        for c in reader.connections:
-            stamps.setdefault(c.topic, [])
-            sizes.setdefault(c.topic, 0)
-            types[c.topic] = c.msgtype
-        try:
-            for c, t, raw in reader.messages():
-                stamps[c.topic].append(t)
-                sizes[c.topic] += len(raw)
-                if _is_controller_state(c):
-                    _add_tracking(reader.deserialize(raw, c.msgtype), tracking.setdefault(
-                        c.topic, {}))
-                elif c.msgtype == ODOMETRY:
-                    odometry: Any = reader.deserialize(raw, c.msgtype)    # (nav_msgs/Odometry)
-                    pose = odometry.pose.pose
-                    paths.setdefault(c.topic, []).append((pose.position.x, pose.position.y))
-                    q = pose.orientation
-                    yaws[c.topic] = yaw_from_quaternion((q.x, q.y, q.z, q.w))
-        except Exception as exc:
-            raise AnalysisError(f'{bag}: unreadable data ({type(exc).__name__}: {exc}); the '
-                                'bag is truncated or corrupt') from None
-        storage = 'mcap' if list(Path(bag).glob('*.mcap')) else 'sqlite3'
-        # The counts and the span are the data's: metadata.yaml may say otherwise (edited,
-        # copied from another bag), and where it does, the report says so.
-        count = sum(len(ts) for ts in stamps.values())
-        firsts = [ts[0] for ts in stamps.values() if ts]
-        lasts = [ts[-1] for ts in stamps.values() if ts]
-        duration = (max(lasts) - min(firsts)) * 1e-9 if firsts else 0.0
-        report = Report(str(bag), storage, duration, count)
-        said = reader.message_count
-        if said != count:
-            report.notes.append(f'metadata.yaml says {said} messages; the bag holds {count}, '
-                                'which this report counts')
-        said_by_topic = {t: info.msgcount for t, info in reader.topics.items()}
-        wrong = [t for t in sorted(stamps) if said_by_topic.get(t, 0) != len(stamps[t])]
-        if wrong and said == count:
-            report.notes.append(f'metadata.yaml miscounts the messages of {", ".join(wrong)}')
-        for topic in sorted(stamps):
-            ts = stamps[topic]
-            span = (ts[-1] - ts[0]) * 1e-9 if len(ts) > 1 else 0.0
-            report.topics.append(TopicStats(
-                topic, types[topic], len(ts), ts[0] * 1e-9 if ts else None,
-                ts[-1] * 1e-9 if ts else None,
-                (len(ts) - 1) / span if span > 0 else None, sizes[topic]))
-        arrays = {t: np.asarray(p, float) for t, p in paths.items()}
+        scan = _scan(reader, bag)
+        report = _counts(reader, bag, scan)
+        arrays = {t: np.asarray(p, float) for t, p in scan.paths.items()}
         for topic, p in arrays.items():
             report.paths.append(PathStats(
                 topic, len(p), float(np.linalg.norm(np.diff(p, axis=0), axis=1).sum()),
-                p[0].tolist(), p[-1].tolist(), math.degrees(yaws[topic])))
-        for topic, joints in sorted(tracking.items()):
+                p[0].tolist(), p[-1].tolist(), math.degrees(scan.yaws[topic])))
+        for topic, joints in sorted(scan.tracking.items()):
             for joint, errors in joints.items():
                 e = np.asarray(errors, float)
                 report.tracking.append(TrackingStats(
@@ -153,6 +117,59 @@ def analyse(bag: Path) -> Tuple['Report', Dict[str, Any]]:
         return report, arrays
     finally:
         reader.close()
+
+
+def _scan(reader: AnyReader, bag: Path) -> _Scan:
+    scan = _Scan()
+    for c in reader.connections:
+        scan.stamps.setdefault(c.topic, [])
+        scan.sizes.setdefault(c.topic, 0)
+        scan.types[c.topic] = c.msgtype
+    try:
+        for c, t, raw in reader.messages():
+            scan.stamps[c.topic].append(t)
+            scan.sizes[c.topic] += len(raw)
+            if _is_controller_state(c):
+                _add_tracking(reader.deserialize(raw, c.msgtype), scan.tracking.setdefault(
+                    c.topic, {}))
+            elif c.msgtype == ODOMETRY:
+                odometry: Any = reader.deserialize(raw, c.msgtype)    # (nav_msgs/Odometry)
+                pose = odometry.pose.pose
+                scan.paths.setdefault(c.topic, []).append((pose.position.x, pose.position.y))
+                q = pose.orientation
+                scan.yaws[c.topic] = yaw_from_quaternion((q.x, q.y, q.z, q.w))
+    except Exception as exc:
+        raise AnalysisError(f'{bag}: unreadable data ({type(exc).__name__}: {exc}); the '
+                            'bag is truncated or corrupt') from None
+    return scan
+
+
+def _counts(reader: AnyReader, bag: Path, scan: _Scan) -> 'Report':
+    """The report's counts, span and topics, as the data has them (metadata.yaml may say
+    otherwise, edited or copied from another bag: where it does, the report says so)."""
+    stamps = scan.stamps
+    storage = 'mcap' if list(Path(bag).glob('*.mcap')) else 'sqlite3'
+    count = sum(len(ts) for ts in stamps.values())
+    firsts = [ts[0] for ts in stamps.values() if ts]
+    lasts = [ts[-1] for ts in stamps.values() if ts]
+    duration = (max(lasts) - min(firsts)) * 1e-9 if firsts else 0.0
+    report = Report(str(bag), storage, duration, count)
+    said = reader.message_count
+    if said != count:
+        report.notes.append(f'metadata.yaml says {said} messages; the bag holds {count}, '
+                            'which this report counts')
+    said_by_topic = {t: info.msgcount for t, info in reader.topics.items()}
+    wrong = [t for t in sorted(stamps) if said_by_topic.get(t, 0) != len(stamps[t])]
+    if wrong and said == count:
+        report.notes.append(f'metadata.yaml miscounts the messages of {", ".join(wrong)}')
+    for topic in sorted(stamps):
+        ts = stamps[topic]
+        span = (ts[-1] - ts[0]) * 1e-9 if len(ts) > 1 else 0.0
+        report.topics.append(TopicStats(
+            topic, scan.types[topic], len(ts), ts[0] * 1e-9 if ts else None,
+            ts[-1] * 1e-9 if ts else None,
+            (len(ts) - 1) / span if span > 0 else None, scan.sizes[topic]))
+    return report
 
 
 def _is_controller_state(connection: Any) -> bool:

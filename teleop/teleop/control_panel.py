@@ -144,21 +144,8 @@ class ControlPanel(Node):
     def _on_world(self, future) -> None:
         self._asking = False
         values = future.result().values if future.result() is not None else []
-        if len(values) != 3 or values[0].type != ParameterType.PARAMETER_STRING:
-            self._error(f'{self._sim} has no world parameter')
-            return
-        max_speed = (values[1].double_value if values[1].type == ParameterType.PARAMETER_DOUBLE
-                     else self._fallback[0])
-        max_turn = (values[2].double_value if values[2].type == ParameterType.PARAMETER_DOUBLE
-                    else self._fallback[1])
-        try:
-            world = load_world(resolve_resource(values[0].string_value))
-        except (WorldConfigError, OSError, ValueError) as exc:
-            self._error(f'cannot read the world of {self._sim}: {exc}')
-            return
-        robots = robots_of_world(world, max_speed, max_turn)
+        robots = self._robots_of(values)
         if not robots:
-            self._error(f'the world {values[0].string_value} has no driven base')
             return
         self._ask_timer.cancel()
         with self._lock:
@@ -172,6 +159,26 @@ class ControlPanel(Node):
             f'{r.name} ({r.namespace}, {"holonomic" if r.holonomic else "differential"})'
             for r in robots))
         self._select(chosen)
+
+    def _robots_of(self, values: list) -> List[PanelRobot]:
+        """The driven bases of the simulator's world (its parameters ``values``: world,
+        max_speed, max_turn), or none, said why."""
+        if len(values) != 3 or values[0].type != ParameterType.PARAMETER_STRING:
+            self._error(f'{self._sim} has no world parameter')
+            return []
+        max_speed = (values[1].double_value if values[1].type == ParameterType.PARAMETER_DOUBLE
+                     else self._fallback[0])
+        max_turn = (values[2].double_value if values[2].type == ParameterType.PARAMETER_DOUBLE
+                    else self._fallback[1])
+        try:
+            world = load_world(resolve_resource(values[0].string_value))
+        except (WorldConfigError, OSError, ValueError) as exc:
+            self._error(f'cannot read the world of {self._sim}: {exc}')
+            return []
+        robots = robots_of_world(world, max_speed, max_turn)
+        if not robots:
+            self._error(f'the world {values[0].string_value} has no driven base')
+        return robots
 
     def _select(self, robot: PanelRobot) -> None:
         """Drive ``robot`` from now on: the previous one is stopped first."""
