@@ -20,4 +20,7 @@ setup(
     maintainer_email='maintainers@example.org',
     description='URDF descriptions of the project robots.',
     license='Apache-2.0',
+    entry_points={'console_scripts': [
+        'generate_urdf = robot_description.generate_urdf:main',
+    ]},
 )

@@ -18,7 +18,8 @@ def test_ruff_finds_nothing():
 
 # Every package of the project (mypy.ini: strict on the ROS-free floor).
 PACKAGES = ('controllers', 'world_description', 'coordinator', 'perception', 'recording',
-            'sim_bridge', 'arm_kinematics', 'ros_common', 'teleop', 'sim_bringup', 'live_view')
+            'sim_bridge', 'arm_kinematics', 'ros_common', 'teleop', 'sim_bringup', 'live_view',
+            'robot_description')
 
 
 def test_mypy_finds_nothing():

@@ -1,6 +1,5 @@
 """The youBot description: generated from the published numbers, loadable by PyBullet and
 pinocchio, and carrying the paper's MDH frames (FK agrees with pinocchio within 1e-9)."""
-import importlib.util
 import math
 import xml.etree.ElementTree as ET
 from pathlib import Path
@@ -20,27 +19,18 @@ from controllers.youbot_arm import (
     theta_from_datasheet,
     youbot_arm_chain,
 )
-from robot_description import urdf_path
+from robot_description import urdf_path, youbot_urdf
 from sim_bridge.world import URDF_FLAGS
 
 URDF = urdf_path('youbot')
 ROOT = ET.parse(URDF).getroot()
-REPO = Path(__file__).resolve().parents[2]
 LOWER = np.radians([lo for lo, _ in DATASHEET_LIMITS_DEG])
 UPPER = np.radians([hi for _, hi in DATASHEET_LIMITS_DEG])
 
 
-def _generator():
-    spec = importlib.util.spec_from_file_location(
-        'generate_youbot_urdf', REPO / 'scripts' / 'generate_youbot_urdf.py')
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
-
-
 def test_the_committed_urdf_is_what_the_generator_writes():
-    assert Path(URDF).read_text() == _generator().render(), \
-        'run scripts/generate_youbot_urdf.py after changing the numbers'
+    assert Path(URDF).read_text() == youbot_urdf.render(), \
+        'run generate_urdf youbot after changing the numbers'
 
 
 def test_parts_joints_and_published_masses():

@@ -1,5 +1,4 @@
 """The JAKA Zu 12: description generated from the DH table, FK against pinocchio, analytic IK."""
-import importlib.util
 import math
 from pathlib import Path
 
@@ -13,19 +12,14 @@ from controllers.transforms import pose_matrix, quaternion_to_matrix
 from controllers.zu12_arm import JOINT_NAMES, JOINT_VELOCITY_LIMITS, zu12_chain
 from controllers.zu12_ik import solve_ik
 from controllers.zu12_kinematics import Zu12Kinematics
-from robot_description import urdf_path
+from robot_description import urdf_path, zu12_urdf
 from sim_bridge.world import URDF_FLAGS
 
 URDF = urdf_path('zu12')
-REPO = Path(__file__).resolve().parents[2]
 
 
 def test_the_committed_urdf_is_what_the_generator_writes():
-    spec = importlib.util.spec_from_file_location(
-        'generate_zu12_urdf', REPO / 'scripts' / 'generate_zu12_urdf.py')
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    assert Path(URDF).read_text() == module.render()
+    assert Path(URDF).read_text() == zu12_urdf.render(), 'run generate_urdf zu12'
 
 
 def _pin():
@@ -160,3 +154,17 @@ def test_ik_never_answers_with_an_arm_through_the_floor():
         else:
             assert 'floor' in result.reason or 'limits' in result.reason, result.reason
     assert answered > 100
+
+
+def test_generate_urdf_checks_and_writes_the_descriptions(tmp_path, capsys):
+    from robot_description.generate_urdf import main
+    assert main(['--check']) == 0                      # the committed files are up to date
+    assert 'zu12.urdf: up to date' in capsys.readouterr().out
+    assert main(['zu12', '--out', str(tmp_path)]) == 0
+    assert (tmp_path / 'zu12.urdf').read_text() == Path(URDF).read_text()
+    assert not (tmp_path / 'youbot.urdf').exists()
+    (tmp_path / 'zu12.urdf').write_text('<robot/>')
+    assert main(['zu12', '--check', '--out', str(tmp_path)]) == 1
+    with pytest.raises(SystemExit) as refused:
+        main(['ur5', '--out', str(tmp_path)])
+    assert refused.value.code == 2 and 'no generator for ur5' in capsys.readouterr().err

@@ -1,29 +1,22 @@
-#!/usr/bin/env python3
 """Write robot_description/urdf/youbot.urdf from the published youBot numbers.
 
 The arm's joint frames are the frames of the pipeline paper's MDH table (docs/robot-models.md §3),
 so the description and controllers/youbot_arm.py describe one arm; the joints themselves use the
 datasheet angles (zero at the straight-up "candle", the convention of the paper's limits).
-Run it after changing the numbers; tests/unit/test_youbot_urdf.py fails if the committed file
-differs from what this script writes.
+Run `generate_urdf` after changing the numbers; tests/unit/test_youbot_urdf.py fails if the
+committed file differs from what this module writes.
 
-    python3 scripts/generate_youbot_urdf.py [--check]
+    generate_urdf youbot [--check]
 """
 from __future__ import annotations
 
 import math
-import sys
-from pathlib import Path
+from typing import List
 
 import numpy as np
 
-ROOT = Path(__file__).resolve().parent.parent
-sys.path.insert(0, str(ROOT / 'controllers'))
-sys.path.insert(0, str(ROOT / 'scripts'))
-
-import urdf_writer as uw  # noqa: E402
-from controllers.mecanum import BASE_LINK_HEIGHT_M, WHEEL_RADIUS_M  # noqa: E402
-from controllers.youbot_arm import (  # noqa: E402
+from controllers.mecanum import BASE_LINK_HEIGHT_M, WHEEL_RADIUS_M
+from controllers.youbot_arm import (
     ARM_BASE_IN_BASE_LINK_M,
     CRAIG_ROWS_DEG_M,
     DATASHEET_LIMITS_DEG,
@@ -33,8 +26,7 @@ from controllers.youbot_arm import (  # noqa: E402
     THETA_OFFSET_RAD,
     THETA_SIGN,
 )
-
-OUT = ROOT / 'robot_description' / 'urdf' / 'youbot.urdf'
+from robot_description import urdf_writer as uw
 
 BASE_SIZE_M = (0.57, 0.36, 0.10)
 BASE_MASS_KG = 22.0
@@ -64,7 +56,7 @@ ARM_SHAPES = (
 )
 
 
-def _base() -> list:
+def _base() -> List[str]:
     parts = [uw.link('base_link', BASE_MASS_KG, ('box', BASE_SIZE_M, (0.0, 0.0, 0.0)), 'dark')]
     wheel_inertia = uw.inertia('cylinder', (WHEEL_RADIUS_M, WHEEL_WIDTH_M), WHEEL_MASS_KG)
     for name, sx, sy, yaw_deg in WHEELS:
@@ -86,7 +78,7 @@ def _base() -> list:
     return parts
 
 
-def _arm() -> list:
+def _arm() -> List[str]:
     parts = [uw.link('arm_link_0', ARM_MASSES_KG[0], ARM_SHAPES[0], 'orange')]
     parts.append(uw.joint('arm_joint_0', 'fixed', 'base_link', 'arm_link_0', ARM_MOUNT_M))
     base_in_mount = np.subtract(ARM_BASE_IN_BASE_LINK_M, ARM_MOUNT_M)
@@ -112,7 +104,7 @@ def _arm() -> list:
     return parts
 
 
-def _gripper() -> list:
+def _gripper() -> List[str]:
     palm = ('box', (0.04, 0.1, 0.045), (0.0, 0.0, 0.0225))
     parts = [uw.link('gripper_palm_link', PALM_MASS_KG, palm, 'dark'),
              uw.joint('gripper_palm_joint', 'fixed', 'arm_link_5', 'gripper_palm_link',
@@ -131,7 +123,7 @@ def _gripper() -> list:
 
 HEADER = f'''<?xml version="1.0"?>
 <!--
-  KUKA youBot, written by scripts/generate_youbot_urdf.py from the published numbers
+  KUKA youBot, written by robot_description/youbot_urdf.py from the published numbers
   (docs/robot-models.md §2-3); do not edit by hand.
   base_link: centre of the base box, {BASE_LINK_HEIGHT_M} m above the ground (REP-103: x forward,
   z up).
@@ -158,6 +150,3 @@ HEADER = f'''<?xml version="1.0"?>
 def render() -> str:
     return HEADER + '\n'.join(_base() + _arm() + _gripper()) + '\n</robot>\n'
 
-
-if __name__ == '__main__':
-    sys.exit(uw.generator_main(__doc__, render, OUT))

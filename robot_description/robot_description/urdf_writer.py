@@ -1,28 +1,18 @@
 """Small helpers that write URDF elements (used by the robot description generators)."""
 from __future__ import annotations
 
-import argparse
 import math
-from pathlib import Path
-from typing import Callable
+from typing import Optional, Sequence, Tuple
 
 import numpy as np
 
+from controllers.arrays import Vector
 
-def generator_main(doc: str, render: Callable[[], str], out: Path) -> int:
-    """Command line of a description generator: write ``out``, or ``--check`` it."""
-    parser = argparse.ArgumentParser(description=doc.splitlines()[0])
-    parser.add_argument('--check', action='store_true',
-                        help='exit 1 if the committed file differs from the generated one')
-    args = parser.parse_args()
-    text = render()
-    if args.check:
-        same = out.is_file() and out.read_text() == text
-        print(f'{out}: {"up to date" if same else "differs from the generator"}')
-        return 0 if same else 1
-    out.write_text(text)
-    print(f'wrote {out}')
-    return 0
+Triple = Vector
+# A link's shape: its kind (box, cylinder, sphere), size and centre in the link's frame.
+Shape = Tuple[str, Sequence[float], Triple]
+# Joint limits: lower, upper (None: a continuous joint), effort, velocity.
+Limit = Tuple[Optional[float], Optional[float], float, float]
 
 
 def num(v: float) -> str:
@@ -31,11 +21,11 @@ def num(v: float) -> str:
     return f'{v:.17g}'
 
 
-def vec(v) -> str:
+def vec(v: Vector) -> str:
     return ' '.join(num(float(x)) for x in v)
 
 
-def rpy(rot: np.ndarray) -> tuple:
+def rpy(rot: np.ndarray) -> Tuple[float, float, float]:
     """URDF roll-pitch-yaw (R = Rz(yaw) Ry(pitch) Rx(roll))."""
     pitch = math.asin(max(-1.0, min(1.0, -rot[2, 0])))
     if abs(rot[2, 0]) < 1.0 - 1e-12:
@@ -57,7 +47,7 @@ def rot_z(a: float) -> np.ndarray:
     return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
 
 
-def inertia(kind: str, size: tuple, mass: float) -> tuple:
+def inertia(kind: str, size: Sequence[float], mass: float) -> Tuple[float, float, float]:
     if kind == 'box':
         x, y, z = size
         return (mass * (y * y + z * z) / 12, mass * (x * x + z * z) / 12,
@@ -70,7 +60,7 @@ def inertia(kind: str, size: tuple, mass: float) -> tuple:
     return (side, side, mass * r * r / 2)
 
 
-def geometry(kind: str, size: tuple) -> str:
+def geometry(kind: str, size: Sequence[float]) -> str:
     if kind == 'box':
         return f'<box size="{vec(size)}"/>'
     if kind == 'sphere':
@@ -78,8 +68,9 @@ def geometry(kind: str, size: tuple) -> str:
     return f'<cylinder radius="{num(size[0])}" length="{num(size[1])}"/>'
 
 
-def link(name: str, mass: float, shape=None, material: str = 'grey', collision: bool = True,
-          visual_shape=None, inertia_diag=None) -> str:
+def link(name: str, mass: float, shape: Optional[Shape] = None, material: str = 'grey',
+         collision: bool = True, visual_shape: Optional[Shape] = None,
+         inertia_diag: Optional[Triple] = None) -> str:
     lines = [f'  <link name="{name}">']
     if shape is not None:
         kind, size, centre = shape
@@ -101,15 +92,17 @@ def link(name: str, mass: float, shape=None, material: str = 'grey', collision: 
     return '\n'.join(lines)
 
 
-def joint(name: str, kind: str, parent: str, child: str, xyz, rpy=(0.0, 0.0, 0.0),
-           axis=None, limit=None) -> str:
+def joint(name: str, kind: str, parent: str, child: str, xyz: Triple,
+          rpy: Triple = (0.0, 0.0, 0.0), axis: Optional[Triple] = None,
+          limit: Optional[Limit] = None) -> str:
     lines = [f'  <joint name="{name}" type="{kind}">', f'    <parent link="{parent}"/>',
              f'    <child link="{child}"/>', f'    <origin xyz="{vec(xyz)}" rpy="{vec(rpy)}"/>']
     if axis is not None:
         lines.append(f'    <axis xyz="{vec(axis)}"/>')
     if limit is not None:
         lower, upper, effort, velocity = limit
-        bounds = '' if lower is None else f'lower="{num(lower)}" upper="{num(upper)}" '
+        bounds = ('' if lower is None or upper is None
+                  else f'lower="{num(lower)}" upper="{num(upper)}" ')
         lines.append(f'    <limit {bounds}effort="{num(effort)}" velocity="{num(velocity)}"/>')
     lines.append('  </joint>')
     return '\n'.join(lines)

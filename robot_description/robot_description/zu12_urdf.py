@@ -1,34 +1,27 @@
-#!/usr/bin/env python3
 """Write robot_description/urdf/zu12.urdf from the JAKA Zu 12's standard DH table.
 
 Standard DH puts joint i's rotation before the link's fixed part: T(i-1, i) = RotZ(theta_i)
 [TransZ(d_i) TransX(a_i) RotX(alpha_i)]. In the URDF, link_i is frame i-1 turned by theta_i, and
 joint i+1's origin is the fixed part of row i, so `flange` (link_6 plus row 6's fixed part) is
 the table's frame 6 and the joint positions are the table's theta (docs/robot-models.md §4).
-tests/unit/test_zu12.py fails if the committed file differs from what this script writes.
+tests/unit/test_zu12.py fails if the committed file differs from what this module writes.
 
-    python3 scripts/generate_zu12_urdf.py [--check]
+    generate_urdf zu12 [--check]
 """
 from __future__ import annotations
 
 import math
-import sys
-from pathlib import Path
+from typing import List, Tuple
 
-ROOT = Path(__file__).resolve().parent.parent
-sys.path.insert(0, str(ROOT / 'controllers'))
-sys.path.insert(0, str(ROOT / 'scripts'))
-
-import urdf_writer as uw  # noqa: E402
-from controllers.zu12_arm import (  # noqa: E402
+from controllers.arrays import Vector
+from controllers.zu12_arm import (
     JOINT_NAMES,
     JOINT_VELOCITY_LIMITS,
     LIMITS_DEG,
     SUCTION_TCP_OFFSET_M,
     flange_offset,
 )
-
-OUT = ROOT / 'robot_description' / 'urdf' / 'zu12.urdf'
+from robot_description import urdf_writer as uw
 
 # About 41 kg in all (the vendor's figure), spread over the links; efforts of the joint sizes.
 BASE_MASS_KG = 4.0
@@ -48,7 +41,7 @@ LINK_SHAPES = (
 
 HEADER = '''<?xml version="1.0"?>
 <!--
-  JAKA Zu 12, written by scripts/generate_zu12_urdf.py from the manufacturer's standard DH
+  JAKA Zu 12, written by robot_description/zu12_urdf.py from the manufacturer's standard DH
   table (docs/robot-models.md §4); do not edit by hand. base_link on the floor; joint positions are
   the table's theta (all offsets 0) with the published ranges and speeds; `flange` is the
   table's frame 6, `suction_tcp` the contact point of the suction tool on the flange's z axis.
@@ -61,10 +54,11 @@ HEADER = '''<?xml version="1.0"?>
 '''
 
 
-def _parts() -> list:
+def _parts() -> List[str]:
     parts = [uw.link('base_link', BASE_MASS_KG, ('cylinder', (0.08, 0.05), (0.0, 0.0, 0.025)),
                      'grey')]
-    parent, origin = 'base_link', ((0.0, 0.0, 0.0), (0.0, 0.0, 0.0))
+    origin: Tuple[Vector, Vector] = ((0.0, 0.0, 0.0), (0.0, 0.0, 0.0))
+    parent = 'base_link'
     for i, name in enumerate(JOINT_NAMES):
         lo, hi = (math.radians(v) for v in LIMITS_DEG[i])
         child = f'link_{i + 1}'
@@ -89,6 +83,3 @@ def _parts() -> list:
 def render() -> str:
     return HEADER + '\n'.join(_parts()) + '\n</robot>\n'
 
-
-if __name__ == '__main__':
-    sys.exit(uw.generator_main(__doc__, render, OUT))
