@@ -91,18 +91,17 @@ def _verdict(ok: bool) -> str:
     return 'met' if ok else 'NOT met'
 
 
-def main() -> int:
-    rng = np.random.default_rng(2026)
-    chain = youbot_arm_chain()
-    lower, upper = chain.limits
-    q0 = rng.uniform(lower, upper)
-    fk_wall, fk_cpu = _per_call_us(lambda: chain.fk(q0))
-    zu12 = zu12_chain()
-    zlower, zupper = zu12.limits
-    z0 = rng.uniform(zlower, zupper)
-    zfk_wall, zfk_cpu = _per_call_us(lambda: zu12.fk(z0))
-    pin_fk = _pinocchio_fk_us()
+def _node_ik(kinematics):
+    def solve(target, seed):
+        result = kinematics.ik(target, seed)
+        return (result.positions, result.position_error) if result.success else (None, 0)
+    return solve
 
+
+def _youbot_ik(rng, chain):
+    """The youBot's IK, the MDH chain's and the node core's: whether both met their checks,
+    and their solves per second."""
+    lower, upper = chain.limits
     targets = [chain.fk(rng.uniform(lower, upper)) for _ in range(N)]
     far = np.eye(4)
     far[:3, 3] = (0.9, 0.0, 0.2)
@@ -118,17 +117,18 @@ def main() -> int:
     targets = [kin.fk(rng.uniform(kin.lower, kin.upper)) for _ in range(N)]
     seeds = [rng.uniform(kin.lower, kin.upper) for _ in range(N)]
 
-    def node_ik(kinematics):
-        def solve(target, seed):
-            result = kinematics.ik(target, seed)
-            return (result.positions, result.position_error) if result.success else (None, 0)
-        return solve
     good, _, node_rate = _report('youBot kinematics node core (gripper_tcp in base_link, '
                                  'random seeds)',
-                                 _solve_all(node_ik(kin), targets, seeds, kin.within_limits),
+                                 _solve_all(_node_ik(kin), targets, seeds, kin.within_limits),
                                  not kin.ik(far).success)
-    ok &= good
 
+    return ok and good, youbot_rate, node_rate
+
+
+def _zu12_ik(rng, zu12):
+    """The Zu 12's IK and its node core's: whether it met its checks, and its median [ms]."""
+    zlower, zupper = zu12.limits
+    far = np.eye(4)
     targets = [zu12.fk(rng.uniform(zlower, zupper)) for _ in range(N)]
     seeds = [rng.uniform(zlower, zupper) for _ in range(N)]
 
@@ -139,14 +139,31 @@ def main() -> int:
     good, zu12_median, _ = _report('JAKA Zu 12 (flange, full 6-DOF poses, random seeds)',
                                    _solve_all(zu12_ik, targets, seeds, zu12.within_limits),
                                    not solve_zu12(far).success)
-    ok &= good
     zkin = Zu12Kinematics('suction_tcp')
     targets = [zkin.fk(rng.uniform(zkin.lower, zkin.upper)) for _ in range(N)]
     # Not every FK target keeps the arm above the floor: those fail with that reason.
     _report('JAKA Zu 12 kinematics node core (suction_tcp, floor check)',
-                         _solve_all(node_ik(zkin), targets, seeds, zkin.within_limits),
+                         _solve_all(_node_ik(zkin), targets, seeds, zkin.within_limits),
                          not zkin.ik(far).success)
 
+    return good, zu12_median
+
+
+def main() -> int:
+    rng = np.random.default_rng(2026)
+    chain = youbot_arm_chain()
+    lower, upper = chain.limits
+    q0 = rng.uniform(lower, upper)
+    fk_wall, fk_cpu = _per_call_us(lambda: chain.fk(q0))
+    zu12 = zu12_chain()
+    zlower, zupper = zu12.limits
+    z0 = rng.uniform(zlower, zupper)
+    zfk_wall, zfk_cpu = _per_call_us(lambda: zu12.fk(z0))
+    pin_fk = _pinocchio_fk_us()
+
+    ok, youbot_rate, node_rate = _youbot_ik(rng, chain)
+    good, zu12_median = _zu12_ik(rng, zu12)
+    ok &= good
     print(f'FK: youBot {fk_wall:.1f} us per call ({fk_cpu:.1f} us CPU), Zu 12 {zfk_wall:.1f} '
           f'us ({zfk_cpu:.1f} us CPU)' + ('' if pin_fk is None else
                                          f'; pinocchio (C++) Zu 12 {pin_fk[0]:.1f} us: ours '

@@ -67,6 +67,30 @@ def trials(count: int, parallel: int, out: Path, domain: int, dt: float = DT) ->
                 for r in results]}
 
 
+def _cpu_lines(run: dict) -> dict:
+    """Print the run's peak joint speeds and CPU figures; the CPU figures."""
+    cpu = run['cpu_seconds']
+    # Measured from the simulator's joint states (their velocities), not from the plans.
+    peak = run.get('peak_joint_speed') or {}
+    print('  largest joint speed / its limit, from the recorded joint states: ' + ', '.join(
+        f'{arm} {p["fraction_of_limit"]:.3f} ({p["joint"]})' for arm, p in sorted(peak.items()))
+        + ('' if all(p['fraction_of_limit'] <= 1.0 for p in peak.values()) else
+           '  ABOVE THE LIMIT'))
+    print('  CPU seconds by node (the coordinator exits first): ' + ', '.join(
+        f'{k} {v:.1f}' for k, v in sorted(cpu.items(), key=lambda kv: -kv[1])
+        if not math.isnan(v)))
+    per_s = {k: v / run['completion_time'] for k, v in cpu.items() if not math.isnan(v)}
+    print('  CPU seconds per simulated second (then: when issue 12 was filed): ' + ', '.join(
+        f'{k} {v:.3f}' + (f' (then {FILED_CPU_PER_SIM_S[k]:.3f})' if k in FILED_CPU_PER_SIM_S
+                          else '') for k, v in sorted(per_s.items(), key=lambda kv: -kv[1])))
+    then = sum(FILED_CPU_PER_SIM_S.values())
+    now = sum(per_s.get(k, 0.0) for k in FILED_CPU_PER_SIM_S)
+    print(f'  those nodes together: {now:.3f} CPU-s per simulated second, then {then:.3f}: '
+          f'{then / now:.2f}x less (goal: 3x); all nodes with the coordinator: '
+          f'{sum(per_s.values()):.3f}')
+    return {'cpu_per_sim_second': per_s, 'cpu_cut_vs_filed': then / now if now else math.inf}
+
+
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument('--count', type=int, default=2, help='trials per throughput run')
@@ -99,26 +123,7 @@ def main() -> int:
           f'step {dt * 1e3:.3f} ms): '
           f'{run["completion_time"]:.1f} s simulated in {run["wall_time"]:.1f} s wall '
           f'(real-time factor {rtf:.2f})')
-    # Measured from the simulator's joint states (their velocities), not from the plans.
-    peak = run.get('peak_joint_speed') or {}
-    print('  largest joint speed / its limit, from the recorded joint states: ' + ', '.join(
-        f'{arm} {p["fraction_of_limit"]:.3f} ({p["joint"]})' for arm, p in sorted(peak.items()))
-        + ('' if all(p['fraction_of_limit'] <= 1.0 for p in peak.values()) else
-           '  ABOVE THE LIMIT'))
-    print('  CPU seconds by node (the coordinator exits first): ' + ', '.join(
-        f'{k} {v:.1f}' for k, v in sorted(cpu.items(), key=lambda kv: -kv[1])
-        if not math.isnan(v)))
-    per_s = {k: v / run['completion_time'] for k, v in cpu.items() if not math.isnan(v)}
-    figures['cpu_per_sim_second'] = per_s
-    print('  CPU seconds per simulated second (then: when issue 12 was filed): ' + ', '.join(
-        f'{k} {v:.3f}' + (f' (then {FILED_CPU_PER_SIM_S[k]:.3f})' if k in FILED_CPU_PER_SIM_S
-                          else '') for k, v in sorted(per_s.items(), key=lambda kv: -kv[1])))
-    then = sum(FILED_CPU_PER_SIM_S.values())
-    now = sum(per_s.get(k, 0.0) for k in FILED_CPU_PER_SIM_S)
-    figures['cpu_cut_vs_filed'] = then / now if now else math.inf
-    print(f'  those nodes together: {now:.3f} CPU-s per simulated second, then {then:.3f}: '
-          f'{then / now:.2f}x less (goal: 3x); all nodes with the coordinator: '
-          f'{sum(per_s.values()):.3f}')
+    figures.update(_cpu_lines(run))
     print(f'in-process baseline, same world and camera, no ROS: real-time factor '
           f'{base["rtf"]:.2f}; the node graph runs at {rtf / base["rtf"]:.2f} of it')
     print(f'throughput: {seq["trials_per_hour"]:.1f} trials/h one at a time, '

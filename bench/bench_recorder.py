@@ -147,6 +147,11 @@ def worker_recorder(count: int, width: int, height: int, out: Path, drain: bool 
         node.destroy_node()
         rclpy.try_shutdown(context=ctx)
     sent = float(publisher.stdout.strip().splitlines()[-1])    # messages/s, until all acked
+    return _recorder_figures(count, marks, sent)
+
+
+def _recorder_figures(count: int, marks: List, sent: float) -> Dict:
+    """Rates from the marks after each write (wall, CPU, bytes) and the publisher's rate."""
     if len(marks) < 2:
         return {'published': count, 'recorded': len(marks), 'mb_per_s': float('nan'),
                 'msgs_per_s': float('nan'), 'cpu_ms_per_msg': float('nan'),
@@ -224,6 +229,34 @@ def _span(runs: List[Dict], key: str, fmt: str = '.0f') -> str:
     return f'{statistics.median(values):{fmt}} ({min(values):{fmt}}-{max(values):{fmt}})'
 
 
+def _table(runs: Dict[str, List[Dict]], count: int) -> Dict[str, Dict]:
+    """Print the table of the runs' medians; the summary per payload and configuration."""
+    print('\n| payload | configuration | raw rosbags write | recorder | sent | recorder / raw | '
+          'drain | drain / raw | recorder CPU ms per frame: streaming, drain (raw write) | '
+          'recorded |')
+    print('|---|---|---|---|---|---|---|---|---|---|')
+    summary = {}
+    for width, height in SIZES:
+        for config in CONFIGS:
+            key = f'{width}x{height} {config}'
+            raw, rec, drain = (runs[f'{kind} {key}'] for kind in ('raw', 'recorder', 'drain'))
+            raw_mb = _median(raw, 'mb_per_s')
+            summary[key] = {'raw_mb_per_s': raw_mb, 'recorder_mb_per_s': _median(rec, 'mb_per_s'),
+                            'sent_mb_per_s': _median(rec, 'sent_mb_per_s'),
+                            'drain_mb_per_s': _median(drain, 'mb_per_s'),
+                            'ratio': _median(rec, 'mb_per_s') / raw_mb,
+                            'drain_ratio': _median(drain, 'mb_per_s') / raw_mb}
+            recorded = ', '.join(f'{min(r["recorded"] for r in x)}-{max(r["recorded"] for r in x)}'
+                                 for x in (rec, drain))
+            print(f'| rgb8 {width}x{height} | {config} | {_span(raw, "mb_per_s")} | '
+                  f'{_span(rec, "mb_per_s")} | {_span(rec, "sent_mb_per_s")} | '
+                  f'{summary[key]["ratio"]:.2f} | {_span(drain, "mb_per_s")} | '
+                  f'{summary[key]["drain_ratio"]:.2f} | {_median(rec, "cpu_ms_per_msg"):.2f}, '
+                  f'{_median(drain, "cpu_ms_per_msg"):.2f} ({_median(raw, "cpu_ms_per_msg"):.2f})'
+                  f' | {recorded} of {count} |')
+    return summary
+
+
 def main() -> int:
     if len(sys.argv) > 1 and sys.argv[1] == '--worker':
         return _worker_main(sys.argv[2:])
@@ -258,29 +291,7 @@ def main() -> int:
           f'{"" if args.dir else "system temp directory"}')
     print('\nMB/s; "sent": how fast the publisher got its frames acknowledged; "drain": the '
           'recorder taking and writing frames already delivered, without the sending')
-    print('\n| payload | configuration | raw rosbags write | recorder | sent | recorder / raw | '
-          'drain | drain / raw | recorder CPU ms per frame: streaming, drain (raw write) | '
-          'recorded |')
-    print('|---|---|---|---|---|---|---|---|---|---|')
-    summary = {}
-    for width, height in SIZES:
-        for config in CONFIGS:
-            key = f'{width}x{height} {config}'
-            raw, rec, drain = (runs[f'{kind} {key}'] for kind in ('raw', 'recorder', 'drain'))
-            raw_mb = _median(raw, 'mb_per_s')
-            summary[key] = {'raw_mb_per_s': raw_mb, 'recorder_mb_per_s': _median(rec, 'mb_per_s'),
-                            'sent_mb_per_s': _median(rec, 'sent_mb_per_s'),
-                            'drain_mb_per_s': _median(drain, 'mb_per_s'),
-                            'ratio': _median(rec, 'mb_per_s') / raw_mb,
-                            'drain_ratio': _median(drain, 'mb_per_s') / raw_mb}
-            recorded = ', '.join(f'{min(r["recorded"] for r in x)}-{max(r["recorded"] for r in x)}'
-                                 for x in (rec, drain))
-            print(f'| rgb8 {width}x{height} | {config} | {_span(raw, "mb_per_s")} | '
-                  f'{_span(rec, "mb_per_s")} | {_span(rec, "sent_mb_per_s")} | '
-                  f'{summary[key]["ratio"]:.2f} | {_span(drain, "mb_per_s")} | '
-                  f'{summary[key]["drain_ratio"]:.2f} | {_median(rec, "cpu_ms_per_msg"):.2f}, '
-                  f'{_median(drain, "cpu_ms_per_msg"):.2f} ({_median(raw, "cpu_ms_per_msg"):.2f})'
-                  f' | {recorded} of {args.count} |')
+    summary = _table(runs, args.count)
     if {'defaults', 'project'} <= set(CONFIGS):
         gain = (summary['640x480 project']['recorder_mb_per_s']
                 / summary['640x480 defaults']['recorder_mb_per_s'])
