@@ -111,10 +111,11 @@ ws_hash="$(cd "$WS/src" && {
   find -L . -type f ! -path '*/__pycache__/*' \( ! -name '*.py' -o -name setup.py \) \
     ! -name '*.pyc' -print0 | LC_ALL=C sort -z | xargs -0 cat
 } | hash_of)"
-# tf2_msgs and control_msgs (ros_ws/src/std_interfaces) are built only where the environment
-# has none: the ROS wheels in .venv, or an install on the AMENT_PREFIX_PATH this ran with.
+# tf2_msgs, control_msgs and simulation_interfaces (ros_ws/src/std_interfaces) are built only
+# where the environment has none: the ROS wheels in .venv, or an install on the
+# AMENT_PREFIX_PATH this ran with.
 provided=()
-for pkg in tf2_msgs control_msgs; do
+for pkg in tf2_msgs control_msgs simulation_interfaces; do
   for prefix in "$VENV" $(printf '%s' "${AMENT_PREFIX_PATH:-}" | tr ':' ' '); do
     case "$prefix" in "$WS"/*) continue ;; esac
     if [ -f "$prefix/share/$pkg/package.xml" ]; then provided+=("$pkg"); break; fi
