@@ -19,6 +19,7 @@ import numpy as np
 import pybullet
 from pybullet_utils.bullet_client import BulletClient
 
+from controllers.arrays import Vector
 from controllers.conveyor import Item, advance
 from controllers.transforms import matrix_to_quaternion
 from world_description.world_config import ConveyorConfig, MaterialsConfig
@@ -40,6 +41,7 @@ class MaterialBody:
     spawned_at: float          # simulated time [s]
     size: float = 0.05         # cube edge [m] (its class's)
     mass: float = 0.1          # [kg]
+    name: str = ''             # a spawned material's name (the simulation interfaces)
 
 
 class Conveyor:
@@ -66,6 +68,7 @@ class Conveyor:
                               spinningFriction=0.0)
         # The stop's face is the belt's downstream end: the whole belt stays usable.
         self.stop_along = config.length if config.end_stop else math.inf
+        self.stop_body: Optional[int] = None
         if config.end_stop:
             stop_half = (END_STOP_THICKNESS_M / 2, config.width / 2,
                          (END_STOP_HEIGHT_M + BELT_THICKNESS_M) / 2)
@@ -77,14 +80,15 @@ class Conveyor:
                                          rgbaColor=END_STOP_COLOR),
                 basePosition=stop_centre, baseOrientation=orn)
         stand_h = centre[2] - BELT_THICKNESS_M / 2
+        self.stand_body: Optional[int] = None
         if stand_h > 0.01:
             stand_half = (config.length / 2 * 0.95, config.width / 2 * 0.8, stand_h / 2)
             stand_col = client.createCollisionShape(pybullet.GEOM_BOX, halfExtents=stand_half)
             stand_vis = client.createVisualShape(pybullet.GEOM_BOX, halfExtents=stand_half,
                                                  rgbaColor=STAND_COLOR)
-            client.createMultiBody(0.0, stand_col, stand_vis,
-                                   basePosition=(centre[0], centre[1], stand_h / 2),
-                                   baseOrientation=orn)
+            self.stand_body = client.createMultiBody(
+                0.0, stand_col, stand_vis, basePosition=(centre[0], centre[1], stand_h / 2),
+                baseOrientation=orn)
 
     @property
     def speed(self) -> float:
@@ -155,7 +159,9 @@ class Conveyor:
 
 
 class MaterialSource:
-    """Drops the scenario's materials on the belt in a seeded random order and spacing."""
+    """Drops the scenario's materials on the belt in a seeded random order and spacing; and
+    materials of the world's classes spawned by request (the simulation interfaces), which the
+    plan does not count. A material's index is its order of appearance, planned or spawned."""
 
     def __init__(self, client: BulletClient, conveyor: Conveyor, config: MaterialsConfig,
                  seed: Optional[int] = None) -> None:
@@ -170,6 +176,8 @@ class MaterialSource:
         for m in self.materials:
             self._p.removeBody(m.body)
         self.materials = []
+        self._dropped = 0               # materials of the plan dropped so far
+        self._next_index = 0
         rng = random.Random(self.seed)
         order = [color for color, n in self.config.counts for _ in range(n)]
         rng.shuffle(order)
@@ -184,30 +192,50 @@ class MaterialSource:
 
     @property
     def done(self) -> bool:
-        return len(self.materials) == len(self.plan)
+        return self._dropped == len(self.plan)
 
     def update(self, sim_time: float) -> Optional[MaterialBody]:
         """Drop the next material once the belt has travelled its gap; return it."""
         if self.done:
             return None
-        color, travel, across = self.plan[len(self.materials)]
+        color, travel, across = self.plan[self._dropped]
         if self._conveyor.travel + 1e-12 < travel:
             return None
+        size = self.config.cls(color).size
+        position = self.drop_point(size, across)
+        orn = self._p.getQuaternionFromEuler((0.0, 0.0, self._conveyor.config.yaw))
+        self._dropped += 1
+        return self.spawn(color, position, orn, sim_time)
+
+    def drop_point(self, size: float, across: float = 0.0) -> np.ndarray:
+        """Where a material of edge ``size`` is dropped: its centre just above the belt's
+        upstream end."""
+        position = self._conveyor.point(self.config.start_offset + size / 2, across)
+        position[2] += size / 2 + 1e-4
+        return position
+
+    def spawn(self, color: str, position: Vector, orientation: Vector,
+              sim_time: float) -> MaterialBody:
+        """A material of class ``color`` at a pose (its centre), from now on one of the cell's
+        materials (KeyError: no such class)."""
         cls = self.config.cls(color)
-        s = cls.size
-        half = (s / 2,) * 3
+        half = (cls.size / 2,) * 3
         col = self._p.createCollisionShape(pybullet.GEOM_BOX, halfExtents=half)
         vis = self._p.createVisualShape(pybullet.GEOM_BOX, halfExtents=half,
                                         rgbaColor=self._colors[color])
-        position = self._conveyor.point(self.config.start_offset + s / 2, across)
-        position[2] += s / 2 + 1e-4
-        orn = self._p.getQuaternionFromEuler((0.0, 0.0, self._conveyor.config.yaw))
-        body = self._p.createMultiBody(cls.mass, col, vis, basePosition=position,
-                                       baseOrientation=orn)
+        body = self._p.createMultiBody(
+            cls.mass, col, vis, basePosition=[float(v) for v in position],
+            baseOrientation=[float(v) for v in orientation])
         self._p.changeDynamics(body, -1, lateralFriction=0.8)
-        material = MaterialBody(len(self.materials), color, body, sim_time, s, cls.mass)
+        material = MaterialBody(self._next_index, color, body, sim_time, cls.size, cls.mass)
+        self._next_index += 1
         self.materials.append(material)
         return material
+
+    def remove(self, material: MaterialBody) -> None:
+        """Take a material out of the cell (a held one must be released first)."""
+        self._p.removeBody(material.body)
+        self.materials.remove(material)
 
     def pose(self, material: MaterialBody) -> Tuple[np.ndarray, np.ndarray]:
         """World position and rotation matrix of a material's centre."""

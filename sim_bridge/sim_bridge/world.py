@@ -475,6 +475,7 @@ class SimWorld:
         p.setGravity(0.0, 0.0, config.gravity)
         self._build_floor(config.floor_size)
         self._obstacle_names: Dict[int, str] = {}
+        self.obstacles: Dict[int, Any] = {}          # body: its ObstacleConfig
         # Fixed cameras' static scenes in the default light, by camera (None: the static
         # bodies are drawn in each frame). False: every frame of every camera is drawn whole
         # (a reference).
@@ -512,6 +513,11 @@ class SimWorld:
                     self.suctions[name] = Suction(p, robot, sc.link, sc.reach, sc.max_payload)
                 except ValueError as exc:
                     raise WorldError(str(exc)) from None
+
+    @property
+    def client(self) -> BulletClient:
+        """The world's PyBullet client."""
+        return self._p
 
     @property
     def sim_time(self) -> float:
@@ -667,5 +673,6 @@ class SimWorld:
         body = p.createMultiBody(0.0, col, vis, basePosition=obstacle.position,
                                  baseOrientation=p.getQuaternionFromEuler((0.0, 0.0,
                                                                           obstacle.yaw)))
+        self.obstacles[body] = obstacle
         self._obstacle_names[body] = (f'the {obstacle.name}' if obstacle.name else
                                       f'an obstacle ({obstacle.shape})')
