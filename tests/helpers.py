@@ -296,18 +296,20 @@ def moving(state) -> bool:
 
 
 class ActionUser:
-    """A FollowJointTrajectory client on a node of its own, spun only from the test's thread:
-    rclpy 7's ActionClient loses a goal response that a spinning thread takes before
-    send_goal_async has recorded the request ("Ignoring unexpected goal response",
-    ros2/rclpy#1123)."""
+    """An action client (FollowJointTrajectory unless ``action_type`` says otherwise) on a node
+    of its own, spun only from the test's thread: rclpy 7's ActionClient loses a goal response
+    that a spinning thread takes before send_goal_async has recorded the request ("Ignoring
+    unexpected goal response", ros2/rclpy#1123). The handshake sends the action's empty goal,
+    which the server must reject."""
 
-    def __init__(self, action: str):
+    def __init__(self, action: str, action_type=FollowJointTrajectory):
         self.context = rclpy.Context()
         rclpy.init(context=self.context)
         self.node = rclpy.create_node('action_user', context=self.context)
         self.executor = SingleThreadedExecutor(context=self.context)
         self.executor.add_node(self.node)
-        self.client = ActionClient(self.node, FollowJointTrajectory, action)
+        self.action_type = action_type
+        self.client = ActionClient(self.node, action_type, action)
 
     def spin_until(self, condition, timeout: float, what: str) -> None:
         end = time.monotonic() + timeout
@@ -324,7 +326,7 @@ class ActionUser:
         until one answer arrives: the path works both ways from then on."""
         end = time.monotonic() + timeout
         while True:
-            sent = self.client.send_goal_async(FollowJointTrajectory.Goal())
+            sent = self.client.send_goal_async(self.action_type.Goal())
             answered = time.monotonic() + 1.0
             while not sent.done() and time.monotonic() < min(answered, end):
                 self.executor.spin_once(timeout_sec=0.05)

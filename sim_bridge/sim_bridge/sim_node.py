@@ -13,6 +13,7 @@ import functools
 import math
 import re
 import sys
+import threading
 import time
 from dataclasses import dataclass, field
 from typing import Dict, Optional, Tuple
@@ -45,11 +46,13 @@ from ros_common.services import SERVICE_QOS
 from ros_common.stamps import stamp_from_ns
 from sim_bridge import messages
 from sim_bridge.camera import ImageBuffer
+from sim_bridge.entities import Entities
 from sim_bridge.frames import WorldFrames
 from sim_bridge.hold_watch import HoldWatch
 from sim_bridge.messages import topic
 from sim_bridge.parameters import PARAMS, SimConfigError, check_params
 from sim_bridge.runner import ZERO, DriveLimits, SimRunner, Twist3
+from sim_bridge.sim_api import SimulationInterfaces
 from sim_bridge.stepping import Stepping
 from sim_bridge.trajectory_action import TrajectoryActions
 from sim_bridge.world import SimWorld, WorldError
@@ -133,6 +136,12 @@ class SimNode(Node):
             time_step=p['time_step'], real_time_factor=p['real_time_factor'],
             max_steps_per_tick=p['max_steps_per_tick'], step_chunk=p['step_chunk'],
             rtf_log_period=p['rtf_log_period'])
+        # The standard simulator interfaces (sim_api.py); quitting through them ends the run.
+        self.exit_request, self.exit_code = threading.Event(), 0
+        self._entities = Entities(self._world, lambda: self._world.sim_time)
+        self._sim_api = SimulationInterfaces(self, self._stepping, self._entities,
+                                             self._reset_world, self.exit_request.set,
+                                             p['world'], lambda: self._world.sim_time_ns)
         self._runner.tick_clock(self)
         for name in self._world.robots:
             self.on_state(name, self._world.sim_time_ns)
@@ -444,6 +453,12 @@ class SimNode(Node):
         return ''
 
     def _on_reset(self, _request, response):
+        response.success, response.message = True, self._reset_world()
+        return response
+
+    def _reset_world(self) -> str:
+        """Robots back at their start poses, the materials' scenario again, faults cleared
+        (simulated time runs on); what was done."""
         aborted = self._actions.abort_all(
             'the simulation was reset: the arm is back at its start pose', hold=False)
         faults = list(self._runner.faults)
@@ -454,16 +469,16 @@ class SimNode(Node):
             if name in self._runner.guards:
                 self._publish_applied(name, now, ZERO)
             self.on_state(name, now)
-        response.success, response.message = True, 'robots returned to their start poses' + (
-            f' (faults cleared: {", ".join(faults)})' if faults else '') + (
-            f' (goals aborted: {", ".join(aborted)})' if aborted else '')
         self.get_logger().info('world reset' + (f'; goals aborted: {", ".join(aborted)}'
                                                 if aborted else ''))
-        return response
+        return 'robots returned to their start poses' + (
+            f' (faults cleared: {", ".join(faults)})' if faults else '') + (
+            f' (goals aborted: {", ".join(aborted)})' if aborted else '')
 
     def destroy_node(self) -> None:
         # Leave no robot driving on a stale command.
         self._runner.stop_all()
+        self._entities.close()
         self._world.close()
         super().destroy_node()
 

@@ -6,7 +6,7 @@ from __future__ import annotations
 import collections
 import time
 from dataclasses import dataclass
-from typing import Deque
+from typing import Callable, Deque, Optional, Tuple
 
 from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
@@ -24,12 +24,22 @@ MAX_STEPS_PER_REQUEST = 100_000
 
 
 @dataclass(eq=False)
-class _StepJob:
-    """A ~/step request served in chunks, and the reply it will get."""
-    request: StepSimulation.Request
-    response: StepSimulation.Response
+class StepJob:
+    """Steps served in chunks: a ~/step request and the reply it will get, or steps asked
+    for through the simulation interfaces, with what to call as they progress and at their
+    end (``on_done(job)``; ``job.stepped``: the steps taken, ``job.canceled``)."""
+    steps: int
     remaining: int
+    request: Optional[StepSimulation.Request] = None
+    response: Optional[StepSimulation.Response] = None
+    on_done: Optional[Callable[['StepJob'], None]] = None
+    on_progress: Optional[Callable[['StepJob'], None]] = None
     started: bool = False
+    canceled: bool = False
+
+    @property
+    def stepped(self) -> int:
+        return self.steps - self.remaining
 
 
 class Stepping:
@@ -43,6 +53,9 @@ class Stepping:
         self._world = runner.world
         self.synchronous = synchronous
         self.paused = False
+        # Stopped (the simulation interfaces' STATE_STOPPED): reset and paused, until it plays
+        # or steps.
+        self.stopped = False
         self._pacer = Pacer(time_step, real_time_factor, max_steps_per_tick)
         self._rtf = RtfMeter()
         self._rtf_log_period = rtf_log_period
@@ -58,7 +71,7 @@ class Stepping:
         # time from a timer, the node's other callbacks in between, and answered after its
         # last chunk (the node is never deaf for a long request).
         self._replies = DeferredReplies(step)
-        self._jobs: Deque[_StepJob] = collections.deque()
+        self._jobs: Deque[StepJob] = collections.deque()
         self._chunk = step_chunk
         steady = Clock(clock_type=ClockType.STEADY_TIME)
         self._chunk_timer = node.create_timer(0.001, self._on_chunk, clock=steady)
@@ -75,6 +88,18 @@ class Stepping:
         rtf = self._pacer.real_time_factor
         return ('lock-step (synchronous)' if self.synchronous else
                 'as fast as possible' if rtf == 0.0 else f'real-time factor {rtf:g}')
+
+    @property
+    def state(self) -> str:
+        """playing, paused or stopped (lock-step: paused, as it steps only on request)."""
+        if self.stopped:
+            return 'stopped'
+        return 'paused' if self.synchronous or self.paused else 'playing'
+
+    @property
+    def stepping(self) -> bool:
+        """Step requests are being served."""
+        return bool(self._jobs)
 
     def command_arrived(self) -> None:
         """A command (cmd_vel, a trajectory) came in: counted for the step that waits for it."""
@@ -109,35 +134,39 @@ class Stepping:
                 self._node.get_logger().info(f'real-time factor {rtf:.2f} '
                                              f'(sim time {self._world.sim_time:.1f} s)')
 
-    def _on_pause(self, _request, response):
+    def pause(self) -> Tuple[bool, str]:
+        """Stop real-time stepping (running trajectory goals end: the arms hold)."""
         if self.synchronous:
-            response.success, response.message = False, 'synchronous mode: use ~/step'
-            return response
+            return False, 'synchronous mode: use ~/step'
         self.paused = True
         self._timer.cancel()
         aborted = self._actions.abort_all(
             'the simulation was paused: the arm holds where it is; send the goal again '
             'after ~/resume', hold=True)
-        response.success = True
-        response.message = f'paused at {self._world.sim_time:.3f} s' + (
+        return True, f'paused at {self._world.sim_time:.3f} s' + (
             f' (goals aborted: {", ".join(aborted)})' if aborted else '')
+
+    def play(self) -> Tuple[bool, str]:
+        """Step in real time again."""
+        if self.synchronous:
+            return False, 'synchronous mode: use ~/step'
+        if self._jobs:
+            # (Both would step the world: the reply's step count would not be the request's.)
+            left = sum(job.remaining for job in self._jobs)
+            return False, (f'step requests are being served ({left} steps left): resume after '
+                           'their reply')
+        self.paused = self.stopped = False
+        self._pacer.restart()
+        self._rtf.reset()
+        self._timer.reset()
+        return True, 'resumed'
+
+    def _on_pause(self, _request, response):
+        response.success, response.message = self.pause()
         return response
 
     def _on_resume(self, _request, response):
-        if self.synchronous:
-            response.success, response.message = False, 'synchronous mode: use ~/step'
-        elif self._jobs:
-            # (Both would step the world: the reply's step count would not be the request's.)
-            left = sum(job.remaining for job in self._jobs)
-            response.success, response.message = False, (
-                f'~/step requests are being served ({left} steps left): resume after their '
-                'reply')
-        else:
-            self.paused = False
-            self._pacer.restart()
-            self._rtf.reset()
-            self._timer.reset()
-            response.success, response.message = True, 'resumed'
+        response.success, response.message = self.play()
         return response
 
     # --- on request ---------------------------------------------------------------------------
@@ -149,15 +178,35 @@ class Stepping:
             response.success = False
             response.message = f'steps must be within 1..{MAX_STEPS_PER_REQUEST}'
         elif self._jobs or request.steps > self._chunk:
-            job = _StepJob(request, response, request.steps)
-            self._jobs.append(job)
-            self._chunk_timer.reset()
+            job = StepJob(request.steps, request.steps, request, response)
+            self._queue(job)
             return self._replies.later(job)
         elif self._claim_commands(request, response):
+            self.stopped = False
             self._runner.advance(request.steps, self._sink)
-            self._end_step(response)
+            self._end_step()
+            response.success = True
         self._stamp(response)
         return response
+
+    def submit(self, steps: int, on_done: Callable[[StepJob], None],
+               on_progress: Optional[Callable[[StepJob], None]] = None) -> Optional[StepJob]:
+        """Step ``steps`` times (in chunks, after any step request before), calling
+        ``on_progress`` after each chunk and ``on_done`` at the end; None if the simulation
+        plays in real time (it must be paused, stopped or lock-step)."""
+        if not (self.synchronous or self.paused):
+            return None
+        job = StepJob(steps, steps, on_done=on_done, on_progress=on_progress)
+        self._queue(job)
+        return job
+
+    def cancel(self, job: StepJob) -> None:
+        """End a submitted job after its current chunk."""
+        job.canceled = True
+
+    def _queue(self, job: StepJob) -> None:
+        self._jobs.append(job)
+        self._chunk_timer.reset()
 
     def _stamp(self, response) -> None:
         response.step_count = self._world.step_count
@@ -179,10 +228,9 @@ class Stepping:
                 'then not reproducible', throttle_duration_sec=5.0)
         return True
 
-    def _end_step(self, response) -> None:
+    def _end_step(self) -> None:
         self._runner.tick_clock(self._sink)       # (the batch's end, if off the clock's grid)
         self._note_progress()
-        response.success = True
 
     def _on_chunk(self) -> None:
         """Run the next chunk of the oldest step request waiting; answer it after its last."""
@@ -190,20 +238,34 @@ class Stepping:
             self._chunk_timer.cancel()
             return
         job = self._jobs[0]
-        done = False
-        if not job.started:
+        done = job.canceled
+        if not job.started and not done:
             job.started = True
-            done = not self._claim_commands(job.request, job.response)
+            if job.request is not None and job.response is not None:
+                done = not self._claim_commands(job.request, job.response)
         if not done:
+            self.stopped = False
             steps = min(job.remaining, self._chunk)
             self._runner.advance(steps, self._sink)
             job.remaining -= steps
             done = job.remaining == 0
             if done:
-                self._end_step(job.response)
+                self._end_step()
+                if job.response is not None:
+                    job.response.success = True
+            elif job.on_progress is not None:
+                job.on_progress(job)
         if done:
             self._jobs.popleft()
-            self._stamp(job.response)
-            self._replies.send(job, job.response)
+            if job.canceled:
+                self._end_step()
+            self._finish(job)
         if not self._jobs:
             self._chunk_timer.cancel()
+
+    def _finish(self, job: StepJob) -> None:
+        if job.response is not None:
+            self._stamp(job.response)
+            self._replies.send(job, job.response)
+        elif job.on_done is not None:
+            job.on_done(job)
