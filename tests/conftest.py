@@ -1,13 +1,37 @@
 """Test session setup: DDS isolation for the whole session, and helpers for graph tests."""
 from __future__ import annotations
 
+import fcntl
 import os
 import random
+import tempfile
+from pathlib import Path
 
-# Isolate DDS before rclpy creates any context: a random domain, discovery on this host only.
+# Isolate DDS before rclpy creates any context: a domain of its own, discovery on this host only.
 # DDS domains here: the suite 1-99 (and 100-159 for the runs of the determinism test), the demos
 # 160-199, `run_trials` from 200 on; a suite, a demo and a campaign on one host never meet.
-os.environ['ROS_DOMAIN_ID'] = os.environ.get('TEST_ROS_DOMAIN_ID') or str(random.randint(1, 99))
+# Two suites on one host (two checkouts) do not either: each holds its domain with a lock file
+# for the whole session, as run_trials' trials do (a random pick met another suite's nodes).
+DOMAIN_LOCKS = Path(tempfile.gettempdir()) / 'test-suite-domains'
+_DOMAIN_LOCK = None
+
+
+def _own_domain() -> str:
+    global _DOMAIN_LOCK
+    DOMAIN_LOCKS.mkdir(mode=0o777, parents=True, exist_ok=True)
+    for domain in random.sample(range(1, 100), 99):
+        lock = open(DOMAIN_LOCKS / f'{domain}.lock', 'a')
+        try:
+            fcntl.flock(lock, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except OSError:
+            lock.close()
+            continue
+        _DOMAIN_LOCK = lock             # (held until the session's process ends)
+        return str(domain)
+    raise RuntimeError('every DDS domain 1-99 is held by another test session on this host')
+
+
+os.environ['ROS_DOMAIN_ID'] = os.environ.get('TEST_ROS_DOMAIN_ID') or _own_domain()
 os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
 os.environ.pop('ROS_STATIC_PEERS', None)
 

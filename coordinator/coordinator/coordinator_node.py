@@ -34,6 +34,7 @@ from nav_msgs.msg import Odometry
 from rcl_interfaces.msg import Parameter, ParameterType, ParameterValue
 from rcl_interfaces.srv import GetParameters, SetParameters
 from rclpy.node import Node
+from rclpy.parameter import Parameter as RosParameter
 from rclpy.qos import DurabilityPolicy, QoSProfile
 from rclpy.subscription import Subscription
 from sensor_msgs.msg import JointState
@@ -49,7 +50,7 @@ from controllers.youbot_arm import JOINT_NAMES as YOUBOT_JOINTS
 from controllers.youbot_arm import JOINT_VELOCITY_LIMIT as YOUBOT_VELOCITY_LIMIT
 from controllers.zu12_arm import JOINT_NAMES as ZU12_JOINTS
 from controllers.zu12_arm import JOINT_VELOCITY_LIMITS as ZU12_VELOCITY_LIMITS
-from coordinator.layout import CellLayout, LayoutError, layout_from_world
+from coordinator.layout import CellLayout, LayoutError, layout_from_world, with_extra_materials
 from coordinator.pipeline import (
     Detection,
     Event,
@@ -118,6 +119,9 @@ PARAMS = (
     Param('result_file', '', 'Write the result (JSON) here at the end'),
     Param('progress_file', '', 'Write the progress (JSON) here once per simulated second'),
     Param('scenario_seed', -1, 'Recorded with the result (the simulator draws the scenario)'),
+    Param('extra_materials', RosParameter.Type.STRING_ARRAY, 'Materials in the batch beyond the '
+          "world file's, by class (one entry each: materials spawned through the simulator's "
+          'spawn_entity, material://<class>)'),
 )
 
 
@@ -126,9 +130,10 @@ class CoordinatorError(RuntimeError):
 
 
 def _layout(world: WorldConfig, p: Dict) -> CellLayout:
-    """The cell as the world lays it out, at the belt speed the parameters give."""
+    """The cell as the world lays it out, at the belt speed the parameters give, with the
+    batch's extra materials."""
     try:
-        layout = layout_from_world(world)
+        layout = layout_from_world(with_extra_materials(world, p['extra_materials'] or ()))
     except LayoutError as exc:
         raise CoordinatorError(f'{p["world"]}: {exc}') from exc
     if p['belt_speed'] >= 0.0:

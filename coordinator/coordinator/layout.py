@@ -255,6 +255,23 @@ def world_to_base(pose: Pose2D, point: Vector) -> np.ndarray:
     return np.array([c * dx + s * dy, -s * dx + c * dy, point[2]])
 
 
+def with_extra_materials(world: Any, extra: Sequence[str]) -> Any:
+    """The world (world_description.world_config.WorldConfig) with a batch larger by one
+    material of each class named in ``extra`` (materials spawned beside the plan's)."""
+    if not extra:
+        return world
+    if world.materials is None:
+        raise LayoutError('extra materials: the world has no materials')
+    known = {c.name for c in world.materials.classes}
+    unknown = sorted(set(extra) - known)
+    if unknown:
+        raise LayoutError(f'extra materials {unknown}: no such class (classes: '
+                          f'{", ".join(sorted(known))})')
+    classes = tuple(replace(c, count=c.count + list(extra).count(c.name))
+                    for c in world.materials.classes)
+    return replace(world, materials=replace(world.materials, classes=classes))
+
+
 def layout_from_world(world: Any) -> CellLayout:
     """The layout of a loaded WorldConfig (world_description.world_config) of the pipeline
     cell; a LayoutError (one line) for a cell whose rules cannot work."""

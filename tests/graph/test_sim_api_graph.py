@@ -227,3 +227,47 @@ def test_quitting_ends_sim_node(start_node, probe):
     wait_for(lambda: not sim.alive(), 20.0, what='sim_node to quit')
     assert sim.proc.returncode == 0
     assert 'Traceback' not in sim.output()
+
+
+def test_a_material_spawned_on_the_belt_is_sorted(start_node, probe, tmp_path):
+    """A client spawns an orange through spawn_entity (material://orange, on the belt behind
+    the plan's first material, upstream of the camera); the coordinator, told the batch has one
+    more orange (extra_materials), sorts it with the others: it rests in the pool by the
+    ground truth."""
+    import json
+
+    import yaml
+
+    from coordinator.graph import pipeline_graph
+    from world_description.resources import resolve_resource
+    world = yaml.safe_load(resolve_resource(
+        'package://world_description/worlds/pipeline_cell.yaml').read_text())
+    world['materials']['counts'] = {'purple': 1, 'orange': 1}
+    path = tmp_path / 'small_cell.yaml'
+    path.write_text(yaml.safe_dump(world))
+    result_file = tmp_path / 'result.json'
+    graph = {node.name: node for node in pipeline_graph(11, 0.12, world=str(path),
+                                                        result_file=result_file)}
+    sim = graph.pop('sim_node')
+    start_node(sim.executable, *sim.ros_args()[1:], name='sim_node')
+    drop = next(p for p in _call(probe, GetNamedPoses, 'get_named_poses').poses
+                if p.name == 'belt_drop').pose
+    spawn = SpawnEntity.Request(name='extra', uri='material://orange')
+    spawn.initial_pose.pose = drop
+    # (The belt runs along +x; the plan's first material drops at belt_drop at the start.)
+    spawn.initial_pose.pose.position.x -= 0.08
+    reply = probe.call(SpawnEntity, f'{SIM}/spawn_entity', spawn)
+    assert reply.result.result == OK and reply.entity_name == 'extra', reply.result
+    coordinator = graph.pop('coordinator_node')
+    coordinator.parameters['extra_materials'] = ['orange']
+    for node in graph.values():
+        start_node(node.executable, *node.ros_args()[1:], name=node.name)
+    done = start_node(coordinator.executable, *coordinator.ros_args()[1:],
+                      name='coordinator_node')
+    wait_for(lambda: not done.alive(), 600.0, what='the run')
+    result = json.loads(result_file.read_text())
+    assert result['status'] == 'completed', (result['message'], result['not_at_destination'])
+    assert result['total'] == 3 and result['handled_verified'] == 3
+    colors = sorted(m['color'] for m in result['final_materials'])
+    assert colors == ['orange', 'orange', 'purple']
+    assert all(m['at_destination'] for m in result['final_materials'])
