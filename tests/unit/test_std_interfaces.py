@@ -1,5 +1,6 @@
-"""tf2_msgs and control_msgs as built in ros_ws/src/std_interfaces (or provided by a ROS 2
-install): upstream Jazzy's fields, and upstream's type hashes as DDS announces them.
+"""tf2_msgs, control_msgs and simulation_interfaces as built in ros_ws/src/std_interfaces (or
+provided by a ROS 2 install): upstream Jazzy's fields, and upstream's type hashes as DDS
+announces them; simulation_interfaces' files are upstream's, byte for byte.
 
 The expected hashes come from upstream builds, not from this workspace: the RIHS01 strings that
 Jazzy's ``ros2 topic info --verbose`` and rosbag2 metadata print for /tf, and the type-hash
@@ -86,3 +87,25 @@ def test_the_result_codes_are_jtcs():
     assert (result.SUCCESSFUL, result.INVALID_GOAL, result.INVALID_JOINTS,
             result.OLD_HEADER_TIMESTAMP, result.PATH_TOLERANCE_VIOLATED,
             result.GOAL_TOLERANCE_VIOLATED) == (0, -1, -2, -3, -4, -5)
+
+
+# simulation_interfaces, Jazzy 1.5.1 (ros-simulation/simulation_interfaces, branch jazzy,
+# a3c60ff): the SHA-256 of its definition files, each path and content in path order.
+SIMULATION_INTERFACES_SHA256 = '3e26d72804e8077dd72a079f3fe622f4642c113bb529d248174b0c32180cd6f8'
+
+
+def test_simulation_interfaces_are_upstreams_files():
+    import hashlib
+
+    from helpers import ROOT
+    package = ROOT / 'ros_ws' / 'src' / 'std_interfaces' / 'simulation_interfaces'
+    digest = hashlib.sha256()
+    files = sorted(p for p in package.glob('*/*.*') if p.suffix in ('.msg', '.srv', '.action'))
+    for path in files:
+        digest.update(str(path.relative_to(package)).encode() + b'\0' + path.read_bytes() + b'\0')
+    assert len(files) == 38 and digest.hexdigest() == SIMULATION_INTERFACES_SHA256
+    # Each one built (or provided by the environment) and importable.
+    import importlib
+    for path in files:
+        module = importlib.import_module(f'simulation_interfaces.{path.parent.name}')
+        assert hasattr(module, path.stem), path
