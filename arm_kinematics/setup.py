@@ -18,7 +18,7 @@ setup(
     license='Apache-2.0',
     entry_points={
         'console_scripts': [
-            'kinematics_node = arm_kinematics.kinematics_node:main',
+            'kinematics_node = arm_kinematics:kinematics_node_main',
         ],
     },
 )

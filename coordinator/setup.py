@@ -19,7 +19,7 @@ setup(
     license='Apache-2.0',
     entry_points={
         'console_scripts': [
-            'coordinator_node = coordinator.coordinator_node:main',
+            'coordinator_node = coordinator:coordinator_node_main',
             'run_trials = coordinator.trials:main',
         ],
     },

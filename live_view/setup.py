@@ -19,7 +19,7 @@ setup(
     license='Apache-2.0',
     entry_points={
         'console_scripts': [
-            'live_view = live_view.live_view_node:main',
+            'live_view = live_view:live_view_main',
         ],
     },
 )

@@ -17,7 +17,7 @@ setup(
     description='Vision sorting of the cell\'s materials.',
     entry_points={
         'console_scripts': [
-            'vision_node = perception.vision_node:main',
+            'vision_node = perception:vision_node_main',
         ],
     },
     license='Apache-2.0',

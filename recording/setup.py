@@ -18,8 +18,8 @@ setup(
     license='Apache-2.0',
     entry_points={
         'console_scripts': [
-            'recorder = recording.recorder:main',
-            'replay = recording.replay:main',
+            'recorder = recording:recorder_main',
+            'replay = recording:replay_main',
             'bag_analysis = recording.analysis:main',
             'bag_repair = recording.repair:main',
         ],

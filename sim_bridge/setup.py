@@ -18,7 +18,7 @@ setup(
     license='Apache-2.0',
     entry_points={
         'console_scripts': [
-            'sim_node = sim_bridge.sim_node:main',
+            'sim_node = sim_bridge:sim_node_main',
         ],
     },
 )

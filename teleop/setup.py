@@ -19,8 +19,8 @@ setup(
     license='Apache-2.0',
     entry_points={
         'console_scripts': [
-            'teleop = teleop.teleop_node:main',
-            'control_panel = teleop.control_panel:main',
+            'teleop = teleop:teleop_main',
+            'control_panel = teleop:control_panel_main',
         ],
     },
 )

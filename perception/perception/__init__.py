@@ -1,1 +1,7 @@
-"""Camera-based perception. Vision sorting for the pipeline cell is planned (issue 5)."""
+"""Camera-based perception. The vision node sorts the
+pipeline cell's materials by colour."""
+
+from ros_common.early_stop import lazy_main
+
+# The executables (setup.py): each imports its module once Ctrl-C and SIGTERM are handled.
+vision_node_main = lazy_main('perception.vision_node')

@@ -189,8 +189,7 @@ def _write_atomically(path: Path, text: str) -> None:
     os.replace(part, path)
 
 def main(args=None) -> int:
-    return run_node(Recorder, 'recorder', (BagError, OSError), on_exit=_finish, args=args,
-                    graceful_signals=True)
+    return run_node(Recorder, 'recorder', (BagError, OSError), on_exit=_finish, args=args)
 
 
 if __name__ == '__main__':

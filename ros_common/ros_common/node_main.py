@@ -26,9 +26,8 @@ instead (the same behaviour, more CPU).
 from __future__ import annotations
 
 import os
-import signal
 import threading
-from typing import Callable, List, Optional, Tuple, Type, TypeVar
+from typing import Callable, Optional, Tuple, Type, TypeVar
 
 import rclpy
 from rclpy.exceptions import ParameterException
@@ -36,12 +35,17 @@ from rclpy.executors import Executor, ExternalShutdownException, SingleThreadedE
 from rclpy.node import Node
 from rclpy.signals import SignalHandlerOptions
 
+from ros_common import early_stop
 from ros_common.memory import keep_large_blocks
 
 try:
-    from rclpy._rclpy_pybind11 import RCLError
-except ImportError:  # pragma: no cover - a future rclpy may move it
-    RCLError = RuntimeError
+    from rclpy._rclpy_pybind11 import InvalidHandle, RCLError
+except ImportError:  # pragma: no cover - a future rclpy may move them
+    RCLError = InvalidHandle = RuntimeError
+# What rclpy raises where a shutdown from another thread meets a wait: the context is invalid,
+# or a guard condition was destroyed under it. Either means a requested shutdown when the
+# context is no longer ok (and is raised again otherwise).
+_SHUTDOWN_RACE = (RCLError, InvalidHandle)
 
 
 # How long one spin_once of the EventsExecutor may sleep; a shutdown wakes it at once.
@@ -62,6 +66,18 @@ def spin_until_shutdown(executor: Executor, context,
     (an EventsExecutor's ``spin()`` would busy-wait)."""
     while context.ok() and not (stop is not None and stop.is_set()):
         executor.spin_once(timeout_sec=_SPIN_SLICE_S)
+
+
+def _spin_in_thread(executor: Executor, context, stop: threading.Event) -> None:
+    """``spin_until_shutdown`` as a thread's target: a shutdown by a signal (rclpy raises
+    ExternalShutdownException, or RCLError in its race) ends the thread quietly."""
+    try:
+        spin_until_shutdown(executor, context, stop)
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    except _SHUTDOWN_RACE:
+        if context.ok():
+            raise           # a real failure, not the shutdown race
 
 
 def _nothing() -> None:
@@ -87,7 +103,7 @@ def spin(node: Node, executor: Optional[Executor] = None, events: bool = True,
         spin_until_shutdown(executor, node.context, stop)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
-    except RCLError:
+    except _SHUTDOWN_RACE:
         if node.context.ok():
             raise           # a real failure, not the shutdown race
 
@@ -95,16 +111,31 @@ def spin(node: Node, executor: Optional[Executor] = None, events: bool = True,
 N = TypeVar('N', bound=Node)
 
 
+class _Stopped(Exception):
+    """Ctrl-C or SIGTERM while the node was being built."""
+
+
 def _create(factory: Callable[[], N], name: str,
             startup_errors: Tuple[Type[BaseException], ...]) -> Optional[N]:
     """The node, or None after one fatal line for a configuration error (the context is then
-    shut down)."""
+    shut down); _Stopped if a stop was asked for while it was being built."""
     try:
-        return factory()
+        node = factory()
     except ParameterException as exc:
         rclpy.logging.get_logger(name).fatal(f'bad parameter: {exc}')
     except tuple(startup_errors) as exc:
         rclpy.logging.get_logger(name).fatal(f'cannot start: {exc}')
+    except (*_SHUTDOWN_RACE, ExternalShutdownException, KeyboardInterrupt):
+        if not early_stop.requested():
+            raise
+        rclpy.try_shutdown()
+        raise _Stopped() from None
+    else:
+        if early_stop.requested():
+            node.destroy_node()
+            rclpy.try_shutdown()
+            raise _Stopped()
+        return node
     rclpy.try_shutdown()
     return None
 
@@ -112,7 +143,7 @@ def _create(factory: Callable[[], N], name: str,
 def run_node(factory: Callable[[], N], name: str,
              startup_errors: Tuple[Type[BaseException], ...] = (),
              on_exit: Optional[Callable[[N], None]] = None, args=None,
-             events: bool = True, graceful_signals: bool = False) -> int:
+             events: bool = True) -> int:
     """Create the node, spin it until shutdown, and return the process exit code.
 
     A configuration error raised by ``factory`` (one of ``startup_errors``, or a bad parameter)
@@ -124,37 +155,28 @@ def run_node(factory: Callable[[], N], name: str,
     creates) and ``node.exit_code``, and the spin ends after the callback (a recorder that
     could not write closes its bag and exits 1).
 
-    ``graceful_signals``: SIGINT and SIGTERM end the spin between two callbacks, never inside
-    one. rclpy's handler raises KeyboardInterrupt wherever the main thread is, and a recorder
-    interrupted inside the mcap library's add_message closed its bag with half a message record
-    in the last chunk (rosbags' reader then failed on it: "unpack requires a buffer of 22
-    bytes"). The node's timers bound how long the spin takes to notice (a recorder's: 0.1 s).
+    SIGINT and SIGTERM (early_stop.py) end the spin between two callbacks, never inside one,
+    and the process exits 0. rclpy's handler raised KeyboardInterrupt wherever the main thread
+    was: a recorder interrupted inside the mcap library's add_message closed its bag with half a
+    message record in the last chunk (rosbags' reader then failed on it: "unpack requires a
+    buffer of 22 bytes"), and a simulator interrupted inside a step logged a FATAL line. The
+    node's timers bound how long the spin takes to notice (a recorder's: 0.1 s); at most
+    ``_SPIN_SLICE_S``.
     """
     keep_large_blocks()     # (ros_common/memory.py: large messages without page faults)
-    stop: Optional[threading.Event] = None
-    # Set by SIGINT and SIGTERM (graceful_signals): the spin's own event, and the node's.
-    stop_events: List[threading.Event] = []
-    if graceful_signals:
-        rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
-        stop = threading.Event()
-        stop_events.append(stop)
-
-        def request_stop(_signum: int, _frame: object) -> None:
-            for event in list(stop_events):
-                event.set()
-        for sig in (signal.SIGINT, signal.SIGTERM):
-            signal.signal(sig, request_stop)
-    else:
-        rclpy.init(args=args)
-    node = _create(factory, name, startup_errors)
+    early_stop.install()
+    rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
+    stop = threading.Event()
+    early_stop.on_stop(stop.set)
+    try:
+        node = _create(factory, name, startup_errors)
+    except _Stopped:
+        return 0
     if node is None:
         return 1
     own: Optional[threading.Event] = getattr(node, 'exit_request', None)
     if own is not None:
-        if stop is not None:
-            stop_events.append(own)
-            if stop.is_set():               # (a signal while the node was being made)
-                own.set()
+        early_stop.on_stop(own.set)
         stop = own
     try:
         spin(node, events=events, stop=stop)
@@ -164,6 +186,12 @@ def run_node(factory: Callable[[], N], name: str,
         node.destroy_node()
         rclpy.try_shutdown()
     return int(getattr(node, 'exit_code', 0))
+
+
+def _shut_down_soon() -> None:
+    """What a stop does to a task's node: rclpy's context shut down (from a thread of its own:
+    the signal handler may have interrupted this thread inside the context's lock)."""
+    threading.Thread(target=rclpy.try_shutdown, daemon=True).start()
 
 
 def run_task(factory: Callable[[], N], name: str, task: Callable[[N], int],
@@ -181,8 +209,13 @@ def run_task(factory: Callable[[], N], name: str, task: Callable[[N], int],
     node is destroyed (a coordinator stops its robots there).
     """
     keep_large_blocks()     # (ros_common/memory.py: large messages without page faults)
-    rclpy.init(args=args)
-    node = _create(factory, name, startup_errors)
+    early_stop.install()
+    rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
+    early_stop.on_stop(_shut_down_soon)
+    try:
+        node = _create(factory, name, startup_errors)
+    except _Stopped:
+        return interrupted_code
     if node is None:
         return 1
     executor: Optional[Executor] = None
@@ -191,7 +224,7 @@ def run_task(factory: Callable[[], N], name: str, task: Callable[[N], int],
     if background_spin:
         executor = make_executor(node)
         executor.add_node(node)
-        spinner = threading.Thread(target=spin_until_shutdown,
+        spinner = threading.Thread(target=_spin_in_thread,
                                    args=(executor, node.context, stop), daemon=True)
         spinner.start()
     code = interrupted_code
@@ -199,7 +232,7 @@ def run_task(factory: Callable[[], N], name: str, task: Callable[[N], int],
         code = task(node)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
-    except RCLError:
+    except _SHUTDOWN_RACE:
         if node.context.ok():
             raise           # a real failure, not the shutdown race
     finally:

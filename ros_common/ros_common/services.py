@@ -24,6 +24,10 @@ class NoAnswer(TimeoutError):
     """A service call that was not answered in time."""
 
 
+# How often a waiting call looks whether the node is still running [s].
+OK_CHECK_S = 0.2
+
+
 def call_and_wait(client, request, timeout: float, resend: float = 0.0,
                   ok: Callable[[], bool] = lambda: True):
     """Call a service and wait for its answer (woken by the answer, not polling).
@@ -43,10 +47,16 @@ def call_and_wait(client, request, timeout: float, resend: float = 0.0,
         future.add_done_callback(lambda _: answered.set())
         futures.append(future)
         left = end - time.monotonic()
-        wait = min(left, resend) if resend > 0.0 else left
-        if answered.wait(max(0.0, wait)):
+        until = time.monotonic() + (min(left, resend) if resend > 0.0 else left)
+        # (In slices: a shutdown ends the wait within one, not after the whole timeout.)
+        while not answered.wait(max(0.0, min(OK_CHECK_S, until - time.monotonic()))):
+            if time.monotonic() >= until or not ok():
+                break
+        if answered.is_set():
             break
-        if time.monotonic() >= end or not ok():
+        if not ok():
+            raise NoAnswer(f'shut down while waiting for {client.srv_name}')
+        if time.monotonic() >= end:
             raise NoAnswer(f'{client.srv_name} did not answer within {timeout} s'
                            + (f' ({len(futures)} requests)' if len(futures) > 1 else ''))
     if not ok():

@@ -489,11 +489,8 @@ def _wanted(publisher: Publisher) -> bool:
 
 
 def main(args=None) -> int:
-    # SIGINT and SIGTERM end the spin between two callbacks, never inside one (a timer
-    # interrupted there failed to publish on a context already shut down).
     return run_node(SimNode, 'sim_node',
-                    (SimConfigError, WorldConfigError, WorldError, FileNotFoundError), args=args,
-                    graceful_signals=True)
+                    (SimConfigError, WorldConfigError, WorldError, FileNotFoundError), args=args)
 
 
 if __name__ == '__main__':

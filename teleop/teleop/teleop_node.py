@@ -17,6 +17,7 @@ from rclpy.node import Node
 from rclpy.signals import SignalHandlerOptions
 from rclpy.time import Time
 
+from ros_common import early_stop
 from ros_common.params import Param, declare_params
 from ros_common.twist_out import TwistOut
 from teleop.teleop_core import (
@@ -193,11 +194,16 @@ def main(args=None) -> int:
     signal.signal(signal.SIGINT, _raise_interrupt)
     signal.signal(signal.SIGTERM, _raise_interrupt)
     try:
+        if early_stop.requested():      # (Ctrl-C while the process started: a stop)
+            raise KeyboardInterrupt
         node = TeleopNode()
     except (TeleopError, rclpy.exceptions.ParameterException) as exc:
         rclpy.logging.get_logger('teleop').fatal(f'cannot start: {exc}')
         rclpy.try_shutdown()
         return 1
+    except KeyboardInterrupt:           # (stopped while the node was being made)
+        rclpy.try_shutdown()
+        return 0
     executor = SingleThreadedExecutor()
     executor.add_node(node)
     code = 0

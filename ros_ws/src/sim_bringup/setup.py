@@ -22,8 +22,8 @@ setup(
     license='Apache-2.0',
     entry_points={
         'console_scripts': [
-            'drive_check = sim_bringup.drive_check:main',
-            'arm_move = sim_bringup.arm_move:main',
+            'drive_check = sim_bringup:drive_check_main',
+            'arm_move = sim_bringup:arm_move_main',
         ],
     },
 )

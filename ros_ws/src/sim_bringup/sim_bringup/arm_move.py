@@ -94,11 +94,14 @@ def _move(node: 'ArmMove') -> int:
             node.get_logger().error('the controller did not start the trajectory (rejected?'
                                     ' see the simulator log)')
             return 1
-    return node.result if node.result is not None else 1
+    if node.result is None:           # (stopped by Ctrl-C or SIGTERM: not a failure)
+        node.get_logger().info('stopped before the motion ended')
+        return 0
+    return node.result
 
 
 def main(args=None) -> int:
-    return run_task(ArmMove, 'arm_move', _move, (ValueError,), interrupted_code=1, args=args)
+    return run_task(ArmMove, 'arm_move', _move, (ValueError,), args=args)   # (Ctrl-C: 0)
 
 
 if __name__ == '__main__':
