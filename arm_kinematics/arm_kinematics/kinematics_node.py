@@ -135,6 +135,9 @@ class KinematicsNode(Node):
 
     def _on_goal_pose(self, msg: PoseStamped) -> None:
         ok, message, positions, _, _ = self._solve(msg, True, 0.0, 0.0)
+        if not ok:
+            # (Nobody waits for an answer here: the reason goes to the log and /diagnostics.)
+            self.get_logger().warn(f'goal_pose: IK failed: {message}')
         status = DiagnosticStatus(level=DiagnosticStatus.OK if ok else DiagnosticStatus.ERROR,
                                   name=self.get_fully_qualified_name() + ': goal_pose',
                                   message=message, hardware_id=self._prefix + 'arm')
@@ -167,7 +170,9 @@ class KinematicsNode(Node):
         return True, plan.message, plan.positions, plan.errors, trajectory
 
     def _fail(self, message: str):
-        self.get_logger().error(f'IK failed: {message}')
+        # A failure is an answer (the reply, or the goal_pose warning, carries it): a caller
+        # that probes reachability gets many, which are no error of this node.
+        self.get_logger().debug(f'IK failed: {message}')
         return False, message, None, (float('inf'), float('inf')), None
 
 

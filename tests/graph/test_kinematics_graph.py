@@ -97,7 +97,8 @@ def test_kinematics_node_moves_the_simulated_arm_to_an_ik_target(start_node):
         request.target.header.frame_id = 'odom'
         reply = probe.call(SolveIK, '/youbot/solve_ik', request, timeout=20.0)
         assert not reply.success and 'unknown frame "odom"' in reply.message
-        assert 'IK failed' in kin.output() and kin.alive()
+        # (Answers, not errors of the node: a caller probing reachability gets many.)
+        assert '[ERROR]' not in kin.output() and kin.alive()
         # Half a second of simulated time later, the arm still holds the target.
         wait_for_stamp(states, latest_stamp(states) + 0.5, what='0.5 s of simulated time')
         assert not moving(states[-1][1])

@@ -46,6 +46,12 @@ def two_runs(tmp_path_factory):
         run = record['run']
         assert run['trial'] == k and run['wall_time'] > 0 and run['code']
         assert {'sim_node', 'coordinator_node', 'vision_node'} <= set(run['cpu_seconds'])
+        # A run that goes as planned logs no error (an unreachable IK probe is an answer),
+        # and its processes, stopped at its end, no traceback.
+        for log in sorted(trial_dir.glob('*.log')):
+            bad = [line for line in log.read_text().splitlines()
+                   if line.startswith(('[ERROR]', '[FATAL]')) or 'Traceback' in line]
+            assert not bad, (log.name, bad[:5])
         records.append(record)
     return records
 
