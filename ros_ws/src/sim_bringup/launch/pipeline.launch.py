@@ -6,18 +6,46 @@ vision node, the two arms' kinematics nodes and the coordinator, optionally reco
         [publish_link_tf:=true]
 
 The processes and their parameters are the trial runner's (coordinator/graph.py): this file
-only turns them into launch_ros Node actions. The result: `ros2 topic echo
-/coordinator_node/state` (latched; the result JSON at the end) and `/coordinator_node/events`.
+only turns them into launch_ros Node actions. The launch ends when the run ends: every node is
+stopped once the coordinator exits, and the launch's exit code is 0 for a completed run, 1
+otherwise. The result: the coordinator's last log line, `ros2 topic echo
+/coordinator_node/state` while it runs (the result JSON at the end) and
+`/coordinator_node/events`.
 (ros2 launch is not installable from the package index; there `run_trials --seeds 5` starts
 the same processes, and `run_trials --show-graph` prints them.)
 """
 from launch import LaunchDescription
-from launch.actions import DeclareLaunchArgument, OpaqueFunction, SetEnvironmentVariable
+from launch.actions import (
+    DeclareLaunchArgument,
+    EmitEvent,
+    LogInfo,
+    OpaqueFunction,
+    RegisterEventHandler,
+    SetEnvironmentVariable,
+)
+from launch.event_handlers import OnProcessExit
+from launch.events import Shutdown
 from launch_ros.actions import Node
 
 from coordinator.graph import pipeline_graph
 from ros_common.dds import profile_environment
 from sim_bringup.state_publishers import state_publishers
+
+
+class RunFailed(RuntimeError):
+    """The run did not complete: the launch ends with exit code 1."""
+
+
+def _run_ended(event, context):
+    """The coordinator exited: the run is over, and so is the launch."""
+    if context.is_shutdown:             # (stopped by Ctrl-C: everything ends anyway)
+        return []
+    if event.returncode != 0:
+        # (launch returns 1 only for an exception; it logs this one and shuts down.)
+        raise RunFailed(f'the run did not complete (coordinator exit code {event.returncode}; '
+                        'its log says why)')
+    return [LogInfo(msg='the run completed: stopping the nodes'),
+            EmitEvent(event=Shutdown(reason='the run completed'))]
 
 
 def _nodes(context):
@@ -38,6 +66,9 @@ def _nodes(context):
         nodes.append(Node(package=n.package, executable=n.executable, name=None,
                           namespace=n.namespace or None, output='screen',
                           parameters=[parameters], remappings=list(n.remappings)))
+        if n.executable == 'coordinator_node':
+            nodes.append(RegisterEventHandler(OnProcessExit(target_action=nodes[-1],
+                                                            on_exit=_run_ended)))
     if not link_tf:
         # robot_state_publisher publishes the links from joint_states instead.
         world = next(n.parameters['world'] for n in graph if n.executable == 'sim_node')
