@@ -14,6 +14,7 @@ from coordinator.progress import (
     running_figures,
     write_progress,
 )
+from coordinator.trial_result import TrialResult
 
 
 def test_a_running_trial_is_projected_from_its_own_pace():
@@ -45,8 +46,8 @@ def test_progress_files_round_trip_and_a_torn_read_is_none(tmp_path):
 
 
 def _result(status='completed', t=60.0, ident=1.0, grasp=1.0, handling=1.0):
-    return {'status': status, 'completion_time': t, 'identification_rate': ident,
-            'grasp_success_rate': grasp, 'handling_success_rate': handling}
+    return TrialResult(status, t, identification_rate=ident, grasp_success_rate=grasp,
+                       handling_success_rate=handling)
 
 
 def test_the_running_figures_are_the_campaigns_table_2_so_far():
@@ -57,7 +58,7 @@ def test_the_running_figures_are_the_campaigns_table_2_so_far():
         '1 not completed; median 60.0 s; identification 100.0 %, grasp 96.7 %, '
         'handling 87.5 %')
     # A trial with no score (its processes failed) counts as not completed, not in the rates.
-    assert running_figures([_result(), {'status': 'error', 'completion_time': float('nan')}]) \
+    assert running_figures([_result(), TrialResult.failure('error', 'no result')]) \
         == '1 not completed; median 60.0 s; identification 100.0 %, grasp 100.0 %, ' \
         'handling 100.0 %'
 
