@@ -25,6 +25,10 @@ _actions: List[Callable[[], None]] = []
 
 
 def _on_signal(_signum: int, _frame: Any) -> None:
+    # The first stop only: a terminal's Ctrl-C reaches a launched node twice (from the
+    # terminal, to its process group, and from ros2 launch), and SIGTERM may follow.
+    if _requested.is_set():
+        return
     _requested.set()
     for action in list(_actions):
         action()
@@ -49,6 +53,14 @@ def on_stop(action: Callable[[], None]) -> None:
         action()
 
 
+def ignore() -> None:
+    """SIGINT and SIGTERM ignored from now on: the process is ending. (Python's finalization
+    puts back the default action of a signal it handled, and a second Ctrl-C, or launch's SIGTERM
+    after its grace, then killed a node that was tidily on its way out: exit code -2.)"""
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(sig, signal.SIG_IGN)
+
+
 def reset() -> None:
     """Forget a stop and the actions (a process that runs nodes one after another: tests)."""
     _requested.clear()
@@ -60,9 +72,12 @@ def lazy_main(module: str, attr: str = 'main') -> Callable[[Optional[List[str]]]
     and its ``attr`` run (exit code 0 if a stop came while it was imported)."""
     def main(args: Optional[List[str]] = None) -> int:
         install()
-        target = getattr(importlib.import_module(module), attr)
-        if _requested.is_set():
-            return 0
-        return int(target() if args is None else target(args=args))
+        try:
+            target = getattr(importlib.import_module(module), attr)
+            if _requested.is_set():
+                return 0
+            return int(target() if args is None else target(args=args))
+        finally:
+            ignore()
     main.__doc__ = f'{module}.{attr}, with Ctrl-C and SIGTERM handled from the start'
     return main

@@ -27,7 +27,7 @@ from __future__ import annotations
 
 import os
 import threading
-from typing import Callable, Optional, Tuple, Type, TypeVar
+from typing import Callable, List, Optional, Tuple, Type, TypeVar
 
 import rclpy
 from rclpy.exceptions import ParameterException
@@ -188,10 +188,17 @@ def run_node(factory: Callable[[], N], name: str,
     return int(getattr(node, 'exit_code', 0))
 
 
+_SHUTTING_DOWN: List[threading.Thread] = []
+
+
 def _shut_down_soon() -> None:
     """What a stop does to a task's node: rclpy's context shut down (from a thread of its own:
-    the signal handler may have interrupted this thread inside the context's lock)."""
-    threading.Thread(target=rclpy.try_shutdown, daemon=True).start()
+    the signal handler may have interrupted this thread inside the context's lock). run_task
+    waits for it before the process ends (a daemon thread inside rclpy at the interpreter's
+    finalization can hang it)."""
+    thread = threading.Thread(target=rclpy.try_shutdown, daemon=True)
+    _SHUTTING_DOWN.append(thread)
+    thread.start()
 
 
 def run_task(factory: Callable[[], N], name: str, task: Callable[[N], int],
@@ -243,6 +250,8 @@ def run_task(factory: Callable[[], N], name: str, task: Callable[[N], int],
             wake(executor)
             spinner.join(2.0)
             executor.shutdown(timeout_sec=2.0)
+        for thread in _SHUTTING_DOWN:
+            thread.join(2.0)
         node.destroy_node()
         rclpy.try_shutdown()
     return code

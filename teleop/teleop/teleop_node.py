@@ -185,6 +185,9 @@ def _run_keyboard(node: TeleopNode, executor) -> int:
 
 
 def _raise_interrupt(_signum, _frame) -> None:
+    # Once: a terminal's Ctrl-C reaches a launched teleop twice (the terminal and ros2 launch),
+    # and a second KeyboardInterrupt would break off the zero twist that ends the session.
+    early_stop.ignore()
     raise KeyboardInterrupt
 
 

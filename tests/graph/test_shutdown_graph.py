@@ -52,14 +52,20 @@ def _clean(output: str) -> bool:
 
 
 def _stop_at(graph: str, sig: int, moment: float, run):
-    """Start the graph's processes, send each ``sig`` ``moment`` seconds later (as ros2 launch
-    does on Ctrl-C); those still running after twice launch's grace, and the exit codes."""
+    """Start the graph's processes, send each ``sig`` ``moment`` seconds later (as a terminal
+    and ros2 launch do on Ctrl-C); those still running after twice launch's grace, and the exit
+    codes."""
     procs = [NodeProcess(executable, args, run, name=name)
              for name, executable, args in GRAPHS[graph](run)]
     try:
         time.sleep(moment)        # (the moment of the stop: a window, not a wait)
-        for proc in procs:
-            proc.proc.send_signal(sig)
+        # Twice, as a terminal's Ctrl-C arrives: from the terminal to the process group, and
+        # from ros2 launch to each process it started.
+        for _ in range(2):
+            for proc in procs:
+                if proc.alive():
+                    proc.proc.send_signal(sig)
+            time.sleep(0.05)
         deadline = time.monotonic() + GRACE_S * 2
         wait_for(lambda: all(not p.alive() for p in procs) or time.monotonic() > deadline,
                  GRACE_S * 2 + 1, what='every process to end')
