@@ -1,7 +1,6 @@
 """Test session setup: DDS isolation for the whole session, and helpers for graph tests."""
 from __future__ import annotations
 
-import fcntl
 import os
 import random
 import tempfile
@@ -18,17 +17,12 @@ _DOMAIN_LOCK = None
 
 def _own_domain() -> str:
     global _DOMAIN_LOCK
-    DOMAIN_LOCKS.mkdir(mode=0o777, parents=True, exist_ok=True)
-    for domain in random.sample(range(1, 100), 99):
-        lock = open(DOMAIN_LOCKS / f'{domain}.lock', 'a')
-        try:
-            fcntl.flock(lock, fcntl.LOCK_EX | fcntl.LOCK_NB)
-        except OSError:
-            lock.close()
-            continue
-        _DOMAIN_LOCK = lock             # (held until the session's process ends)
-        return str(domain)
-    raise RuntimeError('every DDS domain 1-99 is held by another test session on this host')
+    from ros_common.dds import hold_free_domain
+    held = hold_free_domain(random.sample(range(1, 100), 99), DOMAIN_LOCKS)
+    if held is None:
+        raise RuntimeError('every DDS domain 1-99 is held by another test session on this host')
+    domain, _DOMAIN_LOCK = held         # (held until the session's process ends)
+    return str(domain)
 
 
 os.environ['ROS_DOMAIN_ID'] = os.environ.get('TEST_ROS_DOMAIN_ID') or _own_domain()

@@ -4,7 +4,6 @@ the code it ran. ``run_trials`` (trials.py) runs campaigns of them on this machi
 from __future__ import annotations
 
 import ctypes
-import fcntl
 import os
 import signal
 import subprocess
@@ -25,7 +24,7 @@ from coordinator.trial_result import (
     code_version,
     read_result,
 )
-from ros_common.dds import with_profile
+from ros_common.dds import hold_free_domain, with_profile
 from world_description import PIPELINE_CELL
 
 PROGRESS_FILE = 'progress.json'
@@ -127,22 +126,16 @@ class PlanItem(TypedDict):
 @contextmanager
 def domain_lease(first: int) -> Iterator[int]:
     """The first DDS domain from ``first`` on that no other trial on this machine holds, held
-    (by an advisory lock on a file per domain) until the block ends; a crashed holder's lock
-    goes with its process."""
-    DOMAIN_LOCK_DIR.mkdir(mode=0o777, parents=True, exist_ok=True)
-    for domain in range(first, MAX_DOMAIN + 1):
-        lock = open(DOMAIN_LOCK_DIR / f'{domain}.lock', 'a')
-        try:
-            fcntl.flock(lock, fcntl.LOCK_EX | fcntl.LOCK_NB)
-        except OSError:
-            lock.close()
-            continue
-        try:
-            yield domain
-        finally:
-            lock.close()               # (releases the lock)
-        return
-    raise RuntimeError(f'no free DDS domain in {first}-{MAX_DOMAIN} on this machine')
+    (ros_common.dds.hold_free_domain) until the block ends; a crashed holder's lock goes with
+    its process."""
+    held = hold_free_domain(range(first, MAX_DOMAIN + 1), DOMAIN_LOCK_DIR)
+    if held is None:
+        raise RuntimeError(f'no free DDS domain in {first}-{MAX_DOMAIN} on this machine')
+    domain, lock = held
+    try:
+        yield domain
+    finally:
+        lock.close()               # (releases the lock)
 
 
 def run_leased_trial(item: PlanItem, out_dir: Path, options: Dict[str, Any]) -> TrialResult:

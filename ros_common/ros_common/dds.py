@@ -13,9 +13,10 @@ other than Fast DDS gets none.
 """
 from __future__ import annotations
 
+import fcntl
 import os
 from pathlib import Path
-from typing import Dict, Mapping, Optional
+from typing import IO, Dict, Iterable, Mapping, Optional, Tuple
 
 PACKAGE = 'ros_common'
 PROFILE_FILE = 'config/fastdds.xml'
@@ -74,3 +75,22 @@ def profile_environment(env: Optional[Mapping[str, str]] = None) -> Dict[str, st
 def with_profile(env: Mapping[str, str]) -> Dict[str, str]:
     """``env`` plus :func:`profile_environment`'s variables."""
     return {**env, **profile_environment(env)}
+
+
+def hold_free_domain(candidates: Iterable[int], lock_dir: Path
+                     ) -> Optional[Tuple[int, IO[str]]]:
+    """The first DDS domain of ``candidates`` that no other process on this host holds, and
+    the open lock file that now holds it (an advisory lock on a file per domain in
+    ``lock_dir``; closing the file, or the holder's end, frees the domain); None if all are
+    held. Trials on one machine (run_trials, Ray workers) and test sessions take their domains
+    so."""
+    lock_dir.mkdir(mode=0o777, parents=True, exist_ok=True)
+    for domain in candidates:
+        lock = open(lock_dir / f'{domain}.lock', 'a')
+        try:
+            fcntl.flock(lock, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except OSError:
+            lock.close()
+            continue
+        return domain, lock
+    return None
