@@ -238,30 +238,36 @@ class Stepping:
             self._chunk_timer.cancel()
             return
         job = self._jobs[0]
-        done = job.canceled
-        if not job.started and not done:
-            job.started = True
-            if job.request is not None and job.response is not None:
-                done = not self._claim_commands(job.request, job.response)
-        if not done:
-            self.stopped = False
-            steps = min(job.remaining, self._chunk)
-            self._runner.advance(steps, self._sink)
-            job.remaining -= steps
-            done = job.remaining == 0
-            if done:
-                self._end_step()
-                if job.response is not None:
-                    job.response.success = True
-            elif job.on_progress is not None:
-                job.on_progress(job)
-        if done:
+        if self._chunk_of(job):
             self._jobs.popleft()
             if job.canceled:
                 self._end_step()
             self._finish(job)
         if not self._jobs:
             self._chunk_timer.cancel()
+
+    def _chunk_of(self, job: StepJob) -> bool:
+        """Step a chunk of ``job`` (after claiming a ~/step request's commands); whether the
+        job is over (all stepped, canceled, or its commands not in yet)."""
+        if job.canceled:
+            return True
+        if not job.started:
+            job.started = True
+            if job.request is not None and job.response is not None and not \
+                    self._claim_commands(job.request, job.response):
+                return True
+        self.stopped = False
+        steps = min(job.remaining, self._chunk)
+        self._runner.advance(steps, self._sink)
+        job.remaining -= steps
+        if job.remaining:
+            if job.on_progress is not None:
+                job.on_progress(job)
+            return False
+        self._end_step()
+        if job.response is not None:
+            job.response.success = True
+        return True
 
     def _finish(self, job: StepJob) -> None:
         if job.response is not None:
