@@ -239,9 +239,12 @@ def run_task(factory: Callable[[], N], name: str, task: Callable[[N], int],
         code = task(node)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
-    except _SHUTDOWN_RACE:
-        if node.context.ok():
-            raise           # a real failure, not the shutdown race
+    except Exception:
+        # Once a stop shut the context down, rclpy's calls fail in many ways (an invalid
+        # context or handle, the global executor gone: "'NoneType' object has no attribute
+        # 'handle'"): a stop, not a failure. Anything else is raised.
+        if node.context.ok() or not early_stop.requested():
+            raise
     finally:
         if on_exit is not None:
             on_exit(node)

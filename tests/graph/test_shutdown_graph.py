@@ -51,13 +51,27 @@ def _clean(output: str) -> bool:
                    for line in output.splitlines())
 
 
+def _handles_sigterm(pid: int) -> bool:
+    """Whether the process catches SIGTERM (Linux /proc): its console script's first line has
+    run (ros_common/early_stop.py). Python itself catches only SIGINT."""
+    try:
+        status = open(f'/proc/{pid}/status').read()
+    except OSError:
+        return True               # (it ended: nothing to wait for)
+    caught = int(status.split('SigCgt:')[1].split()[0], 16)
+    return bool(caught & (1 << (signal.SIGTERM - 1)))
+
+
 def _stop_at(graph: str, sig: int, moment: float, run):
-    """Start the graph's processes, send each ``sig`` ``moment`` seconds later (as a terminal
-    and ros2 launch do on Ctrl-C); those still running after twice launch's grace, and the exit
-    codes."""
+    """Start the graph's processes, send each ``sig`` ``moment`` seconds after they all handle
+    it (as a terminal and ros2 launch do on Ctrl-C); those still running after twice launch's
+    grace, and the exit codes. (The interpreter's own start, before that, is a known limit:
+    docs/known-limits.md. On a loaded machine it takes seconds.)"""
     procs = [NodeProcess(executable, args, run, name=name)
              for name, executable, args in GRAPHS[graph](run)]
     try:
+        wait_for(lambda: all(_handles_sigterm(p.proc.pid) for p in procs), 120.0,
+                 what='every process past its interpreter\'s start')
         time.sleep(moment)        # (the moment of the stop: a window, not a wait)
         # Twice, as a terminal's Ctrl-C arrives: from the terminal to the process group, and
         # from ros2 launch to each process it started.
@@ -79,11 +93,10 @@ def _stop_at(graph: str, sig: int, moment: float, run):
 @pytest.mark.parametrize('sig', [signal.SIGINT, signal.SIGTERM], ids=['sigint', 'sigterm'])
 @pytest.mark.parametrize('graph', sorted(GRAPHS))
 def test_a_stop_at_any_moment_ends_every_process_cleanly(graph, sig, tmp_path):
-    """Two moments each: while the processes start (their imports and set-up; the
-    interpreter's own first tenths of a second are not covered, see early_stop.py) and while
-    they run."""
+    """Two moments each: while the processes start (their imports and set-up, from their
+    console script's first line) and while they run."""
     rng = random.Random(f'{graph}-{sig}')
-    for moment in (rng.uniform(0.3, 1.5), rng.uniform(2.0, 10.0)):
+    for moment in (rng.uniform(0.0, 1.0), rng.uniform(2.0, 10.0)):
         run = tmp_path / f'at_{moment:.1f}s'
         run.mkdir()
         procs, lingering, codes = _stop_at(graph, sig, moment, run)
