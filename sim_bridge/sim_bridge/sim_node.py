@@ -67,6 +67,8 @@ LATCHED = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
                      durability=DurabilityPolicy.TRANSIENT_LOCAL)
 RELIABILITIES = {'reliable': ReliabilityPolicy.RELIABLE,
                  'best_effort': ReliabilityPolicy.BEST_EFFORT}
+# Wall seconds between a quitting request's reply and the end of the node.
+QUIT_DELAY_S = 1.0
 # Numbers in a rejection's reason: two reasons that differ only in them are of one kind.
 _NUMBERS = re.compile(r'-?\d[\d.e+-]*|nan|inf')
 
@@ -140,7 +142,7 @@ class SimNode(Node):
         self.exit_request, self.exit_code = threading.Event(), 0
         self._entities = Entities(self._world, lambda: self._world.sim_time)
         self._sim_api = SimulationInterfaces(self, self._stepping, self._entities,
-                                             self._reset_world, self.exit_request.set,
+                                             self._reset_world, self._quit_soon,
                                              p['world'], lambda: self._world.sim_time_ns)
         self._runner.tick_clock(self)
         for name in self._world.robots:
@@ -474,6 +476,15 @@ class SimNode(Node):
         return 'robots returned to their start poses' + (
             f' (faults cleared: {", ".join(faults)})' if faults else '') + (
             f' (goals aborted: {", ".join(aborted)})' if aborted else '')
+
+    def _quit_soon(self) -> None:
+        """End the run a second after the reply that asked for it (the reply must reach its
+        client before the node is gone: on a loaded machine it was lost)."""
+        def quit_now() -> None:
+            timer.cancel()
+            self.exit_request.set()
+        timer = self.create_timer(QUIT_DELAY_S, quit_now,
+                                  clock=Clock(clock_type=ClockType.STEADY_TIME))
 
     def destroy_node(self) -> None:
         # Leave no robot driving on a stale command.
