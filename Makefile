@@ -1,6 +1,6 @@
 # The two commands: `make demo` runs the main job, `make test` runs the tests.
 # Both create .venv and build ros_ws first when needed (scripts/setup.sh is idempotent).
-.PHONY: setup demo demo-mini panel trials test bench clean
+.PHONY: setup demo demo-mini panel trials test bench container container-test clean
 
 setup:
 	@bash scripts/setup.sh
@@ -34,6 +34,15 @@ test: setup
 
 bench: setup
 	@bash scripts/bench.sh
+
+# The container image (docker/Dockerfile, docs/docker.md) with podman or docker:
+# make container [BASE=ubuntu:24.04] [CA_CERT=corp-ca.pem] [CONTAINER_ENGINE=docker];
+# make container-test also runs the demo in it and checks it prints what `make demo` does here.
+container:
+	@bash docker/build.sh
+
+container-test:
+	@bash docker/test.sh
 
 clean:
 	rm -rf .venv ros_ws/build ros_ws/install ros_ws/log

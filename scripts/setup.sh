@@ -1,7 +1,18 @@
 #!/usr/bin/env bash
 # Create .venv with the pinned packages and build ros_ws. Idempotent: each stage re-runs only
 # when its inputs changed, so a second run takes a few seconds.
+#   --venv-only   stop after the virtualenv (the container image installs the wheels in a layer
+#                 of their own, before the code is copied in)
+# ROBOT_SIM_NO_BROWSER=1 leaves out the browser the control panel's test drives (the image).
 set -euo pipefail
+
+VENV_ONLY=0
+for arg in "$@"; do
+  case "$arg" in
+    --venv-only) VENV_ONLY=1 ;;
+    *) printf '[setup] error: unknown argument %s (known: --venv-only)\n' "$arg" >&2; exit 2 ;;
+  esac
+done
 
 ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 VENV="$ROOT/.venv"
@@ -47,7 +58,9 @@ fi
 # --- 1a. a browser for the control panel's test -------------------------------------------
 # The browser test (tests/graph/test_control_panel_graph.py) drives Debian's chromium through
 # its chromium-driver with Selenium; nothing downloads a browser. Installed where we can.
-if ! command -v chromium >/dev/null || ! command -v chromedriver >/dev/null; then
+if [ "${ROBOT_SIM_NO_BROWSER:-0}" = 1 ]; then
+  :
+elif ! command -v chromium >/dev/null || ! command -v chromedriver >/dev/null; then
   if command -v apt-get >/dev/null && [ "$(id -u)" = 0 ]; then
     log "installing chromium and chromium-driver (the control panel's browser test)"
     { apt-get update -qq && DEBIAN_FRONTEND=noninteractive \
@@ -101,6 +114,11 @@ if [ "$(cat "$STAMPS/requirements" 2>/dev/null)" != "$req_hash" ]; then
   "$VENV/bin/python" "$ROOT/scripts/fix_wheel_cmake_paths.py" "$VENV"
   echo "$req_hash" > "$STAMPS/requirements"
   rm -f "$STAMPS/workspace"
+fi
+
+if [ "$VENV_ONLY" = 1 ]; then
+  log "virtualenv ready (--venv-only: ros_ws not built)"
+  exit 0
 fi
 
 # --- 3. colcon workspace ----------------------------------------------------------------------

@@ -116,6 +116,15 @@ class TrialResult:
         """The same result, its metadata changed (``RunInfo``'s fields)."""
         return replace(self, run=replace(self.run, **changes))
 
+    def differences(self, other: 'TrialResult') -> List[str]:
+        """The fields in which two runs differ, their metadata (``run``: code, wall time, CPU
+        time, host) left out: [] for two runs of the same trial that went the same way
+        (a lock-step trial re-run, or run in the container image). NaN equals NaN here."""
+        mine, theirs = self.to_dict(), other.to_dict()
+        return [f.name for f in fields(self) if f.name != 'run'
+                and json.dumps(mine.get(f.name), sort_keys=True)
+                != json.dumps(theirs.get(f.name), sort_keys=True)]
+
     def to_dict(self) -> Dict[str, Any]:
         out = asdict(self)
         if out['odometry_age'] is None:
@@ -200,8 +209,10 @@ def read_result(path: Path) -> Tuple[Optional[TrialResult], Optional[str]]:
 
 def code_version() -> str:
     """The code a trial runs: the checkout's commit, with ``-dirty`` when a tracked file outside
-    docs/ and the Markdown files differs from it (results written into docs/ do not count), or
-    'unknown' outside a git checkout. ``--resume`` reuses a result only of the same code."""
+    docs/ and the Markdown files differs from it (results written into docs/ do not count).
+    Outside a git checkout: ``ROBOT_SIM_CODE_VERSION`` (the container image sets it to the
+    commit it was built from), else 'unknown'. ``--resume`` reuses a result only of the same
+    code."""
     here = str(Path(__file__).resolve().parent)
 
     def git(*args: str) -> Optional[str]:
@@ -213,7 +224,7 @@ def code_version() -> str:
         return out.stdout.strip() if out.returncode == 0 else None
     commit, root = git('rev-parse', '--short=12', 'HEAD'), git('rev-parse', '--show-toplevel')
     if not commit or not root:
-        return 'unknown'
+        return os.environ.get('ROBOT_SIM_CODE_VERSION', '').strip() or 'unknown'
     changed = git('-C', root, 'status', '--porcelain', '--untracked-files=no', '--', '.',
                   ':(exclude)docs', ':(exclude)*.md')
     return commit + ('-dirty' if changed is None or changed else '')

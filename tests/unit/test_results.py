@@ -324,6 +324,37 @@ def test_the_code_version_names_the_commit_and_uncommitted_code_changes(tmp_path
     assert copied.code_version() == commit + '-dirty'
 
 
+def test_outside_a_checkout_the_code_version_is_the_one_the_image_was_built_from(
+        tmp_path, monkeypatch):
+    """A container image has no .git: its build hands the commit over in an environment
+    variable (docker/Dockerfile), and without one the version is 'unknown'."""
+    import shutil
+    import sys
+
+    import coordinator.trial_result as trial_result
+    (tmp_path / 'pkg').mkdir()
+    shutil.copy(trial_result.__file__, tmp_path / 'pkg' / 'trials.py')
+    monkeypatch.setenv('GIT_CEILING_DIRECTORIES', str(tmp_path))   # no checkout above it
+    spec = importlib.util.spec_from_file_location('copied_trials2', tmp_path / 'pkg' / 'trials.py')
+    copied = importlib.util.module_from_spec(spec)
+    monkeypatch.setitem(sys.modules, spec.name, copied)
+    spec.loader.exec_module(copied)
+    monkeypatch.delenv('ROBOT_SIM_CODE_VERSION', raising=False)
+    assert copied.code_version() == 'unknown'
+    monkeypatch.setenv('ROBOT_SIM_CODE_VERSION', '298fa3b1c2d3')
+    assert copied.code_version() == '298fa3b1c2d3'
+
+
+def test_two_runs_differ_only_where_their_outcome_does_not_in_their_metadata():
+    one = TrialResult('completed', 60.1, scenario_seed=0, belt_speed=0.12, delivered=8,
+                      events=[[1.5, 'grasp', 'm0']], run=RunInfo(trial=0, wall_time=39.0))
+    other = one.with_run(wall_time=43.8, code='abc', cpu_seconds={'sim_node': 27.0})
+    assert one.differences(other) == []                 # NaN rates equal NaN
+    moved = TrialResult.from_dict({**other.to_dict(), 'completion_time': 60.2,
+                                   'events': [[1.6, 'grasp', 'm0']]})
+    assert one.differences(moved) == ['completion_time', 'events']
+
+
 def _belt_truth(t: float, speed: float = 0.12) -> list:
     """Ground truth at time ``t``: an orange riding the belt (at x -0.5 at t = 10 s) and a
     purple 0.3 m behind it."""
