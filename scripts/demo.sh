@@ -25,6 +25,9 @@ mkdir -p "$RUN_DIR"
 trap stop_live_view EXIT
 ROS_DOMAIN_ID="$DOMAIN" start_live_view "$RUN_DIR/live_view.log" \
   "live_view/layouts/pipeline_cell.json"
+# SIGTERM (`docker stop`, a process manager) goes to the whole process group: run_trials winds
+# the trial up and writes its report; this script waits for it (a trap, not death) and reports.
+trap 'echo "[demo] SIGTERM: the trial runner wound the run up"' TERM
 set +e
 run_trials --seeds "$SEED" --belt-speed "$BELT" "$BELT" --domain-base "$DOMAIN" \
   "${RECORD[@]}" --out "$RUN_DIR"
@@ -32,11 +35,15 @@ code=$?
 set -e
 stop_live_view
 echo
-sed -n '/^| /p' "$RUN_DIR/report.md"
-echo
-grep -h "^\- trial\|^Peak joint speed" "$RUN_DIR/report.md" || true
+if [ -f "$RUN_DIR/report.md" ]; then
+  sed -n '/^| /p' "$RUN_DIR/report.md"
+  echo
+  grep -h "^\- trial\|^Peak joint speed" "$RUN_DIR/report.md" || true
+else
+  echo "[demo] no report: the trial did not finish"
+fi
 echo "[demo] events and logs: ${RUN_DIR#"$ROOT"/}/trial_000/ (result.json, *.log$(
   [ "${DEMO_RECORD:-1}" != 0 ] && echo ', bag/'))"
-echo "[demo] report: ${RUN_DIR#"$ROOT"/}/report.md (plots: completion_times.png, success_rates.png, youbot_paths.png)"
+[ -f "$RUN_DIR/report.md" ] && echo "[demo] report: ${RUN_DIR#"$ROOT"/}/report.md (plots: completion_times.png, success_rates.png, youbot_paths.png)"
 if [ "$code" -eq 0 ]; then echo "[demo] PASS"; else echo "[demo] FAIL (exit $code)"; fi
 exit "$code"

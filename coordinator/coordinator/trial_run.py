@@ -87,7 +87,7 @@ def run_trial(trial: int, seed: int, belt_speed: float, domain_id: int, out_dir:
             pass
         cpu = {name: _cpu_seconds(p.pid) for name, p in procs.items() if p.poll() is None}
     finally:
-        _stop_group(group, procs, at_once=INTERRUPTED.is_set())
+        _stop_group(group, procs, interrupted=INTERRUPTED.is_set())
         ACTIVE_GROUPS.discard(group)
     run = RunInfo(trial=trial, code=code or code_version(),
                   wall_time=time.monotonic() - start, cpu_seconds=cpu)
@@ -186,14 +186,19 @@ def _cpu_seconds(pid: int) -> float:
         return float('nan')
 
 
+# [s] A stopped campaign's trials: SIGKILL this long after SIGINT (within the 10 s that
+# `docker stop` and most process managers wait after their SIGTERM).
+INTERRUPT_GRACE = 5.0
+
+
 def _stop_group(group: Optional[int], procs: Dict[str, 'subprocess.Popen[bytes]'],
-                at_once: bool = False) -> None:
-    """Stop a trial's processes: SIGINT, and SIGKILL for those still running 10 s later (or
-    at once: the campaign was stopped)."""
+                interrupted: bool = False) -> None:
+    """Stop a trial's processes: SIGINT (each node ends between callbacks, the recorder closes
+    its bag), and SIGKILL for those still running 10 s later, or ``INTERRUPT_GRACE`` later
+    when the campaign was stopped."""
     if group is None:
         return
-    steps = ((signal.SIGKILL, 5.0),) if at_once else ((signal.SIGINT, 10.0),
-                                                      (signal.SIGKILL, 5.0))
+    steps = ((signal.SIGINT, INTERRUPT_GRACE if interrupted else 10.0), (signal.SIGKILL, 5.0))
     for sig, grace in steps:
         try:
             os.killpg(group, sig)
@@ -206,9 +211,13 @@ def _stop_group(group: Optional[int], procs: Dict[str, 'subprocess.Popen[bytes]'
             return
 
 
-def stop_all() -> None:
-    """Stop every running trial at once (their results read 'interrupted')."""
+def stop_all(at_once: bool = False) -> None:
+    """Stop every running trial (their results read 'interrupted'): each trial's own thread
+    stops its processes as at a trial's end, with a shorter grace (the bags are closed). At
+    once (SIGKILL): the user insisted (a second Ctrl-C while the trials were being stopped)."""
     INTERRUPTED.set()
+    if not at_once:
+        return
     for group in list(ACTIVE_GROUPS):
         try:
             os.killpg(group, signal.SIGKILL)

@@ -85,7 +85,7 @@ class Pool(Protocol):
         """The running trials' progress, by trial."""
 
     def stop(self) -> None:
-        """Kill the running trials at once."""
+        """Stop the running trials (soon: a user stopped the campaign)."""
 
     def close(self) -> None: ...
 
@@ -132,7 +132,7 @@ class LocalPool:
                 for trial in self.running}
 
     def stop(self) -> None:
-        """Kill the running trials at once (their results read 'interrupted')."""
+        """Stop the running trials (their results read 'interrupted'; their bags closed)."""
         stop_all()
 
     def close(self) -> None:
@@ -238,8 +238,8 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     INTERRUPTED.clear()
     try:
         return _main(argv)
-    except KeyboardInterrupt:       # (before the campaign started, or while it wrote up)
-        stop_all()
+    except KeyboardInterrupt:       # (before the campaign started, or while it wrote up or
+        stop_all(at_once=True)      # stopped its trials: a second Ctrl-C)
         print('[trials] interrupted', flush=True)
         return 130
 
@@ -487,10 +487,12 @@ def _campaign(args: argparse.Namespace, given: Dict[str, Any]) -> int:
                          f'finished (plan seed {opts["seed0"]}, belt {lo}-{hi} m/s); '
                          f'`run_trials --resume {args.out}` runs the others.')
     report = write_report(results, args.out, setup) if results else None
-    print(f'[trials] CSV {args.out / "trials.csv"}, report {report}', flush=True)
+    print(f'[trials] CSV {args.out / "trials.csv"}, '
+          + (f'report {report}' if report else 'no report (no trial finished)'), flush=True)
     if interrupted:
-        print(f'[trials] interrupted: running trials stopped; {len(results)} finished, in the '
-              f'CSV and report; run_trials --resume {args.out} goes on', flush=True)
+        print(f'[trials] interrupted: running trials stopped; {len(results)} finished'
+              + (', in the CSV and report' if results else '')
+              + f'; run_trials --resume {args.out} goes on', flush=True)
         return 130
     return 0 if all(r.status == 'completed' for r in results) else 1
 
@@ -526,8 +528,8 @@ def _run_plan(pool: Pool, pending: List[PlanItem], results: List[TrialResult], t
             while pending and pool.has_room():
                 pool.submit(pending.pop(0))
     except KeyboardInterrupt:
-        # Stopped by the user (Ctrl-C, SIGTERM): the running trials are stopped at once; what
-        # finished goes into the CSV and the report.
+        # Stopped by the user (Ctrl-C, SIGTERM): the running trials are stopped (within
+        # INTERRUPT_GRACE); what finished goes into the CSV and the report.
         pool.stop()
         interrupted = True
     finally:

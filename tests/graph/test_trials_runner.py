@@ -66,3 +66,48 @@ def test_a_signal_while_a_trial_is_set_up_ends_the_campaign_at_once(tmp_path):
     assert json.loads((out / 'campaign.json').read_text())['plan']['trials'] == 1
     wait_for(lambda: not _session_processes(runner.pid), 10.0,
              what='no process of the campaign left')
+
+
+def test_a_campaign_stopped_mid_trial_keeps_the_trials_bag_whole(tmp_path):
+    """SIGTERM (as `docker stop` sends it) while a recorded trial runs: the runner stopped its
+    trial's processes with SIGKILL, and the bag was cut without its summary (unreadable by
+    `mcap info`). Now each node is stopped with SIGINT first: the recorder closes its bag, the
+    trial reads 'interrupted', no node leaves a traceback, and --resume can run it again."""
+    from mcap.reader import make_reader
+
+    out = tmp_path / 'campaign'
+    runner = subprocess.Popen([shutil.which('run_trials'), '--trials', '1', '--record',
+                               '--out', str(out), '--progress-period', '1'],
+                              stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
+                              start_new_session=True)
+    progress = out / 'trial_000' / 'progress.json'
+
+    def sim_time() -> float:
+        try:
+            return float(json.loads(progress.read_text()).get('sim_time', 0.0))
+        except (OSError, ValueError, AttributeError):
+            return 0.0
+    try:
+        wait_for(lambda: sim_time() >= 3.0 or runner.poll() is not None, 180.0,
+                 what='the trial to run 3 s of simulated time')
+        assert runner.poll() is None
+        runner.send_signal(signal.SIGTERM)
+        output, _ = runner.communicate(timeout=60)
+    finally:
+        if runner.poll() is None:
+            os.killpg(runner.pid, signal.SIGKILL)
+            runner.wait()
+    assert runner.returncode == 130, output
+    assert 'no report (no trial finished)' in output and 'Traceback' not in output
+    trial = out / 'trial_000'
+    assert json.loads((trial / 'result.json').read_text())['status'] == 'interrupted'
+    with open(trial / 'bag' / 'bag.mcap', 'rb') as f:
+        summary = make_reader(f).get_summary()         # (None, or an error, for a cut bag)
+    assert summary is not None and summary.statistics.message_count > 0
+    topics = {channel.topic for channel in summary.channels.values()}
+    assert {'/clock', '/cell/materials', '/coordinator_node/events'} <= topics, topics
+    for log in trial.glob('*.log'):
+        text = log.read_text()
+        assert 'Traceback' not in text and '[FATAL]' not in text, (log.name, text[-2000:])
+    wait_for(lambda: not _session_processes(runner.pid), 10.0,
+             what='no process of the campaign left')
