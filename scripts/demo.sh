@@ -45,5 +45,9 @@ fi
 echo "[demo] events and logs: ${RUN_DIR#"$ROOT"/}/trial_000/ (result.json, *.log$(
   [ "${DEMO_RECORD:-1}" != 0 ] && echo ', bag/'))"
 [ -f "$RUN_DIR/report.md" ] && echo "[demo] report: ${RUN_DIR#"$ROOT"/}/report.md (plots: completion_times.png, success_rates.png, youbot_paths.png)"
-if [ "$code" -eq 0 ]; then echo "[demo] PASS"; else echo "[demo] FAIL (exit $code)"; fi
+case "$code" in
+  0) echo "[demo] PASS" ;;
+  130) echo "[demo] STOPPED (exit 130): the trial was stopped before it finished" ;;
+  *) echo "[demo] FAIL (exit $code)" ;;
+esac
 exit "$code"
