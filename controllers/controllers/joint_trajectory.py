@@ -20,7 +20,7 @@ from __future__ import annotations
 
 import bisect
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import List, Optional, Sequence, Tuple
 
 import numpy as np
@@ -79,6 +79,19 @@ class TrajectoryRequest:
     joint_names: Tuple[str, ...]
     points: Tuple[TrajectoryPoint, ...]
     start_time: Optional[float] = None
+
+
+def slowed(request: TrajectoryRequest, scale: float) -> TrajectoryRequest:
+    """The same path taken ``scale`` times as fast (< 1: a slower arm): each point's time from
+    the start divided by ``scale``, its velocities times ``scale``, accelerations times its
+    square. A trajectory for an arm that cannot keep its nominal speed."""
+    if not (math.isfinite(scale) and scale > 0.0):
+        raise ValueError(f'a speed scale must be finite and > 0, got {scale}')
+    return replace(request, points=tuple(
+        replace(pt, time_from_start=pt.time_from_start / scale,
+                velocities=tuple(v * scale for v in pt.velocities),
+                accelerations=tuple(a * scale * scale for a in pt.accelerations))
+        for pt in request.points))
 
 
 @dataclass

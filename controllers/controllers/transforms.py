@@ -46,6 +46,16 @@ def matrix_to_quaternion(r: np.ndarray) -> Tuple[float, float, float, float]:
     return (x, y, z, w)
 
 
+def rpy_matrix(roll: float, pitch: float, yaw: float) -> np.ndarray:
+    """The rotation of roll, pitch and yaw about the fixed x, y and z axes (R = Rz Ry Rx, as
+    URDF and tf2 take them)."""
+    cr, sr, cp, sp = math.cos(roll), math.sin(roll), math.cos(pitch), math.sin(pitch)
+    cy, sy = math.cos(yaw), math.sin(yaw)
+    return np.array([[cy * cp, cy * sp * sr - sy * cr, cy * sp * cr + sy * sr],
+                     [sy * cp, sy * sp * sr + cy * cr, sy * sp * cr - cy * sr],
+                     [-sp, cp * sr, cp * cr]])
+
+
 def yaw_from_quaternion(q: Vector) -> float:
     """The yaw (about z) of a quaternion (x, y, z, w), as REP-103's roll-pitch-yaw has it."""
     x, y, z, w = q

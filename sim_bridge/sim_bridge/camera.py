@@ -6,6 +6,7 @@ import array
 import math
 from typing import Optional, Tuple
 
+import cv2
 import numpy as np
 
 from controllers.arrays import Vector
@@ -34,6 +35,21 @@ def view_matrix_from_optical(position: Vector, rotation: np.ndarray
     view[:3, :3] = r_gl.T
     view[:3, 3] = -r_gl.T @ np.asarray(position, dtype=float)
     return tuple(view.T.ravel())
+
+
+def perturb_frame(rgba: np.ndarray, gains: np.ndarray, noise: Optional[np.ndarray],
+                  blur: float) -> np.ndarray:
+    """A frame as a real camera gives it: each colour channel times its gain (brightness and
+    white balance), blurred (Gaussian, ``blur`` px), pixel noise added (levels, float32, one
+    per pixel and channel); rounded and clipped to 0-255, alpha kept. A new array."""
+    rgb = rgba[:, :, :3].astype(np.float32) * np.asarray(gains, dtype=np.float32)
+    if blur > 0.0:
+        rgb = np.asarray(cv2.GaussianBlur(rgb, (0, 0), blur), dtype=np.float32)
+    if noise is not None:
+        rgb += noise
+    out = np.array(rgba, dtype=np.uint8, copy=True)
+    out[:, :, :3] = np.clip(np.rint(rgb), 0.0, 255.0).astype(np.uint8)
+    return out
 
 
 class ImageBuffer:

@@ -22,6 +22,7 @@ from pybullet_utils.bullet_client import BulletClient
 from controllers.arrays import Vector
 from controllers.conveyor import Item, advance
 from controllers.transforms import matrix_to_quaternion
+from world_description.perturbations import MaterialDraw, PerturbationDraws
 from world_description.world_config import ConveyorConfig, MaterialsConfig
 
 BELT_THICKNESS_M = 0.04
@@ -138,12 +139,14 @@ class Conveyor:
         return (lo[2] < self.top[2] + (hi[2] - lo[2]) and 0.0 <= it.along <= self.stop_along
                 and abs(it.across) <= self.config.width / 2)
 
-    def carry(self, bodies: List[int], dt: float, lifted: Sequence[int] = ()) -> None:
+    def carry(self, bodies: List[int], dt: float, lifted: Sequence[int] = (),
+              speed: Optional[float] = None) -> None:
         """Move what rests on the belt this step as the accumulation rule says (the model the
         coordinator predicts with): at the belt's speed, or up to where the end stop, an item
         held ahead, or one being lifted off ahead (``lifted``: bodies off the belt, carried by
-        a gripper) holds it, and no further; advance the belt's travel."""
-        travel = self._speed * dt
+        a gripper) holds it, and no further; advance the belt's travel. ``speed``: this step's
+        (the set speed drifting, a perturbation), else the set speed."""
+        travel = (self._speed if speed is None else speed) * dt
         self.travel += travel
         resting = self.resting(bodies)
         items = [self.item(b) for b in resting]
@@ -164,10 +167,13 @@ class MaterialSource:
     plan does not count. A material's index is its order of appearance, planned or spawned."""
 
     def __init__(self, client: BulletClient, conveyor: Conveyor, config: MaterialsConfig,
-                 seed: Optional[int] = None) -> None:
+                 seed: Optional[int] = None,
+                 draws: Optional[PerturbationDraws] = None) -> None:
         self._p, self._conveyor, self.config = client, conveyor, config
         self._colors = dict(config.colors)
         self.seed = config.seed if seed is None else seed
+        # Each material's mass, edge and friction off its class's (the world's perturbations).
+        self._draws = draws
         self.materials: List[MaterialBody] = []
         self.restart()
 
@@ -201,11 +207,15 @@ class MaterialSource:
         color, travel, across = self.plan[self._dropped]
         if self._conveyor.travel + 1e-12 < travel:
             return None
-        size = self.config.cls(color).size
+        size = self.config.cls(color).size * self._drawn(self._next_index).size_factor
         position = self.drop_point(size, across)
         orn = self._p.getQuaternionFromEuler((0.0, 0.0, self._conveyor.config.yaw))
         self._dropped += 1
         return self.spawn(color, position, orn, sim_time)
+
+    def _drawn(self, index: int) -> MaterialDraw:
+        """The ``index``-th material's draw (its class's own values without perturbations)."""
+        return self._draws.material(index) if self._draws is not None else MaterialDraw()
 
     def drop_point(self, size: float, across: float = 0.0) -> np.ndarray:
         """Where a material of edge ``size`` is dropped: its centre just above the belt's
@@ -219,15 +229,17 @@ class MaterialSource:
         """A material of class ``color`` at a pose (its centre), from now on one of the cell's
         materials (KeyError: no such class)."""
         cls = self.config.cls(color)
-        half = (cls.size / 2,) * 3
+        drawn = self._drawn(self._next_index)
+        size, mass = cls.size * drawn.size_factor, cls.mass * drawn.mass_factor
+        half = (size / 2,) * 3
         col = self._p.createCollisionShape(pybullet.GEOM_BOX, halfExtents=half)
         vis = self._p.createVisualShape(pybullet.GEOM_BOX, halfExtents=half,
                                         rgbaColor=self._colors[color])
         body = self._p.createMultiBody(
-            cls.mass, col, vis, basePosition=[float(v) for v in position],
+            mass, col, vis, basePosition=[float(v) for v in position],
             baseOrientation=[float(v) for v in orientation])
-        self._p.changeDynamics(body, -1, lateralFriction=0.8)
-        material = MaterialBody(self._next_index, color, body, sim_time, cls.size, cls.mass)
+        self._p.changeDynamics(body, -1, lateralFriction=drawn.friction)
+        material = MaterialBody(self._next_index, color, body, sim_time, size, mass)
         self._next_index += 1
         self.materials.append(material)
         return material

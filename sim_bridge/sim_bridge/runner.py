@@ -9,7 +9,7 @@ from typing import Callable, Dict, List, Optional, Protocol, Sequence, Tuple
 import numpy as np
 
 from controllers.cmd_guard import CommandGuard, GuardResult, non_finite_fields, rate_limited
-from controllers.joint_trajectory import TrajectoryRequest, TrajectoryResult
+from controllers.joint_trajectory import TrajectoryRequest, TrajectoryResult, slowed
 from controllers.lockstep import next_on_grid
 from sim_bridge.world import SimWorld
 
@@ -234,6 +234,9 @@ class SimRunner:
         if robot in self.faults:
             return TrajectoryResult(False, f'{self.faults[robot]}; reset the simulator to go on')
         group = self.world.robots[robot].controllers[controller]
+        scale = self.world.config.perturbations.robots.velocity_scale
+        if scale != 1.0:
+            request = slowed(request, scale)     # a slower arm (a perturbation)
         result = group.follower.set_trajectory(request, self.world.sim_time)
         if result.accepted:
             group.active_path_tolerance = (group.path_tolerance if path_tolerance is None else

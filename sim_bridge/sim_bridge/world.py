@@ -4,7 +4,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Dict, FrozenSet, List, Optional, Sequence, Tuple, Union, cast
+from typing import Any, Dict, FrozenSet, List, Optional, Sequence, Set, Tuple, Union, cast
 
 import numpy as np
 import pybullet
@@ -15,12 +15,14 @@ from controllers.diff_drive import wheel_speeds as diff_wheel_speeds
 from controllers.joint_trajectory import JointLimits, TrajectoryFollower
 from controllers.mecanum import MecanumGeometry
 from controllers.mecanum import wheel_speeds as mecanum_wheel_speeds
+from controllers.transforms import rpy_matrix, yaw_from_quaternion
 from sim_bridge.backdrop import StaticBackdrop, static_visuals
-from sim_bridge.camera import projection_matrix, view_matrix_from_optical
+from sim_bridge.camera import perturb_frame, projection_matrix, view_matrix_from_optical
 from sim_bridge.cell import Conveyor, MaterialBody, MaterialSource, Suction
 from sim_bridge.client import Client
 from world_description.camera_geometry import intrinsics_from_fov, look_at_rotation
 from world_description.joint_limits import JointLimitsError, load_acceleration_limits
+from world_description.perturbations import PerturbationDraws
 from world_description.resources import resolve_resource
 from world_description.world_config import (
     CameraConfig,
@@ -78,7 +80,25 @@ class SimRobot:
         pose = config.pose
         self._start_pos = (pose.x, pose.y, pose.z)
         self._start_orn = tuple(client.getQuaternionFromEuler((0.0, 0.0, pose.yaw)))
+        # Perturbations (set_perturbations): each joint's offset [rad] between where it is and
+        # where its encoder says (by PyBullet index), and the factors the odometry gets its x,
+        # y and yaw motion wrong by.
+        self._encoder_offset: Dict[int, float] = {}
+        self.odometry_scale = (1.0, 1.0, 1.0)
         self._load()
+
+    def set_perturbations(self, joint_offsets: Dict[str, float],
+                          odometry_scale: Tuple[float, float, float]) -> None:
+        """A mis-calibrated robot: each joint in ``joint_offsets`` sits that far [rad] from
+        where its encoder (the joint states, its controller) says, and its odometry reports
+        its motion times ``odometry_scale`` (x, y, yaw). Takes effect from a reset on."""
+        self._encoder_offset = {self.movable_joint(j, 'perturbations'): float(v)
+                                for j, v in joint_offsets.items() if v != 0.0}
+        self.odometry_scale = odometry_scale
+
+    def encoder_offset(self, joint: int) -> float:
+        """How far [rad] a joint (PyBullet index) is from where its encoder says."""
+        return self._encoder_offset.get(joint, 0.0)
 
     def _load(self) -> None:
         """Load the URDF at the start pose and set up its joints, drive and controllers."""
@@ -95,6 +115,7 @@ class SimRobot:
         self.joint_index: Dict[str, int] = {}
         self.link_index: Dict[str, int] = {client.getBodyInfo(self.body)[0].decode(): -1}
         self.movable: List[int] = []
+        self.revolute: Set[str] = set()           # the names of the revolute joints
         self._joint_names: List[str] = []
         self._joint_limits: Dict[str, Tuple[float, float, float, float]] = {}
         for j in range(client.getNumJoints(self.body)):
@@ -102,6 +123,8 @@ class SimRobot:
             name, jtype = info[1].decode(), info[2]
             self.joint_index[name] = j
             self.link_index[info[12].decode()] = j
+            if jtype == pybullet.JOINT_REVOLUTE:
+                self.revolute.add(name)
             if jtype != pybullet.JOINT_FIXED:
                 self.movable.append(j)
                 self._joint_names.append(name)
@@ -194,14 +217,17 @@ class SimRobot:
     def joint_states(self) -> JointStates:
         states = self.client.getJointStates(self.body, self.movable)
         scale = self._report_scale
+        off = [self._encoder_offset.get(j, 0.0) for j in self.movable]
         # A virtual omni-wheel turns 1/sqrt(2) as fast with sqrt(2) times the torque (same power).
-        return JointStates(self.joint_names, [s[0] * k for s, k in zip(states, scale)],
+        return JointStates(self.joint_names, [s[0] * k - o for s, k, o in zip(states, scale, off)],
                            [s[1] * k for s, k in zip(states, scale)],
                            [s[3] / k for s, k in zip(states, scale)])
 
     def joint_positions(self, joints: Sequence[str]) -> np.ndarray:
-        states = self.client.getJointStates(self.body, [self.joint_index[j] for j in joints])
-        return np.array([s[0] for s in states])
+        """Where the joints' encoders say they are."""
+        index = [self.joint_index[j] for j in joints]
+        states = self.client.getJointStates(self.body, index)
+        return np.array([s[0] - self._encoder_offset.get(j, 0.0) for s, j in zip(states, index)])
 
     def joint_velocities(self, joints: Sequence[str]) -> np.ndarray:
         states = self.client.getJointStates(self.body, [self.joint_index[j] for j in joints])
@@ -223,8 +249,17 @@ class SimRobot:
         # Pose relative to the start pose, which is the odom frame's origin.
         inv_pos, inv_orn = self.client.invertTransform(self._start_pos, self._start_orn)
         odom_pos, odom_orn = self.client.multiplyTransforms(inv_pos, inv_orn, pos, orn)
-        return BaseState(tuple(odom_pos), tuple(odom_orn), tuple(rot.T @ v_link),
-                         tuple(rot.T @ np.asarray(omega)))
+        linear, angular = rot.T @ v_link, rot.T @ np.asarray(omega)
+        sx, sy, syaw = self.odometry_scale
+        if (sx, sy, syaw) != (1.0, 1.0, 1.0):
+            # Odometry that drifts: its pose and twist off by a scale per axis.
+            yaw = yaw_from_quaternion(odom_orn)
+            extra = self.client.getQuaternionFromEuler((0.0, 0.0, yaw * (syaw - 1.0)))
+            _, turned = self.client.multiplyTransforms((0.0, 0.0, 0.0), extra, (0.0, 0.0, 0.0),
+                                                       odom_orn)
+            odom_pos, odom_orn = (odom_pos[0] * sx, odom_pos[1] * sy, odom_pos[2]), turned
+            linear, angular = linear * (sx, sy, 1.0), angular * (1.0, 1.0, syaw)
+        return BaseState(tuple(odom_pos), tuple(odom_orn), tuple(linear), tuple(angular))
 
     def link_world_pose(self, link: str) -> Tuple[np.ndarray, np.ndarray]:
         """World position and rotation matrix of a link frame (URDF frame, not inertial)."""
@@ -251,7 +286,8 @@ class SimRobot:
         self.client.resetBasePositionAndOrientation(self.body, *self._start_com())
         self.client.resetBaseVelocity(self.body, (0.0, 0.0, 0.0), (0.0, 0.0, 0.0))
         for j in self.movable:
-            self.client.resetJointState(self.body, j, self._initial.get(j, 0.0), 0.0)
+            self.client.resetJointState(
+                self.body, j, self._initial.get(j, 0.0) + self._encoder_offset.get(j, 0.0), 0.0)
         if self.drive is not None:
             self.drive.command(0.0, 0.0, 0.0)
         for group in self.controllers.values():
@@ -406,7 +442,8 @@ class JointGroup:
         effort, velocity = self._effort, self._max_velocity
         for i, joint in enumerate(self.joints):
             p.setJointMotorControl2(body, joint, pybullet.POSITION_CONTROL,
-                                    targetPosition=targets[0][i],
+                                    targetPosition=targets[0][i]
+                                    + self._robot.encoder_offset(joint),
                                     targetVelocity=targets[1][i],
                                     force=effort[i], maxVelocity=velocity[i],
                                     positionGain=c.position_gain, velocityGain=c.velocity_gain)
@@ -417,9 +454,16 @@ class JointGroup:
 
 
 class SimCamera:
-    def __init__(self, config: CameraConfig, robot: Optional[SimRobot]) -> None:
+    def __init__(self, config: CameraConfig, robot: Optional[SimRobot],
+                 pose_error: Optional[Tuple[np.ndarray, np.ndarray]] = None) -> None:
+        """``pose_error``: the camera's position [m] and rotation (about its optical axes)
+        [rad] off the pose the world file gives it, which the vision is told (a mis-calibrated
+        camera, a perturbation)."""
         self.config = config
         self.robot = robot
+        offset, angles = pose_error if pose_error is not None else (np.zeros(3), np.zeros(3))
+        self._offset = np.asarray(offset, float)
+        self._tilt = rpy_matrix(*(float(a) for a in angles))
         self.intrinsics = intrinsics_from_fov(config.width, config.height,
                                               config.vertical_fov_deg)
         self._projection = projection_matrix(config.width, config.height,
@@ -429,8 +473,8 @@ class SimCamera:
             if config.position is None or config.look_at is None:
                 raise WorldError(f'camera "{config.name}": a camera on no robot needs a position '
                                  'and a point to look at')
-            self._fixed_view = view_matrix_from_optical(
-                config.position, look_at_rotation(config.position, config.look_at))
+            self._fixed_view = self._view(np.asarray(config.position, float),
+                                          look_at_rotation(config.position, config.look_at))
         elif config.link is None or config.link not in robot.link_index:
             raise WorldError(f'camera "{config.name}": robot "{robot.config.name}" has no link '
                              f'"{config.link}"')
@@ -441,7 +485,12 @@ class SimCamera:
         if self.robot is None:
             return self._fixed_view
         pos, rot = self.robot.link_world_pose(self._link)
-        return view_matrix_from_optical(pos, rot)
+        return self._view(np.asarray(pos, float), np.asarray(rot, float))
+
+    def _view(self, position: np.ndarray, rotation: np.ndarray) -> Tuple[float, ...]:
+        """The view from an optical frame's pose, off it by the camera's pose error."""
+        return view_matrix_from_optical(position + rotation @ self._offset,
+                                        rotation @ self._tilt)
 
     @property
     def projection(self) -> Tuple[float, ...]:
@@ -485,14 +534,28 @@ class SimWorld:
         for obstacle in config.obstacles:
             self._add_obstacle(obstacle)
         base_dir = Path(config.source).parent if config.source else None
+        # The world's perturbations, drawn from the scenario's seed (off unless the world file
+        # turns them on).
+        self.draws = PerturbationDraws(config.perturbations, scenario_seed if scenario_seed
+                                       is not None else config.materials.seed
+                                       if config.materials else 0)
         self.robots: Dict[str, SimRobot] = {}
         for rc in config.robots:
-            self.robots[rc.name] = SimRobot(p, rc, resolve_resource(rc.urdf, base_dir), base_dir)
+            robot = SimRobot(p, rc, resolve_resource(rc.urdf, base_dir), base_dir)
+            if config.perturbations.robots.active:
+                robot.set_perturbations(
+                    self.draws.joint_offsets(rc.name, [j for c in rc.controllers
+                                                       for j in c.joints if j in robot.revolute]),
+                    self.draws.odometry_scale(rc.name))
+                robot.reset()
+            self.robots[rc.name] = robot
         self.cameras: List[SimCamera] = [
-            SimCamera(cc, self.robots[cc.robot] if cc.robot else None) for cc in config.cameras]
+            SimCamera(cc, self.robots[cc.robot] if cc.robot else None,
+                      self.draws.camera_pose_error(cc.name)) for cc in config.cameras]
         self.conveyor = Conveyor(p, config.conveyor) if config.conveyor else None
         # (The world file's reader holds materials to a conveyor to be placed on.)
-        self.source = (MaterialSource(p, self.conveyor, config.materials, scenario_seed)
+        self.source = (MaterialSource(p, self.conveyor, config.materials, scenario_seed,
+                                      self.draws)
                        if config.materials and self.conveyor else None)
         # Where every static body (floor, obstacles, the belt and its stands) belongs: a
         # non-finite robot state spreads NaN into the static bodies it touches, and a body
@@ -538,7 +601,8 @@ class SimWorld:
         if self.conveyor is not None:
             held = {s.held.body for s in self.suctions.values() if s.held is not None}
             self.conveyor.carry([m.body for m in self.materials if m.body not in held],
-                                self.time_step, sorted(held))
+                                self.time_step, sorted(held),
+                                self.draws.belt_speed(self.conveyor.speed, self.sim_time))
             if self.source is not None:
                 self.source.update(self.sim_time)
         self._p.stepSimulation()
@@ -566,7 +630,23 @@ class SimWorld:
 
     def render(self, camera: SimCamera,
                lighting: Optional[Dict[str, Any]] = None) -> np.ndarray:
-        """Render an RGBA frame (height x width x 4, uint8) with the CPU renderer.
+        """Render an RGBA frame (height x width x 4, uint8) with the CPU renderer, as the
+        camera gives it: with the world's camera perturbations (noise, colour, blur), if any.
+        ``lighting``: as :meth:`render_ideal`."""
+        frame = self.render_ideal(camera, lighting)
+        c = self.config.perturbations.camera
+        if not (c.pixel_noise > 0.0 or c.brightness > 0.0 or c.white_balance > 0.0
+                or c.blur > 0.0):
+            return frame
+        name = camera.config.name
+        noise = (self.draws.frame_noise(name, self.sim_time_ns, (*frame.shape[:2], 3))
+                 if c.pixel_noise > 0.0 else None)
+        return perturb_frame(frame, self.draws.camera_gains(name), noise, c.blur)
+
+    def render_ideal(self, camera: SimCamera,
+                     lighting: Optional[Dict[str, Any]] = None) -> np.ndarray:
+        """Render an RGBA frame (height x width x 4, uint8) with the CPU renderer: the scene
+        itself, no camera perturbation.
 
         ``lighting``: getCameraImage's light arguments (lightDirection, lightColor,
         lightAmbientCoeff, lightDiffuseCoeff, lightSpecularCoeff), to vary the lighting.

@@ -17,6 +17,13 @@ from world_description.material_classes import (
     color_problem,
     hue_ranges,
 )
+from world_description.perturbations import (
+    CameraPerturbation,
+    MaterialPerturbation,
+    Perturbations,
+    RobotPerturbation,
+    TimingPerturbation,
+)
 
 Vec3 = Tuple[float, float, float]
 
@@ -205,6 +212,8 @@ class WorldConfig:
     cameras: List[CameraConfig] = field(default_factory=list)
     conveyor: Optional[ConveyorConfig] = None
     materials: Optional[MaterialsConfig] = None
+    # Realistic sources of failure, all off unless the world turns them on (perturbations.py).
+    perturbations: Perturbations = field(default_factory=Perturbations)
 
     def robot(self, name: str) -> RobotConfig:
         for robot in self.robots:
@@ -314,7 +323,7 @@ def parse_world(data: Any, source: str = '<memory>') -> WorldConfig:
     if not isinstance(data, dict):
         raise WorldConfigError(f'{source}: the top level must be a mapping')
     r.only(data, 'world', {'gravity', 'floor_size', 'robots', 'obstacles', 'cameras',
-                           'conveyor', 'materials'})
+                           'conveyor', 'materials', 'perturbations'})
     robots = [_robot(r, item, i) for i, item in enumerate(r.list(data, 'robots', 'world'))]
     names = [rb.name for rb in robots]
     if len(set(names)) != len(names):
@@ -336,7 +345,8 @@ def parse_world(data: Any, source: str = '<memory>') -> WorldConfig:
                        gravity=r.number(data, 'gravity', 'world', default=-9.81),
                        floor_size=r.number(data, 'floor_size', 'world', default=4.0, lo=0.1),
                        robots=robots, obstacles=obstacles, cameras=cameras, conveyor=conveyor,
-                       materials=materials)
+                       materials=materials,
+                       perturbations=_perturbations(r, data.get('perturbations') or {}))
 
 
 def _robot(r: '_Reader', item: Any, i: int) -> RobotConfig:
@@ -511,6 +521,52 @@ def _materials(r: '_Reader', item: Any, obstacles: List[ObstacleConfig]) -> Mate
         lateral_jitter=r.number(item, 'lateral_jitter', where, default=0.03, lo=0.0, hi=1.0),
         start_offset=r.number(item, 'start_offset', where, default=0.1, lo=0.0),
         seed=int(r.number(item, 'seed', where, default=0, lo=0, hi=2**31 - 1, integer=True)))
+
+
+def _perturbations(r: '_Reader', item: Any) -> Perturbations:
+    """The ``perturbations`` section: each key off (0, or 1 for a scale) when not given."""
+    r.only(item, 'perturbations', {'camera', 'materials', 'robots', 'timing'})
+
+    def section(key: str, allowed: Set[str]) -> Dict[str, Any]:
+        value = item.get(key) or {}
+        r.only(value, f'perturbations.{key}', allowed)
+        return dict(value)
+
+    cam = section('camera', {'pixel_noise', 'brightness', 'white_balance', 'blur',
+                             'position_error', 'angle_error'})
+    where = 'perturbations.camera'
+    camera = CameraPerturbation(
+        pixel_noise=r.number(cam, 'pixel_noise', where, default=0.0, lo=0.0, hi=128.0),
+        brightness=r.number(cam, 'brightness', where, default=0.0, lo=0.0, hi=0.5),
+        white_balance=r.number(cam, 'white_balance', where, default=0.0, lo=0.0, hi=0.5),
+        blur=r.number(cam, 'blur', where, default=0.0, lo=0.0, hi=20.0),
+        position_error=r.number(cam, 'position_error', where, default=0.0, lo=0.0, hi=0.1),
+        angle_error=r.number(cam, 'angle_error', where, default=0.0, lo=0.0, hi=10.0))
+    mat = section('materials', {'mass_spread', 'size_spread', 'friction'})
+    where = 'perturbations.materials'
+    friction = None
+    if mat.get('friction') is not None:
+        lo, hi = r.vector(mat, 'friction', where, 2, lo=0.0, hi=5.0)
+        if lo > hi:
+            raise r.fail(where, 'friction', f'must be [min, max], got {[lo, hi]}')
+        friction = (lo, hi)
+    materials = MaterialPerturbation(
+        mass_spread=r.number(mat, 'mass_spread', where, default=0.0, lo=0.0, hi=0.5),
+        size_spread=r.number(mat, 'size_spread', where, default=0.0, lo=0.0, hi=0.3),
+        friction=friction)
+    rob = section('robots', {'joint_offset', 'velocity_scale', 'odometry_drift'})
+    where = 'perturbations.robots'
+    robots = RobotPerturbation(
+        joint_offset=r.number(rob, 'joint_offset', where, default=0.0, lo=0.0, hi=0.2),
+        velocity_scale=r.number(rob, 'velocity_scale', where, default=1.0, lo=0.1, hi=1.0),
+        odometry_drift=r.number(rob, 'odometry_drift', where, default=0.0, lo=0.0, hi=0.3))
+    tim = section('timing', {'belt_speed_drift', 'belt_drift_period'})
+    where = 'perturbations.timing'
+    timing = TimingPerturbation(
+        belt_speed_drift=r.number(tim, 'belt_speed_drift', where, default=0.0, lo=0.0, hi=0.9),
+        belt_drift_period=r.number(tim, 'belt_drift_period', where, default=30.0, lo=1.0,
+                                   hi=3600.0))
+    return Perturbations(camera, materials, robots, timing)
 
 
 def _paper_classes(r: '_Reader', item: Dict[str, Any], size: float, mass: float
