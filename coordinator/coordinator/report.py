@@ -8,7 +8,7 @@ from typing import Any, Dict, List, Sequence, Tuple
 import cv2
 import numpy as np
 
-from coordinator.results import summary_rows
+from coordinator.results import FAILURE_CAUSES, summary_rows
 from coordinator.trial_result import TrialResult
 from recording.plot import plot_paths
 
@@ -65,6 +65,9 @@ def bars(rows: Sequence[Tuple[str, float, float]], out: Path, title: str) -> Non
         for j, (value, color) in enumerate(((ours, (180, 119, 31)), (paper, (160, 160, 160)))):
             x0 = int(left + i * group + 30 + j * (group - 60) / 2)
             x1 = int(x0 + (group - 60) / 2 - 6)
+            if not math.isfinite(value):          # (no trial gave this rate)
+                cv2.putText(img, 'n/a', (x0, top + h - 6), FONT, 0.45, (0, 0, 0), 1)
+                continue
             y = int(top + h - h * value / 100.0)
             cv2.rectangle(img, (x0, y), (x1, top + h), color, -1)
             cv2.putText(img, f'{value:.1f}', (x0, y - 6), FONT, 0.45, (0, 0, 0), 1)
@@ -176,6 +179,7 @@ def write_report(trials: Sequence[TrialResult], out_dir: Path, setup: Dict[str, 
     if s:
         lines += _table(s)
     bad = [t for t in trials if t.status != 'completed']
+    lines += _causes(ok)
     if bad:
         lines += ['## Runs that did not complete', '']
         lines += [f'- trial {t.trial} (seed {t.scenario_seed}, belt {t.belt_speed:.3f}): '
@@ -191,6 +195,22 @@ def write_report(trials: Sequence[TrialResult], out_dir: Path, setup: Dict[str, 
     path = out_dir / 'report.md'
     path.write_text('\n'.join(lines))
     return path
+
+
+def _causes(trials: Sequence[TrialResult]) -> List[str]:
+    """The materials not at their destination, counted by what went wrong (results.
+    FAILURE_CAUSES); none: no lines."""
+    counts: Dict[str, int] = {}
+    for t in trials:
+        for m in t.not_at_destination:
+            cause = str(m.get('cause', 'unknown'))
+            counts[cause] = counts.get(cause, 0) + 1
+    if not counts:
+        return []
+    order = list(FAILURE_CAUSES) + sorted(set(counts) - set(FAILURE_CAUSES))
+    return ['Materials not at their destination, by cause: ' + ', '.join(
+        f'{cause.replace("_", " ")} {counts[cause]}' for cause in order if cause in counts)
+        + f' (of {sum(t.total for t in trials)} in {len(trials)} trials).', '']
 
 
 def _plots(ok: Sequence[TrialResult], s: Dict[str, float], out_dir: Path) -> bool:

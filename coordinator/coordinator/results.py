@@ -99,6 +99,47 @@ def not_at_destination(final_truth: Sequence[TruePose], regions: Destinations,
     return out
 
 
+# What went wrong with a material that is not at its destination, earliest cause first.
+FAILURE_CAUSES = {
+    'not_seen': 'the vision never reported it',
+    'wrong_colour': 'the vision took it for another class',
+    'missed': 'it went off the belt\'s end unpicked',
+    'grasp_missed': 'a grasp of it failed, and was given up',
+    'dropped': 'it was lifted off the belt and lost on the way',
+    'out_of_place': 'it was set down, but off its destination',
+    'not_handled': 'the run ended before it was handled',
+}
+
+
+def failure_cause(sim_id: int, true_color: str, details: Sequence[Dict[str, Any]],
+                  materials: Sequence[Dict[str, Any]], events: Sequence[Sequence[Any]]
+                  ) -> Tuple[str, str]:
+    """Why the simulator's material ``sim_id`` is not at its destination: a FAILURE_CAUSES key
+    and what tells it, from what the vision reported (the identifications' ``details``), what
+    the coordinator made of it (its ``materials``) and the run's ``events``."""
+    seen = [d for d in details if d.get('truth_id') == sim_id]
+    if not seen:
+        return 'not_seen', FAILURE_CAUSES['not_seen']
+    wrong = [d for d in seen if d.get('color') != true_color]
+    if wrong:
+        return 'wrong_colour', f'seen as {wrong[0].get("color")}, it is {true_color}'
+    ids = {d['material'] for d in seen if d.get('material', -1) >= 0}
+    mine = [m for m in materials if m.get('id') in ids]
+    status = {m.get('status') for m in mine}
+    kinds = {str(e[1]) for e in events if len(e) > 3 and e[3] in ids}
+    if status & {'placed', 'delivered'}:
+        return 'out_of_place', FAILURE_CAUSES['out_of_place']
+    if 'missed' in status:
+        return 'missed', FAILURE_CAUSES['missed']
+    if 'grasp_failed' in kinds:
+        why = next((m.get('failure') for m in mine if m.get('failure')), '')
+        return 'grasp_missed', why or FAILURE_CAUSES['grasp_missed']
+    if 'picked' in kinds:
+        return 'dropped', FAILURE_CAUSES['dropped']
+    return 'not_handled', (f'the run ended with it {", ".join(sorted(map(str, status)))}'
+                           if status else FAILURE_CAUSES['not_handled'])
+
+
 def tracks_of(details: Sequence[Dict[str, Any]]) -> Dict[int, int]:
     """Simulator id: the coordinator's material id, from the identifications' details (each
     made on the material nearest its detection, in the snapshot of its moment)."""
@@ -268,6 +309,13 @@ def build_result(result: RunResult, final_truth: Sequence[TruePose],
               'at_destination': at_destination(color, p, regions),
               'why': why_not_there(color, p, regions)} for k, (color, p) in enumerate(final_truth)]
     start = trace.start
+    events = [[round(e.time - start, 4), str(e.kind), e.robot, e.material, e.color, e.detail]
+              for e in trace.events if e.kind is not EventKind.STATE]
+    missing = []
+    for m in out.not_at_destination:
+        cause, why = failure_cause(m['id'], m['color'], trace.identification_details,
+                                   materials, events)
+        missing.append({**m, 'cause': cause, 'cause_detail': why})
     peaks = {arm: {'fraction_of_limit': round(p.fraction, 4),
                    'joint': trace.joint_names[arm][p.joint] if p.joint >= 0 else '',
                    'time': round(p.time - start, 4) if math.isfinite(p.time) else None}
@@ -277,8 +325,7 @@ def build_result(result: RunResult, final_truth: Sequence[TruePose],
         final_materials=final, peak_joint_speed=peaks, odometry_age=trace.odometry_age,
         scenario_seed=trace.seed, belt_speed=trace.belt_speed, mode=trace.mode,
         youbot_path=[[round(x, 4), round(y, 4)] for x, y in trace.youbot_path[::3]],
-        events=[[round(e.time - start, 4), str(e.kind), e.robot, e.material, e.color, e.detail]
-                for e in trace.events if e.kind is not EventKind.STATE],
+        events=events, not_at_destination=missing,
         # Each machine's state changes: the report's timeline.
         states=[[round(e.time - start, 4), e.robot, e.detail]
                 for e in trace.events if e.kind is EventKind.STATE])

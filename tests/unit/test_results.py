@@ -355,6 +355,49 @@ def test_two_runs_differ_only_where_their_outcome_does_not_in_their_metadata():
     assert one.differences(moved) == ['completion_time', 'events']
 
 
+def test_each_material_not_at_its_destination_says_what_went_wrong():
+    from coordinator.results import failure_cause
+
+    def seen(truth_id, material, color, true_color):
+        return {'truth_id': truth_id, 'material': material, 'color': color,
+                'true_color': true_color}
+    details = [seen(1, 11, 'orange', 'orange'), seen(2, 12, 'purple', 'orange'),
+               seen(3, 13, 'orange', 'orange'), seen(4, 14, 'orange', 'orange'),
+               seen(5, 15, 'orange', 'orange'), seen(6, 16, 'purple', 'purple')]
+    materials = [{'id': 11, 'status': 'delivered', 'failure': ''},
+                 {'id': 12, 'status': 'placed', 'failure': ''},
+                 {'id': 13, 'status': 'missed', 'failure': 'went off the belt end unpicked'},
+                 {'id': 14, 'status': 'failed', 'failure': 'grasp: nothing within 4 mm'},
+                 {'id': 15, 'status': 'on_plate', 'failure': ''},
+                 {'id': 16, 'status': 'seen', 'failure': ''}]
+    events = [[2.0, 'picked', 'zu12', 11, 'orange', ''], [3.0, 'grasp_failed', 'zu12', 14,
+                                                          'orange', 'grasp: nothing'],
+              [4.0, 'picked', 'zu12', 15, 'orange', ''], [5.0, 'loaded', 'zu12', 15, 'orange',
+                                                          'plate slot 0']]
+    causes = {k: failure_cause(k, 'purple' if k == 6 else 'orange', details, materials,
+                               events)[0] for k in range(7)}
+    assert causes == {0: 'not_seen', 1: 'out_of_place', 2: 'wrong_colour', 3: 'missed',
+                      4: 'grasp_missed', 5: 'dropped', 6: 'not_handled'}
+    assert failure_cause(4, 'orange', details, materials, events)[1] == \
+        'grasp: nothing within 4 mm'
+    assert failure_cause(2, 'orange', details, materials, events)[1] == \
+        'seen as purple, it is orange'
+
+
+def test_the_report_counts_the_failures_by_cause(tmp_path):
+    def trial(n, causes):
+        return TrialResult('incomplete' if causes else 'completed', 60.0 + n, scenario_seed=n,
+                           belt_speed=0.12, total=8,
+                           not_at_destination=[{'id': k, 'color': 'orange', 'cause': c}
+                                               for k, c in enumerate(causes)],
+                           run=RunInfo(trial=n))
+    trials = [trial(0, ['dropped', 'not_seen']), trial(1, ['not_seen']), trial(2, [])]
+    text = write_report(trials, tmp_path, {'note': 'three'}).read_text()
+    assert ('Materials not at their destination, by cause: not seen 2, dropped 1 (of 24 in 3 '
+            'trials).') in text
+    assert 'by cause' not in write_report(trials[2:], tmp_path, {'note': 'one'}).read_text()
+
+
 def _belt_truth(t: float, speed: float = 0.12) -> list:
     """Ground truth at time ``t``: an orange riding the belt (at x -0.5 at t = 10 s) and a
     purple 0.3 m behind it."""
