@@ -14,9 +14,10 @@ import math
 import os
 from contextlib import contextmanager
 from pathlib import Path
-from typing import IO, Any, Dict, Iterator, List, Optional, Tuple
+from typing import IO, Any, Callable, Dict, Iterator, List, Optional, Tuple
 
 from coordinator.graph import CONTROL_RATE, TIME_STEP
+from coordinator.sweep import SweepError, grid, parse_axis
 from coordinator.trial_result import RESULT_FILE, TrialResult, is_int, is_number, read_result
 from world_description import PIPELINE_CELL
 
@@ -26,7 +27,11 @@ LOCK_FILE = '.run_trials.lock'
 # its directory (CAMPAIGN_FILE), so that ``--resume DIR`` needs nothing else.
 PLAN_DEFAULTS: Dict[str, Any] = {
     'trials': 10, 'seed0': 2026, 'seeds': None, 'first_trial': 0,
-    'belt_speed': [0.10, 0.16], 'world': PIPELINE_CELL, 'time_step': TIME_STEP}
+    'belt_speed': [0.10, 0.16], 'world': PIPELINE_CELL, 'time_step': TIME_STEP,
+    # A sweep (coordinator.sweep): one or two NAME=VALUES, `trials_per_point` trials at each
+    # point (else `trials`); the report names the first point where a rate is below
+    # `break_below`.
+    'sweep': None, 'trials_per_point': None, 'break_below': 0.9}
 MAX_TRIALS = 100_000
 MAX_SEED = 2 ** 31 - 1              # (the simulator's scenario_seed is a 32-bit integer)
 MAX_BELT_SPEED = 0.5                # m/s
@@ -70,10 +75,36 @@ def check_plan(plan: Any, source: str) -> Dict[str, Any]:
                                     and 1e-4 <= plan['time_step'] <= 1.0 / CONTROL_RATE):
         raise bad('time_step', f'within [0.0001, {1.0 / CONTROL_RATE:.4f}] s (a physics step '
                   'at least once per control tick)')
+    _check_sweep(plan, bad)
     checked = dict(plan)
     if 'belt_speed' in checked:
         checked['belt_speed'] = [float(v) for v in checked['belt_speed']]
     return checked
+
+
+def _check_sweep(plan: Dict[str, Any], bad: Callable[[str, str], CampaignError]) -> None:
+    """The sweep's options of a plan (check_plan)."""
+    sweep = plan.get('sweep')
+    if sweep is not None:
+        if not (isinstance(sweep, list) and 1 <= len(sweep) <= 2
+                and all(isinstance(spec, str) for spec in sweep)):
+            raise bad('sweep', 'one or two NAME=VALUES')
+        try:
+            axes = [parse_axis(spec) for spec in sweep]
+            points = grid(axes)
+        except SweepError as exc:
+            raise CampaignError(str(exc)) from None
+        if any(not 0.0 < p['belt_speed'] <= MAX_BELT_SPEED for p in points if 'belt_speed' in p):
+            raise bad('sweep', f'belt speeds within (0, {MAX_BELT_SPEED}] m/s')
+        if 'seeds' in plan and plan['seeds'] is not None:
+            raise CampaignError('--sweep runs the same seeds at every point: give '
+                                '--trials-per-point, not --seeds')
+    per = plan.get('trials_per_point')
+    if per is not None and not (is_int(per) and 1 <= per <= MAX_TRIALS):
+        raise bad('trials_per_point', f'an integer within 1..{MAX_TRIALS}')
+    below = plan.get('break_below')
+    if below is not None and not (is_number(below) and 0.0 < below <= 1.0):
+        raise bad('break_below', 'a rate within (0, 1]')
 
 
 def read_campaign(out: Path) -> Optional[Dict[str, Any]]:

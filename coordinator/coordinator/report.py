@@ -9,6 +9,7 @@ import cv2
 import numpy as np
 
 from coordinator.results import FAILURE_CAUSES, summary_rows
+from coordinator.sweep_report import sweep_lines
 from coordinator.trial_result import TrialResult
 from recording.plot import plot_paths
 
@@ -178,6 +179,7 @@ def write_report(trials: Sequence[TrialResult], out_dir: Path, setup: Dict[str, 
         ' (the trials were run by different code)' if len(codes) > 1 else '') + '.']
     if s:
         lines += _table(s)
+    lines += sweep_lines(ok, out_dir, float(setup.get('break_below') or 0.9))
     bad = [t for t in trials if t.status != 'completed']
     lines += _causes(ok)
     if bad:

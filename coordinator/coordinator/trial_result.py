@@ -22,7 +22,7 @@ RESULT_FILE = 'result.json'      # in each trial's directory
 CSV_FIELDS = ('trial', 'scenario_seed', 'belt_speed', 'status', 'completion_time',
               'identification_rate', 'grasp_success_rate', 'handling_success_rate', 'identified',
               'identified_correct', 'picked', 'delivered', 'handled_verified', 'grasp_attempts',
-              'grasp_successes', 'missed', 'failed', 'wall_time', 'message')
+              'grasp_successes', 'missed', 'failed', 'wall_time', 'parameters', 'message')
 # The rates, each within 0..1 (NaN: a record no run made).
 RATES = ('identification_rate', 'grasp_success_rate', 'handling_success_rate',
          'zu12_grasp_rate', 'youbot_grasp_rate', 'transport_rate')
@@ -60,6 +60,8 @@ class TrialResult:
     scenario_seed: Optional[int] = None
     belt_speed: float = math.nan         # [m/s]
     mode: str = ''                       # lock-step or real-time
+    # A sweep's point: the parameters set for this trial (coordinator.sweep), else {}.
+    parameters: Dict[str, float] = field(default_factory=dict)
     # What the coordinator counted.
     total: int = 0
     identified: int = 0
@@ -136,7 +138,8 @@ class TrialResult:
 
     def to_row(self) -> Dict[str, Any]:
         """Its row of ``trials.csv`` (CSV_FIELDS)."""
-        flat = {**self.to_dict(), 'trial': self.run.trial, 'wall_time': self.run.wall_time}
+        flat = {**self.to_dict(), 'trial': self.run.trial, 'wall_time': self.run.wall_time,
+                'parameters': ' '.join(f'{k}={v:g}' for k, v in self.parameters.items())}
         return {k: '' if flat[k] is None else flat[k] for k in CSV_FIELDS}
 
     def write(self, path: Path) -> None:
@@ -184,6 +187,10 @@ def _check(data: Dict[str, Any], run: Dict[str, Any]) -> None:
         if key in data and not (is_number(value) and (
                 math.isnan(value) or 0.0 <= value <= 1.0)):
             raise ResultError(f'{key} is {value!r:.40}, not a rate within 0..1')
+    parameters = data.get('parameters', {})
+    if not isinstance(parameters, Mapping) or not all(
+            isinstance(k, str) and is_number(v) for k, v in parameters.items()):
+        raise ResultError(f'parameters is {parameters!r:.40}, not numbers by name')
     cpu = run.get('cpu_seconds', {})
     if not isinstance(cpu, Mapping) or not all(is_number(v) for v in cpu.values()):
         raise ResultError(f'cpu_seconds is {cpu!r:.40}, not seconds per process')

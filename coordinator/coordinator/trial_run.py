@@ -12,11 +12,12 @@ import tempfile
 import threading
 import time
 from contextlib import contextmanager
-from dataclasses import asdict
+from dataclasses import asdict, replace
 from pathlib import Path
 from typing import Any, Callable, Dict, Iterator, Optional, Set, TypedDict
 
 from coordinator.graph import TIME_STEP, pipeline_graph
+from coordinator.sweep import SweepError, point_world
 from coordinator.trial_result import (
     RESULT_FILE,
     RunInfo,
@@ -43,15 +44,25 @@ INTERRUPTED = threading.Event()
 
 def run_trial(trial: int, seed: int, belt_speed: float, domain_id: int, out_dir: Path,
               wall_timeout: float = 900.0, record: bool = False, code: str = '',
-              world: str = PIPELINE_CELL, time_step: float = TIME_STEP) -> TrialResult:
+              world: str = PIPELINE_CELL, time_step: float = TIME_STEP,
+              parameters: Optional[Dict[str, float]] = None) -> TrialResult:
     """One trial as a process group; returns its result (or a failure record), written to
-    the trial's ``result.json``."""
+    the trial's ``result.json``. ``parameters``: a sweep's point (its world's values go into
+    the trial's own ``world.yaml``)."""
     trial_dir = out_dir / f'trial_{trial:03d}'
     trial_dir.mkdir(parents=True, exist_ok=True)
     result_file = trial_dir / RESULT_FILE
     outcome_file = trial_dir / OUTCOME_FILE
     for stale in (result_file, outcome_file, trial_dir / PROGRESS_FILE):
         stale.unlink(missing_ok=True)
+    if parameters:
+        try:
+            world = point_world(world, parameters, trial_dir)
+        except SweepError as exc:         # (checked before the campaign; a worker may differ)
+            failed = replace(TrialResult.failure('error', str(exc), trial, seed, belt_speed),
+                             parameters=dict(parameters))
+            failed.write(result_file)
+            return failed
     env = with_profile({**os.environ, 'ROS_DOMAIN_ID': str(domain_id),
                         'ROS_AUTOMATIC_DISCOVERY_RANGE': os.environ.get(
                             'ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')})
@@ -94,6 +105,8 @@ def run_trial(trial: int, seed: int, belt_speed: float, domain_id: int, out_dir:
     coordinator = procs.get('coordinator_node')
     result = _record(trial_dir, run, seed, belt_speed,
                      coordinator.returncode if coordinator is not None else None)
+    if parameters:
+        result = replace(result, parameters=dict(parameters))
     result.write(result_file)
     outcome_file.unlink(missing_ok=True)
     return result
@@ -116,11 +129,16 @@ def _record(trial_dir: Path, run: RunInfo, seed: int, belt_speed: float,
         run.trial, seed, belt_speed, run)
 
 
-class PlanItem(TypedDict):
-    """A trial of a campaign's plan."""
+class _Trial(TypedDict):
     trial: int
     seed: int
     belt_speed: float
+
+
+class PlanItem(_Trial, total=False):
+    """A trial of a campaign's plan; in a sweep, with its point's ``parameters``
+    (coordinator.sweep: the world's are written into the trial's own world file)."""
+    parameters: Dict[str, float]
 
 
 @contextmanager
@@ -143,6 +161,8 @@ def run_leased_trial(item: PlanItem, out_dir: Path, options: Dict[str, Any]) -> 
     wall_timeout, record, code, world, time_step)."""
     opts = dict(options)
     with domain_lease(opts.pop('domain_base')) as domain:
+        if 'parameters' in item:                    # (a sweep's point)
+            opts['parameters'] = item['parameters']
         return run_trial(item['trial'], item['seed'], item['belt_speed'], domain, out_dir,
                          **opts)
 

@@ -16,6 +16,7 @@ import random
 import shlex
 import signal
 import sys
+import tempfile
 import time
 from concurrent.futures import FIRST_COMPLETED, Future, ThreadPoolExecutor, wait
 from pathlib import Path
@@ -40,6 +41,7 @@ from coordinator.progress import (
     read_progress,
     running_figures,
 )
+from coordinator.sweep import SweepError, grid, parse_axis, point_world
 from coordinator.trial_result import (
     CSV_FIELDS,
     RESULT_FILE,
@@ -208,7 +210,8 @@ def _rebuild(out: Path) -> int:
     except CampaignError:
         plan = {}
     world = plan.get('world') if isinstance(plan, dict) else None
-    report = write_report(results, out, {'note': note, **({'world': world} if world else {})})
+    report = write_report(results, out, {'note': note, **({'world': world} if world else {}),
+                                         'break_below': plan.get('break_below')})
     print(f'[trials] {len(results)} trials: CSV {out / "trials.csv"}, report {report}')
     return 0
 
@@ -224,6 +227,7 @@ def _finished(out: Path, item: PlanItem, code: str) -> Optional[TrialResult]:
     if r is None:
         return None
     if (r.scenario_seed != item['seed'] or r.belt_speed != item['belt_speed']
+            or r.parameters != item.get('parameters', {})
             or r.status == 'interrupted' or r.run.code != code):
         return None
     return r if r.trial is not None else r.with_run(trial=item['trial'])
@@ -307,6 +311,17 @@ def _parser() -> '_Parser':
                         help='skip this many trials of the plan (split a plan over machines)')
     parser.add_argument('--belt-speed', type=float, nargs=2, default=None,
                         metavar=('LO', 'HI'), help='belt speed range [m/s] (0.10 0.16)')
+    parser.add_argument('--sweep', action='append', default=None, metavar='NAME=VALUES',
+                        help='run the plan at each value of a parameter: belt_speed or a '
+                             'number of the world file by its path (perturbations.camera.'
+                             'pixel_noise); VALUES START:STOP:STEP or V1,V2,...; twice: a grid '
+                             '(docs/studies.md)')
+    parser.add_argument('--trials-per-point', type=int, default=None,
+                        help='with --sweep: trials at each point (--trials), the same seeds '
+                             'at every point')
+    parser.add_argument('--break-below', type=float, default=None,
+                        help='with --sweep: the report names the first point where a rate '
+                             'falls below this (0.9)')
     parser.add_argument('--domain-base', type=int, default=int(os.environ.get(
         'TRIALS_DOMAIN_BASE', '200')), help='a trial takes the first DDS domain from here on '
         'that no other trial on its machine holds (200 on: apart from the test suite, 1-159, '
@@ -409,12 +424,44 @@ def _check_arguments(args: argparse.Namespace, parser: argparse.ArgumentParser) 
 
 
 def _plan(opts: Dict[str, Any]) -> List[PlanItem]:
+    if opts.get('sweep'):
+        return _sweep_plan(opts)
     lo, hi = opts['belt_speed']
     plan = trial_plan(opts['trials'], opts['first_trial'], opts['seed0'], (lo, hi))
     if opts['seeds'] is not None:
         plan = [{**item, 'trial': k, 'seed': seed} for k, (item, seed) in enumerate(
             zip(trial_plan(len(opts['seeds']), 0, opts['seed0'], (lo, hi)), opts['seeds']))]
     return plan
+
+
+def _sweep_plan(opts: Dict[str, Any]) -> List[PlanItem]:
+    """Each point of the sweep with the same seeds (and, unless the sweep sets it, the same
+    belt speeds): trial = point * trials per point + k."""
+    per = opts['trials_per_point'] or opts['trials']
+    points = grid([parse_axis(spec) for spec in opts['sweep']])
+    base = trial_plan(per, 0, opts['seed0'], opts['belt_speed'])
+    plan: List[PlanItem] = []
+    for i, point in enumerate(points):
+        for k, item in enumerate(base):
+            plan.append(PlanItem(trial=i * per + k, seed=item['seed'],
+                                 belt_speed=point.get('belt_speed', item['belt_speed']),
+                                 parameters=dict(point)))
+    return plan[opts['first_trial']:]
+
+
+def check_sweep_worlds(opts: Dict[str, Any]) -> None:
+    """Every point of a sweep gives a world the pipeline can run (CampaignError naming the
+    first that does not), before any trial starts."""
+    if not opts.get('sweep'):
+        return
+    with tempfile.TemporaryDirectory(prefix='run_trials-sweep-') as scratch:
+        for i, point in enumerate(grid([parse_axis(spec) for spec in opts['sweep']])):
+            try:
+                world = point_world(opts['world'], point, Path(scratch) / str(i))
+            except SweepError as exc:
+                raise CampaignError(str(exc)) from None
+            if world != opts['world']:
+                check_world(world)
 
 
 def _show_graph(opts: Dict[str, Any]) -> int:
@@ -457,6 +504,7 @@ def _campaign(args: argparse.Namespace, given: Dict[str, Any]) -> int:
     opts = _plan_options(args, given)
     if args.resume is not None:
         check_world(opts['world'])
+    check_sweep_worlds(opts)
     lo, hi = opts['belt_speed']
     plan = _plan(opts)
     results: List[TrialResult] = []
@@ -481,7 +529,8 @@ def _campaign(args: argparse.Namespace, given: Dict[str, Any]) -> int:
     write_csv(results, args.out / 'trials.csv')
     from coordinator.report import write_report
     setup = {'seed0': opts['seed0'], 'belt_speed': (lo, hi), 'parallel': pool.capacity,
-             'wall_time': time.monotonic() - started, 'code': code, 'world': opts['world']}
+             'wall_time': time.monotonic() - started, 'code': code, 'world': opts['world'],
+             'break_below': opts['break_below'], 'sweep': opts['sweep']}
     if interrupted:
         setup['note'] = (f'Interrupted: {len(results)} of the {total} trials of the plan '
                          f'finished (plan seed {opts["seed0"]}, belt {lo}-{hi} m/s); '
