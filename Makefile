@@ -1,6 +1,6 @@
 # The two commands: `make demo` runs the main job, `make test` runs the tests.
 # Both create .venv and build ros_ws first when needed (scripts/setup.sh is idempotent).
-.PHONY: setup demo demo-mini panel trials test bench container container-test clean
+.PHONY: setup demo demo-mini panel trials study test bench container container-test clean
 
 setup:
 	@bash scripts/setup.sh
@@ -28,6 +28,11 @@ trials: setup
 	  run_trials --trials $${TRIALS:-10} $${w:+--world "$$w"} \
 	  $${PARALLEL:+--parallel $$PARALLEL} $${RAY:+--ray $$RAY} \
 	  $${TIME_STEP:+--time-step $$TIME_STEP}'
+
+# A what-if study: the paper's cell with perturbations on, its belt speed swept
+# (docs/studies.md): make study [SWEEP=name=START:STOP:STEP] [SWEEP2=...] [TRIALS_PER_POINT=4].
+study: setup
+	@bash scripts/study.sh
 
 test: setup
 	@bash scripts/test.sh

@@ -62,6 +62,9 @@ class TrialResult:
     mode: str = ''                       # lock-step or real-time
     # A sweep's point: the parameters set for this trial (coordinator.sweep), else {}.
     parameters: Dict[str, float] = field(default_factory=dict)
+    # What it takes to run the trial again (run_trials --rerun): the world as given, the world
+    # file as it was (one mapping, what it extends merged in), the physics step.
+    scenario: Dict[str, Any] = field(default_factory=dict)
     # What the coordinator counted.
     total: int = 0
     identified: int = 0
@@ -119,11 +122,12 @@ class TrialResult:
         return replace(self, run=replace(self.run, **changes))
 
     def differences(self, other: 'TrialResult') -> List[str]:
-        """The fields in which two runs differ, their metadata (``run``: code, wall time, CPU
-        time, host) left out: [] for two runs of the same trial that went the same way
-        (a lock-step trial re-run, or run in the container image). NaN equals NaN here."""
+        """The fields in which two runs' outcomes differ, their metadata (``run``: code, wall
+        time, CPU time, host) and ``scenario`` (where the world file was) left out: [] for two
+        runs of the same trial that went the same way (a lock-step trial re-run, or run in the
+        container image). NaN equals NaN here."""
         mine, theirs = self.to_dict(), other.to_dict()
-        return [f.name for f in fields(self) if f.name != 'run'
+        return [f.name for f in fields(self) if f.name not in ('run', 'scenario')
                 and json.dumps(mine.get(f.name), sort_keys=True)
                 != json.dumps(theirs.get(f.name), sort_keys=True)]
 
@@ -187,6 +191,8 @@ def _check(data: Dict[str, Any], run: Dict[str, Any]) -> None:
         if key in data and not (is_number(value) and (
                 math.isnan(value) or 0.0 <= value <= 1.0)):
             raise ResultError(f'{key} is {value!r:.40}, not a rate within 0..1')
+    if not isinstance(data.get('scenario', {}), Mapping):
+        raise ResultError(f'scenario is {data["scenario"]!r:.40}, not a mapping')
     parameters = data.get('parameters', {})
     if not isinstance(parameters, Mapping) or not all(
             isinstance(k, str) and is_number(v) for k, v in parameters.items()):

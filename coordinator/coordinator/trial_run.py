@@ -27,6 +27,8 @@ from coordinator.trial_result import (
 )
 from ros_common.dds import hold_free_domain, with_profile
 from world_description import PIPELINE_CELL
+from world_description.resources import ResourceError, resolve_resource
+from world_description.world_config import WorldConfigError, world_data
 
 PROGRESS_FILE = 'progress.json'
 OUTCOME_FILE = 'coordinator_result.json'   # the coordinator's record, before the runner's
@@ -105,11 +107,21 @@ def run_trial(trial: int, seed: int, belt_speed: float, domain_id: int, out_dir:
     coordinator = procs.get('coordinator_node')
     result = _record(trial_dir, run, seed, belt_speed,
                      coordinator.returncode if coordinator is not None else None)
-    if parameters:
-        result = replace(result, parameters=dict(parameters))
+    result = replace(result, parameters=dict(parameters or {}),
+                     scenario=scenario(world, time_step))
     result.write(result_file)
     outcome_file.unlink(missing_ok=True)
     return result
+
+
+def scenario(world: str, time_step: float) -> Dict[str, Any]:
+    """A trial's ``scenario``: the world as given, and as it was (``world_data``)."""
+    out: Dict[str, Any] = {'world': world, 'time_step': time_step}
+    try:
+        out['world_data'] = world_data(resolve_resource(world))
+    except (WorldConfigError, ResourceError) as exc:     # (checked before the trial ran)
+        out['world_problem'] = str(exc)
+    return out
 
 
 def _record(trial_dir: Path, run: RunInfo, seed: int, belt_speed: float,

@@ -41,6 +41,7 @@ from coordinator.progress import (
     read_progress,
     running_figures,
 )
+from coordinator.rerun import Rerun, RerunError, figures, first_parting, prepare
 from coordinator.sweep import SweepError, grid, parse_axis, point_world
 from coordinator.trial_result import (
     CSV_FIELDS,
@@ -355,6 +356,13 @@ def _parser() -> '_Parser':
                              'exit')
     parser.add_argument('--report-only', action='store_true',
                         help='rebuild trials.csv and the report from the results in --out')
+    parser.add_argument('--rerun', default=None, metavar='RUN',
+                        help='run a recorded trial again (its result.json, trial directory, '
+                             'or a run directory with one trial, such as make demo\'s), as it '
+                             'was or changed by --set, and say what came out different')
+    parser.add_argument('--set', action='append', default=None, metavar='NAME=VALUE',
+                        help='with --rerun: change belt_speed or a number of the world file '
+                             '(by its path) for the re-run')
     parser.add_argument('--resume', nargs='?', const='', default=None, metavar='DIR',
                         help='go on with an interrupted campaign in DIR (or --out), with its '
                              'plan: skip the trials whose result is there (same seed and belt '
@@ -367,6 +375,8 @@ def _main(argv: Optional[Sequence[str]]) -> int:
     parser = _parser()
     args = parser.parse_args(argv)
     _check_arguments(args, parser)
+    if args.rerun is not None:
+        return _rerun(args)
     _campaign_directory(args, parser)
     try:
         given = _given_plan(args)
@@ -387,6 +397,54 @@ def _main(argv: Optional[Sequence[str]]) -> int:
         return 2
 
 
+def _rerun(args: argparse.Namespace) -> int:
+    """run_trials --rerun RUN [--set NAME=VALUE ...]: the trial again, into --out."""
+    out = args.out or Path('runs') / time.strftime('rerun-%Y%m%d-%H%M%S')
+    try:
+        rerun = prepare(Path(args.rerun), args.set or [], out)
+        check_world(rerun.world)
+        with campaign_lock(out):
+            return _run_again(rerun, out, args)
+    except (RerunError, CampaignError) as exc:
+        print(f'run_trials: error: {exc}', file=sys.stderr, flush=True)
+        return 2
+
+
+def _run_again(rerun: Rerun, out: Path, args: argparse.Namespace) -> int:
+    original, code = rerun.original, code_version()
+    changed = ', '.join(f'{k} {v:g}' for k, v in rerun.changes.items()) or 'nothing changed'
+    print(f'[rerun] trial {original.trial} of {rerun.source} again: seed {rerun.seed}, belt '
+          f'{rerun.belt_speed:g} m/s, step {rerun.time_step:g} s; {changed}', flush=True)
+    if original.run.code != code:
+        print(f'[rerun] note: the original ran code {original.run.code or "unknown"}, this is '
+              f'{code}: a difference may come from the code', flush=True)
+    item = PlanItem(trial=original.trial or 0, seed=rerun.seed, belt_speed=rerun.belt_speed)
+    if rerun.changes:
+        item['parameters'] = dict(rerun.changes)
+    pool = LocalPool(1, out, {'wall_timeout': args.wall_timeout, 'record': args.record,
+                              'code': code, 'world': rerun.world, 'time_step': rerun.time_step,
+                              'domain_base': args.domain_base})
+    results: List[TrialResult] = []
+    if _run_plan(pool, [item], results, 1, args):
+        print(f'[rerun] interrupted; nothing to compare ({out})', flush=True)
+        return 130
+    again = results[0]
+    write_csv(results, out / 'trials.csv')
+    from coordinator.report import write_report
+    write_report(results, out, {'note': f'Trial {original.trial} of {rerun.source} run again; '
+                                        f'{changed}.', 'world': rerun.world})
+    differ = again.differences(original)
+    for label, before, after in figures(original, again):
+        print(f'[rerun]   {label:>16}: {before:>12} -> {after}', flush=True)
+    if not differ:
+        print(f'[rerun] the same run as the original: the same {len(again.events)} events, '
+              'materials and figures', flush=True)
+        return 0
+    print(f'[rerun] differs from the original in {", ".join(differ)}; first: '
+          f'{first_parting(original, again) or "the same events"}', flush=True)
+    return 1 if not rerun.changes else 0
+
+
 def _campaign_directory(args: argparse.Namespace, parser: argparse.ArgumentParser) -> None:
     """``args.out``: the directory named by --resume or --out, or a new one under runs/."""
     if args.resume:
@@ -404,6 +462,13 @@ def _campaign_directory(args: argparse.Namespace, parser: argparse.ArgumentParse
 
 def _check_arguments(args: argparse.Namespace, parser: argparse.ArgumentParser) -> None:
     """The options that are not the plan's (check_plan checks those), each in its range."""
+    if args.set is not None and args.rerun is None:
+        parser.error('--set goes with --rerun (a sweep: --sweep)')
+    if args.rerun is not None:
+        plan = [k for k in PLAN_DEFAULTS if getattr(args, k) is not None]
+        if plan or args.resume is not None or args.report_only or args.ray is not None:
+            parser.error('--rerun takes the trial as it was: no plan options '
+                         f'({", ".join(plan) or "--resume, --report-only, --ray"}), only --set')
     if args.parallel is not None and args.parallel < 1:
         parser.error('--parallel must be >= 1')
     if not (args.wall_timeout > 0.0 and math.isfinite(args.wall_timeout)):
@@ -494,8 +559,9 @@ def _finished_line(r: TrialResult, done: int, total: int, elapsed: float) -> str
     where = f' on {r.run.node}' if r.run.node else ''
     handling = (f'{r.handling_success_rate:.0%}' if math.isfinite(r.handling_success_rate)
                 else '-')
+    point = ''.join(f', {k} {v:g}' for k, v in r.parameters.items() if k != 'belt_speed')
     return (f'[trials] {done}/{total} trial {r.trial} seed {r.scenario_seed} belt '
-            f'{r.belt_speed:.3f}: {r.status}, {r.completion_time:.1f} s sim, '
+            f'{r.belt_speed:.3f}{point}: {r.status}, {r.completion_time:.1f} s sim, '
             f'handling {handling}, wall {r.run.wall_time:.0f} s{where} (elapsed {elapsed:.0f} s)')
 
 

@@ -244,6 +244,15 @@ def load_world(path: str | Path) -> WorldConfig:
     return parse_world(_resolved(path, _read(path), (path.resolve(),)), str(path))
 
 
+def world_data(path: str | Path) -> Dict[str, Any]:
+    """A world file as one mapping, the worlds it extends merged in (what ``load_world``
+    parses): a world as it was, to run it again. Checked as load_world checks it."""
+    path = Path(path)
+    data = _resolved(path, _read(path), (path.resolve(),))
+    parse_world(data, str(path))
+    return dict(data)
+
+
 def _read(path: Path) -> Any:
     try:
         info = path.stat()
