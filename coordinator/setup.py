@@ -21,6 +21,7 @@ setup(
         'console_scripts': [
             'coordinator_node = coordinator:coordinator_node_main',
             'run_trials = coordinator.trials:main',
+            'compare_runs = coordinator.compare:main',
         ],
     },
 )

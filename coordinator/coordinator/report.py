@@ -3,7 +3,7 @@ from __future__ import annotations
 
 import math
 from pathlib import Path
-from typing import Any, Dict, List, Sequence, Tuple
+from typing import Any, Dict, List, Optional, Sequence, Tuple
 
 import cv2
 import numpy as np
@@ -110,11 +110,20 @@ def activity(trial: TrialResult) -> Dict[str, List[Tuple[float, float, str]]]:
 
 def timeline(trial: TrialResult, out: Path) -> None:
     """Each robot's activity over one run: a lane per robot (and the belt), a bar per state."""
-    img = _canvas(f'Activity over trial {trial.trial} (seed {trial.scenario_seed}, belt '
-                  f'{trial.belt_speed:.3f} m/s): completed in '
-                  f'{trial.completion_time:.1f} s', (900, 330))
+    _write(timeline_image(trial), out)
+
+
+def timeline_image(trial: TrialResult, end: Optional[float] = None,
+                   title: str = '') -> np.ndarray:
+    """The image of ``timeline``; ``end``: where its time axis ends [s] (two runs on one
+    axis), else at the run's completion."""
+    img = _canvas(title or (f'Activity over trial {trial.trial} (seed {trial.scenario_seed}, '
+                            f'belt {trial.belt_speed:.3f} m/s): completed in '
+                            f'{trial.completion_time:.1f} s'), (900, 330))
     left, top, w, lane_h = 90, 50, 780, 50
-    end = max(1.0, float(trial.completion_time))
+    if end is None:
+        end = trial.completion_time if math.isfinite(trial.completion_time) else 1.0
+    end = max(1.0, float(end))
     lanes = activity(trial)
     for i, (label, _) in enumerate(TIMELINE_LANES):
         y0 = top + i * (lane_h + 10)
@@ -138,6 +147,11 @@ def timeline(trial: TrialResult, out: Path) -> None:
         x = left + k * 112
         cv2.rectangle(img, (x, axis + 50), (x + 14, axis + 64), STATE_COLORS[state], -1)
         cv2.putText(img, name, (x + 18, axis + 62), FONT, 0.38, (0, 0, 0), 1)
+    return img
+
+
+def write_png(img: np.ndarray, out: Path) -> None:
+    """An image into a PNG file (OSError if it cannot be written)."""
     _write(img, out)
 
 

@@ -114,7 +114,7 @@ def first_parting(a: TrialResult, b: TrialResult) -> str:
     """The first event where two runs part ('' if their events are the same)."""
     for k, (x, y) in enumerate(zip(a.events, b.events)):
         if x != y:
-            return (f'event {k}: {_event(x)} in the first run, {_event(y)} in the second')
+            return f'event {k}: {_event(x)} in the first run, {_event(y)} in the second run'
     if len(a.events) != len(b.events):
         shorter, longer, which = ((a, b, 'second') if len(a.events) < len(b.events)
                                   else (b, a, 'first'))

@@ -94,7 +94,7 @@ def test_where_two_runs_part():
     assert first_parting(a, a) == ''
     assert first_parting(a, b) == ('event 1: [2.8 s] zu12 picked orange material 1 (attempt 1) '
                                    'in the first run, [2.9 s] zu12 picked orange material 1 '
-                                   '(attempt 1) in the second')
+                                   '(attempt 1) in the second run')
     assert first_parting(a, TrialResult('completed', events=a.events + b.events[2:])) == \
         'event 2: the second run goes on with [3.0 s] vision seen blue material 2'
     assert ('status', 'completed', 'incomplete') in figures(a, b)
