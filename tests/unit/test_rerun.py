@@ -77,6 +77,23 @@ def test_what_cannot_be_run_again_is_said(tmp_path):
         prepare(old, [], tmp_path / 'y')
 
 
+def test_a_worlds_own_relative_files_are_found_from_anywhere(tmp_path):
+    (tmp_path / 'cell').mkdir()
+    urdf = resolve_resource('package://robot_description/urdf/zu12.urdf')
+    (tmp_path / 'cell' / 'arm.urdf').write_text(urdf.read_text())
+    text = CELL.read_text().replace('package://robot_description/urdf/zu12.urdf', 'arm.urdf')
+    text = text.replace('package://robot_description/config/zu12_joint_limits.yaml',
+                        str(resolve_resource('package://robot_description/config/'
+                                             'zu12_joint_limits.yaml')))
+    (tmp_path / 'cell' / 'world.yaml').write_text(text)
+    data = world_data(tmp_path / 'cell' / 'world.yaml')
+    assert data['robots'][0]['urdf'] == str(tmp_path / 'cell' / 'arm.urdf')
+    assert data['robots'][1]['urdf'] == 'package://robot_description/urdf/youbot.urdf'
+    moved = tmp_path / 'elsewhere.yaml'
+    moved.write_text(yaml.safe_dump(data))
+    assert load_world(moved).robots[0].urdf == str(tmp_path / 'cell' / 'arm.urdf')
+
+
 def test_changes_are_numbers_by_name():
     assert parse_sets(['belt_speed=0.2', ' materials.mass = 0.3']) == {
         'belt_speed': 0.2, 'materials.mass': 0.3}

@@ -250,7 +250,23 @@ def world_data(path: str | Path) -> Dict[str, Any]:
     path = Path(path)
     data = _resolved(path, _read(path), (path.resolve(),))
     parse_world(data, str(path))
-    return dict(data)
+    return _absolute_resources(dict(data), path.resolve().parent)
+
+
+def _absolute_resources(data: Dict[str, Any], base_dir: Path) -> Dict[str, Any]:
+    """``data`` with its robots' relative resource paths (a URDF, joint limits) made absolute
+    from ``base_dir``, as the simulator resolves them: the mapping runs from anywhere."""
+    def absolute(holder: Any, key: str) -> None:
+        value = holder.get(key) if isinstance(holder, dict) else None
+        if isinstance(value, str) and not value.startswith('package://'):
+            rel = value[len('file://'):] if value.startswith('file://') else value
+            if not Path(rel).is_absolute():
+                holder[key] = str(base_dir / rel)
+    for robot in data.get('robots') or []:
+        absolute(robot, 'urdf')
+        for controller in (robot.get('controllers') or [] if isinstance(robot, dict) else []):
+            absolute(controller, 'joint_limits')
+    return data
 
 
 def _read(path: Path) -> Any:
