@@ -104,7 +104,7 @@ def compare_trials(a: TrialResult, b: TrialResult, out: Path, names: Tuple[str, 
 
 
 def _trial_plots(a: TrialResult, b: TrialResult, out: Path) -> None:
-    from coordinator.report import timeline_image, write_png
+    from coordinator.report import cell_shapes, timeline_image, write_png
     from recording.plot import plot_paths
     ends = [t.completion_time for t in (a, b) if math.isfinite(t.completion_time)]
     end = max(ends) if ends else max(
@@ -113,7 +113,8 @@ def _trial_plots(a: TrialResult, b: TrialResult, out: Path) -> None:
                          timeline_image(b, end, f'B: {_describe(b)}')]), out / 'timelines.png')
     plot_paths({'A': np.asarray(a.youbot_path or np.zeros((0, 2))),
                 'B': np.asarray(b.youbot_path or np.zeros((0, 2)))},
-               out / 'paths.png', "The youBot's paths, A and B")
+               out / 'paths.png', "The youBot's paths, A and B",
+               shapes=cell_shapes(data=a.scenario.get('world_data')))
 
 
 def _describe(t: TrialResult) -> str:

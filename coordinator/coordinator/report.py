@@ -12,6 +12,9 @@ from coordinator.results import FAILURE_CAUSES, summary_rows
 from coordinator.sweep_report import sweep_lines
 from coordinator.trial_result import TrialResult
 from recording.plot import plot_paths
+from world_description.footprint import footprints
+from world_description.resources import ResourceError, resolve_resource
+from world_description.world_config import WorldConfigError, load_world, parse_world
 
 # The paper's Table 2: trials, completion time [s], identification, grasp, handling [%].
 PAPER_TABLE_2 = (('1-10', 85, 60, 70, 80), ('11-30', 76, 76, 75, 85), ('30-60', 69, 82, 82, 95),
@@ -164,8 +167,6 @@ def _write(img: np.ndarray, out: Path) -> None:
 def scenario(world: str) -> str:
     """The campaign's world, and its classes' rules (as far as the file can be read now)."""
     from coordinator.layout import LayoutError, layout_from_world
-    from world_description.resources import resolve_resource
-    from world_description.world_config import WorldConfigError, load_world
     try:
         layout = layout_from_world(load_world(resolve_resource(world)))
     except (WorldConfigError, LayoutError) as exc:
@@ -181,7 +182,7 @@ def write_report(trials: Sequence[TrialResult], out_dir: Path, setup: Dict[str, 
     trials were run (note, or seed0, belt_speed, parallel, wall_time; world)."""
     ok = [t for t in trials if t.status != 'error']
     s = summary_rows(ok)
-    shown = _plots(ok, s, out_dir)
+    shown = _plots(ok, s, out_dir, setup.get('world'))
     lines = ['# Pipeline trials', '', setup['note'] if 'note' in setup else (
         f'{len(trials)} trials (lock-step), plan seed {setup.get("seed0")}, belt speed '
         f'{setup.get("belt_speed")} m/s, {setup.get("parallel")} in parallel, wall time '
@@ -229,7 +230,25 @@ def _causes(trials: Sequence[TrialResult]) -> List[str]:
         + f' (of {sum(t.total for t in trials)} in {len(trials)} trials).', '']
 
 
-def _plots(ok: Sequence[TrialResult], s: Dict[str, float], out_dir: Path) -> bool:
+def cell_shapes(world: Optional[str] = None, data: Optional[Dict[str, Any]] = None
+                ) -> List[Tuple[str, np.ndarray, Sequence[float], bool]]:
+    """The cell's footprints (world_description.footprint) to draw under paths, from its world
+    file or a result's copy of it (``data``: scenario.world_data); none when neither is known
+    or can be read."""
+    try:
+        if data:
+            config = parse_world(data, 'the run\'s world')
+        elif world:
+            config = load_world(resolve_resource(world))
+        else:
+            return []
+    except (WorldConfigError, ResourceError, OSError):
+        return []
+    return [(f.name, f.outline, f.rgba, f.label) for f in footprints(config)]
+
+
+def _plots(ok: Sequence[TrialResult], s: Dict[str, float], out_dir: Path,
+           world: Optional[str] = None) -> bool:
     """The report's plots; whether it has a timeline."""
     histogram([t.completion_time for t in ok], out_dir / 'completion_times.png',
               'Completion time per trial (simulated seconds)', 'completion time [s]',
@@ -242,7 +261,8 @@ def _plots(ok: Sequence[TrialResult], s: Dict[str, float], out_dir: Path) -> boo
     paths = {f'trial {t.trial}': np.asarray(t.youbot_path or np.zeros((0, 2)))
              for t in sorted(ok, key=lambda t: t.trial or 0)[:5]}
     if paths:
-        plot_paths(paths, out_dir / 'youbot_paths.png', "The youBot's paths over the cell")
+        plot_paths(paths, out_dir / 'youbot_paths.png', "The youBot's paths over the cell",
+                   shapes=cell_shapes(world))
     shown = sorted((t for t in ok if t.states), key=lambda t: t.completion_time)
     if shown:        # the trial of median completion time
         timeline(shown[len(shown) // 2], out_dir / 'timeline.png')

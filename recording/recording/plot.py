@@ -3,7 +3,7 @@ from __future__ import annotations
 
 import math
 from pathlib import Path
-from typing import Dict, Sequence, Tuple
+from typing import Callable, Dict, Sequence, Tuple
 
 import cv2
 import numpy as np
@@ -20,12 +20,35 @@ def _nice_step(span: float, target_ticks: int = 6) -> float:
     return 10 * magnitude
 
 
+def _draw_shapes(img: np.ndarray,
+                 shapes: Sequence[Tuple[str, np.ndarray, Sequence[float], bool]],
+                 px: Callable[[Sequence[float]], Tuple[int, int]]) -> None:
+    """Landmarks: filled in a light tint of their colour, outlined, named at their centre."""
+    font = cv2.FONT_HERSHEY_SIMPLEX
+    for _, outline, rgba, _ in shapes:
+        poly = np.array([px(q) for q in np.asarray(outline, float)], np.int32)
+        r, g, b = (int(255 * (0.45 + 0.55 * float(c))) for c in rgba[:3])
+        cv2.fillPoly(img, [poly], (b, g, r), cv2.LINE_AA)
+        cv2.polylines(img, [poly], True, tuple(int(255 * float(c) * 0.7)
+                                               for c in rgba[2::-1]), 1, cv2.LINE_AA)
+    for name, outline, _, named in shapes:
+        if named and name:
+            cx, cy = px(np.asarray(outline, float).mean(axis=0))
+            (tw, _), _ = cv2.getTextSize(name, font, 0.4, 1)
+            cv2.putText(img, name, (cx - tw // 2, cy + 4), font, 0.4, (60, 60, 60), 1,
+                        cv2.LINE_AA)
+
+
 def plot_paths(paths: Dict[str, np.ndarray], out: Path, title: str,
-               size: Tuple[int, int] = (900, 800)) -> None:
-    """Draw each (N, 2) array of x, y [m] as a line; start as a circle, end as a square."""
+               size: Tuple[int, int] = (900, 800),
+               shapes: Sequence[Tuple[str, np.ndarray, Sequence[float], bool]] = ()) -> None:
+    """Draw each (N, 2) array of x, y [m] as a line; start as a circle, end as a square.
+    ``shapes``: landmarks under the paths, each (name, (N, 2) closed outline, RGBA fill,
+    whether to name it), such as a cell's footprints."""
     width, height = size
     left, right, top, bottom = 80, 30, 50, 60
-    pts = np.concatenate([p for p in paths.values() if len(p)] or [np.zeros((1, 2))])
+    pts = np.concatenate([p for p in paths.values() if len(p)]
+                         + [np.asarray(s[1], float) for s in shapes] or [np.zeros((1, 2))])
     lo, hi = pts.min(axis=0), pts.max(axis=0)
     span = max(float((hi - lo).max()), 0.1) * 1.1
     centre = (lo + hi) / 2
@@ -53,6 +76,7 @@ def plot_paths(paths: Dict[str, np.ndarray], out: Path, title: str,
         if top <= v <= top + plot_h:
             cv2.line(img, (left, v), (left + plot_w, v), (225, 225, 225), 1)
             cv2.putText(img, f'{y:g}', (left - 55, v + 5), font, 0.45, (0, 0, 0), 1)
+    _draw_shapes(img, shapes, px)
     cv2.rectangle(img, (left, top), (left + plot_w, top + plot_h), (0, 0, 0), 1)
     cv2.putText(img, 'x [m]', (left + plot_w // 2 - 20, height - 15), font, 0.55, (0, 0, 0), 1)
     cv2.putText(img, 'y [m]', (10, top - 15), font, 0.55, (0, 0, 0), 1)
