@@ -26,7 +26,7 @@ import sys
 import threading
 import time
 from pathlib import Path
-from typing import Dict, List, Optional, Sequence, Tuple
+from typing import Callable, Dict, List, Optional, Sequence, Tuple
 
 import numpy as np
 import rclpy
@@ -85,6 +85,7 @@ ARMS = {'zu12': ZU12_JOINTS, 'youbot': YOUBOT_JOINTS}
 CAMERA_TOPIC = '/belt_camera/image_raw'
 RESEND_S = 1.0            # wall seconds before an unanswered idempotent request is sent again
 STARTUP_GRACE_S = 1.0      # simulated seconds in which a lost camera frame is tolerated
+STOP_CHECK_S = 0.2         # wall seconds between looks at a stop while waiting
 GRIP_SERVICES = {'zu12': '/zu12/suction', 'youbot': '/youbot/gripper/grasp'}
 
 
@@ -422,15 +423,12 @@ class CoordinatorNode(Node):
     def run(self) -> TrialResult:
         try:
             obs = self._first_observation()
-        except NodeTimeout as exc:
-            self.pipeline = Pipeline(self.layout, self, self.settings, self.now())
-            self.pipeline.abort(self.now(), 'node_timeout', str(exc))
-            return self._report()
-        try:
             belt_ran_before = self._belt_runs_at_layout_speed()
-        except NodeTimeout as exc:
-            self.pipeline = Pipeline(self.layout, self, self.settings, obs.now)
-            self.pipeline.abort(self.now(), 'node_timeout', str(exc))
+        except (NodeTimeout, _Stopped) as exc:
+            self.pipeline = Pipeline(self.layout, self, self.settings, self.now())
+            self.pipeline.abort(self.now(), *(('interrupted', 'shut down before the start')
+                                              if isinstance(exc, _Stopped)
+                                              else ('node_timeout', str(exc))))
             return self._report()
         self.pipeline = Pipeline(self.layout, self, self.settings, obs.now, belt_ran_before)
         ticks = 0
@@ -446,6 +444,8 @@ class CoordinatorNode(Node):
                 obs = self._next_observation(obs)
         except NodeTimeout as exc:
             self.pipeline.abort(self.now(), 'node_timeout', str(exc))
+        except _Stopped:
+            pass                  # (the simulator and the vision stop with it: nothing comes)
         if not self.pipeline.finished:
             self.pipeline.abort(self.now(), 'interrupted', 'shut down before the end')
         return self._report()
@@ -520,8 +520,8 @@ class CoordinatorNode(Node):
         end = time.monotonic() + self.service_timeout
         with self._lock:
             # (Woken by each state message; the clock runs with them.)
-            if not self._lock.wait_for(lambda: self._have_states() and self.now() > 0.0,
-                                       timeout=self.service_timeout):
+            if not self._wait(lambda: self._have_states() and self.now() > 0.0,
+                              self.service_timeout):
                 raise NodeTimeout('no joint_states, grip states and odometry from the '
                                   'simulator (is sim_node running with the cell world?)')
         # Real time: the belt starts with the first decision, so not before the camera's frames
@@ -532,8 +532,7 @@ class CoordinatorNode(Node):
         # camera unseen (the purple, held at the end stop behind one of them, was then picked
         # where that one stood). A detections message is answered for a frame: they flow.
         with self._lock:
-            if not self._lock.wait_for(lambda: bool(self._detections),
-                                       timeout=max(0.0, end - time.monotonic())):
+            if not self._wait(lambda: bool(self._detections), end - time.monotonic()):
                 raise NodeTimeout(f'no detections from the vision node: no camera frame reached '
                                   f'it through {CAMERA_TOPIC}, or its answers did not reach '
                                   f'this node')
@@ -550,6 +549,8 @@ class CoordinatorNode(Node):
                 while self.now() < target:
                     if time.monotonic() > end:
                         raise NodeTimeout('the simulated clock stopped (simulator gone?)')
+                    if not rclpy.ok():
+                        raise _Stopped()
                     self._lock.wait(0.005)
             return self._observe(round(self.now() * 1e9), None)
         before, after = self._step(self.steps_per_tick)
@@ -559,6 +560,20 @@ class CoordinatorNode(Node):
             self._wait_states(state_due[-1])
         self._wait_frames(frames)
         return self._observe(after * self.dt_ns, frames)
+
+    def _wait(self, ready: Callable[[], bool], timeout: float) -> bool:
+        """Under the lock: until ``ready()`` (True) or ``timeout`` seconds (False), woken by
+        what the callbacks deliver; a stop (Ctrl-C, SIGTERM) ends the wait at once (_Stopped):
+        the simulator and the vision node stop with this node, and nothing will come."""
+        end = time.monotonic() + timeout
+        while not ready():
+            if not rclpy.ok():
+                raise _Stopped()
+            left = end - time.monotonic()
+            if left <= 0.0:
+                return False
+            self._lock.wait(min(left, STOP_CHECK_S))
+        return True
 
     def _have_states(self) -> bool:
         """Both arms' joints and grips and the base's odometry have come (under the lock)."""
@@ -573,7 +588,7 @@ class CoordinatorNode(Node):
             return all(s >= stamp_ns for s in stamps) if first else \
                 all(s == stamp_ns for s in stamps)
         with self._lock:
-            if not self._lock.wait_for(ready, timeout=self.service_timeout):
+            if not self._wait(ready, self.service_timeout):
                 have = {**{f'{a} joints': j[0] for a, j in self._joints.items()},
                         **{f'{a} grip': g[0] for a, g in self._grip.items()},
                         'odom': self._odom[0] if self._odom else None}
@@ -586,8 +601,8 @@ class CoordinatorNode(Node):
             # subscriber: nothing is in view yet, so a lost one there changes nothing.
             startup = stamp * 1e-9 - self._start_time < STARTUP_GRACE_S
             with self._lock:
-                if self._lock.wait_for(functools.partial(self._detections.__contains__, stamp),
-                                       timeout=1.0 if startup else self.service_timeout):
+                if self._wait(functools.partial(self._detections.__contains__, stamp),
+                              1.0 if startup else self.service_timeout):
                     continue
             if not startup:
                 raise NodeTimeout(f'no detections for the camera frame at {stamp * 1e-9:.3f}'
@@ -678,6 +693,10 @@ class CoordinatorNode(Node):
             except OSError as exc:
                 self.get_logger().warn(f'progress file {self.progress_file}: {exc}',
                                        throttle_duration_sec=60.0)
+
+
+class _Stopped(Exception):
+    """The node was stopped (Ctrl-C, SIGTERM) while it waited for the simulator."""
 
 
 def _run(node: CoordinatorNode) -> int:

@@ -101,6 +101,7 @@ def test_a_stop_at_any_moment_ends_every_process_cleanly(graph, sig, tmp_path):
         run.mkdir()
         procs, lingering, codes = _stop_at(graph, sig, moment, run)
         report = [line for p in procs for line in p.problems()]
-        assert not lingering, f'{graph} at {moment:.1f} s: still running {lingering}'
+        assert not lingering, (f'{graph} at {moment:.1f} s: still running {lingering}',
+                               [p.output()[-2000:] for p in procs if p.name in lingering])
         assert all(code == 0 for code in codes.values()), (moment, codes, report)
         assert all(_clean(p.output()) for p in procs), (moment, report)

@@ -302,8 +302,12 @@ def test_a_trajectory_of_huge_accelerations_is_refused_and_the_youbot_lives(youb
     pub.publish(_trajectory((0.3, 0.2, 0.1, 0.0, 0.0), 1.0))
     wait_for(lambda: np.abs(_arm_positions(joints) - (0.3, 0.2, 0.1, 0.0, 0.0)).max() < 5e-3,
              20.0, what='the arm at the good trajectory\'s goal')
-    x0 = _pose2d(base.odom[-1][1]).x
+    x0, seen = _pose2d(base.odom[-1][1]).x, len(base.odom)
     base.hold((0.3, 0.0, 0.0), 1.0)
-    assert _pose2d(base.odom[-1][1]).x - x0 > 0.2
+    # It drives at the commanded speed. (Not a distance over the hold: on a loaded machine this
+    # process's commands arrive with gaps, and the simulator stops the base in each gap longer
+    # than its command timeout, as it must.)
+    assert max(m.twist.twist.linear.x for _, m in base.odom[seen:]) > 0.25
+    assert _pose2d(base.odom[-1][1]).x - x0 > 0.1
     assert 'RuntimeWarning' not in youbot_sim.output() and youbot_sim.alive()
     pub.publish(_trajectory(np.zeros(5), 1.0))
