@@ -311,13 +311,19 @@ class CoordinatorNode(Node):
     def _call(self, client, request, what: str, idempotent: bool = True):
         """A service call, waited for. An idempotent one (IK, the grips, the parameters; not a
         step) is sent again every RESEND_S until answered: a reply Fast DDS dropped right after
-        discovery must not end the run (ros_common.services.call_and_wait)."""
+        discovery must not end the run (ros_common.services.call_and_wait). Stopped (Ctrl-C,
+        SIGTERM) while it waits, the run ends as interrupted (_Stopped), not as a node that did
+        not answer."""
         if not client.wait_for_service(timeout_sec=self.service_timeout):
+            if not rclpy.ok():
+                raise _Stopped()
             raise NodeTimeout(f'{client.srv_name} is not available ({what})')
         try:
             return call_and_wait(client, request, self.service_timeout,
                                  resend=RESEND_S if idempotent else 0.0, ok=rclpy.ok)
         except NoAnswer as exc:
+            if not rclpy.ok():
+                raise _Stopped() from None
             raise NodeTimeout(f'{exc} ({what})') from None
 
     def solve(self, arm, position, orientation, frame, seed):

@@ -61,3 +61,24 @@ def test_a_shutdown_ends_the_wait():
     with pytest.raises(NoAnswer):
         call_and_wait(client, 'req', timeout=30.0, resend=0.05, ok=lambda: False)
     assert len(client.sent) == 1
+
+
+class ServedClient(FakeClient):
+    def wait_for_service(self, timeout_sec):
+        return True
+
+
+def test_a_coordinator_stopped_in_a_call_ends_its_run_as_interrupted(monkeypatch):
+    """Ctrl-C or SIGTERM while the coordinator waits for a service: the run was stopped (it
+    ends as interrupted), not a node that did not answer (node_timeout, exit 1)."""
+    from types import SimpleNamespace
+
+    from coordinator import coordinator_node as node
+    coordinator = SimpleNamespace(service_timeout=0.3)
+    stopped = threading.Event()
+    monkeypatch.setattr(node.rclpy, 'ok', lambda: not stopped.is_set())
+    with pytest.raises(node.NodeTimeout, match='did not answer'):
+        node.CoordinatorNode._call(coordinator, ServedClient(set()), 'req', 'IK')
+    threading.Timer(0.1, stopped.set).start()
+    with pytest.raises(node._Stopped):
+        node.CoordinatorNode._call(coordinator, ServedClient(set()), 'req', 'IK')
