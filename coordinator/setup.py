@@ -22,6 +22,7 @@ setup(
             'coordinator_node = coordinator:coordinator_node_main',
             'run_trials = coordinator.trials:main',
             'compare_runs = coordinator.compare:main',
+            'storyboard = coordinator.storyboard:main',
         ],
     },
 )

@@ -44,7 +44,7 @@ else
 fi
 echo "[demo] events and logs: ${RUN_DIR#"$ROOT"/}/trial_000/ (result.json, *.log$(
   [ "${DEMO_RECORD:-1}" != 0 ] && echo ', bag/'))"
-[ -f "$RUN_DIR/report.md" ] && echo "[demo] report: ${RUN_DIR#"$ROOT"/}/report.md (plots: completion_times.png, success_rates.png, youbot_paths.png)"
+[ -f "$RUN_DIR/report.md" ] && echo "[demo] report: ${RUN_DIR#"$ROOT"/}/report.md (plots: completion_times.png, success_rates.png, youbot_paths.png, timeline.png, storyboard.png)"
 case "$code" in
   0) echo "[demo] PASS" ;;
   130) echo "[demo] STOPPED (exit 130): the trial was stopped before it finished" ;;

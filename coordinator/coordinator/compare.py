@@ -20,29 +20,26 @@ from typing import List, Optional, Sequence, Tuple
 import numpy as np
 
 from coordinator.campaign import trial_results
-from coordinator.rerun import RerunError, figures, find_result, first_parting
+from coordinator.recorded import RecordError, load_trial
+from coordinator.rerun import figures, first_parting
 from coordinator.sweep import RATES, wilson
-from coordinator.trial_result import TrialResult, read_result
+from coordinator.trial_result import TrialResult
 
 SIGNIFICANT = 0.05
 
 
 def load_runs(path: Path) -> List[TrialResult]:
-    """A trial (its result, its directory, a run directory with one trial) or a campaign (a
-    directory of trials); ValueError saying why not."""
+    """A trial (its result, its directory, a run directory with one trial, its bag) or a
+    campaign (a directory of trials); ValueError saying why not."""
     if path.is_dir() and len(list(path.glob('trial_*/result.json'))) > 1:
         results, problems = trial_results(path)
         if not results:
             raise ValueError(f'{path}: no usable trial result ({"; ".join(problems[:2])})')
         return results
     try:
-        source = find_result(path)
-    except RerunError as exc:
+        return [load_trial(path)[0]]
+    except RecordError as exc:
         raise ValueError(str(exc)) from None
-    result, problem = read_result(source)
-    if result is None:
-        raise ValueError(f'{source}: {problem or "no result"}')
-    return [result]
 
 
 def two_proportions(s1: int, n1: int, s2: int, n2: int) -> float:

@@ -71,8 +71,8 @@ def parameter_text(value: ParameterValue) -> str:
     as something else (empty, a number, true) is quoted."""
     if isinstance(value, bool):
         return 'true' if value else 'false'
-    if isinstance(value, list):
-        return '[' + ', '.join(repr(str(v)) for v in value) + ']'
+    if isinstance(value, list):       # (each item YAML-quoted: any text goes through)
+        return '[' + ', '.join("'" + str(v).replace("'", "''") + "'" for v in value) + ']'
     if isinstance(value, str):
         try:
             plain = yaml.safe_load(value) == value
@@ -107,11 +107,13 @@ def pipeline_graph(seed: int, belt_speed: float, synchronous: bool = True,
                    result_file: Optional[Path] = None, progress_file: Optional[Path] = None,
                    record_dir: Optional[Path] = None, bag_name: Optional[str] = 'bag',
                    time_step: float = TIME_STEP,
-                   recorder_ready: Optional[Path] = None) -> List[GraphNode]:
+                   recorder_ready: Optional[Path] = None,
+                   bag_metadata: Optional[Dict[str, str]] = None) -> List[GraphNode]:
     """The processes of one run of the pipeline scenario, in their start order (the recorder,
     when there is one, first: it must hear the first /clock). A recording goes into
     ``record_dir``/``bag_name`` (without a name, one with the date and time);
-    ``recorder_ready``: the file the recorder writes once it records /clock."""
+    ``recorder_ready``: the file the recorder writes once it records /clock; ``bag_metadata``:
+    the bag's custom data (what ran: coordinator.recorded)."""
     sim_time = {'use_sim_time': True}
     rate = tick_rate(time_step) if synchronous else CONTROL_RATE
     sim = _sim_parameters(seed, belt_speed, synchronous, world, rate, time_step,
@@ -137,6 +139,8 @@ def pipeline_graph(seed: int, belt_speed: float, synchronous: bool = True,
             recorder['bag_name'] = bag_name
         if recorder_ready is not None:
             recorder['ready_file'] = str(recorder_ready)
+        if bag_metadata:
+            recorder['custom_data'] = [f'{k}={v}' for k, v in bag_metadata.items()]
         nodes.append(GraphNode('recorder', 'recording', 'recorder', parameters=recorder))
     nodes += [
         GraphNode('sim_node', 'sim_bridge', 'sim_node', parameters=sim),

@@ -8,7 +8,9 @@ from typing import Any, Dict, List, Optional, Sequence, Tuple
 import cv2
 import numpy as np
 
+from coordinator.recorded import trial_bag
 from coordinator.results import FAILURE_CAUSES, summary_rows
+from coordinator.storyboard import StoryboardError, write_storyboard
 from coordinator.sweep_report import sweep_lines
 from coordinator.trial_result import TrialResult
 from recording.plot import plot_paths
@@ -206,9 +208,9 @@ def write_report(trials: Sequence[TrialResult], out_dir: Path, setup: Dict[str, 
                   for t in bad]
         lines.append('')
     lines += _definitions(sorted({t.total for t in trials if t.total}) or [8])
-    if shown:
+    if shown is not None:
         lines += ['The trial of median completion time, each robot\'s activity over it:', '',
-                  '![timeline](timeline.png)', '']
+                  '![timeline](timeline.png)', ''] + _storyboard(shown, out_dir)
     path = out_dir / 'report.md'
     path.write_text('\n'.join(lines))
     return path
@@ -248,8 +250,8 @@ def cell_shapes(world: Optional[str] = None, data: Optional[Dict[str, Any]] = No
 
 
 def _plots(ok: Sequence[TrialResult], s: Dict[str, float], out_dir: Path,
-           world: Optional[str] = None) -> bool:
-    """The report's plots; whether it has a timeline."""
+           world: Optional[str] = None) -> Optional[TrialResult]:
+    """The report's plots; the trial its timeline shows, if any."""
     histogram([t.completion_time for t in ok], out_dir / 'completion_times.png',
               'Completion time per trial (simulated seconds)', 'completion time [s]',
               ('paper best 61 s', 61.0))
@@ -264,9 +266,26 @@ def _plots(ok: Sequence[TrialResult], s: Dict[str, float], out_dir: Path,
         plot_paths(paths, out_dir / 'youbot_paths.png', "The youBot's paths over the cell",
                    shapes=cell_shapes(world))
     shown = sorted((t for t in ok if t.states), key=lambda t: t.completion_time)
-    if shown:        # the trial of median completion time
-        timeline(shown[len(shown) // 2], out_dir / 'timeline.png')
-    return bool(shown)
+    if not shown:
+        return None
+    median = shown[len(shown) // 2]       # the trial of median completion time
+    timeline(median, out_dir / 'timeline.png')
+    return median
+
+
+def _storyboard(trial: TrialResult, out_dir: Path) -> List[str]:
+    """The storyboard of a recorded trial (coordinator.storyboard) and its lines; none for a
+    trial not recorded here."""
+    trial_dir = out_dir / f'trial_{trial.trial or 0:03d}'
+    if trial.trial is None or trial_bag(trial_dir) is None:
+        return []
+    try:
+        write_storyboard(trial_dir, out_dir / 'storyboard.png')
+    except StoryboardError as exc:
+        return [f'(No storyboard of trial {trial.trial}: {exc}.)', '']
+    return [f'Trial {trial.trial} seen from above at its phases (its bag\'s states, posed in the '
+            'simulator again: `storyboard RUN` draws any recorded trial):', '',
+            '![storyboard](storyboard.png)', '']
 
 
 def _table(s: Dict[str, float]) -> List[str]:

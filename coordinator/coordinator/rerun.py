@@ -11,8 +11,9 @@ from typing import Dict, List, Sequence, Tuple
 
 import yaml
 
+from coordinator.recorded import RecordError, load_trial
 from coordinator.sweep import TRIAL_PARAMETERS, SweepError, point_world
-from coordinator.trial_result import RESULT_FILE, TrialResult, read_result
+from coordinator.trial_result import TrialResult
 
 ORIGINAL_WORLD = 'original_world.yaml'
 
@@ -30,22 +31,6 @@ class Rerun:
     belt_speed: float
     time_step: float
     changes: Dict[str, float]     # --set: NAME: VALUE
-
-
-def find_result(run: Path) -> Path:
-    """The result file of a run: ``run`` itself, its trial directory, or a campaign directory
-    with exactly one trial (what ``make demo`` leaves)."""
-    if run.is_file():
-        return run
-    if (run / RESULT_FILE).is_file():
-        return run / RESULT_FILE
-    found = sorted(run.glob(f'trial_*/{RESULT_FILE}'))
-    if len(found) == 1:
-        return found[0]
-    if not found:
-        raise RerunError(f'{run}: no trial result there (a result.json, a trial directory, or '
-                         'a run directory with one trial)')
-    raise RerunError(f'{run} holds {len(found)} trials: name one (its trial_NNN directory)')
 
 
 def parse_sets(sets: Sequence[str]) -> Dict[str, float]:
@@ -66,10 +51,10 @@ def parse_sets(sets: Sequence[str]) -> Dict[str, float]:
 
 def prepare(run: Path, sets: Sequence[str], out: Path) -> Rerun:
     """The re-run of ``run`` with ``sets``, its world written into ``out`` and checked."""
-    source = find_result(run)
-    original, problem = read_result(source)
-    if original is None:
-        raise RerunError(f'{source}: {problem or "no result"}')
+    try:
+        original, source = load_trial(run)
+    except RecordError as exc:
+        raise RerunError(str(exc)) from None
     data = original.scenario.get('world_data')
     if not isinstance(data, dict) or original.scenario_seed is None:
         raise RerunError(f'{source}: the result does not keep the world it ran in (results '

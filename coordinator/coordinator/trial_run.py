@@ -17,6 +17,7 @@ from pathlib import Path
 from typing import Any, Callable, Dict, Iterator, Optional, Set, TypedDict
 
 from coordinator.graph import TIME_STEP, pipeline_graph
+from coordinator.recorded import bag_metadata
 from coordinator.sweep import SweepError, point_world
 from coordinator.trial_result import (
     RESULT_FILE,
@@ -68,10 +69,14 @@ def run_trial(trial: int, seed: int, belt_speed: float, domain_id: int, out_dir:
     env = with_profile({**os.environ, 'ROS_DOMAIN_ID': str(domain_id),
                         'ROS_AUTOMATIC_DISCOVERY_RANGE': os.environ.get(
                             'ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')})
+    code = code or code_version()
+    ran = scenario(world, time_step)
     graph = pipeline_graph(seed, belt_speed, world=world, result_file=outcome_file,
                            progress_file=trial_dir / PROGRESS_FILE,
                            record_dir=trial_dir if record else None, time_step=time_step,
-                           recorder_ready=trial_dir / RECORDER_READY)
+                           recorder_ready=trial_dir / RECORDER_READY,
+                           bag_metadata=bag_metadata(trial, seed, belt_speed, code, ran,
+                                                     parameters))
     commands = {node.name: node.command() for node in graph}
     procs: Dict[str, 'subprocess.Popen[bytes]'] = {}
     cpu: Dict[str, float] = {}
@@ -102,13 +107,12 @@ def run_trial(trial: int, seed: int, belt_speed: float, domain_id: int, out_dir:
     finally:
         _stop_group(group, procs, interrupted=INTERRUPTED.is_set())
         ACTIVE_GROUPS.discard(group)
-    run = RunInfo(trial=trial, code=code or code_version(),
+    run = RunInfo(trial=trial, code=code,
                   wall_time=time.monotonic() - start, cpu_seconds=cpu)
     coordinator = procs.get('coordinator_node')
     result = _record(trial_dir, run, seed, belt_speed,
                      coordinator.returncode if coordinator is not None else None)
-    result = replace(result, parameters=dict(parameters or {}),
-                     scenario=scenario(world, time_step))
+    result = replace(result, parameters=dict(parameters or {}), scenario=ran)
     result.write(result_file)
     outcome_file.unlink(missing_ok=True)
     return result

@@ -61,7 +61,8 @@ class BagWriter:
     def __init__(self, output_dir: Path, name: Optional[str] = None, storage: str = 'mcap',
                  resolver: Optional[TypeResolver] = None, compression: str = 'none',
                  chunk_crc: bool = False, max_bag_size: int = 0,
-                 max_bag_duration: float = 0.0) -> None:
+                 max_bag_duration: float = 0.0,
+                 custom_data: Optional[Dict[str, str]] = None) -> None:
         if storage not in STORAGES:
             raise BagError(f'storage must be one of {sorted(STORAGES)}, got "{storage}"')
         if compression not in COMPRESSIONS:
@@ -82,6 +83,9 @@ class BagWriter:
                                          max_bag_duration=max_bag_duration)
             if compression == 'zstd':
                 self._writer.set_compression(CompressionMode.STORAGE, CompressionFormat.ZSTD)
+            # (metadata.yaml's custom_data, and the MCAP's rosbag2 metadata record.)
+            for key, value in (custom_data or {}).items():
+                self._writer.set_custom_data(key, value)
             try:
                 self._writer.open()
                 break

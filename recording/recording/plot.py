@@ -39,12 +39,18 @@ def _draw_shapes(img: np.ndarray,
                         cv2.LINE_AA)
 
 
+def line_width(k: int, n: int) -> int:
+    """The width [px] of the ``k``-th of ``n`` paths: 6 for the first, 2 for the last."""
+    return 2 + round(4 * (n - 1 - k) / (n - 1)) if n > 1 else 2
+
+
 def plot_paths(paths: Dict[str, np.ndarray], out: Path, title: str,
                size: Tuple[int, int] = (900, 800),
                shapes: Sequence[Tuple[str, np.ndarray, Sequence[float], bool]] = ()) -> None:
     """Draw each (N, 2) array of x, y [m] as a line; start as a circle, end as a square.
     ``shapes``: landmarks under the paths, each (name, (N, 2) closed outline, RGBA fill,
-    whether to name it), such as a cell's footprints."""
+    whether to name it), such as a cell's footprints. The first path is drawn widest and each
+    after it narrower, so that one drawn over an identical one leaves it in sight."""
     width, height = size
     left, right, top, bottom = 80, 30, 50, 60
     pts = np.concatenate([p for p in paths.values() if len(p)]
@@ -83,14 +89,16 @@ def plot_paths(paths: Dict[str, np.ndarray], out: Path, title: str,
     cv2.putText(img, title, (left, 30), font, 0.6, (0, 0, 0), 1)
     for k, (name, p) in enumerate(paths.items()):
         color = COLORS[k % len(COLORS)][::-1]  # RGB -> BGR
+        width = line_width(k, len(paths))
         if len(p) >= 2:
-            cv2.polylines(img, [np.array([px(q) for q in p], np.int32)], False, color, 2,
+            cv2.polylines(img, [np.array([px(q) for q in p], np.int32)], False, color, width,
                           cv2.LINE_AA)
         if len(p):
             cv2.circle(img, px(p[0]), 6, color, 2)
             end = px(p[-1])
             cv2.rectangle(img, (end[0] - 5, end[1] - 5), (end[0] + 5, end[1] + 5), color, -1)
-        cv2.line(img, (left + 15, top + 20 + 22 * k), (left + 45, top + 20 + 22 * k), color, 2)
+        cv2.line(img, (left + 15, top + 20 + 22 * k), (left + 45, top + 20 + 22 * k), color,
+                 width)
         cv2.putText(img, f'{name} (o start, # end)', (left + 52, top + 25 + 22 * k), font, 0.5,
                     (0, 0, 0), 1)
     out.parent.mkdir(parents=True, exist_ok=True)

@@ -6,7 +6,7 @@ import os
 import sys
 import threading
 from pathlib import Path
-from typing import Set
+from typing import Dict, Sequence, Set
 
 from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
@@ -43,7 +43,23 @@ PARAMS = (
           'that a launcher waits for before it starts what must be recorded from its first '
           'message; empty: none'),
     Param('ready_topics', ['/clock'], 'The topics whose recording ready_file signals'),
+    Param('custom_data', [''], 'KEY=VALUE pairs kept in the bag\'s metadata (metadata.yaml\'s '
+          'custom_data, as ros2 bag record --custom-data)'),
 )
+
+
+def parse_custom_data(items: Sequence[str]) -> Dict[str, str]:
+    """``KEY=VALUE`` strings as a mapping (empty strings left out); BagError for one without
+    a key or an ``=``."""
+    out: Dict[str, str] = {}
+    for item in items:
+        if not item:
+            continue
+        key, sep, value = item.partition('=')
+        if not sep or not key.strip():
+            raise BagError(f'custom_data "{item[:60]}": give KEY=VALUE')
+        out[key.strip()] = value
+    return out
 
 
 class Recorder(Node):
@@ -64,7 +80,8 @@ class Recorder(Node):
         self._writer = BagWriter(Path(p['output_dir']), p['bag_name'] or None, storage,
                                  compression=p['compression'], chunk_crc=p['chunk_crc'],
                                  max_bag_size=p['max_bag_size'],
-                                 max_bag_duration=p['max_bag_duration'])
+                                 max_bag_duration=p['max_bag_duration'],
+                                 custom_data=parse_custom_data(p['custom_data']))
         # A write that fails (a full disk) closes the bag at its last flush and ends the run
         # with exit code 1 (ros_common.node_main.run_node).
         self.exit_request = threading.Event()

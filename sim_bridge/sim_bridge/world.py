@@ -301,6 +301,32 @@ class SimRobot:
     def _root_link(self) -> str:
         return next(name for name, index in self.link_index.items() if index == -1)
 
+    def pose_as_reported(self, names: Sequence[str], positions: Sequence[float]) -> None:
+        """Put the joints where joint states that said ``positions`` found them (the inverse
+        of :meth:`joint_states`: its encoder offsets and reporting scales undone); names it
+        does not have are left out. To show a recorded moment, not to simulate on from it."""
+        for name, reported in zip(names, positions):
+            j = self.joint_index.get(name)
+            if j is None or j not in self.movable or not math.isfinite(reported):
+                continue
+            scale = float(self._report_scale[self.movable.index(j)])
+            self.client.resetJointState(self.body, j,
+                                        (reported + self._encoder_offset.get(j, 0.0)) / scale)
+
+    def place_as_reported(self, position: Sequence[float],
+                          orientation: Sequence[float]) -> None:
+        """Put the base where odometry that said ``position``, ``orientation`` (x, y, z, w; in
+        the odom frame) found it: the inverse of :meth:`base_state` (its scale errors undone)."""
+        sx, sy, syaw = self.odometry_scale
+        p = self.client
+        pos = (position[0] / sx, position[1] / sy, position[2])
+        yaw = yaw_from_quaternion(orientation)
+        undo = p.getQuaternionFromEuler((0.0, 0.0, yaw * (1.0 / syaw - 1.0)))
+        _, orn = p.multiplyTransforms((0.0, 0.0, 0.0), undo, (0.0, 0.0, 0.0), orientation)
+        world_pos, world_orn = p.multiplyTransforms(self._start_pos, self._start_orn, pos, orn)
+        com = p.multiplyTransforms(world_pos, world_orn, self._inertial_pos, self._inertial_orn)
+        p.resetBasePositionAndOrientation(self.body, *com)
+
     def scale_reported_angle(self, joint: int, scale: float) -> None:
         """Report this movable joint's angle and speed times ``scale`` (a virtual omni-wheel
         turns 1/sqrt(2) as fast as the Mecanum wheel it stands for)."""

@@ -1,8 +1,15 @@
 """run_trials --rerun on a recorded run, as a user runs it: without a change the trial runs
-again the same to the last event; with --set belt_speed it differs, and says where."""
+again the same to the last event, from its bag alone too; with --set belt_speed it differs, and
+says where. The recorded run's storyboard is drawn from its bag."""
+import json
 import shutil
 import subprocess
 
+import cv2
+import numpy as np
+
+from coordinator.recorded import result_from_bag
+from coordinator.storyboard import CAPTION, PANEL
 from coordinator.trial_result import read_result
 
 SHORT_CELL = '''extends: package://world_description/worlds/pipeline_cell.yaml
@@ -25,8 +32,16 @@ def test_a_rerun_is_the_same_run_and_a_changed_one_differs_where_it_should(tmp_p
     original, _ = read_result(tmp_path / 'demo' / 'trial_000' / 'result.json')
     assert original.status == 'completed' and original.scenario['world_data']['materials']
     world.unlink()              # (the re-run needs nothing but the recorded run)
+    # The bag alone keeps the run: what ran (its metadata) and how it went (the coordinator's
+    # last state).
+    bag = tmp_path / 'elsewhere' / 'run'
+    shutil.copytree(tmp_path / 'demo' / 'trial_000' / 'bag', bag)
+    kept = result_from_bag(bag)
+    assert kept.differences(original) == []
+    assert json.dumps(kept.scenario) == json.dumps(original.scenario)     # (order included)
+    _storyboard_shows_the_run(tmp_path / 'demo', original)
 
-    same = _run('--rerun', tmp_path / 'demo', '--out', tmp_path / 'same')
+    same = _run('--rerun', bag, '--out', tmp_path / 'same')
     assert same.returncode == 0, same.stdout + same.stderr
     assert 'the same run as the original' in same.stdout
     again, _ = read_result(tmp_path / 'same' / 'trial_000' / 'result.json')
@@ -49,3 +64,19 @@ def test_a_rerun_is_the_same_run_and_a_changed_one_differs_where_it_should(tmp_p
     bad = _run('--rerun', tmp_path / 'demo', '--set', 'perturbations.camera.blurr=1',
                '--out', tmp_path / 'bad')
     assert bad.returncode == 2 and "unknown keys ['blurr']" in bad.stderr
+
+
+def _storyboard_shows_the_run(run, original):
+    """The report links the storyboard of the recorded trial: a picture per phase."""
+    assert '![storyboard](storyboard.png)' in (run / 'report.md').read_text()
+    img = cv2.imread(str(run / 'storyboard.png'))
+    kinds = {e[1] for e in original.events}
+    expected = 1 + len(kinds & {'picked', 'loaded', 'placed', 'departing', 'loading_over',
+                                'delivered', 'finished'})
+    assert expected == 8                  # (the short cell has every phase)
+    h, w = PANEL[1] + CAPTION + 6, PANEL[0] + 6
+    assert img.shape == (40 + 2 * h, 4 * w, 3)
+    first, last = (img[40 + CAPTION:40 + h - 6, :PANEL[0]].astype(int),
+                   img[40 + h + CAPTION:40 + 2 * h - 6, 3 * w:3 * w + PANEL[0]].astype(int))
+    # At the start and with both robots home the cell differs: the materials were moved.
+    assert (np.abs(first - last).sum(axis=2) > 30).mean() > 0.001

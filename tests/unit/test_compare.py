@@ -80,4 +80,7 @@ def test_what_cannot_be_compared_is_said(tmp_path, capsys):
     assert main([str(tmp_path / 'a'), str(tmp_path / 'many'), '--out', str(tmp_path / 'x')]) == 2
     assert 'a run with a run, or a campaign with a campaign' in capsys.readouterr().err
     assert main([str(tmp_path / 'a'), str(tmp_path / 'nothing')]) == 2
+    assert 'nothing does not exist' in capsys.readouterr().err
+    (tmp_path / 'empty').mkdir()
+    assert main([str(tmp_path / 'a'), str(tmp_path / 'empty')]) == 2
     assert 'no trial result' in capsys.readouterr().err

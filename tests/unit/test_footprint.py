@@ -29,3 +29,20 @@ def test_a_maps_landmarks_come_from_the_world_file_or_a_results_copy_of_it():
     from_copy = cell_shapes(data=world_data(resolve_resource(CELL)))
     assert [s[0] for s in from_file] == [s[0] for s in from_copy] and len(from_file) >= 8
     assert cell_shapes('no/such/world.yaml') == [] and cell_shapes() == []
+
+
+def test_a_path_drawn_over_an_identical_one_leaves_it_in_sight(tmp_path):
+    import cv2
+
+    from recording.plot import COLORS, plot_paths
+    path = np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 1.0]])
+    plot_paths({'first': path, 'second': path.copy()}, tmp_path / 'paths.png', 'two runs')
+    img = cv2.imread(str(tmp_path / 'paths.png')).astype(int)
+    below_legend = img[200:, 500:]          # (the x = 1 leg of both paths, not the legend)
+
+    def pixels(rgb):
+        return int((np.abs(below_legend - rgb[::-1]).sum(axis=2) < 40).sum())
+    first, second = pixels(COLORS[0]), pixels(COLORS[1])
+    # The second (2 px) runs down the middle of the first (6 px), which shows on both sides
+    # (drawn alike, the second would hide the first but for its antialiased fringe).
+    assert second > 1000 and first > second / 2

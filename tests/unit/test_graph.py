@@ -1,5 +1,8 @@
 """The pipeline run's node graph, described once (coordinator.graph)."""
+from pathlib import Path
+
 import pytest
+import yaml
 
 from coordinator.graph import (
     TIME_STEP,
@@ -79,6 +82,16 @@ def test_command_lines_are_what_ros2_run_takes():
         '-p', 'arm:=zu12', '-p', 'use_sim_time:=true', '-p', 'rate:=30.0', '-p',
         "exclude:=['/a', '/b']"]
     assert parameter_text(False) == 'false' and parameter_text(3) == '3'
+    # Any text in a list goes through YAML (rcl's parser) as it was: quotes, backslashes, JSON.
+    items = ['k={"a": "it\'s", "b": "c:\\\\d"}', "'", '', 'x, y', '[1]']
+    assert yaml.safe_load(parameter_text(items)) == items
+
+
+def test_a_recorded_trial_keeps_what_ran_in_its_bag():
+    graph = pipeline_graph(7, 0.13, world=PIPELINE_CELL, record_dir=Path('/r'),
+                           bag_metadata={'robot_sim.trial': '{"seed": 7}'})
+    recorder = next(n for n in graph if n.name == 'recorder')
+    assert recorder.parameters['custom_data'] == ['robot_sim.trial={"seed": 7}']
 
 
 def test_run_trials_refuses_a_physics_step_longer_than_a_control_tick(capsys):

@@ -73,6 +73,31 @@ def test_round_trip_is_byte_for_byte(tmp_path, storage):
         assert qos and qos[0].reliability.name == 'RELIABLE'
 
 
+@pytest.mark.parametrize('storage', STORAGES)
+def test_a_bag_keeps_its_custom_data_in_its_metadata_and_its_mcap_file(tmp_path, storage):
+    what = json.dumps({'world': {'b': 1, 'a': "it's \\ odd"}, 'seed': 5})
+    writer = BagWriter(tmp_path, 'kept', storage, custom_data={'robot_sim.trial': what})
+    writer.add_topic('/text', 'std_msgs/msg/String')
+    writer.write('/text', 1, serialize_message(String(data='x')))
+    writer.close()
+    info = yaml.safe_load((writer.path / 'metadata.yaml').read_text())
+    assert info['rosbag2_bagfile_information']['custom_data'] == {'robot_sim.trial': what}
+    if storage == 'mcap':      # (the file's own rosbag2 record: a bag file alone keeps it)
+        from mcap.reader import make_reader
+        with open(next(writer.path.glob('*.mcap')), 'rb') as f:
+            record = next(make_reader(f).iter_metadata())
+        inner = yaml.safe_load(record.metadata['serialized_metadata'])
+        assert inner['custom_data'] == {'robot_sim.trial': what}
+
+
+def test_the_recorders_custom_data_parameter_is_checked():
+    from recording.recorder import parse_custom_data
+    assert parse_custom_data(['', 'a=1', 'b=x=y', 'c=']) == {'a': '1', 'b': 'x=y', 'c': ''}
+    for bad in ('novalue', '=1'):
+        with pytest.raises(BagError, match='give KEY=VALUE'):
+            parse_custom_data([bad])
+
+
 def test_a_bag_is_never_overwritten(tmp_path):
     first = BagWriter(tmp_path, 'run')
     first.add_topic('/t', 'std_msgs/msg/String')

@@ -5,11 +5,11 @@ import json
 import pytest
 import yaml
 
+from coordinator.recorded import RecordError, find_result
 from coordinator.rerun import (
     ORIGINAL_WORLD,
     RerunError,
     figures,
-    find_result,
     first_parting,
     parse_sets,
     prepare,
@@ -42,9 +42,9 @@ def test_a_run_is_found_by_its_result_its_trial_or_its_run_directory(tmp_path):
     assert find_result(tmp_path / 'demo') == path
     (tmp_path / 'demo' / 'trial_001').mkdir()
     (tmp_path / 'demo' / 'trial_001' / 'result.json').write_text('{}')
-    with pytest.raises(RerunError, match='holds 2 trials'):
+    with pytest.raises(RecordError, match='holds 2 trials'):
         find_result(tmp_path / 'demo')
-    with pytest.raises(RerunError, match='no trial result'):
+    with pytest.raises(RecordError, match='no trial result'):
         find_result(tmp_path)
 
 

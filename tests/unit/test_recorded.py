@@ -1,0 +1,64 @@
+"""A recorded trial read from its bag alone (coordinator/recorded.py): what ran from the bag's
+metadata, how it went from the coordinator's last state; and what a bag that cannot say is
+told."""
+import pytest
+from rclpy.serialization import serialize_message
+from sim_interfaces.msg import PipelineState
+
+from coordinator.recorded import (
+    STATE_TOPIC,
+    TRIAL_KEY,
+    RecordError,
+    bag_metadata,
+    load_trial,
+    result_from_bag,
+)
+from coordinator.trial_result import RunInfo, TrialResult
+from recording.bag_writer import BagWriter
+
+SCENARIO = {'world': 'cell.yaml', 'time_step': 1 / 240,
+            'world_data': {'materials': {'counts': {'purple': 1, 'orange': 2}}}}
+
+
+def _result():
+    return TrialResult('completed', 25.1, scenario_seed=5, belt_speed=0.12, total=3,
+                       events=[[0.0, 'belt_started', '', -1, '', '']],
+                       run=RunInfo(code='abc', wall_time=3.0))
+
+
+def _bag(tmp_path, custom, states):
+    writer = BagWriter(tmp_path, 'bag', 'mcap', custom_data=custom)
+    writer.add_topic(STATE_TOPIC, 'sim_interfaces/msg/PipelineState')
+    for i, text in enumerate(states):
+        writer.write(STATE_TOPIC, i, serialize_message(
+            PipelineState(status='running' if not text else 'completed', result_json=text)))
+    writer.close()
+    return writer.path
+
+
+def test_a_bag_alone_says_what_ran_and_how_it_went(tmp_path):
+    original = _result()
+    custom = bag_metadata(4, 5, 0.12, 'abc', SCENARIO, {'belt_speed': 0.12})
+    bag = _bag(tmp_path, custom, ['', '', original.to_json(), ''])
+    kept = result_from_bag(bag)
+    assert kept.differences(original) == ['parameters']
+    assert kept.parameters == {'belt_speed': 0.12}
+    assert kept.scenario == SCENARIO and list(kept.scenario) == list(SCENARIO)
+    assert kept.trial == 4 and kept.run.code == 'abc'
+    assert load_trial(bag) == (kept, bag)
+
+
+def test_a_bag_that_cannot_say_is_told(tmp_path):
+    result = _result().to_json()
+    with pytest.raises(RecordError, match=f'no {TRIAL_KEY} in custom_data'):
+        result_from_bag(_bag(tmp_path / 'old', {}, [result]))
+    custom = bag_metadata(0, 5, 0.12, 'abc', SCENARIO)
+    with pytest.raises(RecordError, match='the run did not end while it was recorded'):
+        result_from_bag(_bag(tmp_path / 'cut', custom, ['', '']))
+    with pytest.raises(RecordError, match='not a readable rosbag2 bag'):
+        bad = tmp_path / 'bad'
+        bad.mkdir()
+        (bad / 'metadata.yaml').write_text('rosbag2_bagfile_information: {version: 9}\n')
+        result_from_bag(bad)
+    with pytest.raises(RecordError, match='does not exist'):
+        load_trial(tmp_path / 'nowhere')
