@@ -22,7 +22,6 @@ setup(
             'coordinator_node = coordinator:coordinator_node_main',
             'run_trials = coordinator.trials:main',
             'compare_runs = coordinator.compare:main',
-            'storyboard = coordinator.storyboard:main',
         ],
     },
 )

@@ -2,6 +2,8 @@
 from __future__ import annotations
 
 import math
+import shutil
+import subprocess
 from pathlib import Path
 from typing import Any, Dict, List, Optional, Sequence, Tuple
 
@@ -10,7 +12,6 @@ import numpy as np
 
 from coordinator.recorded import trial_bag
 from coordinator.results import FAILURE_CAUSES, summary_rows
-from coordinator.storyboard import StoryboardError, write_storyboard
 from coordinator.sweep_report import sweep_lines
 from coordinator.trial_result import TrialResult
 from recording.plot import plot_paths
@@ -22,6 +23,7 @@ from world_description.world_config import WorldConfigError, load_world, parse_w
 PAPER_TABLE_2 = (('1-10', 85, 60, 70, 80), ('11-30', 76, 76, 75, 85), ('30-60', 69, 82, 82, 95),
                  ('60-100', 64, 90, 89, 100), ('100-110', 61, 99, 99, 10))
 FONT = cv2.FONT_HERSHEY_SIMPLEX
+STORYBOARD_TIMEOUT = 300.0      # [s] (about 4 s here; a loaded machine, a long run: more)
 
 
 def _canvas(title: str, size: Tuple[int, int] = (900, 500)) -> np.ndarray:
@@ -185,9 +187,12 @@ def write_report(trials: Sequence[TrialResult], out_dir: Path, setup: Dict[str, 
     ok = [t for t in trials if t.status != 'error']
     s = summary_rows(ok)
     shown = _plots(ok, s, out_dir, setup.get('world'))
+    swept = any(str(spec).partition('=')[0].strip() == 'belt_speed'
+                for spec in setup.get('sweep') or ())
+    belt = 'swept' if swept else f'{setup.get("belt_speed")} m/s'
     lines = ['# Pipeline trials', '', setup['note'] if 'note' in setup else (
         f'{len(trials)} trials (lock-step), plan seed {setup.get("seed0")}, belt speed '
-        f'{setup.get("belt_speed")} m/s, {setup.get("parallel")} in parallel, wall time '
+        f'{belt}, {setup.get("parallel")} in parallel, wall time '
         f'{setup.get("wall_time", 0.0):.0f} s.'), '']
     if setup.get('world'):
         lines[-1:-1] = [scenario(str(setup['world'])), '']
@@ -274,15 +279,26 @@ def _plots(ok: Sequence[TrialResult], s: Dict[str, float], out_dir: Path,
 
 
 def _storyboard(trial: TrialResult, out_dir: Path) -> List[str]:
-    """The storyboard of a recorded trial (coordinator.storyboard) and its lines; none for a
-    trial not recorded here."""
+    """The storyboard of a recorded trial and its lines; none for a trial not recorded here.
+    Drawn by ``storyboard`` (sim_bringup: it builds the cell in the simulator, which the
+    coordinator does not import), as the trial runner starts the simulator: by its command."""
     trial_dir = out_dir / f'trial_{trial.trial or 0:03d}'
     if trial.trial is None or trial_bag(trial_dir) is None:
         return []
+    tool = shutil.which('storyboard')
+    if tool is None:
+        return [f'(No storyboard of trial {trial.trial}: the `storyboard` tool of sim_bringup '
+                'is not installed.)', '']
     try:
-        write_storyboard(trial_dir, out_dir / 'storyboard.png')
-    except StoryboardError as exc:
-        return [f'(No storyboard of trial {trial.trial}: {exc}.)', '']
+        done = subprocess.run([tool, str(trial_dir), '-o', str(out_dir / 'storyboard.png')],
+                              capture_output=True, text=True, timeout=STORYBOARD_TIMEOUT)
+    except subprocess.TimeoutExpired:
+        return [f'(No storyboard of trial {trial.trial}: not drawn within '
+                f'{STORYBOARD_TIMEOUT:.0f} s.)', '']
+    if done.returncode != 0:
+        why = (done.stderr.strip().splitlines() or [f'exit {done.returncode}'])[-1]
+        return [f'(No storyboard of trial {trial.trial}: {why.removeprefix("storyboard: ")})',
+                '']
     return [f'Trial {trial.trial} seen from above at its phases (its bag\'s states, posed in the '
             'simulator again: `storyboard RUN` draws any recorded trial):', '',
             '![storyboard](storyboard.png)', '']

@@ -9,8 +9,8 @@ import cv2
 import numpy as np
 
 from coordinator.recorded import result_from_bag
-from coordinator.storyboard import CAPTION, PANEL
 from coordinator.trial_result import read_result
+from sim_bringup.storyboard import CAPTION, PANEL
 
 SHORT_CELL = '''extends: package://world_description/worlds/pipeline_cell.yaml
 materials:

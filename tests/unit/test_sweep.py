@@ -169,3 +169,14 @@ def test_a_sweep_over_a_world_value_the_cell_refuses_stops_before_any_trial(tmp_
     err = capsys.readouterr().err
     assert 'gives no valid world' in err and 'materials.mass must be finite' in err
     assert not list(out.glob('trial_*'))
+
+
+def test_a_belt_speed_sweeps_report_says_the_belt_was_swept(tmp_path):
+    from coordinator.report import write_report
+    result = TrialResult('completed', 60.0, scenario_seed=1, belt_speed=0.2, total=8,
+                         parameters={'belt_speed': 0.2}, run=RunInfo(trial=0, code='x'))
+    setup = {'seed0': 1, 'belt_speed': (0.1, 0.16), 'parallel': 1}
+    text = write_report([result], tmp_path, {**setup, 'sweep': ['belt_speed=0.1:0.3:0.1']})
+    assert 'belt speed swept,' in text.read_text() and '(0.1, 0.16)' not in text.read_text()
+    text = write_report([result], tmp_path, {**setup, 'sweep': ['perturbations.x=0,1']})
+    assert 'belt speed (0.1, 0.16) m/s,' in text.read_text()

@@ -345,15 +345,15 @@ def write_storyboard(run: Path, out: Optional[Path] = None) -> Path:
     return path
 
 
-def main(argv: Optional[Sequence[str]] = None) -> int:
+def main(args: Optional[Sequence[str]] = None) -> int:
     parser = argparse.ArgumentParser(prog='storyboard', description=__doc__.split('\n\n')[0])
     parser.add_argument('run', type=Path, help='a recorded trial: its directory, its '
                         'result.json, a run directory with one trial, or its bag')
     parser.add_argument('-o', '--out', type=Path, help='the PNG (default: storyboard.png in '
                         'the trial\'s directory; BAG_storyboard.png beside a bag)')
-    args = parser.parse_args(argv)
+    options = parser.parse_args(args)
     try:
-        path = write_storyboard(args.run, args.out)
+        path = write_storyboard(options.run, options.out)
     except StoryboardError as exc:
         print(f'storyboard: {exc}', file=sys.stderr)
         return 2
