@@ -51,6 +51,9 @@ def test_the_pipeline_demo_runs_the_scenario_prints_its_table_and_records(tmp_pa
     run = next(tmp_path.glob('pipeline-*'))
     assert (run / 'trial_000' / 'bag' / 'metadata.yaml').is_file()
     assert (run / 'report.md').is_file() and (run / 'youbot_paths.png').is_file()
+    # The report shows the run at its phases, drawn from the bag (sim_bringup's storyboard).
+    assert '![storyboard](storyboard.png)' in (run / 'report.md').read_text()
+    assert (run / 'storyboard.png').stat().st_size > 100_000
     # The bag decodes with mcap-ros2-support (no code shared with the writer) and holds the
     # cell's TF tree, one tree under world, and both robots' descriptions.
     from mcap.reader import make_reader

@@ -46,6 +46,14 @@ def test_each_phase_is_the_first_event_of_its_kind_in_time_order():
     assert found[1].detail == 'detail 2' and found[0].detail == ''
 
 
+def test_the_first_trouble_is_a_phase_of_its_own():
+    found = phases(_events(('belt_started', ''), ('picked', 'orange'), ('grasp_missed', 'blue'),
+                           ('arm_stalled', ''), ('finished', '')))
+    assert [p.caption for p in found] == ['start', 'first grasp',
+                                          'first trouble: grasp missed (blue)', 'both home']
+    assert found[2].time == 12.0 and found[2].detail == 'detail 2'
+
+
 def test_phases_that_never_happened_are_left_out():
     # A cell without a transport, stopped before its end.
     found = phases(_events(('belt_started', ''), ('picked', 'red'), ('placed', 'red')))

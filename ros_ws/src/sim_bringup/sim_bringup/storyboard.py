@@ -1,6 +1,7 @@
 """A recorded trial's storyboard, like the pipeline paper's Figure 8: the cell seen from an
 overview camera at its phases (start, first grasp, first load, the first material placed, the
-youBot's departure, loading over, the first material unloaded, both robots home), one PNG.
+youBot's departure, loading over, the first material unloaded, both robots home; and the first
+trouble, a missed grasp or a stall, if any), one PNG.
 
 ``storyboard RUN [-o PNG]``: RUN is a recorded trial (its directory, its result.json, or a run
 directory with one trial, as ``make demo`` leaves it). The phases' times come from the bag's
@@ -40,6 +41,10 @@ PHASES: Tuple[Tuple[str, str], ...] = (
     ('{color} placed', 'placed'), ('youBot departs', 'departing'),
     ('loading over', 'loading_over'), ('first unloaded', 'delivered'),
     ('both home', 'finished'))
+# What went wrong first, shown as a phase of its own (coordinator.pipeline.EventKind): where a
+# perturbed cell starts to fail, the picture shows how.
+TROUBLE = ('grasp_missed', 'grasp_failed', 'missed', 'failed', 'ik_failed', 'arm_stalled',
+           'drive_stalled')
 PANEL = (480, 360)                 # each phase's picture [px]
 CAPTION = 46                       # the caption's band above it [px]
 FONT = cv2.FONT_HERSHEY_SIMPLEX
@@ -70,8 +75,8 @@ class Phase:
 
 def phases(events: Sequence[Event]) -> List[Phase]:
     """The storyboard's phases found in a run's events (in time order): each phase at the first
-    event of its kind; a kind that never happened (a cell with no transport, a run stopped
-    early) gives no phase."""
+    event of its kind, and the first trouble (a missed grasp, a stall, ...) if there was any; a
+    kind that never happened (a cell with no transport, a run stopped early) gives no phase."""
     if not events:
         return []
     ordered = sorted(events, key=lambda e: e.time)
@@ -83,6 +88,11 @@ def phases(events: Sequence[Event]) -> List[Phase]:
             continue
         out.append(Phase(caption.format(color=e.color or 'material'), e.time, e.time - t0,
                          e.detail if kind else ''))
+    trouble = next((e for e in ordered if e.kind in TROUBLE), None)
+    if trouble is not None:
+        out.append(Phase(f'first trouble: {trouble.kind.replace("_", " ")}'
+                         + (f' ({trouble.color})' if trouble.color else ''), trouble.time,
+                         trouble.time - t0, trouble.detail))
     return sorted(out, key=lambda p: p.time)
 
 
@@ -254,7 +264,7 @@ def _inside(points: np.ndarray, view: Sequence[float], projection: Sequence[floa
 
 def storyboard(recording: Recording, world: WorldConfig, seed: Optional[int],
                time_step: float, title: str) -> np.ndarray:
-    """The storyboard's image (BGR): one picture per phase, four to a row, captioned."""
+    """The storyboard's image (BGR): one picture per phase, four or five to a row, captioned."""
     found = phases(recording.events)
     if not found:
         raise StoryboardError('the recording has no events: nothing to show')
@@ -281,8 +291,9 @@ def _caption(img: np.ndarray, number: int, phase: Phase) -> np.ndarray:
     return np.vstack((band, img))
 
 
-def _grid(panels: Sequence[np.ndarray], title: str, columns: int = 4) -> np.ndarray:
+def _grid(panels: Sequence[np.ndarray], title: str) -> np.ndarray:
     h, w = panels[0].shape[:2]
+    columns = 5 if len(panels) > 8 else 4         # (two rows for the phases and a trouble)
     rows = -(-len(panels) // columns)
     cols = min(columns, len(panels))
     out = np.full((40 + rows * (h + 6), cols * (w + 6), 3), 255, np.uint8)
