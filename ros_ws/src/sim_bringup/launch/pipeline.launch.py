@@ -10,7 +10,8 @@ only turns them into launch_ros Node actions. The launch ends when the run ends:
 stopped once the coordinator exits, and the launch's exit code is 0 for a completed run, 1
 otherwise. The result: the coordinator's last log line, `ros2 topic echo
 /coordinator_node/state` while it runs (the result JSON at the end) and
-`/coordinator_node/events`.
+`/coordinator_node/events`. A recorded run's bag keeps what ran: `run_trials --rerun BAG` runs
+it again, `storyboard BAG` draws it.
 (ros2 launch is not installable from the package index; there `run_trials --seeds 5` starts
 the same processes, and `run_trials --show-graph` prints them.)
 """
@@ -27,9 +28,13 @@ from launch.event_handlers import OnProcessExit
 from launch.events import Shutdown
 from launch_ros.actions import Node
 
-from coordinator.graph import pipeline_graph
+from coordinator.graph import TIME_STEP, pipeline_graph
+from coordinator.recorded import bag_metadata
+from coordinator.trial_result import code_version
+from coordinator.trial_run import scenario
 from ros_common.dds import profile_environment
 from sim_bringup.state_publishers import state_publishers
+from world_description import PIPELINE_CELL
 
 
 class RunFailed(RuntimeError):
@@ -53,10 +58,16 @@ def _nodes(context):
         return context.launch_configurations[name]
 
     synchronous = arg('synchronous').lower() == 'true'
+    seed, belt, record = (int(arg('scenario_seed')), float(arg('belt_speed')),
+                          arg('record').lower() == 'true')
+    # A recorded run keeps what ran in its bag, as a trial runner's does (coordinator.recorded):
+    # run_trials --rerun BAG runs it again in lock-step.
+    metadata = (bag_metadata(0, seed, belt, code_version(), scenario(PIPELINE_CELL, TIME_STEP))
+                if record else None)
     graph = pipeline_graph(
-        int(arg('scenario_seed')), float(arg('belt_speed')), synchronous=synchronous,
+        seed, belt, synchronous=synchronous,
         real_time_factor=None if synchronous else float(arg('real_time_factor')),
-        record_dir=arg('bag_dir') if arg('record').lower() == 'true' else None, bag_name=None)
+        record_dir=arg('bag_dir') if record else None, bag_name=None, bag_metadata=metadata)
     link_tf = arg('publish_link_tf').lower() == 'true'
     nodes = []
     for n in graph:
