@@ -35,6 +35,8 @@ def test_goals_are_judged_on_this_runs_figures_only(tmp_path):
     assert table['two trials at a time / one at a time (throughput)'] == (1.5, False)
     assert table['110 trials two at a time (from that throughput)'] == (
         110 * 60.0 / 360.0, True)
+    assert table['make study, 28 trials two at a time (from that throughput)'] == (
+        28 * 60.0 / 360.0, True)
     assert table['FK, the slower arm'] == (21.0, False)
     assert table['Zu 12 IK, median'] == (0.07, True)
     # The recorder's figures are older than the run: not used, not judged.
