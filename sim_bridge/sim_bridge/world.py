@@ -316,7 +316,10 @@ class SimRobot:
     def place_as_reported(self, position: Sequence[float],
                           orientation: Sequence[float]) -> None:
         """Put the base where odometry that said ``position``, ``orientation`` (x, y, z, w; in
-        the odom frame) found it: the inverse of :meth:`base_state` (its scale errors undone)."""
+        the odom frame) found it: the inverse of :meth:`base_state` (its scale errors undone).
+        A pose that is not finite leaves the base where it is."""
+        if not all(math.isfinite(v) for v in (*position, *orientation)):
+            return
         sx, sy, syaw = self.odometry_scale
         p = self.client
         pos = (position[0] / sx, position[1] / sy, position[2])

@@ -162,3 +162,19 @@ def test_a_storyboard_draws_one_captioned_picture_per_phase():
     b, g, r = panels[2][row, col]
     assert r > 150 and b < 90 and r - g > 60, (r, g, b)
     assert not np.array_equal(panels[1][row, col], panels[2][row, col])
+
+
+def test_a_state_that_is_not_finite_leaves_the_robot_where_it_was():
+    world = SimWorld(load_world(CELL))
+    try:
+        youbot = world.robots['youbot']
+        before = youbot.base_link_world()[0]
+        youbot.place_as_reported((math.nan, 0.0, 0.0), (0.0, 0.0, 0.0, 1.0))
+        assert youbot.base_link_world()[0] == before
+        zu12 = world.robots['zu12']
+        joints = [zu12.joint_index['joint_1']]
+        was = zu12.client.getJointState(zu12.body, joints[0])[0]
+        zu12.pose_as_reported(['joint_1', 'no_such_joint'], [math.inf, 1.0])
+        assert zu12.client.getJointState(zu12.body, joints[0])[0] == was
+    finally:
+        world.close()

@@ -168,7 +168,9 @@ def _take(out: Recording, what: str, robot: str, msg: Any) -> None:
         out.odometry.setdefault(robot, []).append(
             (_stamp(msg.header), ((p.x, p.y, p.z), (o.x, o.y, o.z, o.w))))
     elif msg.markers:
-        markers = [m for m in msg.markers if m.action == 0]          # ADD
+        # (ADD markers with a finite pose: a material whose pose is not finite is left out.)
+        markers = [m for m in msg.markers if m.action == 0 and all(math.isfinite(v) for v in (
+            m.pose.position.x, m.pose.position.y, m.pose.position.z, m.pose.orientation.w))]
         out.materials.append((_stamp(msg.markers[0].header), [Material(
             (m.ns, int(m.id)), (m.pose.position.x, m.pose.position.y, m.pose.position.z),
             (m.pose.orientation.x, m.pose.orientation.y, m.pose.orientation.z,
@@ -182,7 +184,6 @@ class Stage:
     def __init__(self, world: WorldConfig, seed: Optional[int], time_step: float) -> None:
         # No materials from the world: the recorded ones are shown where they were.
         self.world = SimWorld(_without_materials(world), time_step, scenario_seed=seed)
-        self.config = world
         self._materials: Dict[Tuple[str, int], int] = {}
         self.view, self.projection = overview_camera(world, PANEL)
 
