@@ -10,6 +10,7 @@ away from its trial's directory can still be re-run (``run_trials --rerun BAG``)
 from __future__ import annotations
 
 import json
+import math
 from dataclasses import replace
 from pathlib import Path
 from typing import Any, Dict, Optional, Tuple
@@ -109,16 +110,21 @@ def result_from_bag(bag: Path) -> TrialResult:
         raise RecordError(f'{bag}: its metadata does not say what ran (no {TRIAL_KEY} in '
                           'custom_data: a bag recorded before bags kept it); use its trial '
                           'directory')
-    if not last:
-        raise RecordError(f'{bag}: no result on {STATE_TOPIC} (the run did not end while it '
-                          'was recorded)')
     try:
         ran = json.loads(custom[TRIAL_KEY])
-        result = TrialResult.from_dict(json.loads(last))
-    except (ValueError, ResultError) as exc:
-        raise RecordError(f'{bag}: {str(exc)[:120]}') from None
+    except ValueError as exc:
+        raise RecordError(f'{bag}: {TRIAL_KEY}: {str(exc)[:120]}') from None
     if not isinstance(ran, dict):
         raise RecordError(f'{bag}: {TRIAL_KEY} is not a JSON object')
+    try:
+        # A run stopped before its end published no result: what ran is still known (it can
+        # be drawn, and run again).
+        result = (TrialResult.from_dict(json.loads(last)) if last else TrialResult.failure(
+            'interrupted', f'the run did not end while it was recorded (no result on '
+            f'{STATE_TOPIC})', seed=ran.get('scenario_seed'),
+            belt_speed=float(ran.get('belt_speed', math.nan))))
+    except (ValueError, TypeError, ResultError) as exc:
+        raise RecordError(f'{bag}: {str(exc)[:120]}') from None
     # (The coordinator's result has the seed and the belt speed; the trial runner added the
     # rest to the result file.)
     return replace(result.with_run(trial=ran.get('trial'), code=str(ran.get('code', ''))),

@@ -52,9 +52,14 @@ def test_a_bag_that_cannot_say_is_told(tmp_path):
     result = _result().to_json()
     with pytest.raises(RecordError, match=f'no {TRIAL_KEY} in custom_data'):
         result_from_bag(_bag(tmp_path / 'old', {}, [result]))
-    custom = bag_metadata(0, 5, 0.12, 'abc', SCENARIO)
-    with pytest.raises(RecordError, match='the run did not end while it was recorded'):
-        result_from_bag(_bag(tmp_path / 'cut', custom, ['', '']))
+    # A run stopped before its end: what ran is known, how it went is not.
+    cut = result_from_bag(_bag(tmp_path / 'cut', bag_metadata(2, 5, 0.12, 'abc', SCENARIO),
+                               ['', '']))
+    assert cut.status == 'interrupted' and 'did not end while it was recorded' in cut.message
+    assert (cut.trial, cut.scenario_seed, cut.belt_speed, cut.scenario) == (2, 5, 0.12,
+                                                                           SCENARIO)
+    with pytest.raises(RecordError, match='not a JSON object'):
+        result_from_bag(_bag(tmp_path / 'odd', {TRIAL_KEY: '[1]'}, [result]))
     with pytest.raises(RecordError, match='not a readable rosbag2 bag'):
         bad = tmp_path / 'bad'
         bad.mkdir()
