@@ -9,6 +9,7 @@ import signal
 import subprocess
 import time
 
+from coordinator.recorded import result_from_bag
 from helpers import wait_for
 
 
@@ -106,6 +107,13 @@ def test_a_campaign_stopped_mid_trial_keeps_the_trials_bag_whole(tmp_path):
     assert summary is not None and summary.statistics.message_count > 0
     topics = {channel.topic for channel in summary.channels.values()}
     assert {'/clock', '/cell/materials', '/coordinator_node/events'} <= topics, topics
+    # The bag alone says what ran: it reads as the interrupted trial, and is drawn.
+    kept = result_from_bag(trial / 'bag')
+    assert kept.status == 'interrupted' and kept.scenario['world_data']['robots'], kept.message
+    drawn = subprocess.run([shutil.which('storyboard'), str(trial / 'bag'), '-o',
+                            str(tmp_path / 'board.png')], capture_output=True, text=True,
+                           timeout=120)
+    assert drawn.returncode == 0 and (tmp_path / 'board.png').is_file(), drawn.stderr
     for log in trial.glob('*.log'):
         text = log.read_text()
         assert 'Traceback' not in text and '[FATAL]' not in text, (log.name, text[-2000:])
