@@ -30,9 +30,17 @@ from urllib.parse import parse_qs, unquote, urlparse
 
 import numpy as np
 import pybullet
+import re2
 
 from controllers.arrays import Vector
 from sim_bridge.cell import MaterialBody
+from sim_bridge.scratch import ScratchDir
+from sim_bridge.urdf_check import (
+    UrdfProblem,
+    check_meshes,
+    read_urdf_file,
+    summarise_urdf,
+)
 from sim_bridge.world import URDF_FLAGS, SimWorld
 from world_description.resources import resolve_resource
 from world_description.world_config import ObstacleConfig
@@ -47,6 +55,20 @@ MAX_SIZE_M = 5.0            # a spawned shape's largest dimension
 MAX_MASS_KG = 1000.0
 MAX_DISTANCE_M = 1000.0     # how far from the origin a pose may be
 PENETRATION_M = 0.005       # a spawn that would sink deeper into a body is refused
+# What a request may ask for (any client on the domain can send one; docs/faults.md): each is
+# served in milliseconds within these.
+MAX_LINEAR_SPEED_M_S = 50.0          # a state's (set or spawned) linear velocity
+MAX_ANGULAR_SPEED_RAD_S = 50.0       # and angular velocity (PyBullet caps both at 100)
+MAX_SPAWNED = 200                    # spawned entities alive at once
+MAX_FILTER_CHARS = 1024              # a name filter (RE2: linear in the names it reads)
+MAX_NAME_CHARS = 256                 # a name, a namespace, a tag
+MAX_TAGS = 64                        # tags in a filter or an entity's info
+MAX_DESCRIPTION_CHARS = 4096
+MAX_URI_CHARS = 4096
+_RE2_OPTIONS = re2.Options()
+_RE2_OPTIONS.max_mem = 8 * 1024 * 1024       # a compiled filter's memory
+_RE2_OPTIONS.log_errors = False
+SCRATCH_PREFIX = 'sim_node_urdf_'
 
 
 class EntityError(Exception):
@@ -134,7 +156,8 @@ class Entities:
         self._world, self._p, self._now = world, world.client, now
         self._spawned: Dict[str, _Spawned] = {}
         self._info: Dict[str, Info] = {}           # set by SetEntityInfo
-        self._scratch = tempfile.TemporaryDirectory(prefix='sim_node_urdf_')
+        # Where a URDF sent as text is written for PyBullet to read, for as long as that takes.
+        self._scratch = ScratchDir(SCRATCH_PREFIX)
 
     # --- what there is ------------------------------------------------------------------------
     def _all(self) -> List[_Entity]:
@@ -188,11 +211,8 @@ class Entities:
         raise EntityError('not_found', f'no entity named {name!r}')
 
     def names(self, filters: Filters = Filters()) -> List[str]:
-        try:
-            pattern = re.compile(filters.pattern) if filters.pattern else None
-        except re.error as exc:
-            raise EntityError('failed', f'the name filter {filters.pattern!r} is not a regular '
-                              f'expression: {exc}') from None
+        pattern = _filter_pattern(filters.pattern)
+        _check_tags(filters.tags, 'the tags filter')
         out = []
         for e in self._all():
             if pattern is not None and not pattern.search(e.name):
@@ -234,6 +254,10 @@ class Entities:
         self._get(name)
         if info.category not in (OBJECT, ROBOT, 2, DYNAMIC_OBJECT, STATIC_OBJECT):
             raise EntityError('failed', f'category {info.category} is none of EntityCategory')
+        if len(info.description) > MAX_DESCRIPTION_CHARS:
+            raise EntityError('failed', f'the description has {len(info.description)} '
+                              f'characters (at most {MAX_DESCRIPTION_CHARS})')
+        _check_tags(info.tags, 'the tags')
         self._info[name] = replace(info, tags=list(info.tags))
 
     # --- state --------------------------------------------------------------------------------
@@ -302,6 +326,11 @@ class Entities:
         values = np.concatenate([pos, orn, state.linear, state.angular])
         if not np.all(np.isfinite(values)):
             raise EntityError('invalid_pose', 'the state has values that are not finite')
+        speed, spin = math.hypot(*state.linear), math.hypot(*state.angular)
+        if speed > MAX_LINEAR_SPEED_M_S or spin > MAX_ANGULAR_SPEED_RAD_S:
+            raise EntityError('invalid_pose', f'the velocity ({speed:.4g} m/s, {spin:.4g} '
+                              f'rad/s) is beyond {MAX_LINEAR_SPEED_M_S:g} m/s or '
+                              f'{MAX_ANGULAR_SPEED_RAD_S:g} rad/s')
         norm = float(np.linalg.norm(orn))
         if abs(norm - 1.0) > 1e-3:
             raise EntityError('invalid_pose', f'the orientation is not a unit quaternion '
@@ -343,8 +372,19 @@ class Entities:
     def spawn(self, name: str, allow_renaming: bool, uri: str, resource: str, namespace: str,
               pose: State, frame: str = '') -> str:
         """Spawn an entity; its name (EntityError with a spawn code when it cannot)."""
-        if namespace and not _NAMESPACE.match(namespace):
-            raise EntityError('namespace_invalid', f'{namespace!r} is not a ROS namespace')
+        if len(name) > MAX_NAME_CHARS:
+            raise EntityError('name_invalid', f'the name has {len(name)} characters (at most '
+                              f'{MAX_NAME_CHARS})')
+        if namespace and (len(namespace) > MAX_NAME_CHARS or not _NAMESPACE.match(namespace)):
+            raise EntityError('namespace_invalid', f'{namespace[:80]!r} is not a ROS namespace '
+                              f'(of at most {MAX_NAME_CHARS} characters)')
+        if len(uri) > MAX_URI_CHARS:
+            raise EntityError('unsupported_format', f'the uri has {len(uri)} characters (at '
+                              f'most {MAX_URI_CHARS})')
+        spawned = self.spawned_count()
+        if spawned >= MAX_SPAWNED:
+            raise EntityError('failed', f'{spawned} spawned entities already (at most '
+                              f'{MAX_SPAWNED} at once): delete some first')
         pose = self._in_world(pose, frame)
         if uri.startswith('material://'):
             return self._spawn_material(name, allow_renaming, uri, pose)
@@ -353,6 +393,10 @@ class Entities:
         if uri or resource:
             return self._spawn_urdf(name, allow_renaming, uri, resource, pose, namespace)
         raise EntityError('no_resource', 'both uri and resource_string are empty')
+
+    def spawned_count(self) -> int:
+        """The spawned entities alive now (shapes, URDFs and materials)."""
+        return len(self._spawned) + sum(1 for m in self._world.materials if m.name)
 
     def _name(self, wanted: str, allow_renaming: bool, default: str) -> str:
         taken = set(self.names())
@@ -427,9 +471,15 @@ class Entities:
             body, Info(STATIC_OBJECT if mass == 0.0 else DYNAMIC_OBJECT,
                        f'a spawned {kind}, {mass:g} kg', ['spawned', 'shape', kind]),
             pose, half, namespace, static=mass == 0.0)
+        self._world.adopt(body, final, lambda: self._forget(final))
         if mass > 0.0:
             self._p.resetBaseVelocity(body, pose.linear, pose.angular)
         return final
+
+    def _forget(self, name: str) -> None:
+        """A spawned body the world took out (it left the world: free_bodies.py)."""
+        self._spawned.pop(name, None)
+        self._info.pop(name, None)
 
     def _color(self, text: str) -> Tuple[float, float, float, float]:
         source = self._world.source
@@ -447,23 +497,16 @@ class Entities:
 
     def _spawn_urdf(self, name: str, allow_renaming: bool, uri: str, resource: str,
                     pose: State, namespace: str) -> str:
-        if uri:
-            path = self._resolve(uri)
-        else:
-            if '<robot' not in resource:
-                raise EntityError('parse_error', 'the resource string is no URDF (no <robot>)')
-            fd, tmp = tempfile.mkstemp(suffix='.urdf', dir=self._scratch.name)
-            with os.fdopen(fd, 'w') as f:
-                f.write(resource)
-            path = Path(tmp)
-        default = _urdf_name(path) or 'entity'
-        final = self._name(name, allow_renaming, default)
+        path = self._resolve(uri) if uri else None
         try:
-            body = self._p.loadURDF(str(path), pose.position, pose.orientation,
-                                    flags=URDF_FLAGS)
-        except pybullet.error as exc:
-            raise EntityError('parse_error', f'{uri or "the URDF"} cannot be loaded: {exc}'
-                              ) from None
+            text = read_urdf_file(path) if path is not None else resource
+            summary = summarise_urdf(text)
+            check_meshes(summary, path.parent if path is not None else None, resolve_resource)
+        except UrdfProblem as exc:
+            raise EntityError(exc.code, f'{uri or "the URDF text"}: {exc}') from None
+        default = summary.name if _NAME.match(summary.name) else 'entity'
+        final = self._name(name, allow_renaming, default)
+        body = self._load_urdf(path, text, pose, uri)
         self._check_clear(body, final, lambda: self._p.removeBody(body))
         start = self.state_of_body(body)
         self._spawned[final] = _Spawned(
@@ -471,8 +514,28 @@ class Entities:
                        ['spawned', 'urdf']), replace(start, linear=pose.linear,
                                                      angular=pose.angular),
             None, namespace)
+        self._world.adopt(body, final, lambda: self._forget(final))
         self._p.resetBaseVelocity(body, pose.linear, pose.angular)
         return final
+
+    def _load_urdf(self, path: Optional[Path], text: str, pose: State, uri: str) -> int:
+        """PyBullet's body of a checked URDF: its file, or its text written to a scratch file
+        for as long as PyBullet reads it."""
+        scratch = None
+        if path is None:
+            fd, name = tempfile.mkstemp(suffix='.urdf', dir=self._scratch.path)
+            with os.fdopen(fd, 'w') as f:
+                f.write(text)
+            path = scratch = Path(name)
+        try:
+            return self._p.loadURDF(str(path), pose.position, pose.orientation,
+                                    flags=URDF_FLAGS)
+        except pybullet.error as exc:
+            raise EntityError('parse_error', f'{uri or "the URDF"} cannot be loaded: {exc}'
+                              ) from None
+        finally:
+            if scratch is not None:
+                scratch.unlink(missing_ok=True)
 
     def state_of_body(self, body: int) -> State:
         pos, orn = self._frame_pose(body)
@@ -525,6 +588,7 @@ class Entities:
             assert self._world.source is not None
             self._world.source.remove(e.material)
         else:
+            self._world.disown(e.body)
             self._p.removeBody(e.body)
             del self._spawned[name]
         self._info.pop(name, None)
@@ -596,7 +660,7 @@ class Entities:
         return out
 
     def close(self) -> None:
-        self._scratch.cleanup()
+        self._scratch.close()
 
 
 def _vec3(v: Vector) -> Tuple[float, float, float]:
@@ -628,10 +692,27 @@ def _footprint(obstacle: ObstacleConfig) -> Tuple[Tuple[float, float], Tuple[flo
     return (x - ex, y - ey), (x + ex, y + ey)
 
 
-def _urdf_name(path: Path) -> str:
-    match = re.search(r'<robot[^>]*\bname\s*=\s*"([^"]*)"', path.read_text(errors='replace'))
-    name = match.group(1) if match else ''
-    return name if _NAME.match(name) else ''
+def _filter_pattern(pattern: str) -> Optional['re2._Regexp']:
+    """A client's name filter compiled by RE2, which matches in time linear in the name
+    (Python's re backtracks: one pattern could hold the node for minutes); None for none."""
+    if not pattern:
+        return None
+    if len(pattern) > MAX_FILTER_CHARS:
+        raise EntityError('failed', f'the name filter has {len(pattern)} characters (at most '
+                          f'{MAX_FILTER_CHARS})')
+    try:
+        return re2.compile(pattern, _RE2_OPTIONS)
+    except re2.error as exc:
+        why = exc.args[0].decode(errors='replace') if exc.args and isinstance(
+            exc.args[0], bytes) else str(exc)
+        raise EntityError('failed', f'the name filter {pattern[:80]!r} is not a regular '
+                          f'expression RE2 takes: {why}') from None
+
+
+def _check_tags(tags: Sequence[str], what: str) -> None:
+    if len(tags) > MAX_TAGS or any(len(t) > MAX_NAME_CHARS for t in tags):
+        raise EntityError('failed', f'{what}: at most {MAX_TAGS} tags of at most '
+                          f'{MAX_NAME_CHARS} characters')
 
 
 def _number(query: Dict[str, List[str]], key: str, default: Optional[float], lo: float,

@@ -58,6 +58,11 @@ class StepSink(Protocol):
         """A robot's physics state went non-finite: it was put back at its start pose, at
         rest, and takes no commands until the runner is reset."""
 
+    def on_body_lost(self, name: str, what: str) -> None:
+        """A material or a spawned body left the world (its state not finite, too fast, too
+        far: free_bodies.py) and was taken out of it, or a static body it poisoned was put
+        back: ``what`` says which, and why."""
+
 
 class NullSink:
     """A StepSink that wants nothing: subclass it and override what you need."""
@@ -85,6 +90,9 @@ class NullSink:
         pass
 
     def on_fault(self, robot: str, reason: str) -> None:
+        pass
+
+    def on_body_lost(self, name: str, what: str) -> None:
         pass
 
 
@@ -250,7 +258,7 @@ class SimRunner:
         problem = robot.state_problem()
         if problem:
             repaired = self._fault(name)
-            self.faults[name] = f'{name}: the physics state of {problem} was not finite' + (
+            self.faults[name] = f'{name}: {problem}' + (
                 f' (and the pose of {", ".join(repaired)}, put back)' if repaired else '')
             sink.on_fault(name, self.faults[name])
             return False
@@ -308,12 +316,15 @@ class SimRunner:
                     self._apply(name, _twist(command))
                     sink.on_command_applied(name, world.sim_time_ns, self._applied[name])
             world.step()
+            self._check_bases(sink)
             t_ns = world.sim_time_ns
             if t_ns >= self._clock_next_ns:
                 self._clock_next_ns = next_on_grid(t_ns, self.clock_period_ns)
                 self.tick_clock(sink)
             if t_ns >= self._state_next_ns:
                 self._state_next_ns = next_on_grid(t_ns, self.state_period_ns)
+                world.check_free_bodies(pose=True)
+                self._report_lost(sink)
                 for name in world.robots:
                     self.check_robot(name, sink)
                     sink.on_state(name, t_ns)
@@ -325,6 +336,19 @@ class SimRunner:
                     # Keep the camera's own grid of due times, skipping frames nobody wanted.
                     self._camera_next_ns[i] = next_on_grid(t_ns, self._camera_period_ns[i])
                     sink.on_camera_due(i, t_ns, functools.partial(world.render, cam))
+
+    def _check_bases(self, sink: StepSink) -> None:
+        """After every step: no body is stepped on with a state that is not finite. The free
+        bodies' velocities were checked by the world's step; the robots' bases are here (their
+        joints, at the state rate: check_robot)."""
+        for name, robot in self.world.robots.items():
+            if robot.state_problem(joints=False):
+                self.check_robot(name, sink)
+        self._report_lost(sink)
+
+    def _report_lost(self, sink: StepSink) -> None:
+        for lost in self.world.take_lost():
+            sink.on_body_lost(lost.name, lost.what)
 
     def tick_clock(self, sink: StepSink) -> None:
         """/clock now, unless it already shows this time."""

@@ -81,7 +81,8 @@ FEATURES = [
     F.SIMULATION_RESET_SPAWNED, F.SIMULATION_STATE_GETTING, F.SIMULATION_STATE_SETTING,
     F.SIMULATION_STATE_PAUSE, F.STEP_SIMULATION_SINGLE, F.STEP_SIMULATION_MULTIPLE,
     F.STEP_SIMULATION_ACTION, F.WORLD_INFO_GETTING, F.SPAWNING_ENTITIES]
-MAX_STEPS = 10_000_000
+MAX_STEPS = 10_000_000        # a request's steps (served in chunks; a pause, stop or reset ends it)
+MAX_SPAWN_BATCH = 64          # SpawnEntities' requests in one call (each about 1-3 ms here)
 # EntityError codes as result codes: the standard's, and SpawnEntity's own.
 _CODES = {'not_found': Result.RESULT_NOT_FOUND, 'failed': Result.RESULT_OPERATION_FAILED,
           'unsupported': Result.RESULT_FEATURE_UNSUPPORTED}
@@ -178,15 +179,23 @@ class SimulationInterfaces:
             response.result = _result(message='quitting: sim_node shuts down')
             self._node.get_logger().info('quitting on request (set_simulation_state)')
             self._quit()                  # (the spin ends after this reply)
-        elif _STATES.get(now) == target:
+        elif _STATES.get(now) == target and not self._stepping.stepping:
             response.result = _result(R.ALREADY_IN_TARGET_STATE, f'already {now}')
         elif target == S.STATE_STOPPED:
+            # (The steps being served end first: nothing steps after the reset replied.)
+            ended = self._stepping.end_steps('set_simulation_state STOPPED')
             if not self._stepping.synchronous:
                 self._stepping.pause()
             done = self._reset()
             self._entities.reset_spawned()
             self._stepping.stopped = True
-            response.result = _result(message=f'stopped: {done}')
+            response.result = _result(message=f'stopped: {done}' + (
+                f'; {ended}' if ended else ''))
+        elif target == S.STATE_PAUSED and self._stepping.stepping:
+            ended = self._stepping.end_steps('set_simulation_state PAUSED')
+            if not self._stepping.synchronous:
+                self._stepping.pause()
+            response.result = _result(message=f'paused: {ended}')
         elif target == S.STATE_PAUSED:
             if now == 'stopped':
                 self._stepping.stopped = False
@@ -213,11 +222,10 @@ class SimulationInterfaces:
             return response
         else:
             note = ''
-        if self._stepping.stepping:
-            response.result = _result(Result.RESULT_INCORRECT_STATE,
-                                      'steps are being served: reset after their reply')
-            return response
         done = []
+        ended = self._stepping.end_steps('reset_simulation')
+        if ended:
+            done.append(ended)
         if scope & R.SCOPE_SPAWNED:
             deleted = self._entities.delete_spawned()
             done.append(f'deleted {", ".join(deleted) or "nothing spawned"}')
@@ -234,7 +242,8 @@ class SimulationInterfaces:
             return response
 
         def done(job: StepJob) -> None:
-            response.result = _result()
+            response.result = (_result(Result.RESULT_OPERATION_FAILED, _ended(job))
+                               if job.ended_by else _result())
             self._step_replies.send(job, response)
         job = self._stepping.submit(request.steps, done)
         assert job is not None
@@ -280,7 +289,10 @@ class SimulationInterfaces:
         finally:
             self._goals.pop(key, None)
         progress(job)
-        if job.canceled and job.remaining:
+        if job.ended_by:
+            result.result = _result(Result.RESULT_OPERATION_FAILED, _ended(job))
+            goal_handle.abort()
+        elif job.canceled and job.remaining:
             result.result = _result(message=f'canceled after {job.stepped} of {steps} steps')
             goal_handle.canceled()
         else:
@@ -383,6 +395,12 @@ class SimulationInterfaces:
         return response
 
     def _spawn_entities(self, request: Any, response: Any) -> Any:
+        count = len(request.spawn_requests)
+        if count > MAX_SPAWN_BATCH:
+            response.result = _result(Result.RESULT_OPERATION_FAILED, f'{count} spawn requests '
+                                      f'in one call: at most {MAX_SPAWN_BATCH} (nothing was '
+                                      'spawned)')
+            return response
         for r in request.spawn_requests:
             result, name = self._spawn(r.name, r.allow_renaming, r.entity_resource.uri,
                                        r.entity_resource.resource_string, r.entity_namespace,
@@ -466,6 +484,10 @@ class SimulationInterfaces:
                                   'sim_node runs the world of its parameter "world": no world '
                                   'loading or unloading at run time')
         return response
+
+
+def _ended(job: StepJob) -> str:
+    return f'ended by {job.ended_by} after {job.stepped} of {job.steps} steps'
 
 
 def _xyz(v: Any) -> Tuple[float, float, float]:

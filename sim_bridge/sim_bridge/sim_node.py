@@ -267,6 +267,9 @@ class SimNode(Node):
         if robot in self._runner.guards:
             self._publish_applied(robot, self._world.sim_time_ns, self._runner.applied(robot))
 
+    def on_body_lost(self, name: str, what: str) -> None:
+        self.get_logger().error(f'{name}: {what}')
+
     def on_state(self, robot: str, time_ns: int) -> None:
         # A state nobody reads is not built or sent (as the cameras): each costs about a
         # millisecond in rclpy, and a lock-step trial sends about 20,000 of them. A reader that
@@ -460,7 +463,8 @@ class SimNode(Node):
 
     def _reset_world(self) -> str:
         """Robots back at their start poses, the materials' scenario again, faults cleared
-        (simulated time runs on); what was done."""
+        (simulated time runs on); what was done. Step requests being served end first."""
+        ended = self._stepping.end_steps('a reset')
         aborted = self._actions.abort_all(
             'the simulation was reset: the arm is back at its start pose', hold=False)
         faults = list(self._runner.faults)
@@ -475,7 +479,8 @@ class SimNode(Node):
                                                 if aborted else ''))
         return 'robots returned to their start poses' + (
             f' (faults cleared: {", ".join(faults)})' if faults else '') + (
-            f' (goals aborted: {", ".join(aborted)})' if aborted else '')
+            f' (goals aborted: {", ".join(aborted)})' if aborted else '') + (
+            f'; {ended}' if ended else '')
 
     def _quit_soon(self) -> None:
         """End the run a second after the reply that asked for it (the reply must reach its

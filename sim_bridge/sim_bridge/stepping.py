@@ -36,6 +36,9 @@ class StepJob:
     on_progress: Optional[Callable[['StepJob'], None]] = None
     started: bool = False
     canceled: bool = False
+    # Why the job was ended before its last step by something else than its own cancel (a
+    # pause, a stop, a reset): '' if it was not.
+    ended_by: str = ''
 
     @property
     def stepped(self) -> int:
@@ -135,8 +138,12 @@ class Stepping:
                                              f'(sim time {self._world.sim_time:.1f} s)')
 
     def pause(self) -> Tuple[bool, str]:
-        """Stop real-time stepping (running trajectory goals end: the arms hold)."""
+        """Stop real-time stepping (running trajectory goals end: the arms hold); step
+        requests being served end too (in lock-step, that is all a pause does)."""
+        ended = self.end_steps('a pause')
         if self.synchronous:
+            if ended:
+                return True, f'paused: {ended}'
             return False, 'synchronous mode: use ~/step'
         self.paused = True
         self._timer.cancel()
@@ -144,7 +151,31 @@ class Stepping:
             'the simulation was paused: the arm holds where it is; send the goal again '
             'after ~/resume', hold=True)
         return True, f'paused at {self._world.sim_time:.3f} s' + (
-            f' (goals aborted: {", ".join(aborted)})' if aborted else '')
+            f' (goals aborted: {", ".join(aborted)})' if aborted else '') + (
+            f'; {ended}' if ended else '')
+
+    def end_steps(self, cause: str) -> str:
+        """End every step request being served, now: each is answered with the steps it took
+        (a pause, a stop and a reset do this before they act, so that what they reply has
+        happened and no step follows it). What was ended, as text ('' if nothing was)."""
+        ended = []
+        while self._jobs:
+            job = self._jobs.popleft()
+            job.canceled, job.ended_by = True, cause
+            if job.started:
+                self._end_step()
+            ended.append(f'{job.stepped} of {job.steps}')
+            if job.response is not None:
+                job.response.success = False
+                job.response.message = (f'ended by {cause} after {job.stepped} of {job.steps} '
+                                        'steps')
+            self._finish(job)
+        self._chunk_timer.cancel()
+        if not ended:
+            return ''
+        self._node.get_logger().info(f'{cause} ended the step requests being served (steps '
+                                     f'taken: {", ".join(ended)})')
+        return f'step requests ended after {", ".join(ended)} steps'
 
     def play(self) -> Tuple[bool, str]:
         """Step in real time again."""

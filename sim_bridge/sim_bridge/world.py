@@ -4,7 +4,19 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Dict, FrozenSet, List, Optional, Sequence, Set, Tuple, Union, cast
+from typing import (
+    Any,
+    Callable,
+    Dict,
+    FrozenSet,
+    List,
+    Optional,
+    Sequence,
+    Set,
+    Tuple,
+    Union,
+    cast,
+)
 
 import numpy as np
 import pybullet
@@ -20,6 +32,7 @@ from sim_bridge.backdrop import StaticBackdrop, static_visuals
 from sim_bridge.camera import perturb_frame, projection_matrix, view_matrix_from_optical
 from sim_bridge.cell import Conveyor, MaterialBody, MaterialSource, Suction
 from sim_bridge.client import Client
+from sim_bridge.free_bodies import Lost, base_problem
 from world_description.camera_geometry import intrinsics_from_fov, look_at_rotation
 from world_description.joint_limits import JointLimitsError, load_acceleration_limits
 from world_description.perturbations import PerturbationDraws
@@ -154,18 +167,20 @@ class SimRobot:
             self._initial[j] = position
         self.reset()
 
-    def state_problem(self) -> str:
-        """What in the body's state is not finite ('' if all is): PyBullet carries a NaN on
-        from step to step, and resetting the state does not clear it from the body."""
+    def state_problem(self, joints: bool = True) -> str:
+        """What in the body's state is not finite, or has left the world ('' if nothing is):
+        PyBullet carries a NaN on from step to step, and resetting the state does not clear it
+        from the body. ``joints=False``: the base's velocity only (after every step)."""
         p, body = self.client, self.body
-        pos, orn = p.getBasePositionAndOrientation(body)
-        linear, angular = p.getBaseVelocity(body)
-        if not math.isfinite(sum(pos) + sum(orn) + sum(linear) + sum(angular)):
-            return 'its base pose or velocity'
+        problem = base_problem(p, body, pose=joints)
+        if problem:
+            return f'its base: {problem}'
+        if not joints:
+            return ''
         states = p.getJointStates(body, self.movable) if self.movable else []
         bad = [self._joint_names[i] for i, st in enumerate(states)
                if not math.isfinite(st[0] + st[1])]
-        return f'joints {bad}' if bad else ''
+        return f'the states of joints {bad} are not finite' if bad else ''
 
     def reload(self) -> None:
         """Remove the body from the physics and load it again at its start pose, at rest: the
@@ -597,6 +612,10 @@ class SimWorld:
         # Their visual shapes, hidden while a fixed camera draws what moves (None: they cannot
         # be drawn again alike, and every frame is drawn whole).
         self._static_visuals = static_visuals(p, list(self._static_poses))
+        # Bodies spawned into the world by others (entities.py): name, and what to call when
+        # the world takes one out; and the bodies taken out since take_lost.
+        self._guests: Dict[int, Tuple[str, Callable[[], None]]] = {}
+        self._lost: List[Lost] = []
         self.suctions: Dict[str, Suction] = {}
         for name, robot in self.robots.items():
             sc = robot.config.suction
@@ -636,6 +655,51 @@ class SimWorld:
                 self.source.update(self.sim_time)
         self._p.stepSimulation()
         self.step_count += 1
+        self.check_free_bodies(pose=False)
+
+    def adopt(self, body: int, name: str, forget: Callable[[], None]) -> None:
+        """Watch a body spawned by another part (its ``name``): one that leaves the world is
+        removed, and ``forget()`` called."""
+        self._guests[body] = (name, forget)
+
+    def disown(self, body: int) -> None:
+        """Stop watching a body (its owner removes it)."""
+        self._guests.pop(body, None)
+
+    def check_free_bodies(self, pose: bool = True) -> None:
+        """Take out every material and spawned body whose state is not finite or has left
+        the world (free_bodies.py), before it is stepped again (a material held by a suction
+        cup is released first); each is in ``take_lost()``. ``pose=False``: velocities only
+        (after every step)."""
+        taken = False
+        for m in list(self.materials):
+            problem = base_problem(self._p, m.body, pose)
+            if problem:
+                for suction in self.suctions.values():
+                    if suction.held is m:
+                        suction.release(self.source)
+                assert self.source is not None
+                self.source.remove(m)
+                self._lost.append(Lost(m.name or f'material_{m.index}',
+                                       f'taken out of the world: {problem}'))
+                taken = True
+        for body, (name, forget) in list(self._guests.items()):
+            problem = base_problem(self._p, body, pose)
+            if problem:
+                del self._guests[body]
+                self._p.removeBody(body)
+                forget()
+                self._lost.append(Lost(name, f'taken out of the world: {problem}'))
+                taken = True
+        if taken:
+            for name in self.repair_static():
+                self._lost.append(Lost(name, 'put back where it belongs: its pose was not '
+                                             'finite'))
+
+    def take_lost(self) -> List[Lost]:
+        """The bodies taken out of the world since the last call (and static bodies put back)."""
+        lost, self._lost = self._lost, []
+        return lost
 
     def repair_static(self) -> List[str]:
         """Put back every static body whose pose is no longer finite; their names."""

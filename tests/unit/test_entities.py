@@ -2,6 +2,8 @@
 listed and filtered, their states read and set, spawned and deleted, with a clear refusal for
 what cannot be done."""
 import math
+import os
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -13,6 +15,7 @@ from sim_bridge.entities import (
     Entities,
     EntityError,
     Filters,
+    Info,
     State,
 )
 from sim_bridge.runner import DriveLimits, NullSink, SimRunner
@@ -207,3 +210,157 @@ def test_spawnables_and_named_poses(cell):
     assert poses['pool_floor'].pose.position == pytest.approx((2.1, -1.3, 0.002))
     lo, hi = poses['pool_floor'].box
     assert lo[:2] == pytest.approx((1.8, -1.6)) and hi[:2] == pytest.approx((2.4, -1.0))
+
+
+# --- requests from a careless or hostile client (issue 47): each answered at once ---------------
+def test_a_name_filter_runs_in_linear_time_and_its_limits_say_why(cell):
+    """Python's re took minutes on this pattern against the cell's names (it backtracks);
+    RE2 reads each name once. POSIX classes (the standard's syntax) work; what RE2 cannot
+    do (a backreference) is refused with the reason."""
+    world, runner, entities = cell
+    assert entities.names(Filters(pattern=r'(\w*\w*\w*\w*\w*\w*\w*\w*)*!')) == []
+    assert entities.names(Filters(pattern='^[[:alpha:]]+12$')) == ['zu12']
+    assert 'RE2' in _error('failed', entities.names, Filters(pattern=r'(a)\1'))
+    assert 'at most' in _error('failed', entities.names, Filters(pattern='a' * 2000))
+    assert 'tags' in _error('failed', entities.names, Filters(tags=('t',) * 100))
+
+
+def test_a_urdf_text_is_checked_before_pybullet_reads_it_and_leaves_no_file(cell, tmp_path):
+    from sim_bridge.entities import SCRATCH_PREFIX
+    from sim_bridge.urdf_check import MAX_LINKS, MAX_URDF_BYTES
+    world, runner, entities = cell
+    scratch = entities._scratch.path
+    here = State((3.0, 3.0, 0.3), UPRIGHT)
+    # 315 kB of "<robot ": a regular expression over the text took two minutes; expat
+    # stops at its first malformed byte.
+    assert 'not well-formed' in _error('parse_error', entities.spawn, 'x', False, '',
+                                       '<robot ' * 45_000, '', here)
+    assert 'bytes' in _error('parse_error', entities.spawn, 'x', False, '',
+                             '<robot name="r">' + ' ' * MAX_URDF_BYTES + '</robot>', '', here)
+    laughs = ('<?xml version="1.0"?><!DOCTYPE r [<!ENTITY a "aaaaaaaaaa">'
+              '<!ENTITY b "&a;&a;&a;&a;&a;&a;&a;&a;&a;&a;">]><robot name="r">&b;</robot>')
+    assert 'document type' in _error('parse_error', entities.spawn, 'x', False, '', laughs,
+                                     '', here)
+    links = ''.join(f'<link name="l{k}"/>' for k in range(MAX_LINKS + 1))
+    assert 'links' in _error('parse_error', entities.spawn, 'x', False, '',
+                             f'<robot name="r">{links}</robot>', '', here)
+    fifo = tmp_path / 'pipe.obj'
+    os.mkfifo(fifo)
+    for mesh, code in ((str(fifo), 'not_found'), ('/nowhere/m.obj', 'not_found'),
+                       ('relative.obj', 'not_found'), ('/dev/zero', 'unsupported_format')):
+        text = (f'<robot name="m"><link name="b"><visual><geometry><mesh filename="{mesh}"/>'
+                '</geometry></visual></link></robot>')
+        _error(code, entities.spawn, 'x', False, '', text, '', here)
+    big = tmp_path / 'big.urdf'
+    big.write_text('<robot name="big">' + ' ' * MAX_URDF_BYTES + '</robot>')
+    _error('parse_error', entities.spawn, 'x', False, f'file://{big}', '', '', here)
+    block = ('<robot name="block"><link name="base"><inertial><mass value="1"/>'
+             '<inertia ixx="0.01" ixy="0" ixz="0" iyy="0.01" iyz="0" izz="0.01"/></inertial>'
+             '<collision><geometry><box size="0.1 0.1 0.1"/></geometry></collision></link>'
+             '</robot>')
+    assert entities.spawn('', True, '', block, '', here).startswith('block')
+    assert [p.name for p in scratch.iterdir()] == ['.owner.lock']   # nothing else kept
+    assert scratch.name.startswith(SCRATCH_PREFIX)
+    entities.close()
+    assert not scratch.exists()
+
+
+def test_a_scratch_directory_of_a_dead_run_is_removed_by_the_next(tmp_path):
+    """A SIGKILLed simulator cannot remove its scratch directory: the next one does, and
+    leaves a living one's alone."""
+    import subprocess
+    import sys
+
+    from sim_bridge.scratch import ScratchDir
+    code = ('import sys, time; from pathlib import Path; from sim_bridge.scratch import '
+            'ScratchDir; s = ScratchDir("sim_x_", Path(sys.argv[1])); '
+            '(s.path / "left.urdf").write_text("x"); print(s.path, flush=True); time.sleep(60)')
+    dead = subprocess.Popen([sys.executable, '-c', code, str(tmp_path)], stdout=subprocess.PIPE,
+                            text=True)
+    dead_dir = Path(dead.stdout.readline().strip())
+    dead.kill()
+    dead.wait()
+    alive = ScratchDir('sim_x_', tmp_path)
+    assert dead_dir.exists() is False and alive.removed_stale == [dead_dir]
+    again = ScratchDir('sim_x_', tmp_path)
+    assert alive.path.exists() and again.removed_stale == []
+    alive.close()
+    again.close()
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_spawned_entities_are_bounded_in_number_and_size_of_request(cell):
+    from sim_bridge.entities import MAX_NAME_CHARS, MAX_SPAWNED
+    world, runner, entities = cell
+    for k in range(MAX_SPAWNED):
+        entities.spawn(f'b{k}', False, 'shape://box?size=0.02,0.02,0.02&mass=0', '', '',
+                       State((-1.0 + (k % 20) * 0.05, 2.0 + (k // 20) * 0.05, 0.5), UPRIGHT))
+    assert 'at most' in _error('failed', entities.spawn, 'one_more', False,
+                               'shape://sphere?radius=0.01', '', '',
+                               State((3.0, -2.0, 0.5), UPRIGHT))
+    entities.delete('b0')
+    entities.spawn('one_more', False, 'shape://sphere?radius=0.01', '', '',
+                   State((3.0, -2.0, 0.5), UPRIGHT))
+    _error('name_invalid', entities.spawn, 'n' * (MAX_NAME_CHARS + 1), False,
+           'shape://sphere?radius=0.01', '', '', State((3.0, -2.5, 0.5), UPRIGHT))
+    assert 'at most' in _error('failed', entities.set_info, 'youbot',
+                               Info(ROBOT, 'd' * 5000, []))
+
+
+@pytest.mark.parametrize('linear, angular', [((1e300, 0.0, 0.0), (0.0, 0.0, 0.0)),
+                                             ((60.0, 0.0, 0.0), (0.0, 0.0, 0.0)),
+                                             ((0.0, 0.0, 0.0), (0.0, 0.0, 60.0))])
+def test_a_state_set_from_outside_is_held_to_speed_limits(cell, linear, angular):
+    world, runner, entities = cell
+    entities.spawn('ball', False, 'shape://sphere?radius=0.05&mass=0.2', '', '',
+                   State((1.5, 1.5, 0.5), UPRIGHT))
+    assert 'velocity' in _error('invalid_pose', entities.set_state, 'ball',
+                                State((1.5, 1.5, 0.5), UPRIGHT, linear, angular))
+    assert 'velocity' in _error('invalid_pose', entities.spawn, 'thrown', False,
+                                'shape://sphere?radius=0.05&mass=0.2', '', '',
+                                State((1.5, 2.5, 0.5), UPRIGHT, linear, angular))
+    entities.set_state('ball', State((1.5, 1.5, 0.5), UPRIGHT, (10.0, 0.0, 0.0)))
+    _run(world, runner, 0.05)
+    assert entities.state('ball').linear[0] == pytest.approx(10.0, rel=0.05)
+
+
+def test_a_body_whose_state_goes_wrong_is_taken_out_before_the_next_step(cell):
+    """Whatever brings a free body's state to NaN or off into the distance (here PyBullet is
+    told so directly, past every check), the step after which it happened takes it out: it is
+    never stepped on, and never reported."""
+    world, runner, entities = cell
+    p = world.client
+    entities.spawn('ball', False, 'shape://sphere?radius=0.05&mass=0.2', '', '',
+                   State((1.5, 1.5, 0.5), UPRIGHT))
+    entities.spawn('crate', False, 'shape://box?size=0.1,0.1,0.1&mass=1', '', '',
+                   State((1.5, 2.0, 0.5), UPRIGHT))
+    _run(world, runner, 3.0)                      # (a material is on the belt by now)
+    material = world.materials[0]
+    lost = []
+
+    class Lost(NullSink):
+        def on_body_lost(self, name, reason):
+            lost.append((name, reason))
+    ball = entities._get('ball').body
+    p.resetBaseVelocity(ball, (math.nan, 0.0, 0.0), (0.0, 0.0, 0.0))
+    runner.advance(1, Lost())
+    taken = {name: what for name, what in lost if what.startswith('taken out')}
+    assert list(taken) == ['ball'] and 'not finite' in taken['ball']
+    assert 'ball' not in entities.names()
+    _error('not_found', entities.state, 'ball')
+    # Driven to PyBullet's velocity cap (it clamps, and simulates no more); a material far off.
+    p.resetBaseVelocity(entities._get('crate').body, (5000.0, 0.0, 0.0), (0.0, 0.0, 0.0))
+    p.resetBasePositionAndOrientation(material.body, (2000.0, 0.0, 0.5), UPRIGHT)
+    runner.advance(1, Lost())
+    assert 'cap' in dict(lost)['crate'] and 'crate' not in entities.names()
+    runner.advance(round(0.01 / world.time_step), Lost())      # (poses: at the state rate)
+    assert 'origin' in dict(lost)[f'material_{material.index}']
+    assert material not in world.materials
+    # What is left is finite, and keeps working.
+    for name in entities.names():
+        state = entities.state(name)
+        assert np.all(np.isfinite(state.position + state.linear))
+    entities.spawn('crate', False, 'shape://box?size=0.1,0.1,0.1&mass=1', '', '',
+                   State((1.5, 2.0, 0.5), UPRIGHT))
+    _run(world, runner, 0.5)
+    assert entities.state('crate').position[2] == pytest.approx(0.05, abs=3e-3)
