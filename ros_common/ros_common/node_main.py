@@ -125,8 +125,19 @@ def _create(factory: Callable[[], N], name: str,
         rclpy.logging.get_logger(name).fatal(f'bad parameter: {exc}')
     except tuple(startup_errors) as exc:
         rclpy.logging.get_logger(name).fatal(f'cannot start: {exc}')
-    except (*_SHUTDOWN_RACE, ExternalShutdownException, KeyboardInterrupt):
+    except (ExternalShutdownException, KeyboardInterrupt):
         if not early_stop.requested():
+            raise
+        rclpy.try_shutdown()
+        raise _Stopped() from None
+    except Exception:
+        # A stop shuts a task's context down from a thread of its own (run_task): a node
+        # being built then fails in whatever rclpy call comes next (Node.__init__ raised
+        # NotInitializedException, "rclpy.init() has not been called", 0.92 s into a launch).
+        # With the context gone by a stop, that is the stop; anything else is raised.
+        for thread in _SHUTTING_DOWN:          # (a stop's shutdown under way)
+            thread.join(2.0)
+        if not (early_stop.requested() and not rclpy.ok()):
             raise
         rclpy.try_shutdown()
         raise _Stopped() from None

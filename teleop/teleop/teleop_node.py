@@ -194,9 +194,10 @@ def _raise_interrupt(_signum, _frame) -> None:
 def main(args=None) -> int:
     # rclpy's own handlers would shut the context down before the zero twist could go out.
     rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
-    signal.signal(signal.SIGINT, _raise_interrupt)
-    signal.signal(signal.SIGTERM, _raise_interrupt)
     try:
+        # (Inside the try: a signal between the two raises here, and is a stop.)
+        signal.signal(signal.SIGINT, _raise_interrupt)
+        signal.signal(signal.SIGTERM, _raise_interrupt)
         if early_stop.requested():      # (Ctrl-C while the process started: a stop)
             raise KeyboardInterrupt
         node = TeleopNode()

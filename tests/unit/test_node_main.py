@@ -164,3 +164,37 @@ def test_a_node_ends_its_own_run_and_a_signal_while_it_is_made_is_not_lost(how, 
     out = subprocess.run([sys.executable, '-c', NODE_THAT_ENDS_ITSELF, str(code), how],
                          capture_output=True, text=True, timeout=60)
     assert out.returncode == expected, out.stdout + out.stderr
+
+
+TASK_STOPPED_WHILE_MADE = '''
+import os, signal, sys, time
+import rclpy
+from rclpy.node import Node
+from ros_common import early_stop
+from ros_common.node_main import run_task
+
+class Late(Node):
+    def __init__(self):
+        # A SIGINT between rclpy.init and the node's creation (as ros2 launch sent one 0.92 s
+        # into the pipeline's start): the stop shuts the task's context down in a thread.
+        os.kill(os.getpid(), signal.SIGINT)
+        deadline = time.monotonic() + 20.0
+        while rclpy.ok() and time.monotonic() < deadline:
+            time.sleep(0.01)
+        super().__init__('late')         # NotInitializedException: the context is gone
+
+early_stop.install()
+sys.exit(run_task(Late, 'late', lambda node: 5, interrupted_code=int(sys.argv[1])))
+'''
+
+
+@pytest.mark.parametrize('interrupted_code', [0, 1])
+def test_a_task_stopped_before_its_node_exists_ends_as_a_stop(interrupted_code):
+    """run_task: a stop that shut the context down before the node was made ends the task
+    as a stop (its interrupted code), with no traceback."""
+    import subprocess
+    import sys
+    out = subprocess.run([sys.executable, '-c', TASK_STOPPED_WHILE_MADE, str(interrupted_code)],
+                         capture_output=True, text=True, timeout=60)
+    assert out.returncode == interrupted_code, out.stdout + out.stderr
+    assert 'Traceback' not in out.stderr and 'Exception' not in out.stderr, out.stderr
