@@ -11,21 +11,54 @@ from __future__ import annotations
 
 import json
 import math
-from dataclasses import replace
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any, Dict, Optional, Tuple
 
 import yaml
 
-from coordinator.trial_result import RESULT_FILE, ResultError, TrialResult, read_result
-from recording.analysis import AnalysisError, open_reader
+from coordinator.records import Fields, RecordError, parse_json, read_text
+from coordinator.trial_result import (
+    MAX_BELT_SPEED,
+    MAX_SEED,
+    MAX_TRIAL,
+    RESULT_FILE,
+    TrialResult,
+    check_parameters,
+    check_scenario,
+    read_result,
+)
+from recording.analysis import AnalysisError, open_reader, read_messages
 
 TRIAL_KEY = 'robot_sim.trial'
 STATE_TOPIC = '/coordinator_node/state'
+MAX_METADATA_BYTES = 16 * 1024 * 1024      # a trial's metadata.yaml: about 30 kB
+
+__all__ = ['RecordError', 'TrialRecord', 'bag_metadata', 'is_bag', 'trial_bag', 'find_result',
+           'load_trial', 'custom_data', 'result_from_bag']
 
 
-class RecordError(ValueError):
-    """A run that cannot be read as a trial; the message is the line to print."""
+@dataclass(frozen=True)
+class TrialRecord:
+    """What ran, as a trial's bag keeps it (``TRIAL_KEY``), checked field by field: a bag
+    copied from elsewhere and edited is data, not instructions (its trial number names
+    directories, its world is run again)."""
+    trial: Optional[int]
+    scenario_seed: Optional[int]
+    belt_speed: float
+    code: str
+    parameters: Dict[str, float] = field(default_factory=dict)
+    scenario: Dict[str, Any] = field(default_factory=dict)
+
+    @classmethod
+    def from_json(cls, text: str, what: str) -> 'TrialRecord':
+        f = Fields(parse_json(text, what), what)
+        f.only(('trial', 'scenario_seed', 'belt_speed', 'code', 'parameters', 'scenario'))
+        return cls(trial=f.integer('trial', 0, MAX_TRIAL, None, none=True),
+                   scenario_seed=f.integer('scenario_seed', -1, MAX_SEED, None, none=True),
+                   belt_speed=f.number('belt_speed', 0.0, MAX_BELT_SPEED, math.nan, nan=True),
+                   code=f.text('code', '', limit=200),
+                   parameters=check_parameters(f), scenario=check_scenario(f))
 
 
 def bag_metadata(trial: int, seed: int, belt_speed: float, code: str,
@@ -81,10 +114,12 @@ def load_trial(run: Path) -> Tuple[TrialResult, Path]:
 
 def custom_data(bag: Path) -> Dict[str, str]:
     """A bag's custom data (metadata.yaml's ``custom_data``; {} if none)."""
+    path = bag / 'metadata.yaml'
+    text = read_text(path, 'a bag\'s metadata', MAX_METADATA_BYTES)
     try:
-        info = yaml.safe_load((bag / 'metadata.yaml').read_text())
-    except (OSError, UnicodeDecodeError, yaml.YAMLError) as exc:
-        raise RecordError(f'{bag}: its metadata.yaml cannot be read: {exc}') from None
+        info = yaml.safe_load(text)
+    except (yaml.YAMLError, RecursionError) as exc:
+        raise RecordError(f'{path} cannot be read: {str(exc)[:120]}') from None
     data = (info or {}).get('rosbag2_bagfile_information', {}) if isinstance(info, dict) else {}
     custom = data.get('custom_data') if isinstance(data, dict) else None
     return {str(k): str(v) for k, v in custom.items()} if isinstance(custom, dict) else {}
@@ -92,41 +127,42 @@ def custom_data(bag: Path) -> Dict[str, str]:
 
 def result_from_bag(bag: Path) -> TrialResult:
     """A trial's result as its bag keeps it: the coordinator's last published result, with
-    what ran from the bag's metadata."""
-    try:
-        reader = open_reader(bag)
-    except AnalysisError as exc:
-        raise RecordError(str(exc)) from None
-    try:
-        last = ''
-        states = [c for c in reader.connections if c.topic == STATE_TOPIC]
-        for connection, _, raw in reader.messages(connections=states):
-            text = str(getattr(reader.deserialize(raw, connection.msgtype), 'result_json', ''))
-            last = text or last
-    finally:
-        reader.close()
+    what ran from the bag's metadata (each checked: RecordError)."""
+    last = _last_result(bag)
     custom = custom_data(bag)
     if TRIAL_KEY not in custom:
         raise RecordError(f'{bag}: its metadata does not say what ran (no {TRIAL_KEY} in '
                           'custom_data: a bag recorded before bags kept it); use its trial '
                           'directory')
-    try:
-        ran = json.loads(custom[TRIAL_KEY])
-    except ValueError as exc:
-        raise RecordError(f'{bag}: {TRIAL_KEY}: {str(exc)[:120]}') from None
-    if not isinstance(ran, dict):
-        raise RecordError(f'{bag}: {TRIAL_KEY} is not a JSON object')
-    try:
-        # A run stopped before its end published no result: what ran is still known (it can
-        # be drawn, and run again).
-        result = (TrialResult.from_dict(json.loads(last)) if last else TrialResult.failure(
-            'interrupted', f'the run did not end while it was recorded (no result on '
-            f'{STATE_TOPIC})', seed=ran.get('scenario_seed'),
-            belt_speed=float(ran.get('belt_speed', math.nan))))
-    except (ValueError, TypeError, ResultError) as exc:
-        raise RecordError(f'{bag}: {str(exc)[:120]}') from None
+    ran = TrialRecord.from_json(custom[TRIAL_KEY], f'{bag}: {TRIAL_KEY}')
+    # A run stopped before its end published no result: what ran is still known (it can be
+    # drawn, and run again).
+    result = (TrialResult.from_dict(parse_json(last, f'{bag}: its last {STATE_TOPIC}'),
+                                    f'{bag}: its last {STATE_TOPIC}') if last else
+              TrialResult.failure('interrupted', 'the run did not end while it was recorded '
+                                  f'(no result on {STATE_TOPIC})', seed=ran.scenario_seed,
+                                  belt_speed=ran.belt_speed))
     # (The coordinator's result has the seed and the belt speed; the trial runner added the
     # rest to the result file.)
-    return replace(result.with_run(trial=ran.get('trial'), code=str(ran.get('code', ''))),
-                   parameters=dict(ran.get('parameters') or {}),
-                   scenario=dict(ran.get('scenario') or {}))
+    return replace(result.with_run(trial=ran.trial, code=ran.code),
+                   parameters=dict(ran.parameters), scenario=dict(ran.scenario))
+
+
+def _last_result(bag: Path) -> str:
+    """The last result the coordinator published in a bag ('' if none)."""
+    try:
+        reader = open_reader(bag)
+    except AnalysisError as exc:
+        raise RecordError(str(exc)) from None
+    last = ''
+    try:
+        states = [c for c in reader.connections if c.topic == STATE_TOPIC]
+        if states:
+            for _, _, msg in read_messages(reader, bag, states):
+                text = getattr(msg, 'result_json', '')
+                last = text if isinstance(text, str) and text else last
+    except AnalysisError as exc:
+        raise RecordError(str(exc)) from None
+    finally:
+        reader.close()
+    return last

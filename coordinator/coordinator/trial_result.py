@@ -12,10 +12,24 @@ from __future__ import annotations
 import json
 import math
 import os
+import re
 import subprocess
 from dataclasses import asdict, dataclass, field, fields, replace
 from pathlib import Path
 from typing import Any, Dict, List, Mapping, Optional, Tuple
+
+from coordinator.records import (
+    MAX_COUNT,
+    MAX_SIM_TIME_S,
+    MAX_TEXT,
+    Fields,
+    RecordError,
+    is_int,
+    is_number,
+    parse_json,
+    read_text,
+)
+from world_description.world_config import WorldConfigError, parse_world
 
 RESULT_FILE = 'result.json'      # in each trial's directory
 # The CSV's columns, in order (``TrialResult.to_row``).
@@ -29,9 +43,23 @@ RATES = ('identification_rate', 'grasp_success_rate', 'handling_success_rate',
 # Metadata a record of the first layout kept at its top level (read into ``run``).
 _FLAT_RUN_KEYS = ('trial', 'code', 'wall_time', 'cpu_seconds', 'node', 'ray_node', 'niceness',
                   'bag')
+STATUSES = ('completed', 'incomplete', 'timeout', 'node_timeout', 'error', 'interrupted')
+MODES = ('', 'lock-step', 'real-time')
+COUNTS = ('total', 'identified', 'picked', 'delivered', 'grasp_attempts', 'grasp_successes',
+          'missed', 'failed', 'zu12_grasp_attempts', 'zu12_grasp_successes',
+          'youbot_grasp_attempts', 'youbot_grasp_successes', 'loaded', 'trips', 'belt_stops',
+          'identified_correct', 'handled_verified')
+MAX_MESSAGE = 100_000               # characters of a result's message (longer ones are cut)
+MAX_TRIAL = 1_000_000               # a trial's number in its plan
+MAX_SEED = 2 ** 31 - 1              # (the simulator's scenario_seed is a 32-bit integer)
+MAX_BELT_SPEED = 2.0                # [m/s] the world file's largest
+TIME_STEP_RANGE = (1e-4, 0.05)      # [s] the simulator's time_step parameter's range
+MAX_PARAMETERS = 16
+PARAMETER_NAME = re.compile(r'^[A-Za-z_][A-Za-z0-9_]*(\.[A-Za-z_][A-Za-z0-9_]*)*$')
+MAX_PATH_XY_M = 1e4                 # a path point's coordinates [m]
 
 
-class ResultError(ValueError):
+class ResultError(RecordError):
     """A record that is not a trial's result, and why."""
 
 
@@ -102,6 +130,11 @@ class TrialResult:
     states: List[List[Any]] = field(default_factory=list)
     run: RunInfo = field(default_factory=RunInfo)
 
+    def __post_init__(self) -> None:
+        # (What is written must read back: a message is cut to what the reader takes.)
+        if len(self.message) > MAX_MESSAGE:
+            self.message = self.message[:MAX_MESSAGE - 1] + '\u2026'
+
     @classmethod
     def failure(cls, status: str, message: str, trial: Optional[int] = None,
                 seed: Optional[int] = None, belt_speed: float = math.nan,
@@ -154,70 +187,171 @@ class TrialResult:
         os.replace(scratch, path)
 
     @classmethod
-    def from_dict(cls, data: Any) -> 'TrialResult':
+    def from_dict(cls, data: Any, what: str = 'the result') -> 'TrialResult':
         """A record read back (``to_dict``'s layout, or the first layout, which kept the run's
-        metadata at its top level); ResultError says what makes it unusable."""
+        metadata at its top level), every field typed and ranged; ResultError says which field
+        makes it unusable."""
         if not isinstance(data, Mapping):
-            raise ResultError(f'not a trial result (a JSON {type(data).__name__})')
+            raise ResultError(f'{what}: not a trial result (a JSON {type(data).__name__})')
         data = dict(data)
-        run = data.pop('run', None)
-        run = dict(run) if isinstance(run, Mapping) else {}
+        run = data.pop('run', {})
+        if not isinstance(run, Mapping):
+            raise ResultError(f'{what}: run is not a mapping')
+        run = dict(run)
         for key in _FLAT_RUN_KEYS:
             if key in data:
                 if key in run and run[key] != data[key]:
-                    raise ResultError(f'{key} is {data[key]!r:.40} and, in its run, '
+                    raise ResultError(f'{what}: {key} is {data[key]!r:.40} and, in its run, '
                                       f'{run[key]!r:.40}')
                 run[key] = data.pop(key)
         data.pop('cpu_seconds_self', None)
-        _check(data, run)
-        known = {f.name for f in fields(cls)} - {'run'}
-        info = RunInfo(**{k: v for k, v in run.items()
-                          if k in {f.name for f in fields(RunInfo)}})
-        return cls(**{k: v for k, v in data.items() if k in known}, run=info)
+        try:
+            return cls(**_outcome(Fields(data, what)), run=_run_info(Fields(run, f'{what}: run')))
+        except ResultError:
+            raise
+        except RecordError as exc:
+            raise ResultError(str(exc)) from None
 
 
-def _check(data: Dict[str, Any], run: Dict[str, Any]) -> None:
-    if not isinstance(data.get('status'), str) or not data['status']:
-        raise ResultError('no status')
-    for key, where in (('trial', run), ('scenario_seed', data)):
-        number: Any = where.get(key)
-        if key in where and number is not None and not (is_int(number) and number >= 0):
-            raise ResultError(f'{key} is {number!r:.40}, not an integer >= 0')
-    for key, where in (('belt_speed', data), ('completion_time', data), ('wall_time', run)):
-        if key in where and not is_number(where[key]):
-            raise ResultError(f'{key} is {where[key]!r:.40}, not a number')
-    for key in RATES:
-        value: Any = data.get(key)
-        if key in data and not (is_number(value) and (
-                math.isnan(value) or 0.0 <= value <= 1.0)):
-            raise ResultError(f'{key} is {value!r:.40}, not a rate within 0..1')
-    if not isinstance(data.get('scenario', {}), Mapping):
-        raise ResultError(f'scenario is {data["scenario"]!r:.40}, not a mapping')
-    parameters = data.get('parameters', {})
-    if not isinstance(parameters, Mapping) or not all(
-            isinstance(k, str) and is_number(v) for k, v in parameters.items()):
-        raise ResultError(f'parameters is {parameters!r:.40}, not numbers by name')
-    cpu = run.get('cpu_seconds', {})
-    if not isinstance(cpu, Mapping) or not all(is_number(v) for v in cpu.values()):
-        raise ResultError(f'cpu_seconds is {cpu!r:.40}, not seconds per process')
+def _outcome(f: Fields) -> Dict[str, Any]:
+    """The fields of a result but its run, checked."""
+    f.only([x.name for x in fields(TrialResult) if x.name != 'run'])
+    out: Dict[str, Any] = {
+        'status': f.text('status', choices=STATUSES),
+        'completion_time': f.number('completion_time', 0.0, MAX_SIM_TIME_S, math.nan, nan=True),
+        'message': f.text('message', '', limit=MAX_MESSAGE),
+        'scenario_seed': f.integer('scenario_seed', -1, MAX_SEED, None, none=True),
+        'belt_speed': f.number('belt_speed', 0.0, MAX_BELT_SPEED, math.nan, nan=True),
+        'mode': f.text('mode', '', choices=MODES),
+        'parameters': check_parameters(f),
+        'scenario': check_scenario(f),
+        'not_at_destination': f.entries('not_at_destination', []),
+        'materials': _materials(f),
+        'identifications': f.entries('identifications', []),
+        'final_materials': f.entries('final_materials', []),
+        'peak_joint_speed': _peaks(f),
+        'youbot_path': _path(f),
+        'events': _rows(f, 'events', (_time, str, str, int, str, str)),
+        'states': _rows(f, 'states', (_time, str, str)),
+    }
+    out.update({key: f.integer(key, 0, MAX_COUNT, 0) for key in COUNTS})
+    out.update({key: f.number(key, 0.0, 1.0, math.nan, nan=True) for key in RATES})
+    if f.has('odometry_age') and f.data['odometry_age'] is not None:
+        out['odometry_age'] = f.numbers('odometry_age', -MAX_SIM_TIME_S, MAX_SIM_TIME_S)
+    return out
+
+
+def _run_info(f: Fields) -> RunInfo:
+    f.only([x.name for x in fields(RunInfo)])
+    return RunInfo(trial=f.integer('trial', 0, MAX_TRIAL, None, none=True),
+                   code=f.text('code', 'unknown', limit=200),
+                   wall_time=f.number('wall_time', 0.0, 1e8, math.nan, nan=True),
+                   cpu_seconds=f.numbers('cpu_seconds', 0.0, 1e8, {}),
+                   node=f.text('node', '', limit=1000),
+                   ray_node=f.text('ray_node', '', limit=1000),
+                   niceness=f.integer('niceness', -20, 19, None, none=True),
+                   bag=f.text('bag', '', limit=4096))
+
+
+def check_parameters(f: Fields) -> Dict[str, float]:
+    """A sweep point's (or a re-run's) parameters: numbers by their names (belt_speed, or a
+    number of the world file by its path); each is checked against the world when used."""
+    values = f.numbers('parameters', -1e12, 1e12, {})
+    bad = [name for name in values if len(name) > 200 or not PARAMETER_NAME.match(name)]
+    if bad or len(values) > MAX_PARAMETERS:
+        raise f.fail('parameters', f'are not at most {MAX_PARAMETERS} numbers by name '
+                     f'({bad[0][:40]!r} is no name)' if bad else
+                     f'are {len(values)} (at most {MAX_PARAMETERS})')
+    return values
+
+
+def check_scenario(f: Fields) -> Dict[str, Any]:
+    """What it takes to run a trial again: the world as given, the world file as it was (a
+    world the reader of world files takes), the physics step."""
+    s = f.record('scenario', {})
+    s.only(('world', 'world_data', 'time_step'))
+    out: Dict[str, Any] = {}
+    for key in s.data:                   # (in their order: a world's keys are part of it)
+        if key == 'world':
+            out[key] = s.text(key, limit=4096)
+        elif key == 'time_step':
+            out[key] = s.number(key, *TIME_STEP_RANGE)
+        else:
+            data = s.record(key).data
+            try:
+                parse_world(data, f'{s.what}: world_data')
+            except WorldConfigError as exc:
+                raise ResultError(str(exc)) from None
+            except RecursionError:
+                raise ResultError(f'{s.what}: world_data is nested too deeply') from None
+            out[key] = dict(data)
+    return out
+
+
+def _materials(f: Fields) -> List[Dict[str, Any]]:
+    """What became of each material (the report names a failed one by id, colour, status)."""
+    out = f.entries('materials', [])
+    for k, m in enumerate(out):
+        entry = Fields(m, f'{f.what}: materials[{k}]')
+        entry.integer('id', -1, MAX_COUNT)
+        entry.text('color')
+        entry.text('status')
+        entry.text('failure', '')
+    return out
+
+
+def _peaks(f: Fields) -> Dict[str, Dict[str, Any]]:
+    out = {}
+    peaks = f.record('peak_joint_speed', {})
+    for arm in peaks.data:
+        p = peaks.record(arm)
+        p.number('fraction_of_limit', 0.0, 1e6)
+        p.text('joint', '')
+        if p.has('time') and p.data['time'] is not None:
+            p.number('time', -MAX_SIM_TIME_S, MAX_SIM_TIME_S, nan=True)
+        out[arm] = dict(p.data)
+    return out
+
+
+def _path(f: Fields) -> List[List[float]]:
+    points = f.items('youbot_path', [])
+    for k, point in enumerate(points):
+        if not (isinstance(point, list) and len(point) == 2 and all(
+                is_number(v) and abs(v) <= MAX_PATH_XY_M for v in point)):
+            raise f.fail(f'youbot_path[{k}]', f'is not [x, y] within {MAX_PATH_XY_M:g} m')
+    return [[float(x), float(y)] for x, y in points]
+
+
+def _time(value: Any) -> bool:
+    return is_number(value) and abs(value) <= MAX_SIM_TIME_S
+
+
+def _rows(f: Fields, key: str, kinds: Tuple[Any, ...]) -> List[List[Any]]:
+    """A list of rows of a fixed shape: an event (time, kind, robot, material, colour,
+    detail) or a state change (time, machine, state)."""
+    rows = f.items(key, [])
+    for k, row in enumerate(rows):
+        ok = isinstance(row, list) and len(row) == len(kinds) and all(
+            kind(v) if callable(kind) and kind is _time else
+            (is_int(v) if kind is int else isinstance(v, kind) and len(v) <= MAX_TEXT)
+            for kind, v in zip(kinds, row))
+        if not ok:
+            raise f.fail(f'{key}[{k}]', 'is not a row of ' + ', '.join(
+                'time' if kind is _time else kind.__name__ for kind in kinds))
+    return rows
 
 
 def read_result(path: Path) -> Tuple[Optional[TrialResult], Optional[str]]:
     """A trial's result and None, or None and why it cannot be used (None, None: no file)."""
-    try:
-        text = path.read_text()
-    except FileNotFoundError:
+    if not path.exists() and not path.is_symlink():
         return None, None
-    except (OSError, UnicodeDecodeError) as exc:
-        return None, f'cannot be read: {exc}'
     try:
-        data = json.loads(text)
-    except (ValueError, RecursionError) as exc:
-        return None, f'not JSON: {str(exc)[:80]}'
-    try:
-        return TrialResult.from_dict(data), None
-    except ResultError as exc:
-        return None, str(exc)
+        data = parse_json(read_text(path, 'a trial result'), str(path))
+        return TrialResult.from_dict(data, str(path)), None
+    except RecordError as exc:
+        text = str(exc)
+        prefix = f'{path}: '
+        return None, text[len(prefix):] if text.startswith(prefix) else text
 
 
 def code_version() -> str:
@@ -241,11 +375,3 @@ def code_version() -> str:
     changed = git('-C', root, 'status', '--porcelain', '--untracked-files=no', '--', '.',
                   ':(exclude)docs', ':(exclude)*.md')
     return commit + ('-dirty' if changed is None or changed else '')
-
-
-def is_int(value: Any) -> bool:
-    return isinstance(value, int) and not isinstance(value, bool)
-
-
-def is_number(value: Any) -> bool:
-    return isinstance(value, (int, float)) and not isinstance(value, bool)

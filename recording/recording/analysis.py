@@ -11,7 +11,7 @@ import math
 import sys
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
-from typing import Any, Dict, List, Optional, Sequence, Tuple
+from typing import Any, Dict, Iterator, List, Optional, Sequence, Tuple
 
 import numpy as np
 from rosbags.highlevel import AnyReader, AnyReaderError
@@ -85,6 +85,28 @@ def open_reader(bag: Path) -> AnyReader:
         if bag.is_dir() and not (bag / 'metadata.yaml').exists():
             hint = ' (no metadata.yaml: if its recorder was killed, run bag_repair on it)'
         raise AnalysisError(f'{bag} is not a readable rosbag2 bag: {exc}{hint}') from None
+
+
+def read_messages(reader: AnyReader, bag: Path, connections: Sequence[Any] = ()
+                  ) -> Iterator[Tuple[Any, int, Any]]:
+    """The reader's messages (connection, time, message) of ``connections`` (all if none),
+    deserialized. Whatever the libraries raise on damaged data (rosbags, the mcap and SQLite
+    libraries raise many kinds: a zeroed block gave OverflowError, others struct.error,
+    KeyError, CorruptError) is an AnalysisError that names the bag: a bag from elsewhere is
+    data, and a tool that reads one ends with a line, not a traceback."""
+    messages = reader.messages(connections=list(connections)) if connections else \
+        reader.messages()
+    while True:
+        try:
+            connection, stamp, raw = next(messages)
+            msg = reader.deserialize(raw, connection.msgtype)
+        except StopIteration:
+            return
+        except Exception as exc:
+            raise AnalysisError(f'{bag}: unreadable data ({type(exc).__name__}: '
+                                f'{str(exc)[:200]}); the bag is truncated or corrupt: '
+                                'bag_repair recovers what is intact') from None
+        yield connection, stamp, msg
 
 
 @dataclass

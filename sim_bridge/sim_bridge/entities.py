@@ -35,7 +35,7 @@ import re2
 from controllers.arrays import Vector
 from sim_bridge.cell import MaterialBody
 from sim_bridge.scratch import ScratchDir
-from sim_bridge.urdf_check import (
+from world_description.urdf_check import (
     UrdfProblem,
     check_meshes,
     read_urdf_file,

@@ -176,13 +176,13 @@ def test_results_are_checked_field_by_field():
     # The first layout, with the run's metadata at the top level, reads into the same record.
     flat = {**{k: v for k, v in good.items() if k != 'run'}, **good['run']}
     assert TrialResult.from_dict(flat).run == TrialResult.from_dict(good).run
-    for change, fragment in (({'status': 5}, 'no status'), ({'trial': -1}, 'trial is'),
+    for change, fragment in (({'status': 5}, 'status is 5, not a string'), ({'trial': -1}, 'trial is'),
                              ({'run': {'trial': 'x'}}, 'trial is'),
                              ({'scenario_seed': 'a'}, 'scenario_seed is'),
                              ({'belt_speed': None}, 'belt_speed is'),
                              ({'run': {'wall_time': '1'}}, 'wall_time is'),
-                             ({'run': {'cpu_seconds': {'sim_node': 'a'}}}, 'cpu_seconds is'),
-                             ({'handling_success_rate': 2.0}, 'not a rate')):
+                             ({'run': {'cpu_seconds': {'sim_node': 'a'}}}, 'cpu_seconds: sim_node is'),
+                             ({'handling_success_rate': 2.0}, 'not a number within 0..1')):
         assert fragment in result_problem({**good, **change})
     assert 'JSON str' in result_problem('abc')
 

@@ -227,7 +227,7 @@ def test_a_name_filter_runs_in_linear_time_and_its_limits_say_why(cell):
 
 def test_a_urdf_text_is_checked_before_pybullet_reads_it_and_leaves_no_file(cell, tmp_path):
     from sim_bridge.entities import SCRATCH_PREFIX
-    from sim_bridge.urdf_check import MAX_LINKS, MAX_URDF_BYTES
+    from world_description.urdf_check import MAX_LINKS, MAX_URDF_BYTES
     world, runner, entities = cell
     scratch = entities._scratch.path
     here = State((3.0, 3.0, 0.3), UPRIGHT)

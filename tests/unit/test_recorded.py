@@ -15,9 +15,12 @@ from coordinator.recorded import (
 )
 from coordinator.trial_result import RunInfo, TrialResult
 from recording.bag_writer import BagWriter
+from world_description.resources import resolve_resource
+from world_description.world_config import world_data
 
 SCENARIO = {'world': 'cell.yaml', 'time_step': 1 / 240,
-            'world_data': {'materials': {'counts': {'purple': 1, 'orange': 2}}}}
+            'world_data': world_data(resolve_resource(
+                'package://world_description/worlds/pipeline_cell.yaml'))}
 
 
 def _result():
@@ -58,7 +61,7 @@ def test_a_bag_that_cannot_say_is_told(tmp_path):
     assert cut.status == 'interrupted' and 'did not end while it was recorded' in cut.message
     assert (cut.trial, cut.scenario_seed, cut.belt_speed, cut.scenario) == (2, 5, 0.12,
                                                                            SCENARIO)
-    with pytest.raises(RecordError, match='not a JSON object'):
+    with pytest.raises(RecordError, match='a JSON object was expected'):
         result_from_bag(_bag(tmp_path / 'odd', {TRIAL_KEY: '[1]'}, [result]))
     with pytest.raises(RecordError, match='not a readable rosbag2 bag'):
         bad = tmp_path / 'bad'

@@ -347,11 +347,12 @@ def test_outside_a_checkout_the_code_version_is_the_one_the_image_was_built_from
 
 def test_two_runs_differ_only_where_their_outcome_does_not_in_their_metadata():
     one = TrialResult('completed', 60.1, scenario_seed=0, belt_speed=0.12, delivered=8,
-                      events=[[1.5, 'grasp', 'm0']], run=RunInfo(trial=0, wall_time=39.0))
+                      events=[[1.5, 'picked', 'zu12', 0, 'orange', '']],
+                      run=RunInfo(trial=0, wall_time=39.0))
     other = one.with_run(wall_time=43.8, code='abc', cpu_seconds={'sim_node': 27.0})
     assert one.differences(other) == []                 # NaN rates equal NaN
     moved = TrialResult.from_dict({**other.to_dict(), 'completion_time': 60.2,
-                                   'events': [[1.6, 'grasp', 'm0']]})
+                                   'events': [[1.6, 'picked', 'zu12', 0, 'orange', '']]})
     assert one.differences(moved) == ['completion_time', 'events']
 
 

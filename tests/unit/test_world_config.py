@@ -131,7 +131,7 @@ def test_the_joint_limits_files_match_what_the_planner_plans_with(tmp_path):
     for text, why in [('joint_limits: 3', 'needs a "joint_limits" mapping'),
                       ('joint_limits: {a: {has_acceleration_limits: true}}', 'max_acceleration'),
                       ('joint_limits: {a: {has_acceleration_limits: true, max_acceleration: -1}}',
-                       'finite number > 0'),
+                       r'within \(0, 10000\]'),
                       ('joint_limits: {a: {has_acceleration_limits: 1}}', 'true or false'),
                       ('{', 'cannot be read as YAML')]:
         bad = tmp_path / 'bad.yaml'
@@ -143,3 +143,47 @@ def test_the_joint_limits_files_match_what_the_planner_plans_with(tmp_path):
     off = tmp_path / 'off.yaml'
     off.write_text('joint_limits: {a: {has_acceleration_limits: false, max_acceleration: 3}}')
     assert load_acceleration_limits(off) == {}
+
+
+def _numbers(data, path=()):
+    """Every number of a world's data (not a boolean), by its path of keys and indices."""
+    if isinstance(data, dict):
+        for key, value in data.items():
+            yield from _numbers(value, path + (key,))
+    elif isinstance(data, list):
+        for i, value in enumerate(data):
+            yield from _numbers(value, path + (i,))
+    elif isinstance(data, (int, float)) and not isinstance(data, bool):
+        yield path
+
+
+def _set(data, path, value):
+    import copy
+    out = copy.deepcopy(data)
+    node = out
+    for key in path[:-1]:
+        node = node[key]
+    node[path[-1]] = value
+    return out
+
+
+@pytest.mark.parametrize('world', ['pipeline_cell', 'pipeline_cell_perturbed',
+                                   'cell_four_classes', 'youbot', 'mini_robot'])
+def test_every_number_of_a_world_has_a_range(world):
+    """Issue 47: gravity=1e300 was taken (materials flew to 2,760 m), and robot poses and
+    initial joint positions alike. Each number of a world, set far out either way, is refused
+    with the field named."""
+    import yaml
+
+    from world_description.world_config import parse_world, world_data
+    data = world_data(resolve_resource(f'package://world_description/worlds/{world}.yaml'))
+    data.pop('perturbations', None) if world != 'pipeline_cell_perturbed' else None
+    paths = list(_numbers(data))
+    assert len(paths) > 20
+    for path in paths:
+        for value in (1e300, -1e300):
+            with pytest.raises(WorldConfigError) as raised:
+                parse_world(_set(data, path, value), 'w.yaml')
+            assert str(path[-1]) in str(raised.value) or 'w.yaml' in str(raised.value), path
+    assert yaml.safe_dump(data)      # (the unchanged world still loads)
+    parse_world(data, 'w.yaml')

@@ -9,6 +9,8 @@ Only the acceleration limits are read (position, velocity and effort come from t
 from __future__ import annotations
 
 import math
+import os
+import stat
 from pathlib import Path
 from typing import Dict
 
@@ -19,11 +21,19 @@ class JointLimitsError(ValueError):
     """A joint_limits file that cannot be used; the message names the file and the field."""
 
 
+MAX_FILE_BYTES = 1024 * 1024         # the project's are a few hundred bytes
+MAX_ACCELERATION = 1e4               # [rad/s^2 or m/s^2]
+
+
 def load_acceleration_limits(path: Path) -> Dict[str, float]:
     """{joint: max_acceleration} for the joints whose has_acceleration_limits is true."""
     try:
+        info = os.stat(path)
+        if not stat.S_ISREG(info.st_mode) or info.st_size > MAX_FILE_BYTES:
+            raise JointLimitsError(f'{path}: not a regular file of at most {MAX_FILE_BYTES} '
+                                   'bytes')
         data = yaml.safe_load(Path(path).read_text(encoding='utf-8'))
-    except (OSError, UnicodeDecodeError, yaml.YAMLError) as exc:
+    except (OSError, UnicodeDecodeError, yaml.YAMLError, RecursionError) as exc:
         raise JointLimitsError(f'{path}: cannot be read as YAML: {exc}') from None
     joints = data.get('joint_limits') if isinstance(data, dict) else None
     if not isinstance(joints, dict):
@@ -40,8 +50,8 @@ def load_acceleration_limits(path: Path) -> Dict[str, float]:
             continue
         value = entry.get('max_acceleration')
         if (isinstance(value, bool) or not isinstance(value, (int, float))
-                or not (math.isfinite(value) and value > 0.0)):
+                or not (math.isfinite(value) and 0.0 < value <= MAX_ACCELERATION)):
             raise JointLimitsError(f'{path}: joint_limits.{joint}.max_acceleration must be a '
-                                   f'finite number > 0, got {value!r}')
+                                   f'number within (0, {MAX_ACCELERATION:g}], got {value!r}')
         limits[str(joint)] = float(value)
     return limits

@@ -224,6 +224,16 @@ class WorldConfig:
 
 _NAME = re.compile(r'^[A-Za-z][A-Za-z0-9_]*$')
 
+# Every number of a world has a range: a world file, or the copy of one a result or a bag
+# keeps, may come from elsewhere, and a value without one (gravity 1e300) runs a world that is
+# no cell. The ranges hold every cell this simulator can run.
+WORLD_EXTENT_M = 100.0            # each coordinate of what a world places [m]
+GRAVITY_RANGE = (-30.0, 0.0)      # [m/s^2] along z: none to three g, downwards
+TURN_RAD = 6.2832                 # a yaw within a turn either way (2 pi, rounded up) [rad]
+MAX_JOINT_POSITION = 100.0        # an initial joint position [rad or m] (the robot's URDF
+#                                   limits are checked by robot_files.py and the simulator)
+MAX_SIZE_M = WORLD_EXTENT_M       # an obstacle's dimension
+
 
 # A world file larger than this is refused before it is parsed: the worlds here are a few kB,
 # and YAML is parsed at about 2 MB/s by each node that reads it (a 1 GB file took 8.5 min and
@@ -367,8 +377,10 @@ def parse_world(data: Any, source: str = '<memory>') -> WorldConfig:
             raise WorldConfigError(f'{source}: materials need a conveyor to be placed on')
         materials = _materials(r, data['materials'], obstacles)
     return WorldConfig(source=source,
-                       gravity=r.number(data, 'gravity', 'world', default=-9.81),
-                       floor_size=r.number(data, 'floor_size', 'world', default=4.0, lo=0.1),
+                       gravity=r.number(data, 'gravity', 'world', default=-9.81,
+                                        lo=GRAVITY_RANGE[0], hi=GRAVITY_RANGE[1]),
+                       floor_size=r.number(data, 'floor_size', 'world', default=4.0, lo=0.1,
+                                           hi=2 * WORLD_EXTENT_M),
                        robots=robots, obstacles=obstacles, cameras=cameras, conveyor=conveyor,
                        materials=materials,
                        perturbations=_perturbations(r, data.get('perturbations') or {}))
@@ -384,7 +396,9 @@ def _robot(r: '_Reader', item: Any, i: int) -> RobotConfig:
         raise WorldConfigError(f'{r.source}: {where}.namespace "{namespace}" is not a ROS name')
     pose_data = item.get('pose', {}) or {}
     r.only(pose_data, where + '.pose', {'x', 'y', 'z', 'yaw'})
-    pose = Pose(*(r.number(pose_data, k, where + '.pose', default=0.0)
+    pose = Pose(*(r.number(pose_data, k, where + '.pose', default=0.0,
+                           lo=-TURN_RAD if k == 'yaw' else -WORLD_EXTENT_M,
+                           hi=TURN_RAD if k == 'yaw' else WORLD_EXTENT_M)
                   for k in ('x', 'y', 'z', 'yaw')))
     drive, limits = None, DriveLimitsConfig()
     if item.get('drive') is not None:
@@ -406,7 +420,8 @@ def _robot(r: '_Reader', item: Any, i: int) -> RobotConfig:
     initial = item.get('initial_joint_positions') or {}
     if not isinstance(initial, dict):
         raise r.fail(where, 'initial_joint_positions', 'must be a mapping joint: position')
-    initial_positions = tuple((str(j), r.number(initial, j, where + '.initial_joint_positions'))
+    initial_positions = tuple((str(j), r.number(initial, j, where + '.initial_joint_positions',
+                                                lo=-MAX_JOINT_POSITION, hi=MAX_JOINT_POSITION))
                               for j in initial)
     fixed_base = item.get('fixed_base', False)
     if not isinstance(fixed_base, bool):
@@ -421,7 +436,7 @@ def _robot(r: '_Reader', item: Any, i: int) -> RobotConfig:
                                 r.number(item['suction'], 'reach', sw, default=0.01, lo=1e-4,
                                          hi=0.1),
                                 r.number(item['suction'], 'max_payload', sw, default=12.0,
-                                         lo=1e-3),
+                                         lo=1e-3, hi=1000.0),
                                 r.string(item['suction'], 'service', sw, default='suction'))
         if not re.fullmatch(r'[a-z][a-z0-9_]*(/[a-z][a-z0-9_]*)*', suction.service):
             raise r.fail(sw, 'service', f'"{suction.service}" is not a relative ROS name')
@@ -442,9 +457,9 @@ def _drive(r: '_Reader', d: Any, dw: str
         drive: Union[DiffDriveConfig, MecanumConfig] = DiffDriveConfig(
             left_wheel_joint=r.string(d, 'left_wheel_joint', dw),
             right_wheel_joint=r.string(d, 'right_wheel_joint', dw),
-            wheel_radius=r.number(d, 'wheel_radius', dw, lo=1e-4),
-            wheel_separation=r.number(d, 'wheel_separation', dw, lo=1e-4),
-            wheel_effort=r.number(d, 'wheel_effort', dw, lo=1e-6))
+            wheel_radius=r.number(d, 'wheel_radius', dw, lo=1e-4, hi=5.0),
+            wheel_separation=r.number(d, 'wheel_separation', dw, lo=1e-4, hi=20.0),
+            wheel_effort=r.number(d, 'wheel_effort', dw, lo=1e-6, hi=1e5))
     elif kind == 'mecanum':
         k_name = 'sum_of_robot_center_projection_on_X_Y_axis'
         r.only(d, dw, common | {'wheel_joints', k_name})
@@ -455,9 +470,10 @@ def _drive(r: '_Reader', d: Any, dw: str
                          f'front-right, rear-right, rear-left; got {joints!r}')
         drive = MecanumConfig(
             wheel_joints=tuple(joints),
-            wheel_radius=r.number(d, 'wheel_radius', dw, lo=1e-4),
-            sum_of_robot_center_projection_on_X_Y_axis=r.number(d, k_name, dw, lo=1e-4),
-            wheel_effort=r.number(d, 'wheel_effort', dw, lo=1e-6))
+            wheel_radius=r.number(d, 'wheel_radius', dw, lo=1e-4, hi=5.0),
+            sum_of_robot_center_projection_on_X_Y_axis=r.number(d, k_name, dw, lo=1e-4,
+                                                                hi=20.0),
+            wheel_effort=r.number(d, 'wheel_effort', dw, lo=1e-6, hi=1e5))
     else:
         raise WorldConfigError(f'{r.source}: {dw}.type must be "diff_drive" or "mecanum", '
                                f'got {kind!r}')
@@ -494,13 +510,14 @@ def _obstacle(r: '_Reader', item: Any, i: int) -> ObstacleConfig:
     sizes = {'box': 3, 'cylinder': 2, 'sphere': 1}
     if shape not in sizes:
         raise WorldConfigError(f'{r.source}: {where}.shape must be one of {sorted(sizes)}')
-    size = r.vector(item, 'size', where, sizes[shape], lo=1e-4)
+    size = r.vector(item, 'size', where, sizes[shape], lo=1e-4, hi=MAX_SIZE_M)
     color = r.rgba(item, 'color', where, default=(0.6, 0.6, 0.6, 1.0))
     collision = item.get('collision', True)
     if not isinstance(collision, bool):
         raise r.fail(where, 'collision', f'must be true or false, got {collision!r}')
     return ObstacleConfig(shape=shape, size=size, position=r.vec3(item, 'position', where),
-                          yaw=r.number(item, 'yaw', where, default=0.0), color=color,
+                          yaw=r.number(item, 'yaw', where, default=0.0, lo=-TURN_RAD,
+                                       hi=TURN_RAD), color=color,
                           name=r.string(item, 'name', where, default=''), collision=collision)
 
 
@@ -513,7 +530,8 @@ def _conveyor(r: '_Reader', item: Any) -> ConveyorConfig:
     return ConveyorConfig(position=r.vec3(item, 'position', where),
                           length=r.number(item, 'length', where, lo=0.1, hi=50.0),
                           width=r.number(item, 'width', where, lo=0.02, hi=5.0),
-                          yaw=r.number(item, 'yaw', where, default=0.0),
+                          yaw=r.number(item, 'yaw', where, default=0.0, lo=-TURN_RAD,
+                                       hi=TURN_RAD),
                           belt_speed=r.number(item, 'belt_speed', where, default=0.05, lo=0.0,
                                               hi=2.0), end_stop=end_stop)
 
@@ -535,7 +553,7 @@ def _materials(r: '_Reader', item: Any, obstacles: List[ObstacleConfig]) -> Mate
                      'bring no material at all')
     _check_rules(r, classes, obstacles)
     largest = max(c.size for c in classes)
-    lo_gap, hi_gap = r.vector(item, 'gap', where, 2, lo=0.0, default=(0.25, 0.45))
+    lo_gap, hi_gap = r.vector(item, 'gap', where, 2, lo=0.0, hi=50.0, default=(0.25, 0.45))
     gap = (lo_gap, hi_gap)
     if gap[0] > gap[1]:
         raise r.fail(where, 'gap', f'must be [min, max], got {list(gap)}')
@@ -544,7 +562,7 @@ def _materials(r: '_Reader', item: Any, obstacles: List[ObstacleConfig]) -> Mate
     return MaterialsConfig(
         classes=classes, size=size, mass=mass, gap=gap,
         lateral_jitter=r.number(item, 'lateral_jitter', where, default=0.03, lo=0.0, hi=1.0),
-        start_offset=r.number(item, 'start_offset', where, default=0.1, lo=0.0),
+        start_offset=r.number(item, 'start_offset', where, default=0.1, lo=0.0, hi=50.0),
         seed=int(r.number(item, 'seed', where, default=0, lo=0, hi=2**31 - 1, integer=True)))
 
 
@@ -691,8 +709,8 @@ def _camera(r: '_Reader', item: Any, i: int, robots: List[RobotConfig]) -> Camer
     height = int(r.number(item, 'height', where, default=240, lo=8, hi=4096, integer=True))
     rate = r.number(item, 'rate', where, default=15.0, lo=1e-3, hi=1000.0)
     fov = r.number(item, 'vertical_fov_deg', where, default=60.0, lo=1.0, hi=170.0)
-    near = r.number(item, 'near', where, default=0.01, lo=1e-5)
-    far = r.number(item, 'far', where, default=10.0, lo=1e-3)
+    near = r.number(item, 'near', where, default=0.01, lo=1e-5, hi=100.0)
+    far = r.number(item, 'far', where, default=10.0, lo=1e-3, hi=1000.0)
     if far <= near:
         raise WorldConfigError(f'{r.source}: {where}: far must be greater than near')
     if robot is not None:
@@ -752,8 +770,9 @@ class _Reader:
             raise self.fail(where, key, f'"{value}" must be a ROS name ([A-Za-z][A-Za-z0-9_]*)')
         return value
 
-    def number(self, data: Dict[str, Any], key: str, where: str, default: Optional[float] = None,
-               lo: float = -math.inf, hi: float = math.inf, integer: bool = False) -> float:
+    def number(self, data: Dict[str, Any], key: str, where: str, *, lo: float, hi: float,
+               default: Optional[float] = None, integer: bool = False) -> float:
+        """A number within [lo, hi] (every number of a world has a range)."""
         value = data.get(key, default)
         if value is None:
             raise self.fail(where, key, 'is required')
@@ -765,9 +784,8 @@ class _Reader:
             raise self.fail(where, key, f'must be finite and within [{lo}, {hi}], got {value}')
         return float(value)
 
-    def vector(self, data: Dict[str, Any], key: str, where: str, n: int, lo: float = -math.inf,
-               hi: float = math.inf, default: Optional[Tuple[float, ...]] = None
-               ) -> Tuple[float, ...]:
+    def vector(self, data: Dict[str, Any], key: str, where: str, n: int, *, lo: float,
+               hi: float, default: Optional[Tuple[float, ...]] = None) -> Tuple[float, ...]:
         value = data.get(key, default)
         if value is None:
             raise self.fail(where, key, 'is required')
@@ -777,7 +795,7 @@ class _Reader:
         return tuple(self.number(tmp, str(i), f'{where}.{key}', lo=lo, hi=hi) for i in range(n))
 
     def vec3(self, data: Dict[str, Any], key: str, where: str) -> Tuple[float, float, float]:
-        x, y, z = self.vector(data, key, where, 3)
+        x, y, z = self.vector(data, key, where, 3, lo=-WORLD_EXTENT_M, hi=WORLD_EXTENT_M)
         return (x, y, z)
 
     def rgba(self, data: Dict[str, Any], key: str, where: str,

@@ -5,6 +5,7 @@ bounded size. Any client on the DDS domain can send one: nothing here may take m
 milliseconds, whatever the text."""
 from __future__ import annotations
 
+import math
 import os
 import stat
 import xml.parsers.expat
@@ -29,11 +30,24 @@ class UrdfProblem(ValueError):
 
 
 @dataclass(frozen=True)
+class UrdfJoint:
+    name: str
+    kind: str                          # revolute, continuous, prismatic, fixed, ...
+    lower: float                       # its <limit>'s (-inf, inf: none given)
+    upper: float
+
+
+@dataclass(frozen=True)
 class UrdfSummary:
     name: str                          # the robot's name ('' if it has none)
     links: int
     joints: int
     meshes: Tuple[str, ...]            # the mesh file names, as written
+    joint_list: Tuple[UrdfJoint, ...] = ()
+    link_names: Tuple[str, ...] = ()
+
+    def joint(self, name: str) -> Optional[UrdfJoint]:
+        return next((j for j in self.joint_list if j.name == name), None)
 
 
 def read_urdf_file(path: Path) -> str:
@@ -83,7 +97,8 @@ def summarise_urdf(text: str) -> UrdfSummary:
     if walk.root != 'robot':
         raise UrdfProblem('parse_error', f'the URDF\'s root element is <{walk.root}>, not '
                           '<robot>')
-    return UrdfSummary(walk.name, walk.links, walk.joints, tuple(walk.meshes))
+    return UrdfSummary(walk.name, walk.links, walk.joints, tuple(walk.meshes),
+                       tuple(walk.joint_list), tuple(walk.link_names))
 
 
 class _Walk:
@@ -94,6 +109,8 @@ class _Walk:
         self.name = ''
         self.links = self.joints = self.elements = self.depth = 0
         self.meshes: List[str] = []
+        self.joint_list: List[UrdfJoint] = []
+        self.link_names: List[str] = []
 
     def doctype(self, *_args: object) -> None:
         raise UrdfProblem('parse_error', 'the URDF has a document type (<!DOCTYPE>): not '
@@ -115,15 +132,31 @@ class _Walk:
         elif self.depth == 2 and tag in ('link', 'joint'):
             if tag == 'link':
                 self.links += 1
+                self.link_names.append(str(attributes.get('name', '')))
             else:
                 self.joints += 1
+                self.joint_list.append(UrdfJoint(str(attributes.get('name', '')),
+                                                 str(attributes.get('type', '')),
+                                                 -math.inf, math.inf))
             if max(self.links, self.joints) > MAX_LINKS:
                 raise UrdfProblem('parse_error', f'the URDF has more than {MAX_LINKS} {tag}s')
         elif tag == 'mesh':
             self.meshes.append(str(attributes.get('filename', '')))
+        elif tag == 'limit' and self.depth == 3 and self.joint_list:
+            last = self.joint_list[-1]
+            self.joint_list[-1] = UrdfJoint(last.name, last.kind,
+                                            _float(attributes.get('lower'), -math.inf),
+                                            _float(attributes.get('upper'), math.inf))
 
     def end(self, _tag: str) -> None:
         self.depth -= 1
+
+
+def _float(text: Optional[str], default: float) -> float:
+    try:
+        return float(text) if text is not None else default
+    except ValueError:
+        return default
 
 
 def check_meshes(summary: UrdfSummary, base_dir: Optional[Path],
