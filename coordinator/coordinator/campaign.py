@@ -18,7 +18,8 @@ from typing import IO, Any, Callable, Dict, Iterator, List, Optional, Tuple
 
 from coordinator.graph import CONTROL_RATE, TIME_STEP
 from coordinator.sweep import SweepError, grid, parse_axis
-from coordinator.trial_result import RESULT_FILE, TrialResult, is_int, is_number, read_result
+from coordinator.records import is_int, is_number
+from coordinator.trial_result import RESULT_FILE, TrialResult, read_result
 from world_description import PIPELINE_CELL
 
 CAMPAIGN_FILE = 'campaign.json'
@@ -102,6 +103,11 @@ def _check_sweep(plan: Dict[str, Any], bad: Callable[[str, str], CampaignError])
     per = plan.get('trials_per_point')
     if per is not None and not (is_int(per) and 1 <= per <= MAX_TRIALS):
         raise bad('trials_per_point', f'an integer within 1..{MAX_TRIALS}')
+    if sweep is not None:
+        trials = len(points) * (per or plan.get('trials', PLAN_DEFAULTS['trials']))
+        if trials > MAX_TRIALS:
+            raise CampaignError(f'the sweep plans {trials} trials ({len(points)} points): at '
+                                f'most {MAX_TRIALS}')
     below = plan.get('break_below')
     if below is not None and not (is_number(below) and 0.0 < below <= 1.0):
         raise bad('break_below', 'a rate within (0, 1]')

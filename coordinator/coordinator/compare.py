@@ -20,6 +20,7 @@ from typing import List, Optional, Sequence, Tuple
 import numpy as np
 
 from coordinator.campaign import trial_results
+from coordinator.outputs import OutputError, check_output_dir, staged_dir
 from coordinator.recorded import RecordError, load_trial
 from coordinator.rerun import figures, first_parting
 from coordinator.sweep import RATES, wilson
@@ -33,8 +34,9 @@ def load_runs(path: Path) -> List[TrialResult]:
     campaign (a directory of trials); ValueError saying why not."""
     if path.is_dir() and len(list(path.glob('trial_*/result.json'))) > 1:
         results, problems = trial_results(path)
-        if not results:
-            raise ValueError(f'{path}: no usable trial result ({"; ".join(problems[:2])})')
+        if problems:
+            more = f' (and {len(problems) - 1} more)' if len(problems) > 1 else ''
+            raise ValueError(f'{problems[0]}{more}')
         return results
     try:
         return [load_trial(path)[0]]
@@ -162,21 +164,25 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     parser.add_argument('--out', type=Path, default=None,
                         help='where comparison.md and its plots go (runs/compare-<time>)')
     args = parser.parse_args(argv)
+    out = args.out or Path('runs') / time.strftime('compare-%Y%m%d-%H%M%S')
     try:
+        check_output_dir(out, '--out')                 # (before any work)
         a, b = load_runs(args.a), load_runs(args.b)
-    except ValueError as exc:
+        if (len(a) == 1) != (len(b) == 1):
+            raise ValueError('compare a run with a run, or a campaign with a campaign '
+                             f'({args.a}: {len(a)} trials, {args.b}: {len(b)})')
+    except ValueError as exc:                  # (OutputError and RecordError are ValueErrors)
         print(f'compare_runs: error: {exc}', file=sys.stderr)
         return 2
-    if (len(a) == 1) != (len(b) == 1):
-        print('compare_runs: error: compare a run with a run, or a campaign with a campaign '
-              f'({args.a}: {len(a)} trials, {args.b}: {len(b)})', file=sys.stderr)
-        return 2
-    out = args.out or Path('runs') / time.strftime('compare-%Y%m%d-%H%M%S')
-    out.mkdir(parents=True, exist_ok=True)
     names = (str(args.a), str(args.b))
-    lines = (compare_trials(a[0], b[0], out, names) if len(a) == 1
-             else compare_campaigns(a, b, names))
-    (out / 'comparison.md').write_text('\n'.join(lines))
+    try:
+        with staged_dir(out, '--out', last='comparison.md') as stage:
+            lines = (compare_trials(a[0], b[0], stage, names) if len(a) == 1
+                     else compare_campaigns(a, b, names))
+            (stage / 'comparison.md').write_text('\n'.join(lines))
+    except (OutputError, OSError) as exc:
+        print(f'compare_runs: error: {exc}; nothing written to {out}', file=sys.stderr)
+        return 2
     print('\n'.join(line for line in lines if not line.startswith('![')))
     print(f'[compare_runs] {out / "comparison.md"}')
     return 0

@@ -10,6 +10,7 @@ from typing import Any, Dict, List, Optional, Sequence, Tuple
 import cv2
 import numpy as np
 
+from coordinator.outputs import staged_dir
 from coordinator.recorded import trial_bag
 from coordinator.results import FAILURE_CAUSES, summary_rows
 from coordinator.sweep_report import sweep_lines
@@ -41,6 +42,7 @@ def histogram(values: Sequence[float], out: Path, title: str, xlabel: str,
         lo = min(vals.min(), mark[1] if math.isfinite(mark[1]) else vals.min())
         hi = max(vals.max(), mark[1] if math.isfinite(mark[1]) else vals.max())
         lo, hi = math.floor(lo - 1), math.ceil(hi + 1)
+        hi = max(hi, lo + 2)                # (never an empty span: values are finite, ranged)
         bins = max(5, min(30, int(hi - lo)))
         counts, edges = np.histogram(vals, bins=bins, range=(lo, hi))
         peak = max(1, counts.max())
@@ -103,6 +105,9 @@ def activity(trial: TrialResult) -> Dict[str, List[Tuple[float, float, str]]]:
     """Per lane of the timeline (the belt, the Zu 12, the youBot): (start, end, state) from a
     trial's state changes and belt events, up to its completion time."""
     end = float(trial.completion_time)
+    if not math.isfinite(end):             # (a run that did not end: up to its last record)
+        end = max([float(s[0]) for s in trial.states] + [float(e[0]) for e in trial.events]
+                  + [0.0])
     lanes: Dict[str, List[Tuple[float, float, str]]] = {}
     for label, machine in TIMELINE_LANES[1:]:
         changes = [(float(t), state) for t, who, state in trial.states
@@ -182,11 +187,20 @@ def scenario(world: str) -> str:
 
 
 def write_report(trials: Sequence[TrialResult], out_dir: Path, setup: Dict[str, Any]) -> Path:
-    """The campaign's report (``report.md``) and its plots, in ``out_dir``. ``setup``: how the
-    trials were run (note, or seed0, belt_speed, parallel, wall_time; world)."""
+    """The campaign's report (``report.md``) and its plots, in ``out_dir``, all or none of
+    them (outputs.staged_dir: report.md moves in last). ``setup``: how the trials were run
+    (note, or seed0, belt_speed, parallel, wall_time; world)."""
+    with staged_dir(out_dir, 'the report', last='report.md') as stage:
+        _write_report(trials, out_dir, stage, setup)
+    return out_dir / 'report.md'
+
+
+def _write_report(trials: Sequence[TrialResult], out_dir: Path, stage: Path,
+                  setup: Dict[str, Any]) -> None:
+    """write_report's files into ``stage`` (the trials' own files are read in ``out_dir``)."""
     ok = [t for t in trials if t.status != 'error']
     s = summary_rows(ok)
-    shown = _plots(ok, s, out_dir, setup.get('world'))
+    shown = _plots(ok, s, stage, setup.get('world'))
     swept = any(str(spec).partition('=')[0].strip() == 'belt_speed'
                 for spec in setup.get('sweep') or ())
     belt = 'swept' if swept else f'{setup.get("belt_speed")} m/s'
@@ -201,7 +215,7 @@ def write_report(trials: Sequence[TrialResult], out_dir: Path, setup: Dict[str, 
         ' (the trials were run by different code)' if len(codes) > 1 else '') + '.']
     if s:
         lines += _table(s)
-    lines += sweep_lines(ok, out_dir, float(setup.get('break_below') or 0.9))
+    lines += sweep_lines(ok, stage, float(setup.get('break_below') or 0.9))
     bad = [t for t in trials if t.status != 'completed']
     lines += _causes(ok)
     if bad:
@@ -215,10 +229,8 @@ def write_report(trials: Sequence[TrialResult], out_dir: Path, setup: Dict[str, 
     lines += _definitions(sorted({t.total for t in trials if t.total}) or [8])
     if shown is not None:
         lines += ['The trial of median completion time, each robot\'s activity over it:', '',
-                  '![timeline](timeline.png)', ''] + _storyboard(shown, out_dir)
-    path = out_dir / 'report.md'
-    path.write_text('\n'.join(lines))
-    return path
+                  '![timeline](timeline.png)', ''] + _storyboard(shown, out_dir, stage)
+    (stage / 'report.md').write_text('\n'.join(lines))
 
 
 def _causes(trials: Sequence[TrialResult]) -> List[str]:
@@ -278,7 +290,7 @@ def _plots(ok: Sequence[TrialResult], s: Dict[str, float], out_dir: Path,
     return median
 
 
-def _storyboard(trial: TrialResult, out_dir: Path) -> List[str]:
+def _storyboard(trial: TrialResult, out_dir: Path, stage: Path) -> List[str]:
     """The storyboard of a recorded trial and its lines; none for a trial not recorded here.
     Drawn by ``storyboard`` (sim_bringup: it builds the cell in the simulator, which the
     coordinator does not import), as the trial runner starts the simulator: by its command."""
@@ -290,7 +302,7 @@ def _storyboard(trial: TrialResult, out_dir: Path) -> List[str]:
         return [f'(No storyboard of trial {trial.trial}: the `storyboard` tool of sim_bringup '
                 'is not installed.)', '']
     try:
-        done = subprocess.run([tool, str(trial_dir), '-o', str(out_dir / 'storyboard.png')],
+        done = subprocess.run([tool, str(trial_dir), '-o', str(stage / 'storyboard.png')],
                               capture_output=True, text=True, timeout=STORYBOARD_TIMEOUT)
     except subprocess.TimeoutExpired:
         return [f'(No storyboard of trial {trial.trial}: not drawn within '

@@ -11,6 +11,7 @@ from typing import Dict, List, Sequence, Tuple
 
 import yaml
 
+from coordinator.outputs import OutputError, make_dir
 from coordinator.recorded import RecordError, load_trial
 from coordinator.sweep import TRIAL_PARAMETERS, SweepError, point_world
 from coordinator.trial_result import TrialResult
@@ -61,7 +62,10 @@ def prepare(run: Path, sets: Sequence[str], out: Path) -> Rerun:
                          'before the re-run feature); run it again with its seed instead: '
                          f'run_trials --seeds {original.scenario_seed}')
     changes = parse_sets(sets)
-    out.mkdir(parents=True, exist_ok=True)
+    try:
+        make_dir(out, '--out')
+    except OutputError as exc:
+        raise RerunError(str(exc)) from None
     world = out / ORIGINAL_WORLD
     world.write_text(f'# The world of {source}, as it ran\n'
                      + yaml.safe_dump(data, sort_keys=False))

@@ -50,13 +50,22 @@ def parse_axis(spec: str) -> Axis:
             if not (all(math.isfinite(v) for v in (start, stop, step)) and step > 0.0
                     and stop >= start):
                 raise ValueError
-            count = int(math.floor((stop - start) / step + 1e-9)) + 1
+            # (Counted before any point is made: 0:1e12:1 made a trillion of them.)
+            span = (stop - start) / step
+            if not math.isfinite(span) or span + 1 > MAX_POINTS:
+                raise SweepError(f'--sweep {spec!r}: more than {MAX_POINTS} values')
+            count = int(math.floor(span + 1e-9)) + 1
             points = tuple(round(start + k * step, 10) for k in range(count))
         else:
-            points = tuple(float(v) for v in values.split(','))
+            items = values.split(',')
+            if len(items) > MAX_POINTS:
+                raise SweepError(f'--sweep {spec!r}: {len(items)} values (1..{MAX_POINTS})')
+            points = tuple(float(v) for v in items)
             if not all(math.isfinite(v) for v in points):
                 raise ValueError
-    except ValueError:
+    except SweepError:
+        raise
+    except (ValueError, OverflowError):
         raise SweepError(f'--sweep {spec!r}: the values must be finite numbers, START <= STOP '
                          'and STEP > 0') from None
     if not 1 <= len(points) <= MAX_POINTS:
@@ -70,6 +79,9 @@ def grid(axes: Sequence[Axis]) -> List[Dict[str, float]]:
         raise SweepError(f'a sweep has one or two parameters, got {len(axes)}')
     if len({a.name for a in axes}) != len(axes):
         raise SweepError(f'--sweep names {axes[0].name} twice')
+    count = math.prod(len(a.values) for a in axes)
+    if count > MAX_POINTS:
+        raise SweepError(f'the grid has {count} points (at most {MAX_POINTS})')
     points: List[Dict[str, float]] = [{}]
     for axis in axes:
         points = [{**p, axis.name: v} for p in points for v in axis.values]
@@ -111,7 +123,8 @@ def point_world(base: str, point: Dict[str, float], directory: Path) -> str:
     try:
         load_world(path)
     except WorldConfigError as exc:
-        raise SweepError(f'the sweep point {point} gives no valid world: {exc}') from None
+        why = str(exc).replace(f'{path}: ', '')
+        raise SweepError(f'the sweep point {point} gives no valid world: {why}') from None
     return str(path)
 
 

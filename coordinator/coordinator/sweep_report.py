@@ -101,7 +101,11 @@ def _plot(series: Dict[str, List[Tuple[float, float, float, float]]], xs: Sequen
     left, top, w, h = 80, 50, 640, 380
     cv2.putText(img, title, (left, 30), FONT, 0.55, (0, 0, 0), 1)
     x0, x1 = (xs[0] - 0.5, xs[0] + 0.5) if len(xs) == 1 else (xs[0], xs[-1])
+    if not x1 - x0 > 0.0:                 # (values too close to tell apart in a float)
+        x0, x1 = x0 - 0.5, x0 + 0.5
     pad = (x1 - x0) * 0.05
+    if not span[1] - span[0] > 0.0:
+        span = (span[0] - 1.0, span[0] + 1.0)
 
     def px(x: float) -> int:
         return int(left + (x - x0 + pad) / (x1 - x0 + 2 * pad) * w)

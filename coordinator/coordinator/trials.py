@@ -33,6 +33,7 @@ from coordinator.campaign import (
     write_campaign,
 )
 from coordinator.graph import pipeline_graph
+from coordinator.outputs import OutputError, check_output_dir
 from coordinator.progress import (
     CampaignBar,
     TrialProgress,
@@ -61,6 +62,9 @@ from coordinator.trial_run import (
 from world_description import PIPELINE_CELL
 
 PROGRESS_PERIOD_S = 10.0     # wall seconds between two progress lines
+# A trial with one of these ended without an outcome of the cell (its processes failed or were
+# stopped): a re-run that ends so has failed (exit 1), whatever it changed.
+DID_NOT_RUN = ('error', 'node_timeout', 'interrupted')
 
 
 class Pool(Protocol):
@@ -280,11 +284,14 @@ def check_world(world: str) -> None:
     once, before any process starts."""
     from coordinator.layout import LayoutError, layout_from_world
     from world_description.resources import ResourceError, resolve_resource
+    from world_description.robot_files import check_robot_files
     from world_description.world_config import WorldConfigError, load_world
     path: Optional[Path] = None
     try:
         path = resolve_resource(world)
-        layout_from_world(load_world(path))
+        config = load_world(path)
+        layout_from_world(config)
+        check_robot_files(config)          # (its robots' URDFs: the simulator's first read)
     except (WorldConfigError, LayoutError, ResourceError) as exc:
         text = ' '.join(str(exc).split())
         named = world in text or (path is not None and str(path) in text)
@@ -383,7 +390,9 @@ def _main(argv: Optional[Sequence[str]]) -> int:
         if args.show_graph:
             return _show_graph({**PLAN_DEFAULTS, **given})
         if args.resume is None and not args.report_only:
-            check_world(given.get('world', PLAN_DEFAULTS['world']))     # (before any file)
+            # (Before any file: a refused plan leaves no campaign directory behind.)
+            check_world(given.get('world', PLAN_DEFAULTS['world']))
+            check_sweep_worlds({**PLAN_DEFAULTS, **given})
         try:
             args.out.mkdir(parents=True, exist_ok=True)
         except OSError as exc:
@@ -401,11 +410,12 @@ def _rerun(args: argparse.Namespace) -> int:
     """run_trials --rerun RUN [--set NAME=VALUE ...]: the trial again, into --out."""
     out = args.out or Path('runs') / time.strftime('rerun-%Y%m%d-%H%M%S')
     try:
+        check_output_dir(out, '--out')
         rerun = prepare(Path(args.rerun), args.set or [], out)
         check_world(rerun.world)
         with campaign_lock(out):
             return _run_again(rerun, out, args)
-    except (RerunError, CampaignError) as exc:
+    except (RerunError, CampaignError, OutputError) as exc:
         print(f'run_trials: error: {exc}', file=sys.stderr, flush=True)
         return 2
 
@@ -430,6 +440,11 @@ def _run_again(rerun: Rerun, out: Path, args: argparse.Namespace) -> int:
         return 130
     again = results[0]
     write_csv(results, out / 'trials.csv')
+    if again.status in DID_NOT_RUN:
+        # (Nothing to compare: the exit code says the re-run failed, whatever was asked.)
+        print(f'[rerun] the re-run did not run to its end: {again.status}: '
+              f'{again.message or "no message"} ({out})', flush=True)
+        return 1
     from coordinator.report import write_report
     write_report(results, out, {'note': f'Trial {original.trial} of {rerun.source} run again; '
                                         f'{changed}.', 'world': rerun.world})
@@ -570,7 +585,7 @@ def _campaign(args: argparse.Namespace, given: Dict[str, Any]) -> int:
     opts = _plan_options(args, given)
     if args.resume is not None:
         check_world(opts['world'])
-    check_sweep_worlds(opts)
+        check_sweep_worlds(opts)
     lo, hi = opts['belt_speed']
     plan = _plan(opts)
     results: List[TrialResult] = []

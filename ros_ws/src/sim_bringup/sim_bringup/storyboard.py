@@ -25,11 +25,13 @@ import cv2
 import numpy as np
 import pybullet
 
+from coordinator.outputs import OutputError, check_output_file, make_dir, write_file
 from coordinator.recorded import RecordError, is_bag, load_trial, trial_bag
 from coordinator.trial_result import TrialResult
-from recording.analysis import AnalysisError, open_reader
+from recording.analysis import AnalysisError, open_reader, read_messages
 from sim_bridge.world import SimWorld, WorldError
 from world_description.footprint import footprints
+from world_description.robot_files import check_robot_files
 from world_description.world_config import WorldConfig, WorldConfigError, parse_world
 
 EVENTS_TOPIC = '/coordinator_node/events'
@@ -149,9 +151,9 @@ def read_recording(bag: Path, world: WorldConfig) -> Recording:
         if not any(c.topic == EVENTS_TOPIC for c in connections):
             raise StoryboardError(f'{bag}: no {EVENTS_TOPIC} recorded (the phases come from '
                                   'the coordinator\'s events)')
-        for connection, _, raw in reader.messages(connections=connections):
+        for connection, _, msg in read_messages(reader, bag, connections):
             what, name = by_topic[connection.topic]
-            _take(out, what, name, reader.deserialize(raw, connection.msgtype))
+            _take(out, what, name, msg)
     finally:
         reader.close()
     return out
@@ -329,6 +331,7 @@ def recorded_trial(run: Path) -> RecordedTrial:
                               '(results before the re-run feature)')
     try:
         world = parse_world(data, str(source))
+        check_robot_files(world)            # (the robots' files, before the cell is built)
     except WorldConfigError as exc:
         raise StoryboardError(f'{source}: its world: {exc}') from None
     return RecordedTrial(result, source, bag, world)
@@ -336,7 +339,9 @@ def recorded_trial(run: Path) -> RecordedTrial:
 
 def write_storyboard(run: Path, out: Optional[Path] = None) -> Path:
     """Draw a recorded trial's storyboard into ``out`` (default: storyboard.png in its
-    directory); the file written."""
+    directory); the file written, whole (StoryboardError, and nothing written, otherwise)."""
+    if out is not None:
+        _check_out(out)                      # (before any work)
     trial = recorded_trial(run)
     try:
         recording = read_recording(trial.bag, trial.world)
@@ -351,10 +356,23 @@ def write_storyboard(run: Path, out: Optional[Path] = None) -> Path:
     # (Beside a bag given alone, not in it.)
     path = out or (trial.source.parent / f'{trial.source.name}_storyboard.png'
                    if is_bag(trial.source) else trial.source.parent / 'storyboard.png')
-    path.parent.mkdir(parents=True, exist_ok=True)
-    if not cv2.imwrite(str(path), img):
-        raise StoryboardError(f'cannot write {path}')
+    _check_out(path)
+    ok, png = cv2.imencode('.png', img)
+    if not ok:
+        raise StoryboardError(f'cannot encode the picture for {path}')
+    try:
+        make_dir(path.parent, '-o')
+        write_file(path, png.tobytes())
+    except (OutputError, OSError) as exc:
+        raise StoryboardError(f'cannot write {path}: {exc}') from None
     return path
+
+
+def _check_out(path: Path) -> None:
+    try:
+        check_output_file(path, '-o', ('.png',))
+    except OutputError as exc:
+        raise StoryboardError(str(exc)) from None
 
 
 def main(args: Optional[Sequence[str]] = None) -> int:
