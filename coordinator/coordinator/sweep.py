@@ -140,7 +140,7 @@ def wilson(successes: float, n: float, z: float = 1.96) -> Tuple[float, float]:
     """The Wilson score interval of a proportion (95 % by default); (nan, nan) for n = 0."""
     if n <= 0:
         return math.nan, math.nan
-    p = successes / n
+    p = min(1.0, max(0.0, successes / n))
     centre = (p + z * z / (2 * n)) / (1 + z * z / n)
     half = z * math.sqrt(p * (1 - p) / n + z * z / (4 * n * n)) / (1 + z * z / n)
     return max(0.0, centre - half), min(1.0, centre + half)

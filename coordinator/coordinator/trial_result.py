@@ -49,6 +49,10 @@ COUNTS = ('total', 'identified', 'picked', 'delivered', 'grasp_attempts', 'grasp
           'missed', 'failed', 'zu12_grasp_attempts', 'zu12_grasp_successes',
           'youbot_grasp_attempts', 'youbot_grasp_successes', 'loaded', 'trips', 'belt_stops',
           'identified_correct', 'handled_verified')
+# Counts that are parts of others (the rates divide one by the other).
+_PARTS = (('grasp_successes', 'grasp_attempts'), ('zu12_grasp_successes', 'zu12_grasp_attempts'),
+          ('youbot_grasp_successes', 'youbot_grasp_attempts'), ('identified_correct', 'total'),
+          ('handled_verified', 'total'))
 MAX_MESSAGE = 100_000               # characters of a result's message (longer ones are cut)
 MAX_TRIAL = 1_000_000               # a trial's number in its plan
 MAX_SEED = 2 ** 31 - 1              # (the simulator's scenario_seed is a 32-bit integer)
@@ -235,6 +239,9 @@ def _outcome(f: Fields) -> Dict[str, Any]:
         'states': _rows(f, 'states', (_time, str, str)),
     }
     out.update({key: f.integer(key, 0, MAX_COUNT, 0) for key in COUNTS})
+    for part, whole in _PARTS:
+        if out[part] > out[whole]:
+            raise f.fail(part, f'is {out[part]}, more than {whole} ({out[whole]})')
     out.update({key: f.number(key, 0.0, 1.0, math.nan, nan=True) for key in RATES})
     if f.has('odometry_age') and f.data['odometry_age'] is not None:
         out['odometry_age'] = f.numbers('odometry_age', -MAX_SIM_TIME_S, MAX_SIM_TIME_S)
