@@ -17,8 +17,8 @@ from pathlib import Path
 from typing import IO, Any, Callable, Dict, Iterator, List, Optional, Tuple
 
 from coordinator.graph import CONTROL_RATE, TIME_STEP
+from coordinator.records import Fields, RecordError, is_int, is_number, parse_json, read_text
 from coordinator.sweep import SweepError, grid, parse_axis
-from coordinator.records import is_int, is_number
 from coordinator.trial_result import RESULT_FILE, TrialResult, read_result
 from world_description import PIPELINE_CELL
 
@@ -36,6 +36,7 @@ PLAN_DEFAULTS: Dict[str, Any] = {
 MAX_TRIALS = 100_000
 MAX_SEED = 2 ** 31 - 1              # (the simulator's scenario_seed is a 32-bit integer)
 MAX_BELT_SPEED = 0.5                # m/s
+MAX_CAMPAIGN_BYTES = 16 * 1024 * 1024   # a plan of 100,000 seeds is about 1.2 MB
 
 
 class CampaignError(ValueError):
@@ -116,19 +117,18 @@ def _check_sweep(plan: Dict[str, Any], bad: Callable[[str, str], CampaignError])
 def read_campaign(out: Path) -> Optional[Dict[str, Any]]:
     """The plan stored in a campaign directory, or None if it has no campaign file."""
     path = out / CAMPAIGN_FILE
-    try:
-        text = path.read_text()
-    except FileNotFoundError:
+    if not path.exists() and not path.is_symlink():
         return None
-    except (OSError, UnicodeDecodeError) as exc:
-        raise CampaignError(f'{path} cannot be read: {exc}') from None
     try:
-        data = json.loads(text)
-    except (ValueError, RecursionError) as exc:
-        raise CampaignError(f'{path} is not JSON: {str(exc)[:100]}') from None
-    if not isinstance(data, dict) or 'plan' not in data:
-        raise CampaignError(f'{path} is not a campaign file (no "plan")')
-    return check_plan(data['plan'], str(path))
+        f = Fields(parse_json(read_text(path, 'a campaign file', MAX_CAMPAIGN_BYTES),
+                              str(path)), str(path))
+        f.only(('plan', 'code'))
+        f.text('code', '', limit=200)
+        if not f.has('plan'):
+            raise RecordError(f'{path} is not a campaign file (no "plan")')
+    except RecordError as exc:
+        raise CampaignError(str(exc)) from None
+    return check_plan(f.data['plan'], str(path))
 
 
 def write_campaign(out: Path, plan: Dict[str, Any], code: str) -> None:

@@ -15,6 +15,14 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Dict, List, Optional, Sequence
 
+from coordinator.records import (
+    MAX_COUNT,
+    MAX_SIM_TIME_S,
+    Fields,
+    RecordError,
+    parse_json,
+    read_text,
+)
 from coordinator.trial_result import TrialResult
 
 # Before any trial has finished, a trial is taken to need this much simulated time [s]
@@ -42,10 +50,19 @@ def write_progress(path: Path, **fields: Any) -> None:
 
 
 def read_progress(path: Path) -> Optional[Dict[str, Any]]:
+    """A running trial's progress, its fields typed (None: none yet, or not a progress file:
+    a campaign's line goes on without it)."""
     try:
-        data = json.loads(path.read_text())
-        return data if isinstance(data, dict) else None
-    except (OSError, ValueError):
+        f = Fields(parse_json(read_text(path, 'a progress file', 1 << 16), str(path)), str(path))
+        out: Dict[str, Any] = {}
+        for key in ('sim_time', 'delivered', 'total', 'loader', 'transport', 'status'):
+            if not f.has(key):
+                continue
+            out[key] = (f.number(key, 0.0, MAX_SIM_TIME_S) if key == 'sim_time' else
+                        f.integer(key, 0, MAX_COUNT) if key in ('delivered', 'total') else
+                        f.text(key, limit=40))
+        return out
+    except RecordError:
         return None
 
 

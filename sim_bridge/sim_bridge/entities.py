@@ -35,14 +35,14 @@ import re2
 from controllers.arrays import Vector
 from sim_bridge.cell import MaterialBody
 from sim_bridge.scratch import ScratchDir
+from sim_bridge.world import URDF_FLAGS, SimWorld
+from world_description.resources import resolve_resource
 from world_description.urdf_check import (
     UrdfProblem,
     check_meshes,
     read_urdf_file,
     summarise_urdf,
 )
-from sim_bridge.world import URDF_FLAGS, SimWorld
-from world_description.resources import resolve_resource
 from world_description.world_config import ObstacleConfig
 
 # simulation_interfaces/EntityCategory's values.
@@ -528,8 +528,8 @@ class Entities:
                 f.write(text)
             path = scratch = Path(name)
         try:
-            return self._p.loadURDF(str(path), pose.position, pose.orientation,
-                                    flags=URDF_FLAGS)
+            return int(self._p.loadURDF(str(path), pose.position, pose.orientation,
+                                        flags=URDF_FLAGS))
         except pybullet.error as exc:
             raise EntityError('parse_error', f'{uri or "the URDF"} cannot be loaded: {exc}'
                               ) from None

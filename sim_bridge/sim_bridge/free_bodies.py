@@ -2,10 +2,10 @@
 and the check of one body's state against them.
 
 Every state set from outside is held to tighter limits before it reaches the physics
-(entities.py: 50 m/s, 50 rad/s); these catch what the physics itself does with it. A velocity that is finite
-and bounded, integrated over one step from a finite pose, gives a finite pose: so the
-velocities of the free bodies (materials, spawned bodies) and of the robots' bases are checked
-after every step, and their poses at the state rate.
+(entities.py: 50 m/s, 50 rad/s); these catch what the physics itself does with it. A
+velocity that is finite and bounded, integrated over one step from a finite pose, gives a
+finite pose: so the velocities of the free bodies (materials, spawned bodies) and of the
+robots' bases are checked after every step, and their poses at the state rate.
 """
 from __future__ import annotations
 

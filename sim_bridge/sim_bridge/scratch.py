@@ -44,7 +44,7 @@ class ScratchDir:
 def remove_stale(prefix: str, parent: Optional[Path] = None) -> List[Path]:
     """Remove the scratch directories of ``prefix`` whose owner is gone; those removed."""
     root = Path(parent or tempfile.gettempdir())
-    removed = []
+    removed: List[Path] = []
     try:
         candidates = [p for p in root.iterdir() if p.name.startswith(prefix)]
     except OSError:

@@ -81,7 +81,7 @@ FEATURES = [
     F.SIMULATION_RESET_SPAWNED, F.SIMULATION_STATE_GETTING, F.SIMULATION_STATE_SETTING,
     F.SIMULATION_STATE_PAUSE, F.STEP_SIMULATION_SINGLE, F.STEP_SIMULATION_MULTIPLE,
     F.STEP_SIMULATION_ACTION, F.WORLD_INFO_GETTING, F.SPAWNING_ENTITIES]
-MAX_STEPS = 10_000_000        # a request's steps (served in chunks; a pause, stop or reset ends it)
+MAX_STEPS = 10_000_000        # a request's steps (in chunks; a pause, stop or reset ends it)
 MAX_SPAWN_BATCH = 64          # SpawnEntities' requests in one call (each about 1-3 ms here)
 # EntityError codes as result codes: the standard's, and SpawnEntity's own.
 _CODES = {'not_found': Result.RESULT_NOT_FOUND, 'failed': Result.RESULT_OPERATION_FAILED,
@@ -254,6 +254,8 @@ class SimulationInterfaces:
             return f'steps must be within 1..{MAX_STEPS}'
         if self._stepping.state == 'playing':
             return 'the simulation is playing: pause it first (set_simulation_state)'
+        if self._stepping.full:
+            return 'too many step requests wait already: ask again after their replies'
         return ''
 
     def _on_goal(self, goal: Any) -> GoalResponse:

@@ -21,6 +21,9 @@ from sim_bridge.pacing import Pacer, RtfMeter
 from sim_bridge.runner import SimRunner, StepSink
 
 MAX_STEPS_PER_REQUEST = 100_000
+# Step requests waiting to be served at once (all clients, both services and the action): as
+# many as a service keeps per client (ros_common/services.py).
+MAX_WAITING_STEPS = 256
 
 
 @dataclass(eq=False)
@@ -103,6 +106,11 @@ class Stepping:
     def stepping(self) -> bool:
         """Step requests are being served."""
         return bool(self._jobs)
+
+    @property
+    def full(self) -> bool:
+        """As many step requests wait as are served at once: a further one is refused."""
+        return len(self._jobs) >= MAX_WAITING_STEPS
 
     def command_arrived(self) -> None:
         """A command (cmd_vel, a trajectory) came in: counted for the step that waits for it."""
@@ -208,6 +216,10 @@ class Stepping:
         elif not (1 <= request.steps <= MAX_STEPS_PER_REQUEST):
             response.success = False
             response.message = f'steps must be within 1..{MAX_STEPS_PER_REQUEST}'
+        elif self.full:
+            response.success = False
+            response.message = (f'{MAX_WAITING_STEPS} step requests wait already: ask again '
+                                'after their replies')
         elif self._jobs or request.steps > self._chunk:
             job = StepJob(request.steps, request.steps, request, response)
             self._queue(job)

@@ -71,7 +71,6 @@ def _stood_still(probe):
 
 def test_hostile_requests_are_answered_at_once_and_leave_the_node_serving(start_node, probe):
     sim = start_node('sim_node', '-p', PIPELINE, '-p', 'synchronous:=true')
-    clock = probe.collect(Clock, '/clock')
 
     # A filter that backtracks: Python's re spent minutes on it, deaf to every client.
     filters = EntityFilters(filter=r'(\w*\w*\w*\w*\w*\w*\w*\w*)*!')

@@ -96,8 +96,10 @@ def test_a_bad_world_is_one_line_before_anything_starts(capsys, tmp_path, nothin
 
 @pytest.mark.parametrize('stored, fragment', [
     ({'plan': 5}, 'the plan must be a mapping'),
-    ('abc', 'is not a campaign file'),
-    ([], 'is not a campaign file'),
+    ('abc', 'a JSON object was expected'),
+    ([], 'a JSON object was expected'),
+    ({'trials': 3}, 'unknown fields'),
+    ({'code': 'x'}, 'is not a campaign file'),
     ({'plan': {'trials': 'x'}}, 'trials must be an integer'),
     ({'plan': {'belt_speed': 5}}, 'belt_speed must be'),
     ({'plan': {'seeds': ['a']}}, 'seeds must be a list of integers'),
@@ -109,7 +111,7 @@ def test_a_damaged_campaign_file_is_one_line(capsys, tmp_path, nothing_runs, sto
     (tmp_path / 'campaign.json').write_text(json.dumps(stored))
     refused(capsys, ['--resume', str(tmp_path)], fragment)
     (tmp_path / 'campaign.json').write_text('{"plan": {')
-    refused(capsys, ['--resume', str(tmp_path)], 'is not JSON')
+    refused(capsys, ['--resume', str(tmp_path)], 'not JSON')
 
 
 def test_resume_and_report_need_a_campaign_directory(capsys, tmp_path, nothing_runs):
@@ -176,12 +178,14 @@ def test_results_are_checked_field_by_field():
     # The first layout, with the run's metadata at the top level, reads into the same record.
     flat = {**{k: v for k, v in good.items() if k != 'run'}, **good['run']}
     assert TrialResult.from_dict(flat).run == TrialResult.from_dict(good).run
-    for change, fragment in (({'status': 5}, 'status is 5, not a string'), ({'trial': -1}, 'trial is'),
+    for change, fragment in (({'status': 5}, 'status is 5, not a string'),
+                             ({'trial': -1}, 'trial is'),
                              ({'run': {'trial': 'x'}}, 'trial is'),
                              ({'scenario_seed': 'a'}, 'scenario_seed is'),
                              ({'belt_speed': None}, 'belt_speed is'),
                              ({'run': {'wall_time': '1'}}, 'wall_time is'),
-                             ({'run': {'cpu_seconds': {'sim_node': 'a'}}}, 'cpu_seconds: sim_node is'),
+                             ({'run': {'cpu_seconds': {'sim_node': 'a'}}},
+                              'cpu_seconds: sim_node is'),
                              ({'handling_success_rate': 2.0}, 'not a number within 0..1')):
         assert fragment in result_problem({**good, **change})
     assert 'JSON str' in result_problem('abc')

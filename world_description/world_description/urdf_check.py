@@ -11,7 +11,7 @@ import stat
 import xml.parsers.expat
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Callable, List, Optional, Tuple
+from typing import Callable, Dict, List, Optional, Tuple
 
 MAX_URDF_BYTES = 1024 * 1024      # the project's URDFs are 8-16 kB
 MAX_LINKS = 128                   # and joints: the youBot has 19 links
@@ -119,7 +119,7 @@ class _Walk:
     def entity(self, *_args: object) -> None:
         raise UrdfProblem('parse_error', 'the URDF declares entities: not taken here')
 
-    def start(self, tag: str, attributes: dict) -> None:
+    def start(self, tag: str, attributes: Dict[str, str]) -> None:
         self.elements += 1
         self.depth += 1
         if self.elements > MAX_ELEMENTS:
