@@ -229,6 +229,10 @@ class LockStepDriver:
                                                f'/{robot}/cmd_vel', 10)
         self.client = probe.node.create_client(StepSimulation, '/sim_node/step')
         assert self.client.wait_for_service(timeout_sec=15.0), 'no /sim_node/step'
+        # A first round trip that steps nothing, sent again until answered (a reply right after
+        # discovery can be lost; a step's must not be), as the coordinator does.
+        from ros_common.services import call_and_wait
+        call_and_wait(self.client, self._request(steps=0), 30.0, resend=0.5)
         wait_for(lambda: self.pub.get_subscription_count() > 0, 15.0, what='cmd_vel matched')
 
     def step(self, steps: int, commands: int = 0) -> 'PendingStep':

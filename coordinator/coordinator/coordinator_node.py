@@ -505,6 +505,11 @@ class CoordinatorNode(Node):
             if time.monotonic() > end:
                 raise NodeTimeout(f'{", ".join(missing)} not available')
             time.sleep(0.02)
+        if self.synchronous:
+            # A step's reply must reach this node: one that steps nothing, sent again until
+            # it is answered, is the first (Fast DDS drops a reply while its server has not
+            # matched the client's reader; a lost first step ended a run in node_timeout).
+            self._call(self.step_client, StepSimulation.Request(steps=0), 'step')
         while time.monotonic() < end:
             if (self.count_publishers('/detections') > 0
                     and self.count_subscribers(CAMERA_TOPIC) > 0):

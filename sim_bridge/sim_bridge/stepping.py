@@ -210,7 +210,11 @@ class Stepping:
 
     # --- on request ---------------------------------------------------------------------------
     def _on_step(self, request, response):
-        if not (self.synchronous or self.paused):
+        if request.steps == 0:
+            # A round trip that steps nothing, and may be sent again: a client's first reply
+            # can be lost right after discovery (ros_common.services), a step's must not.
+            response.success, response.message = True, 'no steps asked for: none taken'
+        elif not (self.synchronous or self.paused):
             response.success = False
             response.message = 'step needs synchronous:=true or a paused simulation'
         elif not (1 <= request.steps <= MAX_STEPS_PER_REQUEST):
