@@ -126,17 +126,12 @@ def _like(draw, old):
     return copy.deepcopy(old)
 
 
-@st.composite
-def results(draw):
-    """A valid result with one to three of its fields (at any depth) replaced by anything, by
-    a value of its own kind, deleted, or a field of its own added; now and then a value that
-    is no result at all."""
-    if draw(st.integers(0, 19)) == 0:
-        return draw(st.one_of(VALUES, DEEP))
-    data = copy.deepcopy(GOOD)
+def _mutated(draw, data):
+    """``data`` with one to three of its fields (at any depth) replaced by anything, by a
+    value of its own kind, or deleted."""
+    data = copy.deepcopy(data)
     for _ in range(draw(st.integers(1, 3))):
-        paths = [p for p in _paths(data) if p]
-        path = draw(st.sampled_from(paths))
+        path = draw(st.sampled_from([p for p in _paths(data) if p]))
         if draw(st.booleans()):
             node = data
             for key in path:
@@ -148,6 +143,17 @@ def results(draw):
             data = _set(data, path, value)
         except (KeyError, IndexError, TypeError):
             pass
+    return data
+
+
+@st.composite
+def results(draw):
+    """A valid result with one to three of its fields (at any depth) replaced by anything, by
+    a value of its own kind, deleted, or a field of its own added; now and then a value that
+    is no result at all."""
+    if draw(st.integers(0, 19)) == 0:
+        return draw(st.one_of(VALUES, DEEP))
+    data = _mutated(draw, GOOD)
     if draw(st.integers(0, 9)) == 0:
         data[draw(TEXTS)] = draw(VALUES)
     return data
@@ -191,20 +197,7 @@ def trial_records(draw):
     base = json.loads(bag_metadata(4, 7, 0.12, 'abc', SCENARIO, {'belt_speed': 0.12})[TRIAL_KEY])
     if draw(st.integers(0, 9)) == 0:
         return draw(st.one_of(VALUES, DEEP))
-    for _ in range(draw(st.integers(1, 3))):
-        path = draw(st.sampled_from([p for p in _paths(base) if p]))
-        if draw(st.booleans()):
-            node = base
-            for key in path:
-                node = node[key]
-            value = _like(draw, node)
-        else:
-            value = draw(st.one_of(VALUES, DEEP, st.just(_DELETE)))
-        try:
-            base = _set(base, path, value)
-        except (KeyError, IndexError, TypeError):
-            pass
-    return base
+    return _mutated(draw, base)
 
 
 @SETTINGS

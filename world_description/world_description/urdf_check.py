@@ -53,15 +53,7 @@ class UrdfSummary:
 def read_urdf_file(path: Path) -> str:
     """A URDF file's text, read no further than ``MAX_URDF_BYTES`` (a regular file only: a
     FIFO or a device named ``.urdf`` would block the reader)."""
-    try:
-        info = path.stat()
-    except OSError as exc:
-        raise UrdfProblem('not_found', f'{path}: {exc.strerror or exc}') from None
-    if not stat.S_ISREG(info.st_mode):
-        raise UrdfProblem('not_found', f'{path} is not a regular file')
-    if info.st_size > MAX_URDF_BYTES:
-        raise UrdfProblem('parse_error', f'{path} has {info.st_size} bytes; a URDF is at most '
-                          f'{MAX_URDF_BYTES} bytes here')
+    _regular_file(path, str(path), MAX_URDF_BYTES)
     try:
         with open(path, 'rb') as f:
             data = f.read(MAX_URDF_BYTES + 1)
@@ -183,12 +175,17 @@ def check_meshes(summary: UrdfSummary, base_dir: Optional[Path],
                                       'names its meshes by absolute path, file:// or '
                                       'package://')
                 path = base_dir / path
-        try:
-            info = os.stat(path)
-        except OSError as exc:
-            raise UrdfProblem('not_found', f'mesh {name[:200]}: {exc.strerror or exc}') from None
-        if not stat.S_ISREG(info.st_mode):
-            raise UrdfProblem('not_found', f'mesh {name[:200]} is not a regular file')
-        if info.st_size > MAX_MESH_BYTES:
-            raise UrdfProblem('parse_error', f'mesh {name[:200]} has {info.st_size} bytes; at '
-                              f'most {MAX_MESH_BYTES} here')
+        _regular_file(path, f'mesh {name[:200]}', MAX_MESH_BYTES)
+
+
+def _regular_file(path: Path, what: str, limit: int) -> None:
+    """UrdfProblem unless ``path`` is a regular file of at most ``limit`` bytes."""
+    try:
+        info = os.stat(path)
+    except OSError as exc:
+        raise UrdfProblem('not_found', f'{what}: {exc.strerror or exc}') from None
+    if not stat.S_ISREG(info.st_mode):
+        raise UrdfProblem('not_found', f'{what} is not a regular file')
+    if info.st_size > limit:
+        raise UrdfProblem('parse_error', f'{what} has {info.st_size} bytes; at most {limit} '
+                          'here')
