@@ -12,5 +12,6 @@ python "$ROOT/bench/bench_youbot.py"
 python "$ROOT/bench/bench_vision.py"
 python "$ROOT/bench/bench_pipeline.py"
 python "$ROOT/bench/bench_live_view.py"
+python "$ROOT/bench/bench_requests.py"
 # The issue-12 goals, from the figures of this run only.
 python "$ROOT/bench/goals.py" --since "$START"

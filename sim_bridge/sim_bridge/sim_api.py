@@ -69,7 +69,7 @@ from simulation_interfaces.srv import (
 from ros_common.deferred_reply import DeferredReplies
 from ros_common.services import SERVICE_QOS
 from ros_common.stamps import stamp_from_ns
-from sim_bridge.entities import Entities, EntityError, Filters, Info, State
+from sim_bridge.entities import MAX_TAGS, Entities, EntityError, Filters, Info, State
 from sim_bridge.stepping import StepJob, Stepping
 
 F = SimulatorFeatures
@@ -448,6 +448,10 @@ class SimulationInterfaces:
 
     def _get_named_poses(self, request: Any, response: Any) -> Any:
         wanted = list(request.tags.tags)
+        if len(wanted) > MAX_TAGS:
+            response.result = _result(Result.RESULT_OPERATION_FAILED,
+                                      f'{len(wanted)} tags: at most {MAX_TAGS}')
+            return response
         every = request.tags.filter_mode == TagsFilter.FILTER_MODE_ALL
         for p in self._entities.named_poses():
             if wanted:

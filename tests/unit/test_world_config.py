@@ -187,3 +187,14 @@ def test_every_number_of_a_world_has_a_range(world):
             assert str(path[-1]) in str(raised.value) or 'w.yaml' in str(raised.value), path
     assert yaml.safe_dump(data)      # (the unchanged world still loads)
     parse_world(data, 'w.yaml')
+
+
+def test_a_world_whose_aliases_expand_past_reason_is_refused(tmp_path):
+    """The "billion laughs" in YAML: 1 kB of anchors and aliases for 10^9 values, which a
+    result's or a bag's copy of the world would write out."""
+    lines = ['a0: &a0 [1, 1, 1, 1, 1, 1, 1, 1, 1, 1]']
+    lines += [f'a{k}: &a{k} [' + ', '.join([f'*a{k - 1}'] * 10) + ']' for k in range(1, 9)]
+    path = tmp_path / 'laughs.yaml'
+    path.write_text('\n'.join(lines) + '\ngravity: -9.81\n')
+    with pytest.raises(WorldConfigError, match='aliases are expanded'):
+        load_world(path)

@@ -241,6 +241,11 @@ MAX_SIZE_M = WORLD_EXTENT_M       # an obstacle's dimension
 MAX_WORLD_BYTES = 4 * 1024 * 1024
 
 
+# Values (numbers, strings, entries) of a world once YAML's aliases are expanded: the largest
+# shipped world has about 300.
+MAX_WORLD_VALUES = 100_000
+
+
 # A world may extend another, which may extend another, this deep at most.
 MAX_EXTENDS = 8
 
@@ -294,7 +299,9 @@ def _read(path: Path) -> Any:
         raise WorldConfigError(f'world file {path} has {info.st_size} bytes; a world file is '
                                f'at most {MAX_WORLD_BYTES} bytes')
     try:
-        return yaml.safe_load(path.read_text(encoding='utf-8'))
+        data = yaml.safe_load(path.read_text(encoding='utf-8'))
+        _check_expanded_size(data, path)
+        return data
     except yaml.YAMLError as exc:
         mark = getattr(exc, 'problem_mark', None)
         where = f' at line {mark.line + 1}, column {mark.column + 1}' if mark else ''
@@ -307,6 +314,23 @@ def _read(path: Path) -> Any:
                                f'{exc.object[exc.start:exc.start + 1]!r})') from None
     except OSError as exc:
         raise WorldConfigError(f'{path}: cannot be read ({exc.strerror})') from None
+
+
+def _check_expanded_size(data: Any, path: Path) -> None:
+    """A world's values, counted as they expand: YAML's aliases let a few kilobytes stand for
+    billions of values (the "billion laughs"), which every copy of the world (a result, a bag's
+    record, a sweep's point) would write out."""
+    count, stack = 0, [data]
+    while stack:
+        value = stack.pop()
+        count += 1
+        if count > MAX_WORLD_VALUES:
+            raise WorldConfigError(f'{path}: more than {MAX_WORLD_VALUES} values once its YAML '
+                                   'aliases are expanded')
+        if isinstance(value, dict):
+            stack.extend(value.values())
+        elif isinstance(value, list):
+            stack.extend(value)
 
 
 def _resolved(path: Path, data: Any, seen: Tuple[Path, ...]) -> Any:
