@@ -182,7 +182,7 @@ def step_cost(seconds: float = 5.0) -> Dict[str, Any]:
     out: Dict[str, Any] = {}
     for boxes in (0, 200):
         world = SimWorld(load_world(resolve_resource(PIPELINE)))
-        entities = Entities(world, lambda: world.sim_time)
+        entities = Entities(world, lambda w=world: w.sim_time)
         for k in range(boxes):
             entities.spawn(f'b{k}', False, 'shape://box?size=0.03,0.03,0.03&mass=0.1', '', '',
                            State((-2.0 + (k % 20) * 0.06, 2.0 + (k // 20) * 0.06, 0.016),

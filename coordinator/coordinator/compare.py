@@ -20,11 +20,11 @@ from typing import List, Optional, Sequence, Tuple
 import numpy as np
 
 from coordinator.campaign import trial_results
-from coordinator.outputs import OutputError, check_output_dir, staged_dir
 from coordinator.recorded import RecordError, load_trial
 from coordinator.rerun import figures, first_parting
 from coordinator.sweep import RATES, wilson
 from coordinator.trial_result import TrialResult
+from ros_common.outputs import OutputError, check_output_dir, staged_dir
 
 SIGNIFICANT = 0.05
 

@@ -10,12 +10,12 @@ from typing import Any, Dict, List, Optional, Sequence, Tuple
 import cv2
 import numpy as np
 
-from coordinator.outputs import staged_dir
 from coordinator.recorded import trial_bag
 from coordinator.results import FAILURE_CAUSES, summary_rows
 from coordinator.sweep_report import sweep_lines
 from coordinator.trial_result import TrialResult
 from recording.plot import plot_paths
+from ros_common.outputs import staged_dir
 from world_description.footprint import footprints
 from world_description.resources import ResourceError, resolve_resource
 from world_description.world_config import WorldConfigError, load_world, parse_world

@@ -33,7 +33,6 @@ from coordinator.campaign import (
     write_campaign,
 )
 from coordinator.graph import pipeline_graph
-from coordinator.outputs import OutputError, check_output_dir
 from coordinator.progress import (
     CampaignBar,
     TrialProgress,
@@ -59,6 +58,7 @@ from coordinator.trial_run import (
     run_leased_trial,
     stop_all,
 )
+from ros_common.outputs import OutputError, check_output_dir
 from world_description import PIPELINE_CELL
 
 PROGRESS_PERIOD_S = 10.0     # wall seconds between two progress lines

@@ -19,6 +19,7 @@ from rosbags.rosbag2 import ReaderError
 
 from controllers.transforms import yaw_from_quaternion
 from recording.plot import plot_paths
+from ros_common.outputs import OutputError, check_output_dir
 
 ODOMETRY = 'nav_msgs/msg/Odometry'
 
@@ -268,8 +269,12 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     args = parser.parse_args(argv)
     out = args.output or args.bag.parent / f'{args.bag.name}_report'
     try:
+        check_output_dir(out, '-o')                    # (before the bag is read)
         report = write_report(args.bag, out)
-    except AnalysisError as exc:
+    except (AnalysisError, OutputError) as exc:
+        print(f'bag_analysis: error: {exc}', file=sys.stderr)
+        return 2
+    except OSError as exc:                             # (a full disk)
         print(f'bag_analysis: error: {exc}', file=sys.stderr)
         return 2
     print(to_markdown(report))

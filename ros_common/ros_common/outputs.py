@@ -1,5 +1,6 @@
-"""Where the study tools write: checked before any work starts, and written so that a run that
-fails leaves nothing half-written (a report's plots without its report.md, half a PNG).
+"""Where the tools that write files (the study tools, bag_analysis) write: checked before any
+work starts, and written so that a run that fails leaves nothing half-written (a report's plots
+without its report.md, half a PNG).
 
 A directory of outputs is made in a staging directory beside it and its files moved in at the
 end, the main file last (``report.md``, ``comparison.md``): a reader who finds the main file
