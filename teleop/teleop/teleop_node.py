@@ -3,7 +3,6 @@ from __future__ import annotations
 
 import os
 import select
-import signal
 import sys
 import termios
 import time
@@ -132,10 +131,15 @@ class TeleopNode(Node):
         self.publish_twist(step.v, step.w, step.vy)
 
 
+def _running() -> bool:
+    """Neither the context shut down nor a stop asked for (Ctrl-C, SIGTERM: early_stop)."""
+    return rclpy.ok() and not early_stop.requested()
+
+
 def _wait_for_subscriber(node: TeleopNode, executor, timeout: float) -> bool:
     # Wall time: with use_sim_time the clock does not run before the simulator does.
     end = time.monotonic() + timeout
-    while time.monotonic() < end:
+    while time.monotonic() < end and _running():
         if node.subscriber_count() > 0:
             return True
         executor.spin_once(timeout_sec=0.05)
@@ -145,11 +149,13 @@ def _wait_for_subscriber(node: TeleopNode, executor, timeout: float) -> bool:
 def _run_script(node: TeleopNode, executor) -> int:
     if node.wait_for_subscriber > 0 and not _wait_for_subscriber(
             node, executor, node.wait_for_subscriber):
+        if early_stop.requested():
+            return 0
         node.get_logger().error(f'no subscriber on {node.topic} after '
                                 f'{node.wait_for_subscriber:g} s; is the simulator running?')
         return 1
     node.start_script()
-    while rclpy.ok() and not node.finished:
+    while _running() and not node.finished:
         executor.spin_once(timeout_sec=0.1)
     return 0
 
@@ -165,7 +171,7 @@ def _run_keyboard(node: TeleopNode, executor) -> int:
     try:
         tty.setraw(fd)
         # One thread: poll the keyboard, then serve the executor (the repeat timer).
-        while rclpy.ok():
+        while _running():
             executor.spin_once(timeout_sec=0.0)
             ready, _, _ = select.select([fd], [], [], 0.01)
             if not ready:
@@ -184,28 +190,22 @@ def _run_keyboard(node: TeleopNode, executor) -> int:
     return 0
 
 
-def _raise_interrupt(_signum, _frame) -> None:
-    # Once: a terminal's Ctrl-C reaches a launched teleop twice (the terminal and ros2 launch),
-    # and a second KeyboardInterrupt would break off the zero twist that ends the session.
-    early_stop.ignore()
-    raise KeyboardInterrupt
-
-
 def main(args=None) -> int:
-    # rclpy's own handlers would shut the context down before the zero twist could go out.
+    # A stop (SIGINT, SIGTERM) only sets a flag (early_stop, from the console script's first
+    # line): the loops end at their next turn, within 0.1 s, and the zero twist goes out.
+    # rclpy's handlers would shut the context down before it could; a KeyboardInterrupt raised
+    # wherever the main thread is can leave one of rclpy's locks held, and the zero twist and
+    # the shutdown then wait on it for ever.
+    early_stop.install()
     rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
     try:
-        # (Inside the try: a signal between the two raises here, and is a stop.)
-        signal.signal(signal.SIGINT, _raise_interrupt)
-        signal.signal(signal.SIGTERM, _raise_interrupt)
-        if early_stop.requested():      # (Ctrl-C while the process started: a stop)
-            raise KeyboardInterrupt
         node = TeleopNode()
     except (TeleopError, rclpy.exceptions.ParameterException) as exc:
         rclpy.logging.get_logger('teleop').fatal(f'cannot start: {exc}')
         rclpy.try_shutdown()
         return 1
-    except KeyboardInterrupt:           # (stopped while the node was being made)
+    if early_stop.requested():          # (stopped while the node was being made)
+        node.destroy_node()
         rclpy.try_shutdown()
         return 0
     executor = SingleThreadedExecutor()

@@ -105,12 +105,13 @@ def test_a_long_step_request_is_served_in_chunks_while_the_node_serves_the_rest(
     applied = probe.collect(TwistStamped, '/mini_robot/cmd_vel_out')
     before = driver.reply(driver.step(1)).step_count
     steps = 24000                                     # 100 s of simulated time
-    probe.service(Trigger, '/sim_node/pause', 30.0)   # (found before, not while it runs)
+    probe.service(Trigger, '/sim_node/resume', 30.0)  # (found before, not while it runs)
     long = driver.step(steps)
     wait_for(lambda: clock and stamp_s(clock[-1][1].clock) > 2.0, 60.0, what='stepping')
-    # Another service is answered, and a command takes effect, while the request runs.
-    paused = probe.call(Trigger, '/sim_node/pause', Trigger.Request(), timeout=30.0)
-    assert 'synchronous mode' in paused.message
+    # Another service is answered, and a command takes effect, while the request runs. (Not
+    # a pause, which would end it: test_sim_api_limits_graph.py.)
+    resumed = probe.call(Trigger, '/sim_node/resume', Trigger.Request(), timeout=30.0)
+    assert not resumed.success and 'synchronous mode' in resumed.message
     driver.send(0.1)
     wait_for(lambda: any(m.twist.linear.x > 0.0 for _, m in applied), 30.0,
              what='the command applied between chunks')

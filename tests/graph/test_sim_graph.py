@@ -329,8 +329,11 @@ def test_lock_step_advances_exactly_n_steps_per_request(start_node, probe, clock
                 assert len(clock) - n_clock in (slots, slots + 1)
     # States at 100 Hz: the last odom published is at most one state period old.
     assert stamp_s(reply.sim_time) - stamp_s(odom[-1][1].header.stamp) < 0.0105
-    bad = probe.call(StepSimulation, '/sim_node/step', StepSimulation.Request(steps=0))
+    bad = probe.call(StepSimulation, '/sim_node/step', StepSimulation.Request(steps=100_001))
     assert not bad.success and 'within' in bad.message
+    # 0 steps: a round trip that takes none (a client's first, which it may send again).
+    none = probe.call(StepSimulation, '/sim_node/step', StepSimulation.Request(steps=0))
+    assert none.success and none.step_count == reply.step_count
     assert not probe.call(Trigger, '/sim_node/pause', Trigger.Request()).success
 
 
