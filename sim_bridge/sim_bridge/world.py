@@ -32,7 +32,7 @@ from sim_bridge.backdrop import StaticBackdrop, static_visuals
 from sim_bridge.camera import perturb_frame, projection_matrix, view_matrix_from_optical
 from sim_bridge.cell import Conveyor, MaterialBody, MaterialSource, Suction
 from sim_bridge.client import Client
-from sim_bridge.free_bodies import Lost, base_problem
+from sim_bridge.free_bodies import Lost, base_problem, moving_within_reason
 from world_description.camera_geometry import intrinsics_from_fov, look_at_rotation
 from world_description.joint_limits import JointLimitsError, load_acceleration_limits
 from world_description.perturbations import PerturbationDraws
@@ -672,7 +672,10 @@ class SimWorld:
         cup is released first); each is in ``take_lost()``. ``pose=False``: velocities only
         (after every step)."""
         taken = False
+        quick = not pose
         for m in list(self.materials):
+            if quick and moving_within_reason(self._p, m.body):
+                continue
             problem = base_problem(self._p, m.body, pose)
             if problem:
                 for suction in self.suctions.values():
@@ -684,6 +687,8 @@ class SimWorld:
                                        f'taken out of the world: {problem}'))
                 taken = True
         for body, (name, forget) in list(self._guests.items()):
+            if quick and moving_within_reason(self._p, body):
+                continue
             problem = base_problem(self._p, body, pose)
             if problem:
                 del self._guests[body]
