@@ -37,8 +37,8 @@ def moving_within_reason(client: BulletClient, body: int) -> bool:
     """The quick test after every step (about 1.5 us): both speeds finite and below the cap
     (a NaN fails the comparison). False means: ask base_problem."""
     v, w = client.getBaseVelocity(body)
-    return (v[0] * v[0] + v[1] * v[1] + v[2] * v[2] < _AT_CAP_2
-            and w[0] * w[0] + w[1] * w[1] + w[2] * w[2] < _AT_CAP_2)
+    return bool(v[0] * v[0] + v[1] * v[1] + v[2] * v[2] < _AT_CAP_2
+                and w[0] * w[0] + w[1] * w[1] + w[2] * w[2] < _AT_CAP_2)
 
 
 def base_problem(client: BulletClient, body: int, pose: bool = True) -> str:
