@@ -3,7 +3,10 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Optional, Sequence, Tuple
+from typing import Callable, Optional, Sequence, Tuple
+
+# A drive's wheel speeds for a command (rad/s): what a wheel speed limit is checked on.
+WheelSpeeds = Callable[[Tuple[float, ...]], Sequence[float]]
 
 
 @dataclass(frozen=True)
@@ -14,6 +17,7 @@ class GuardResult:
     command: Tuple[float, ...]
     clamped: bool = False
     reason: str = ''
+    wheel_limited: bool = False      # scaled down so that no wheel passes its speed limit
 
 
 class CommandGuard:
@@ -24,7 +28,13 @@ class CommandGuard:
     the robot driving on its previous command.
     """
 
-    def __init__(self, limits: Sequence[float], timeout: float) -> None:
+    def __init__(self, limits: Sequence[float], timeout: float,
+                 wheels: Optional[WheelSpeeds] = None, wheel_limit: float = math.inf) -> None:
+        """``limits``: each component's (>= 0); ``wheels``: the drive's wheel speeds for a
+        command, which a command is scaled down to keep within ``wheel_limit`` [rad/s] (its
+        direction kept: a drive that saturates slows down along the same path)."""
+        if not wheel_limit > 0.0:
+            raise ValueError(f'wheel_limit must be > 0, got {wheel_limit}')
         if any(not (lim >= 0.0 and math.isfinite(lim)) for lim in limits) or not any(limits):
             raise ValueError(f'limits must be finite and >= 0 (0: the component stays 0), '
                              f'not all 0; got {list(limits)}')
@@ -32,6 +42,7 @@ class CommandGuard:
             raise ValueError(f'timeout must be finite and > 0, got {timeout}')
         self._limits = tuple(float(lim) for lim in limits)
         self._timeout = float(timeout)
+        self._wheels, self._wheel_limit = wheels, float(wheel_limit)
         self._command = tuple(0.0 for _ in self._limits)
         self._stamp: Optional[float] = None
 
@@ -51,9 +62,18 @@ class CommandGuard:
             return GuardResult(False, self._command,
                                reason=f'non-finite command {list(command)} rejected; stopping')
         clamped = tuple(max(-lim, min(lim, float(c))) for c, lim in zip(command, self._limits))
+        fastest = (max((abs(w) for w in self._wheels(clamped)), default=0.0)
+                   if self._wheels is not None else 0.0)
+        wheel_limited = fastest > self._wheel_limit
+        if wheel_limited:
+            # (Wheel speeds are linear in the twist; the factor leaves the fastest one a hair
+            # under its limit whatever the rounding.)
+            factor = self._wheel_limit / fastest * (1.0 - 1e-12)
+            clamped = tuple(c * factor for c in clamped)
         self._command = clamped
         self._stamp = now
-        return GuardResult(True, clamped, clamped=clamped != tuple(float(c) for c in command))
+        return GuardResult(True, clamped, clamped=clamped != tuple(float(c) for c in command),
+                           wheel_limited=wheel_limited)
 
     def active_command(self, now: float) -> Tuple[float, ...]:
         """The command to apply at time ``now``: zero once the last one is older than timeout."""

@@ -26,10 +26,11 @@ import sys
 import threading
 import time
 from pathlib import Path
-from typing import Callable, Dict, List, Optional, Sequence, Tuple
+from typing import Any, Callable, Dict, List, Optional, Sequence, Tuple
 
 import numpy as np
 import rclpy
+from diagnostic_msgs.msg import DiagnosticArray
 from nav_msgs.msg import Odometry
 from rcl_interfaces.msg import Parameter, ParameterType, ParameterValue
 from rcl_interfaces.srv import GetParameters, SetParameters
@@ -47,9 +48,8 @@ from visualization_msgs.msg import MarkerArray
 from controllers.lockstep import CommandCounter, DueGrid
 from controllers.path_follower import DriveLead, PathFollower
 from controllers.youbot_arm import JOINT_NAMES as YOUBOT_JOINTS
-from controllers.youbot_arm import JOINT_VELOCITY_LIMIT as YOUBOT_VELOCITY_LIMIT
 from controllers.zu12_arm import JOINT_NAMES as ZU12_JOINTS
-from controllers.zu12_arm import JOINT_VELOCITY_LIMITS as ZU12_VELOCITY_LIMITS
+from coordinator.joint_speeds import driven_past, speed_limits
 from coordinator.layout import CellLayout, LayoutError, layout_from_world, with_extra_materials
 from coordinator.pipeline import (
     Detection,
@@ -202,8 +202,12 @@ class CoordinatorNode(Node):
         # may lag it.
         self._commands = CommandCounter()
         self._path: List[Tuple[float, float]] = []
-        self._peak = {'zu12': PeakJointSpeed(ZU12_VELOCITY_LIMITS),
-                      'youbot': PeakJointSpeed([YOUBOT_VELOCITY_LIMIT] * len(YOUBOT_JOINTS))}
+        # Every joint with a speed limit in each robot's URDF (arm, gripper, wheels), as the
+        # simulator's joint states report it; and what the simulator braked (~/joint_limits).
+        self._speed_joints = {arm: speed_limits(self.world, arm) for arm in ARMS}
+        self._peak = {arm: PeakJointSpeed(list(limits.values()))
+                      for arm, limits in self._speed_joints.items()}
+        self._driven_past: List[Dict[str, Any]] = []
         self._connect(p['sim_node'].rstrip('/'))
         self.get_logger().info(
             f'{"lock-step" if self.synchronous else "real-time"} at {self.rate:g} Hz '
@@ -225,6 +229,9 @@ class CoordinatorNode(Node):
         self._detections_sub: Optional[Subscription] = self.create_subscription(
             MaterialDetectionArray, '/detections', self._on_detections, qos)
         self.create_subscription(MarkerArray, '/cell/materials', self._on_markers, qos)
+        self.create_subscription(
+            DiagnosticArray, f'{sim}/joint_limits', self._on_joint_limits,
+            QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL))
         reliable = QoSProfile(depth=10)
         self.traj_pubs = {arm: self.create_publisher(
             JointTrajectory, f'/{arm}/arm_controller/joint_trajectory', reliable) for arm in ARMS}
@@ -247,12 +254,20 @@ class CoordinatorNode(Node):
             return
         velocity = (np.array([msg.velocity[index[n]] for n in names])
                     if len(msg.velocity) == len(msg.name) else None)
+        limited = self._speed_joints[arm]
+        speeds = (np.array([msg.velocity[index[n]] for n in limited])
+                  if velocity is not None and all(n in index for n in limited) else None)
         with self._lock:
             self._joints[arm] = (to_ns(msg.header.stamp),
                                  np.array([msg.position[index[n]] for n in names]), velocity)
-            if velocity is not None:
-                self._peak[arm].update(velocity, to_ns(msg.header.stamp) * 1e-9)
+            if speeds is not None:
+                self._peak[arm].update(speeds, to_ns(msg.header.stamp) * 1e-9)
             self._lock.notify_all()
+
+    def _on_joint_limits(self, msg: DiagnosticArray) -> None:
+        driven = driven_past(msg)
+        with self._lock:
+            self._driven_past = driven
 
     def _on_grip(self, arm: str, msg: GripState) -> None:
         with self._lock:
@@ -664,7 +679,9 @@ class CoordinatorNode(Node):
                 mode='lock-step' if self.synchronous else 'real-time',
                 start=self.pipeline.start_time,
                 identification_details=list(self._identifications.details),
-                peaks=dict(self._peak), joint_names=ARMS, youbot_path=list(self._path),
+                peaks=dict(self._peak),
+                joint_names={arm: list(limits) for arm, limits in self._speed_joints.items()},
+                driven_past=list(self._driven_past), youbot_path=list(self._path),
                 events=list(self.pipeline.events),
                 # How old the odometry was when the drive acted on it [s] (simulated time).
                 odometry_age=None if self.synchronous else self._drive_lead.summary())

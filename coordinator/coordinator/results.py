@@ -28,7 +28,7 @@ import numpy as np
 from controllers.arrays import Vector
 from coordinator.layout import CellLayout, layout_from_world
 from coordinator.pipeline import Event, EventKind, RunResult
-from coordinator.trial_result import TrialResult
+from coordinator.trial_result import MAX_DRIVEN_PAST, TrialResult
 
 TruePose = Tuple[str, np.ndarray]            # (true colour, centre position)
 
@@ -293,6 +293,8 @@ class RunTrace:
     youbot_path: Sequence[Tuple[float, float]]
     events: Sequence[Event]
     odometry_age: Optional[Dict[str, float]] = None
+    # The joints the simulator found driven past their speed limits (coordinator.joint_speeds).
+    driven_past: Sequence[Dict[str, Any]] = ()
 
 
 def build_result(result: RunResult, final_truth: Sequence[TruePose],
@@ -323,6 +325,8 @@ def build_result(result: RunResult, final_truth: Sequence[TruePose],
     return replace(
         out, materials=materials, identifications=list(trace.identification_details),
         final_materials=final, peak_joint_speed=peaks, odometry_age=trace.odometry_age,
+        joints_driven_past=[{**d, 'time': round(float(d['time']) - start, 4)}
+                            for d in trace.driven_past][:MAX_DRIVEN_PAST],
         scenario_seed=trace.seed, belt_speed=trace.belt_speed, mode=trace.mode,
         youbot_path=[[round(x, 4), round(y, 4)] for x, y in trace.youbot_path[::3]],
         events=events, not_at_destination=missing,

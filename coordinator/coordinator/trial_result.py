@@ -61,6 +61,7 @@ TIME_STEP_RANGE = (1e-4, 0.05)      # [s] the simulator's time_step parameter's 
 MAX_PARAMETERS = 16
 PARAMETER_NAME = re.compile(r'^[A-Za-z_][A-Za-z0-9_]*(\.[A-Za-z_][A-Za-z0-9_]*)*$')
 MAX_PATH_XY_M = 1e4                 # a path point's coordinates [m]
+MAX_DRIVEN_PAST = 64                # joints driven past their speed limits, kept per trial
 
 
 class ResultError(RecordError):
@@ -128,6 +129,9 @@ class TrialResult:
     identifications: List[Dict[str, Any]] = field(default_factory=list)
     final_materials: List[Dict[str, Any]] = field(default_factory=list)
     peak_joint_speed: Dict[str, Dict[str, Any]] = field(default_factory=dict)
+    # The joints the simulator had to brake back to their speed limits because the world drove
+    # them past (each its worst: robot, joint, ratio, speed, limit, brake, time, count).
+    joints_driven_past: List[Dict[str, Any]] = field(default_factory=list)
     odometry_age: Optional[Dict[str, float]] = None      # real-time runs only
     youbot_path: List[List[float]] = field(default_factory=list)
     events: List[List[Any]] = field(default_factory=list)
@@ -234,6 +238,7 @@ def _outcome(f: Fields) -> Dict[str, Any]:
         'identifications': f.entries('identifications', []),
         'final_materials': f.entries('final_materials', []),
         'peak_joint_speed': _peaks(f),
+        'joints_driven_past': _driven_past(f),
         'youbot_path': _path(f),
         'events': _rows(f, 'events', (_time, str, str, int, str, str)),
         'states': _rows(f, 'states', (_time, str, str)),
@@ -317,6 +322,19 @@ def _peaks(f: Fields) -> Dict[str, Dict[str, Any]]:
         if p.has('time') and p.data['time'] is not None:
             p.number('time', -MAX_SIM_TIME_S, MAX_SIM_TIME_S, nan=True)
         out[arm] = dict(p.data)
+    return out
+
+
+def _driven_past(f: Fields) -> List[Dict[str, Any]]:
+    out = []
+    for k, item in enumerate(f.items('joints_driven_past', [], limit=MAX_DRIVEN_PAST)):
+        d = Fields(item, f'{f.what}: joints_driven_past[{k}]')
+        d.only(('robot', 'joint', 'ratio', 'speed', 'limit', 'brake', 'time', 'count'))
+        out.append({'robot': d.text('robot', limit=256), 'joint': d.text('joint', limit=256),
+                    'ratio': d.number('ratio', 0.0, 1e6), 'speed': d.number('speed', 0.0, 1e6),
+                    'limit': d.number('limit', 0.0, 1e6), 'brake': d.number('brake', 0.0, 1e9),
+                    'time': d.number('time', -MAX_SIM_TIME_S, MAX_SIM_TIME_S),
+                    'count': d.integer('count', 0, 10**9)})
     return out
 
 

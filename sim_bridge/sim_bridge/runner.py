@@ -11,6 +11,7 @@ import numpy as np
 from controllers.cmd_guard import CommandGuard, GuardResult, non_finite_fields, rate_limited
 from controllers.joint_trajectory import TrajectoryRequest, TrajectoryResult, slowed
 from controllers.lockstep import next_on_grid
+from sim_bridge.joint_speed import Braked
 from sim_bridge.world import SimWorld
 
 Twist3 = Tuple[float, float, float]
@@ -63,6 +64,11 @@ class StepSink(Protocol):
         far: free_bodies.py) and was taken out of it, or a static body it poisoned was put
         back: ``what`` says which, and why."""
 
+    def on_joints_braked(self, robot: str, time_ns: int, braked: Sequence[Braked]) -> None:
+        """Joints of a robot were faster than their limits after the step at ``time_ns`` and
+        were braked back to them (joint_speed.py): each with the speed it had and the brake
+        torque it took."""
+
 
 class NullSink:
     """A StepSink that wants nothing: subclass it and override what you need."""
@@ -93,6 +99,9 @@ class NullSink:
         pass
 
     def on_body_lost(self, name: str, what: str) -> None:
+        pass
+
+    def on_joints_braked(self, robot: str, time_ns: int, braked: Sequence[Braked]) -> None:
         pass
 
 
@@ -148,7 +157,8 @@ class SimRunner:
             turn = own.max_turn if own.max_turn is not None else limits.max_turn
             # (vx, vy, wz) for every drive; a differential drive's vy is held at 0.
             sideways = speed if 'linear.y' in robot.drive.components else 0.0
-            self.guards[name] = CommandGuard((speed, sideways, turn), limits.cmd_vel_timeout)
+            self.guards[name] = CommandGuard((speed, sideways, turn), limits.cmd_vel_timeout,
+                                             robot.drive.wheel_speeds, robot.drive.wheel_limit)
             accel = own.max_accel if own.max_accel is not None else limits.max_accel
             turn_accel = (own.max_turn_accel if own.max_turn_accel is not None
                           else limits.max_turn_accel)
@@ -206,9 +216,11 @@ class SimRunner:
         if not result.accepted:
             notes.append(('fault', f'rejected: {result.reason}'))
         elif result.clamped:
+            wheels = (f', wheels {self.world.robots[robot].drive_wheel_limit():g} rad/s'
+                      if result.wheel_limited else '')
             notes.append(('clamped', f'{self.shown(robot, (vx, vy, wz))} clamped to '
                                      f'{self.shown(robot, result.command)} (limits '
-                                     f'{self.shown(robot, self.guards[robot].limits)})'))
+                                     f'{self.shown(robot, self.guards[robot].limits)}{wheels})'))
         return TwistVerdict(result.accepted, _twist(result.command), tuple(notes))
 
     def shown(self, robot: str, twist: Sequence[float]) -> str:
@@ -318,6 +330,8 @@ class SimRunner:
             world.step()
             self._check_bases(sink)
             t_ns = world.sim_time_ns
+            for name, _, braked in world.take_braked():
+                sink.on_joints_braked(name, t_ns, braked)
             if t_ns >= self._clock_next_ns:
                 self._clock_next_ns = next_on_grid(t_ns, self.clock_period_ns)
                 self.tick_clock(sink)

@@ -49,6 +49,7 @@ from sim_bridge.camera import ImageBuffer
 from sim_bridge.entities import Entities
 from sim_bridge.frames import WorldFrames
 from sim_bridge.hold_watch import HoldWatch
+from sim_bridge.joint_speed import DRIVEN_PAST, BrakeBook
 from sim_bridge.messages import topic
 from sim_bridge.parameters import PARAMS, SimConfigError, check_params
 from sim_bridge.runner import ZERO, DriveLimits, SimRunner, Twist3
@@ -127,6 +128,11 @@ class SimNode(Node):
         self._rejections = KeyedLimiter(1.0)
         self._input_report = InputReport()
         self._diagnostics_pub = self.create_publisher(DiagnosticArray, '/diagnostics', 10)
+        # Joints braked back to their speed limits (joint_speed.py); latched: each robot's
+        # joints driven past their limits since the start or the last reset (a trial's result
+        # takes them).
+        self._brakes = BrakeBook()
+        self._brakes_pub = self.create_publisher(DiagnosticArray, '~/joint_limits', LATCHED)
         self.create_timer(1.0, self._publish_input_report,
                           clock=Clock(clock_type=ClockType.STEADY_TIME))
         self._actions = TrajectoryActions(self, self._world, self._runner)
@@ -270,6 +276,30 @@ class SimNode(Node):
     def on_body_lost(self, name: str, what: str) -> None:
         self.get_logger().error(f'{name}: {what}')
 
+    def on_joints_braked(self, robot: str, time_ns: int, braked) -> None:
+        lines = self._brakes.add(robot, time_ns * 1e-9, braked)
+        for b, line in zip([b for b in braked if b.ratio > 1.0 + DRIVEN_PAST], lines):
+            text = self._rejections.text((robot, b.joint, 'driven'), time.monotonic(), line)
+            if text is not None:
+                self.get_logger().warning(text)
+        if lines:
+            self._publish_brakes()
+
+    def _brake_statuses(self) -> list:
+        out = []
+        for robot in sorted(self._world.robots):
+            driven, message, values = self._brakes.status(robot)
+            out.append(DiagnosticStatus(
+                level=DiagnosticStatus.WARN if driven else DiagnosticStatus.OK,
+                name=f'{self.get_name()}: {robot} joint speed limits', hardware_id=robot,
+                message=message, values=[KeyValue(key=k, value=v) for k, v in values]))
+        return out
+
+    def _publish_brakes(self) -> None:
+        msg = DiagnosticArray(status=self._brake_statuses())
+        msg.header.stamp = stamp_from_ns(self._world.sim_time_ns)
+        self._brakes_pub.publish(msg)
+
     def on_state(self, robot: str, time_ns: int) -> None:
         # A state nobody reads is not built or sent (as the cameras): each costs about a
         # millisecond in rclpy, and a lock-step trial sends about 20,000 of them. A reader that
@@ -391,9 +421,7 @@ class SimNode(Node):
             self.get_logger().warn(text)
 
     def _publish_input_report(self) -> None:
-        if not self._input_report:
-            return
-        msg = DiagnosticArray()
+        msg = DiagnosticArray(status=self._brake_statuses())
         msg.header.stamp = stamp_from_ns(self._world.sim_time_ns)
         for status in self._input_report.statuses():
             msg.status.append(DiagnosticStatus(
@@ -469,6 +497,8 @@ class SimNode(Node):
             'the simulation was reset: the arm is back at its start pose', hold=False)
         faults = list(self._runner.faults)
         self._runner.reset()
+        self._brakes.clear()
+        self._publish_brakes()
         self._hold_watch = HoldWatch(self._world)     # (simulated time starts again)
         now = self._world.sim_time_ns
         for name in self._world.robots:

@@ -33,6 +33,7 @@ from sim_bridge.camera import perturb_frame, projection_matrix, view_matrix_from
 from sim_bridge.cell import Conveyor, MaterialBody, MaterialSource, Suction
 from sim_bridge.client import Client
 from sim_bridge.free_bodies import Lost, base_problem, moving_within_reason
+from sim_bridge.joint_speed import Braked, SpeedLimiter
 from world_description.camera_geometry import intrinsics_from_fov, look_at_rotation
 from world_description.joint_limits import JointLimitsError, load_acceleration_limits
 from world_description.perturbations import PerturbationDraws
@@ -83,9 +84,10 @@ class SimRobot:
     """One URDF body: its joints, its base frame, its drive and its joint-group controllers."""
 
     def __init__(self, client: BulletClient, config: RobotConfig, urdf: Path,
-                 base_dir: Optional[Path] = None) -> None:
+                 base_dir: Optional[Path] = None, time_step: float = 1.0 / 240.0) -> None:
         self.config = config
         self.client = client
+        self.time_step = time_step
         if not urdf.is_file():
             raise WorldError(f'robot "{config.name}": URDF {urdf} does not exist')
         self.urdf = urdf
@@ -157,6 +159,12 @@ class SimRobot:
         self.controllers: Dict[str, JointGroup] = {}
         for cc in config.controllers:
             self.controllers[cc.name] = JointGroup(self, cc, self._base_dir)
+        # No joint faster than its URDF limit, whatever drives it (joint_speed.py).
+        self.speed_limiter = SpeedLimiter(
+            client, self.body, self.movable, self._joint_names,
+            [self._joint_limits[n][2] for n in self._joint_names], self._report_scale.tolist(),
+            floating_base=not config.fixed_base, time_step=self.time_step,
+            prismatic=[n not in self.revolute for n in self._joint_names])
         self._initial: Dict[int, float] = {}
         for joint, position in config.initial_joint_positions:
             j = self.movable_joint(joint, 'initial_joint_positions')
@@ -204,6 +212,10 @@ class SimRobot:
     def joint_limits(self, joint: str) -> Tuple[float, float, float, float]:
         """(lower, upper, max velocity, max effort) as the URDF gives them."""
         return self._joint_limits[joint]
+
+    def drive_wheel_limit(self) -> float:
+        """The speed limit [rad/s] of the drive's slowest wheel."""
+        return self.drive.wheel_limit if self.drive is not None else math.inf
 
     def set_body_twist(self, vx: float, vy: float, wz: float) -> Tuple[float, ...]:
         """Command the wheel velocity motors for a body twist; returns the wheel targets
@@ -364,6 +376,12 @@ class SimRobot:
             self._start_pos, self._start_orn, self._inertial_pos, self._inertial_orn))
 
 
+def _wheel_limit(robot: SimRobot, *joints: str) -> float:
+    """The slowest of the wheels' URDF speed limits [rad/s] (inf: none gives one)."""
+    limits = [robot.joint_limits(j)[2] for j in joints]
+    return min((v for v in limits if v > 0.0), default=math.inf)
+
+
 class _DiffDrive:
     def __init__(self, robot: SimRobot, config: DiffDriveConfig) -> None:
         self._robot, self.config = robot, config
@@ -372,6 +390,11 @@ class _DiffDrive:
         self.geometry = DiffDriveGeometry(config.wheel_radius, config.wheel_separation)
         self.components = ('linear.x', 'angular.z')
         self.targets: Tuple[float, ...] = (0.0, 0.0)
+        self.wheel_limit = _wheel_limit(robot, config.left_wheel_joint, config.right_wheel_joint)
+
+    def wheel_speeds(self, command: Tuple[float, ...]) -> Tuple[float, ...]:
+        """The wheels' speeds [rad/s] for a (vx, vy, wz) command."""
+        return tuple(diff_wheel_speeds(command[0], command[2], self.geometry))
 
     def command(self, vx: float, vy: float, wz: float) -> Tuple[float, ...]:
         del vy                                     # a differential drive cannot strafe
@@ -400,11 +423,17 @@ class _MecanumDrive:
                                         config.sum_of_robot_center_projection_on_X_Y_axis)
         self.components = ('linear.x', 'linear.y', 'angular.z')
         self.targets: Tuple[float, ...] = (0.0, 0.0, 0.0, 0.0)
+        self.wheel_limit = _wheel_limit(robot, *config.wheel_joints)
         for joint in self.joints:
             # No friction along the spin axis (link y), which the spin leaves fixed in space.
             robot.client.changeDynamics(robot.body, joint, anisotropicFriction=(1.0, 0.0, 1.0),
                                     lateralFriction=1.0)
             robot.scale_reported_angle(joint, OMNI_WHEEL_SCALE)
+
+    def wheel_speeds(self, command: Tuple[float, ...]) -> Tuple[float, ...]:
+        """The Mecanum wheels' speeds [rad/s] for a (vx, vy, wz) command."""
+        vx, vy, wz = command
+        return tuple(mecanum_wheel_speeds(vx, vy, wz, self.geometry))
 
     def command(self, vx: float, vy: float, wz: float) -> Tuple[float, ...]:
         targets = mecanum_wheel_speeds(vx, vy, wz, self.geometry)
@@ -585,7 +614,7 @@ class SimWorld:
                                        if config.materials else 0)
         self.robots: Dict[str, SimRobot] = {}
         for rc in config.robots:
-            robot = SimRobot(p, rc, resolve_resource(rc.urdf, base_dir), base_dir)
+            robot = SimRobot(p, rc, resolve_resource(rc.urdf, base_dir), base_dir, time_step)
             if config.perturbations.robots.active:
                 robot.set_perturbations(
                     self.draws.joint_offsets(rc.name, [j for c in rc.controllers
@@ -616,6 +645,7 @@ class SimWorld:
         # the world takes one out; and the bodies taken out since take_lost.
         self._guests: Dict[int, Tuple[str, Callable[[], None]]] = {}
         self._lost: List[Lost] = []
+        self._braked: List[Tuple[str, float, List[Braked]]] = []
         self.suctions: Dict[str, Suction] = {}
         for name, robot in self.robots.items():
             sc = robot.config.suction
@@ -656,6 +686,16 @@ class SimWorld:
         self._p.stepSimulation()
         self.step_count += 1
         self.check_free_bodies(pose=False)
+        for name, robot in self.robots.items():
+            braked = robot.speed_limiter.enforce()
+            if braked:
+                self._braked.append((name, self.sim_time, braked))
+
+    def take_braked(self) -> List[Tuple[str, float, List[Braked]]]:
+        """The joints brought back to their speed limits since the last call: (robot, time [s],
+        what was braked)."""
+        braked, self._braked = self._braked, []
+        return braked
 
     def adopt(self, body: int, name: str, forget: Callable[[], None]) -> None:
         """Watch a body spawned by another part (its ``name``): one that leaves the world is

@@ -98,9 +98,22 @@ def test_wheel_joint_states_show_the_kinematic_wheel_speeds(youbot):
 
 def test_commands_are_clamped_to_the_youbots_own_limits(youbot):
     robot, runner = youbot
-    result = runner.command('youbot', 2.0, -3.0, 4.0)
-    assert result.clamped and result.command == (0.8, -0.8, 1.5)
+    result = runner.command('youbot', 0.3, -3.0, 0.2)
+    assert result.clamped and result.command == (0.3, -0.8, 0.2) and not result.wheel_limited
     assert runner.guards['youbot'].limits == (0.8, 0.8, 1.5)
+
+
+def test_a_command_its_wheels_cannot_follow_is_slowed_along_the_same_path(youbot):
+    # (0.8, -0.8, 1.5), each within its limit, asks a wheel for 45.9 rad/s (URDF: 30): the
+    # drive takes the same twist scaled until its fastest wheel is at its limit.
+    robot, runner = youbot
+    result = runner.command('youbot', 2.0, -3.0, 4.0)
+    assert result.clamped and result.wheel_limited
+    assert np.divide(result.command, (0.8, -0.8, 1.5)) == pytest.approx([30 / 45.89] * 3,
+                                                                        rel=1e-3)
+    speeds = wheel_speeds(*result.command, MecanumGeometry(0.0475, K))
+    assert max(abs(w) for w in speeds) == pytest.approx(30.0, rel=1e-9)
+    assert max(abs(w) for w in speeds) <= 30.0
 
 
 def test_a_step_to_full_speed_is_taken_at_the_acceleration_limits(youbot):

@@ -35,6 +35,7 @@ class UrdfJoint:
     kind: str                          # revolute, continuous, prismatic, fixed, ...
     lower: float                       # its <limit>'s (-inf, inf: none given)
     upper: float
+    velocity: float = 0.0              # its <limit>'s speed limit (0: none given)
 
 
 @dataclass(frozen=True)
@@ -138,7 +139,8 @@ class _Walk:
             last = self.joint_list[-1]
             self.joint_list[-1] = UrdfJoint(last.name, last.kind,
                                             _float(attributes.get('lower'), -math.inf),
-                                            _float(attributes.get('upper'), math.inf))
+                                            _float(attributes.get('upper'), math.inf),
+                                            _float(attributes.get('velocity'), 0.0))
 
     def end(self, _tag: str) -> None:
         self.depth -= 1
