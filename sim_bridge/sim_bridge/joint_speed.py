@@ -6,26 +6,26 @@ contact or the reaction of another joint can drive a joint past its limit, and t
 states would show it. A real joint cannot: its gearbox (a reduction of 70 to 160 on the youBot,
 harmonic drives on the Zu 12) is hard to back-drive, and its drive brakes the motor at its
 rated speed. After every physics step, :class:`SpeedLimiter` does what that brake does: each
-joint found faster than its limit gets the joint-space impulse that brings it back to its limit
-exactly, applied through the body's mass matrix, so that the joints coupled to it (the links
-beyond it) take their share as a brake torque at that joint would give them.
+joint found faster than its limit is brought back to its limit exactly, and every other joint
+keeps its speed (PhysX's articulations clamp a joint's speed the same way).
 
-The impulse acts between the joint's two links; a mobile robot's base is taken as held by its
-wheels (its six coordinates are left out of the mass matrix), which the ground does. Every
-braking is returned with the speed the joint would have had and the mean brake torque it took
-over the step, so that the simulator can say when the world drove a joint past its limit.
+Keeping the other joints' speeds is the gears' doing too: a brake acting alone at one joint of
+a free chain would hand its link's momentum to the joints beyond it (braking the Zu 12's
+shoulder from 4 to 2.1 rad/s would swing its elbow and wrists to 2 rad/s and more), but each of
+those is a geared joint that resists being driven as much as the braked one. The generalised
+impulse the change took (M dv, through the body's mass matrix; a mobile robot's base taken as
+held by its wheels) gives each braking's mean brake torque over the step, which is returned
+with the speed the joint would have had, so that the simulator can say when the world drove a
+joint past its limit.
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from typing import Dict, List, Optional, Sequence, Tuple
 
 import numpy as np
 from pybullet_utils.bullet_client import BulletClient
-
-# Rounds of braking in one step: braking one joint changes the speeds of the joints coupled to
-# it, and one of those may then be over its own limit (it is braked with the first).
-MAX_ROUNDS = 4
 
 
 @dataclass(frozen=True)
@@ -42,6 +42,15 @@ class Braked:
     limit: float
     torque: float
     torque_is_force: bool = False       # a prismatic joint's brake is a force [N]
+    effort: float = math.inf            # the joint's own effort limit (its motor's most)
+
+    @property
+    def driven_past(self) -> bool:
+        """Driven past its limit by the world: well past it (more than DRIVEN_PAST), and it
+        took a brake torque beyond what the joint's own motor gives. Short of either, the
+        brake only took out the solver's slop (a motor asked for its limit overshoots it by up
+        to 0.8 %; a finger nudged by the material it closes on takes a fraction of a newton)."""
+        return self.ratio > 1.0 + DRIVEN_PAST and self.torque > self.effort
 
     @property
     def ratio(self) -> float:
@@ -54,7 +63,7 @@ class SpeedLimiter:
     def __init__(self, client: BulletClient, body: int, joints: Sequence[int],
                  names: Sequence[str], limits: Sequence[float], scales: Sequence[float],
                  floating_base: bool, time_step: float,
-                 prismatic: Sequence[bool] = ()) -> None:
+                 prismatic: Sequence[bool] = (), efforts: Sequence[float] = ()) -> None:
         """``joints``: the body's movable joints (PyBullet indices, in its order), ``limits``
         their velocity limits in reported units (<= 0: none), ``scales`` reported speed over
         PyBullet joint speed (a virtual omni-wheel's is sqrt(2))."""
@@ -68,6 +77,8 @@ class SpeedLimiter:
         self._floating = floating_base
         self._dt = time_step
         self._prismatic = list(prismatic) or [False] * len(self._joints)
+        self._efforts = [e if e > 0.0 else math.inf for e in efforts] or [math.inf] * len(
+            self._joints)
 
     @property
     def active(self) -> bool:
@@ -83,39 +94,24 @@ class SpeedLimiter:
         if not over.any() or not np.all(np.isfinite(v)):
             return []              # (a state that is not finite is the runner's to handle)
         q = [s[0] for s in states]
+        after = np.clip(v, -self._limit, self._limit)
+        for k in np.flatnonzero(over):
+            self._p.resetJointState(self._body, self._joints[k], q[k], float(after[k]))
+        # The generalised impulse that change took (M dv): at a braked joint, its brake's.
         mass = np.asarray(self._p.calculateMassMatrix(self._body, q), float)
         if self._floating:
             mass = mass[6:, 6:]
-        before = v.copy()
-        impulse = np.zeros(len(v))
-        braked = np.zeros(len(v), bool)
-        for _ in range(MAX_ROUNDS):
-            braked |= over
-            rows = np.flatnonzero(braked)
-            target = np.clip(v[rows], -self._limit[rows], self._limit[rows])
-            # The impulses (one per joint braked) that take those joints to their limits:
-            # M dv = S^T lambda, S dv = target - v.
-            columns = np.linalg.solve(mass, np.eye(len(v))[:, rows])
-            step = np.linalg.solve(columns[rows], target - v[rows])
-            v = v + columns @ step
-            impulse[rows] += step
-            v[rows] = target                   # (exactly, whatever the rounding)
-            over = np.abs(v) > self._limit
-            if not over.any():
-                break
-        for k, j in enumerate(self._joints):
-            if v[k] != before[k]:
-                self._p.resetJointState(self._body, j, q[k], float(v[k]))
+        impulse = mass @ (after - v)
+        before = v
         return [Braked(self._names[k], float(before[k] * self._scales[k]),
                        float(self._reported[k]),
                        float(abs(impulse[k]) / self._dt / self._scales[k]),
-                       self._prismatic[k])
-                for k in np.flatnonzero(braked & (np.abs(before) > self._limit))]
+                       self._prismatic[k], self._efforts[k])
+                for k in np.flatnonzero(over)]
 
 
-# A joint the step left more than this fraction over its limit was driven past it by the world
-# (a contact, a load let go, gravity on an arm its motors cannot hold); closer to the limit, it
-# is the motor's own solver (a PyBullet motor asked for its limit overshoots it by up to 0.8 %).
+# A joint the step left more than this fraction over its limit, with a brake beyond its motor's
+# effort, was driven past it by the world (Braked.driven_past).
 DRIVEN_PAST = 0.02
 
 
@@ -144,14 +140,15 @@ class BrakeBook:
         for b in braked:
             entry = self._joints.setdefault((robot, b.joint), _Joint())
             entry.brakings += 1
-            if b.ratio <= 1.0 + DRIVEN_PAST:
+            if not b.driven_past:
                 continue
             entry.driven += 1
             if entry.worst is None or b.ratio > entry.worst.ratio:
                 entry.worst, entry.worst_time = b, time_s
+            unit = 'N' if b.torque_is_force else 'N m'
             lines.append(f'{robot}: {b.joint} was driven past its speed limit at {time_s:.3f} s:'
                          f' {abs(b.speed):.4g} ({b.ratio:.3f} times its {b.limit:.4g}); braked '
-                         f'back to it with {b.torque:.3g} {"N" if b.torque_is_force else "N m"}')
+                         f'back to it with {b.torque:.3g} {unit} (its motor: {b.effort:.3g})')
         return lines
 
     def driven(self, robot: str) -> List[Tuple[str, _Joint]]:

@@ -49,7 +49,7 @@ from sim_bridge.camera import ImageBuffer
 from sim_bridge.entities import Entities
 from sim_bridge.frames import WorldFrames
 from sim_bridge.hold_watch import HoldWatch
-from sim_bridge.joint_speed import DRIVEN_PAST, BrakeBook
+from sim_bridge.joint_speed import BrakeBook
 from sim_bridge.messages import topic
 from sim_bridge.parameters import PARAMS, SimConfigError, check_params
 from sim_bridge.runner import ZERO, DriveLimits, SimRunner, Twist3
@@ -278,7 +278,7 @@ class SimNode(Node):
 
     def on_joints_braked(self, robot: str, time_ns: int, braked) -> None:
         lines = self._brakes.add(robot, time_ns * 1e-9, braked)
-        for b, line in zip([b for b in braked if b.ratio > 1.0 + DRIVEN_PAST], lines):
+        for b, line in zip([b for b in braked if b.driven_past], lines):
             text = self._rejections.text((robot, b.joint, 'driven'), time.monotonic(), line)
             if text is not None:
                 self.get_logger().warning(text)

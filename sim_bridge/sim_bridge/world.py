@@ -164,7 +164,8 @@ class SimRobot:
             client, self.body, self.movable, self._joint_names,
             [self._joint_limits[n][2] for n in self._joint_names], self._report_scale.tolist(),
             floating_base=not config.fixed_base, time_step=self.time_step,
-            prismatic=[n not in self.revolute for n in self._joint_names])
+            prismatic=[n not in self.revolute for n in self._joint_names],
+            efforts=[self._joint_limits[n][3] for n in self._joint_names])
         self._initial: Dict[int, float] = {}
         for joint, position in config.initial_joint_positions:
             j = self.movable_joint(joint, 'initial_joint_positions')
