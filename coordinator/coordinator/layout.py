@@ -517,6 +517,25 @@ def _youbot_reaches_from(stand: UnloadStand, point: np.ndarray, base_z: float, m
     return False
 
 
+def _check_plate_load(layout: CellLayout, name: str, size: float, mass: float) -> None:
+    """A LayoutError unless the youBot's arm holds ``mass`` kg at rest (within youbot_holds'
+    share of each joint's effort) over one of the plate's slots, where it lifts every carried
+    material from: a load it cannot hold there it cannot unload anywhere."""
+    from coordinator.reach import YOUBOT_LOAD_MAX, youbot_least_need
+    best: Optional[Tuple[str, float, float]] = None
+    for slot in layout.plate_slots:
+        top = np.array([slot[0], slot[1], PLATE_TOP_IN_BASE_M + size])
+        need = youbot_least_need([top + np.array([0.0, 0.0, 0.06]), top], mass)
+        if need is not None and (best is None or need[1] / need[2] < best[1] / best[2]):
+            best = need
+    if best is not None and best[1] > YOUBOT_LOAD_MAX * best[2]:
+        joint, torque, effort = best
+        raise LayoutError(f'{name} materials ({mass:g} kg) are more than the youBot\'s arm '
+                          f'holds at rest over its plate: {joint} needs {torque:.2f} N m there '
+                          f'at best, and takes at most {YOUBOT_LOAD_MAX:.0%} of its '
+                          f'{effort:g} N m (the rest accelerates it)')
+
+
 def _region(layout: CellLayout, obstacle: Any, name: str) -> Tuple[Region, str]:
     """A destination's region and its slots, each checked in reach of the robot that sets a
     material down there (a LayoutError if none is), and the stand the youBot unloads there from
@@ -561,8 +580,13 @@ def _region(layout: CellLayout, obstacle: Any, name: str) -> Tuple[Region, str]:
     reached = [p for p in slots if _youbot_reaches_from(
         stand, p + np.array([0.0, 0.0, size + 0.015]), layout.youbot_base_z, 0.0, mass, 0.05)]
     if not reached:
+        light = mass > 0.0 and any(_youbot_reaches_from(
+            stand, p + np.array([0.0, 0.0, size + 0.015]), layout.youbot_base_z, 0.0, 0.0, 0.05)
+            for p in slots)
         raise LayoutError(f'destination {name} is out of the youBot arm\'s reach from its '
-                          f'unload stands beside the pool')
+                          f'unload stands beside the pool' + (
+                              f' holding {mass:g} kg at rest (it reaches it empty-handed)'
+                              if light else ''))
     return Region(name, (ox, oy), (hx, hy), top, tuple(reached)), stand.name
 
 
@@ -572,11 +596,14 @@ CARRIED_MAX_M = 0.06
 
 def _check_capacity(layout: CellLayout) -> None:
     """Every destination has a slot for each material bound for it (the youBot makes as many
-    trips as its load needs), and every carried material fits the plate's slots."""
+    trips as its load needs), every carried material fits the plate's slots, and the youBot's
+    arm holds it at rest over one of them at least."""
     for name, rule in layout.rules.items():
         if rule.route == 'carry' and rule.size > CARRIED_MAX_M + 1e-9:
             raise LayoutError(f'{name} ({rule.size} m) is too large to be carried: the youBot '
                               f'carries materials of at most {CARRIED_MAX_M} m')
+        if rule.route == 'carry' and rule.mass > 0.0:
+            _check_plate_load(layout, name, rule.size, rule.mass)
     for name, region in layout.regions.items():
         bound = sum(n for c, n in layout.manifest.items() if layout.destination(c) == name)
         if bound > len(region.slots):

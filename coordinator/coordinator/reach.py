@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import math
 from functools import lru_cache
-from typing import Sequence, Tuple
+from typing import Optional, Sequence, Tuple
 
 import numpy as np
 
@@ -65,6 +65,39 @@ def youbot_holds(qs: Sequence[Vector], payload: float) -> bool:
     YOUBOT_LOAD_MAX of each joint's effort."""
     statics = youbot_statics()
     return all(statics.load(q, payload) <= YOUBOT_LOAD_MAX for q in qs)
+
+
+def youbot_hold_need(q: Vector, payload: float) -> Tuple[str, float, float]:
+    """The youBot arm's joint that holding ``payload`` kg at rest at ``q`` loads most for its
+    effort: (joint, torque [N m], its effort [N m])."""
+    statics = youbot_statics()
+    torques = np.abs(statics.torques(q, payload))
+    k = int(np.argmax(torques / statics.effort))
+    return youbot_arm.JOINT_NAMES[k], float(torques[k]), float(statics.effort[k])
+
+
+def youbot_least_need(points_in_base: Sequence[Vector], payload: float
+                      ) -> Optional[Tuple[str, float, float]]:
+    """Of the tilts at which the youBot's arm reaches every point (base_link), the one whose
+    most loaded joint, holding ``payload`` kg at rest, is loaded least: that joint's
+    youbot_hold_need at its worst point; None if no tilt reaches them."""
+    best: Optional[Tuple[str, float, float]] = None
+    for tilt in YOUBOT_TILTS_DEG:
+        qs = []
+        for p in points_in_base:
+            target = np.eye(4)
+            target[:3, :3] = quaternion_to_matrix(youbot_tool_quaternion(p, math.radians(tilt)))
+            target[:3, 3] = p
+            solution = _youbot().ik(target)
+            if not solution.success or solution.positions is None:
+                break
+            qs.append(solution.positions)
+        if len(qs) != len(points_in_base):
+            continue
+        need = max((youbot_hold_need(q, payload) for q in qs), key=lambda n: n[1] / n[2])
+        if best is None or need[1] / need[2] < best[1] / best[2]:
+            best = need
+    return best
 
 
 def zu12_reaches(base: Sequence[float], points: Sequence[Vector]) -> bool:

@@ -116,6 +116,13 @@ def test_a_class_of_the_users_own_goes_where_its_rule_says():
      r"0.06 m"),
     (lambda c, o, m: c['orange'].update(count=30),
      r'destination pool_floor has \d+ slots in reach for 30 materials'),
+    # A load the youBot's arm cannot hold (issue 48): named with its joint and torque.
+    (lambda c, o, m: c['orange'].update(mass=2.0),
+     r"orange materials \(2 kg\) are more than the youBot's arm holds at rest over its plate: "
+     r'arm_joint_\d needs \d+\.\d\d N m there at best, and takes at most 95% of its'),
+    (lambda c, o, m: c['blue'].update(mass=0.9),
+     r"destination pool_platform is out of the youBot arm's reach from its unload stands beside "
+     r'the pool holding 0.9 kg at rest \(it reaches it empty-handed\)'),
 ])
 def test_a_cell_whose_rules_cannot_work_is_refused_with_one_line(change, fragment):
     classes, obstacles, move = copy.deepcopy(PAPER), [], {}
@@ -450,6 +457,41 @@ def test_an_unload_that_stalled_short_of_its_drop_is_a_failure_not_a_delivery():
         if not delivered:
             assert m.failure.startswith('unload: the arm stalled')
             assert 'short of the drop' in m.failure
+            assert 'needs' not in m.failure           # (0.1 kg: held, it stalled otherwise)
+
+
+def test_an_unload_stalled_under_a_load_the_arm_cannot_hold_names_the_joint_and_its_torque():
+    from test_pipeline import _YoubotIK
+
+    from coordinator.pipeline import Material, Observation, Pipeline, Settings
+    from coordinator.reach import youbot_hold_need
+
+    class Ports(_YoubotIK):
+        def grip(self, arm, on):
+            return True, ''
+
+    classes = copy.deepcopy(PAPER)
+    classes['orange'].update(mass=0.5)
+    layout = layout_from_world(world(classes))
+    run_ = Pipeline(layout, Ports(), Settings())
+    tr = run_.transport
+    tr._next_unload = lambda obs: None
+    tr.arrival = lambda obs: False
+    m = Material(1, 'orange', np.zeros(3), 0.0, 3, status='on_plate', slot=0)
+    run_.materials = {1: m}
+    stand = layout.stand_for('orange', 0)
+    path = tr._unload_path(m, stand.pose, np.zeros(5))
+    tr._carry, tr.queue, tr._drop_pending = path, [m], False
+    # Stalled with the arm stretched out flat (the shoulder at its forward limit).
+    q = np.array([0.0, 1.5, 0.0, 0.0, 0.0])
+    joint, torque, effort = youbot_hold_need(q, 0.5)
+    assert torque > 0.95 * effort
+    tr._carry_to_drop(Observation(10.0, np.zeros(6), q, stand.pose, youbot_holding=True))
+    assert m.left_on_plate
+    assert (f'; holding 0.5 kg there, {joint} needs {torque:.2f} N m at rest (its motor: '
+            f'{effort:g} N m)') in m.failure
+    stalls = [e for e in run_.events if e.kind.value == 'arm_stalled']
+    assert stalls and f'{joint} needs {torque:.2f} N m' in stalls[-1].detail
 
 
 def test_a_lift_out_of_the_end_stops_queue_keeps_to_the_straight_line_up():

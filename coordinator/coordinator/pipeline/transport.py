@@ -46,6 +46,7 @@ from coordinator.pipeline.model import (
     TransportState,
     known,
 )
+from coordinator.reach import YOUBOT_LOAD_MAX, youbot_hold_need
 
 if TYPE_CHECKING:
     from coordinator.pipeline.shared import Shared
@@ -567,13 +568,15 @@ class Transport(Machine):
             self._carry, m.place = path, path.place
             return self._carry_out(obs, m, path.over, path.drop)
         if not arrived:
-            run.event(now, EventKind.ARM_STALLED, 'youbot', m, 'unload motion not completed')
+            held = self._held_beyond(obs, m)
+            run.event(now, EventKind.ARM_STALLED, 'youbot', m,
+                      'unload motion not completed' + held)
             short = self._short_of_drop(obs)
             if short > DROP_REACH_TOLERANCE_M:
                 # Let go where it is, and not told delivered: a 0.44 kg blue whose unload
                 # stalled 2 cm over its plate slot was reported set down on the platform.
                 return self._unload_failed(obs, m, EventKind.FAILED, f'unload: the arm stalled '
-                                           f'{short:.2f} m short of the drop')
+                                           f'{short:.2f} m short of the drop' + held)
         run.ports.grip('youbot', False)
         m.status = MaterialStatus.DELIVERED
         where = run.layout.destination(m.color)
@@ -585,6 +588,17 @@ class Transport(Machine):
         run.event(now, EventKind.DELIVERED, 'youbot', m, where)
         # The arm stays still while the material falls free of the fingers.
         self.enter(TransportState.RELEASE, now, RELEASE_HOLD_S)
+
+    def _held_beyond(self, obs: Observation, m: Material) -> str:
+        """Where the arm, as it stands, holds ``m`` beyond what it may (YOUBOT_LOAD_MAX of a
+        joint's effort, at rest): which joint, and the torque it takes ('' where it does not):
+        an arm that cannot hold its load sags, and says why."""
+        mass = self.run.layout.rule(m.color).mass
+        joint, torque, effort = youbot_hold_need(obs.youbot_q, mass)
+        if torque <= YOUBOT_LOAD_MAX * effort:
+            return ''
+        return (f'; holding {mass:g} kg there, {joint} needs {torque:.2f} N m at rest '
+                f'(its motor: {effort:g} N m)')
 
     def _short_of_drop(self, obs: Observation) -> float:
         """How far the gripper is from the unload's drop, across [m] (the arm's forward
