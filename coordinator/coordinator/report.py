@@ -335,7 +335,12 @@ def _table(s: Dict[str, float]) -> List[str]:
         f'{s["trials"]:.0f}.', '',
         f'Peak joint speed in the joint states the simulator published (all trials, as a '
         f'fraction of each joint\'s published limit): Zu 12 {s["peak_joint_speed_zu12"]:.3f}, '
-        f'youBot {s["peak_joint_speed_youbot"]:.3f}.', '']
+        f'youBot {s["peak_joint_speed_youbot"]:.3f}; every joint with a limit, arms, fingers '
+        f'and wheels' + (
+            f'. The world drove a joint past its limit (braked back to it) in '
+            f'{s["trials_joints_driven_past"]:.0f} trials, at worst '
+            f'{s["worst_driven_past"]:.2f} times its limit (each trial\'s '
+            '`joints_driven_past`).' if s.get('trials_joints_driven_past') else '.'), '']
 
 
 def _definitions(totals: Sequence[int]) -> List[str]:

@@ -378,4 +378,9 @@ def summary_rows(trials: Sequence[TrialResult]) -> Dict[str, float]:
         **{f'peak_joint_speed_{arm}': max(
             (t.peak_joint_speed.get(arm, {}).get('fraction_of_limit', 0.0) for t in trials),
             default=0.0) for arm in ('zu12', 'youbot')},
+        # Trials in which the world drove a joint past its speed limit (the simulator braked it
+        # back), and the worst such joint's ratio.
+        'trials_joints_driven_past': sum(1 for t in trials if t.joints_driven_past),
+        'worst_driven_past': max((d['ratio'] for t in trials for d in t.joints_driven_past),
+                                 default=0.0),
     }

@@ -119,6 +119,9 @@ def test_summary_and_report(tmp_path):
                        'materials': [{'id': 3, 'color': 'blue', 'status': 'failed',
                                       'failure': 'not held after 2 attempts'}]
                        if handling < 1.0 else [], 'wall_time': 80.0})
+    trials[2]['joints_driven_past'] = [{'robot': 'youbot', 'joint': 'arm_joint_4',
+                                        'ratio': 1.31, 'speed': 2.06, 'limit': 1.5708,
+                                        'brake': 2.7, 'time': 40.0, 'count': 1}]
     trials = [TrialResult.from_dict(t) for t in trials]
     s = summary_rows(trials)
     assert s['median_completion_time'] == 140.0 and s['completed'] == 2
@@ -127,6 +130,9 @@ def test_summary_and_report(tmp_path):
     assert '| **these trials** | 3 | 140.0' in report
     assert '| paper, trials 100-110 | | 61 | 99 | 99 | 10 |' in report
     assert 'trial 1 (seed 11, belt 0.120): incomplete' in report and 'blue 3' in report
+    assert s['trials_joints_driven_past'] == 1 and s['worst_driven_past'] == 1.31
+    assert ('The world drove a joint past its limit (braked back to it) in 1 trials, at worst '
+            '1.31 times its limit') in report
     for png in ('completion_times.png', 'success_rates.png', 'youbot_paths.png'):
         assert (tmp_path / png).stat().st_size > 1000
     write_csv(trials, tmp_path / 'trials.csv')
