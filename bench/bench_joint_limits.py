@@ -5,21 +5,28 @@ limit, and the joints the simulator found driven past their limits (and braked b
 
 Random cells are drawn like the held-back ones of the 36-cell round (docs/writing-a-cell.md):
 6 to 20 materials of up to four classes, 40 to 60 mm, 0.05 to 0.5 kg, belts 0.05 to 0.25 m/s.
+The brake's cost, against a baseline in the same run: the paper's cell stepped in-process
+(the arms following a motion, the belt carrying) with and without it.
 Prints a table and writes JSON to bench/results/joint_limits.json.
 """
 import argparse
 import json
 import sys
 import tempfile
+import time
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
 import numpy as np
 import yaml
 
+from controllers.joint_trajectory import TrajectoryPoint, TrajectoryRequest
 from coordinator.trial_run import run_trial
+from sim_bridge.runner import DriveLimits, NullSink, SimRunner
+from sim_bridge.world import SimWorld
 from world_description import PIPELINE_CELL
 from world_description.resources import resolve_resource
+from world_description.world_config import load_world
 
 HERE = Path(__file__).resolve().parent
 WORLDS = resolve_resource(PIPELINE_CELL).parent
@@ -57,6 +64,44 @@ def random_cell(rng: np.random.Generator, out: Path, k: int):
     return path, belt
 
 
+class _Count(NullSink):
+    def __init__(self):
+        self.brakings = 0
+
+    def on_joints_braked(self, robot, time_ns, braked):
+        self.brakings += len(braked)
+
+
+def brake_cost(steps=2400, rounds=3):
+    """CPU seconds per simulated second of the paper's cell, with the brake and without it
+    (its limiter switched off), the two interleaved over ``rounds``; the braking count."""
+    timings = {True: [], False: []}
+    brakings = 0
+    for _ in range(rounds):
+        for on in (True, False):
+            world = SimWorld(load_world(resolve_resource(PIPELINE_CELL)))
+            runner = SimRunner(world, DriveLimits(), 50.0)
+            if not on:
+                for robot in world.robots.values():
+                    robot.speed_limiter.enforce = lambda: []
+            zu12 = ['joint_1', 'joint_2', 'joint_3', 'joint_4', 'joint_5', 'joint_6']
+            runner.set_trajectory('zu12', 'arm_controller', TrajectoryRequest(tuple(zu12), (
+                TrajectoryPoint(3.0, (1.0, 0.5, -0.5, 0.3, 0.5, 0.5)),
+                TrajectoryPoint(6.0, (-1.0, 0.2, 0.3, -0.3, -0.5, 0.0)))))
+
+            sink = _Count()
+            start = time.process_time()
+            runner.advance(steps, sink)
+            timings[on].append(time.process_time() - start)
+            brakings += sink.brakings
+            world.close()
+    sim_s = steps / 240.0
+    with_brake = min(timings[True]) / sim_s
+    without = min(timings[False]) / sim_s
+    return {'cpu_per_sim_s_with_brake': with_brake, 'cpu_per_sim_s_without': without,
+            'ratio': with_brake / without, 'brakings': brakings}
+
+
 def summary(name, result):
     peaks = result.peak_joint_speed
     worst = max(peaks.items(), key=lambda kv: kv[1].get('fraction_of_limit', 0.0),
@@ -77,6 +122,10 @@ def main(argv=None):
     ap.add_argument('--parallel', type=int, default=2)
     ap.add_argument('--out', default=str(HERE / 'results' / 'joint_limits.json'))
     args = ap.parse_args(argv)
+    cost = brake_cost()
+    print(f'brake cost: {cost["cpu_per_sim_s_with_brake"]:.3f} CPU-s per simulated s with it, '
+          f'{cost["cpu_per_sim_s_without"]:.3f} without (ratio {cost["ratio"]:.3f}; '
+          f'{cost["brakings"]} brakings)', flush=True)
     rng = np.random.default_rng(args.seed)
     work = Path(tempfile.mkdtemp(prefix='joint_limits_'))
     jobs = [(f'random {k:02d}', *random_cell(rng, work, k)) for k in range(args.cells)]
@@ -101,7 +150,7 @@ def main(argv=None):
     print(f'{done}/{len(rows)} completed; worst peak {worst:.4f} of a limit; '
           f'{len(driven)} joints driven past their limits (braked back)')
     Path(args.out).parent.mkdir(parents=True, exist_ok=True)
-    Path(args.out).write_text(json.dumps({'rows': rows, 'worst_peak': worst,
+    Path(args.out).write_text(json.dumps({'rows': rows, 'worst_peak': worst, 'brake_cost': cost,
                                           'completed': done, 'cells': len(rows)}, indent=1))
     return 0 if worst <= 1.0 + 1e-9 else 1
 

@@ -13,5 +13,7 @@ python "$ROOT/bench/bench_vision.py"
 python "$ROOT/bench/bench_pipeline.py"
 python "$ROOT/bench/bench_live_view.py"
 python "$ROOT/bench/bench_requests.py"
+# Joint speed limits in random cells and every example world (issue 48); the brake's cost.
+python "$ROOT/bench/bench_joint_limits.py" --cells 12 --examples
 # The issue-12 goals, from the figures of this run only.
 python "$ROOT/bench/goals.py" --since "$START"
