@@ -134,7 +134,7 @@ def main(argv=None):
 
     def run(item):
         k, (name, world, belt) = item
-        result = run_trial(k, args.seed + k, belt, 200 + k % 50, work / 'runs',
+        result = run_trial(k, args.seed + k, belt, 200 + k % 16, work / 'runs',
                            world=str(world))
         row = summary(name, result)
         print(f'{name:24s} {row["status"]:10s} {row["completion_time"]:6.1f} s '
