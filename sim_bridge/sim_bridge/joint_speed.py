@@ -171,9 +171,9 @@ class BrakeBook:
         for joint, e in driven:
             assert e.worst is not None
             values += [(f'{joint}/ratio', f'{e.worst.ratio:.4f}'),
-                       (f'{joint}/speed', f'{abs(e.worst.speed):.6g}'),
-                       (f'{joint}/limit', f'{e.worst.limit:.6g}'),
-                       (f'{joint}/brake', f'{e.worst.torque:.6g}'),
+                       (f'{joint}/speed', f'{abs(e.worst.speed):.10g}'),
+                       (f'{joint}/limit', f'{e.worst.limit:.10g}'),
+                       (f'{joint}/brake', f'{e.worst.torque:.10g}'),
                        (f'{joint}/time', f'{e.worst_time:.4f}'),
                        (f'{joint}/count', str(e.driven))]
         if not driven:

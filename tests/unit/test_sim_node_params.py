@@ -108,3 +108,32 @@ def test_an_arm_held_then_freed_is_reported_both_times_without_taking_the_node_d
             node.on_state('zu12', k * 1_000_000)
     finally:
         node.destroy_node()
+
+
+def test_a_joint_driven_past_its_limit_is_told_in_the_form_a_trials_result_reads(context):
+    """Issue 48: the simulator's ~/joint_limits statuses, read by the coordinator's parser."""
+    import math
+
+    from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
+
+    from coordinator.joint_speeds import driven_past
+    from world_description import YOUBOT_WORLD
+    node = make(context, world=YOUBOT_WORLD, synchronous=True)
+    try:
+        robot = node._world.robots['youbot']
+        j = robot.joint_index['arm_joint_2']
+        node._world.client.resetJointState(robot.body, j, 0.3, 5 * math.pi / 2)   # flung
+        node._runner.advance(1, node)
+        [status] = [s for s in node._brake_statuses() if s.hardware_id == 'youbot']
+        assert status.level == DiagnosticStatus.WARN
+        assert status.name == 'sim_node: youbot joint speed limits'
+        [record] = driven_past(DiagnosticArray(status=[status]))
+        assert record['joint'] == 'arm_joint_2' and record['count'] == 1
+        assert record['ratio'] > 4.0 and record['limit'] == pytest.approx(math.pi / 2)
+        assert record['brake'] > 9.5 and record['time'] == pytest.approx(1 / 240, abs=1e-4)
+        assert abs(robot.joint_states().velocities[robot.joint_names.index('arm_joint_2')]) \
+            <= math.pi / 2
+        node._reset_world()
+        assert all(s.level == DiagnosticStatus.OK for s in node._brake_statuses())
+    finally:
+        node.destroy_node()
