@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import math
 from functools import lru_cache
-from typing import Optional, Sequence, Tuple
+from typing import List, Optional, Sequence, Tuple
 
 import numpy as np
 
@@ -83,16 +83,8 @@ def youbot_least_need(points_in_base: Sequence[Vector], payload: float
     youbot_hold_need at its worst point; None if no tilt reaches them."""
     best: Optional[Tuple[str, float, float]] = None
     for tilt in YOUBOT_TILTS_DEG:
-        qs = []
-        for p in points_in_base:
-            target = np.eye(4)
-            target[:3, :3] = quaternion_to_matrix(youbot_tool_quaternion(p, math.radians(tilt)))
-            target[:3, 3] = p
-            solution = _youbot().ik(target)
-            if not solution.success or solution.positions is None:
-                break
-            qs.append(solution.positions)
-        if len(qs) != len(points_in_base):
+        qs = _youbot_solutions(points_in_base, tilt)
+        if qs is None:
             continue
         need = max((youbot_hold_need(q, payload) for q in qs), key=lambda n: n[1] / n[2])
         if best is None or need[1] / need[2] < best[1] / best[2]:
@@ -131,15 +123,23 @@ def youbot_reaches(points_in_base: Sequence[Vector], payload: float = 0.0) -> bo
     """Whether the youBot's arm reaches every point (base_link) at one tool tilt, holding
     ``payload`` kg at rest at each (youbot_holds)."""
     for tilt in YOUBOT_TILTS_DEG:
-        qs = []
-        for p in points_in_base:
-            target = np.eye(4)
-            target[:3, :3] = quaternion_to_matrix(youbot_tool_quaternion(p, math.radians(tilt)))
-            target[:3, 3] = p
-            solution = _youbot().ik(target)
-            if not solution.success or solution.positions is None:
-                break
-            qs.append(solution.positions)
-        if len(qs) == len(points_in_base) and (payload <= 0.0 or youbot_holds(qs, payload)):
+        qs = _youbot_solutions(points_in_base, tilt)
+        if qs is not None and (payload <= 0.0 or youbot_holds(qs, payload)):
             return True
     return False
+
+
+def _youbot_solutions(points_in_base: Sequence[Vector], tilt_deg: float
+                      ) -> Optional[List[np.ndarray]]:
+    """The youBot arm's joint positions for its tool at each point (base_link) at one tilt,
+    or None if it reaches one of them at none."""
+    qs = []
+    for p in points_in_base:
+        target = np.eye(4)
+        target[:3, :3] = quaternion_to_matrix(youbot_tool_quaternion(p, math.radians(tilt_deg)))
+        target[:3, 3] = p
+        solution = _youbot().ik(target)
+        if not solution.success or solution.positions is None:
+            return None
+        qs.append(solution.positions)
+    return qs
