@@ -4,9 +4,10 @@ A PyBullet position or velocity motor caps the speed it *asks* for at the URDF's
 limit, but it may only push with the URDF's effort: gravity on a heavy arm, a load let go, a
 contact or the reaction of another joint can drive a joint past its limit, and the joint
 states would show it. A real joint cannot: its motor turns it through a high-reduction gearbox
-that is hard to back-drive, and its drive brakes the motor at its rated speed. After every physics step, :class:`SpeedLimiter` does what that brake does: each
-joint found faster than its limit is brought back to its limit exactly, and every other joint
-keeps its speed (PhysX's articulations clamp a joint's speed the same way).
+that is hard to back-drive, and its drive brakes the motor at its rated speed. After every
+physics step, :class:`SpeedLimiter` does what that brake does: each joint found faster than its
+limit is brought back to its limit exactly, and every other joint keeps its speed (PhysX's
+articulations clamp a joint's speed the same way).
 
 Keeping the other joints' speeds is the gears' doing too: a brake acting alone at one joint of
 a free chain would hand its link's momentum to the joints beyond it (braking the Zu 12's
