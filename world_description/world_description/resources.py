@@ -4,11 +4,9 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Optional
 
-from world_description.world_config import WorldConfigError
+from world_description.errors import ResourceError
 
-
-class ResourceError(WorldConfigError):
-    """A ``package://`` resource whose package is not found."""
+__all__ = ['ResourceError', 'package_share', 'resolve_resource']
 
 
 def resolve_resource(uri: str, base_dir: Optional[Path] = None) -> Path:
@@ -26,8 +24,9 @@ def resolve_resource(uri: str, base_dir: Optional[Path] = None) -> Path:
 
 
 def package_share(package: str) -> Path:
-    """A package's share directory, from the ament index (the workspace sourced); the two
-    description packages also from their source trees."""
+    """A package's share directory, from the ament index (the workspace sourced), else a
+    package of this source tree (a directory beside this package's, with its package.xml):
+    the floor finds the robots' files without importing their package."""
     try:
         from ament_index_python.packages import PackageNotFoundError, get_package_share_directory
         try:
@@ -36,10 +35,8 @@ def package_share(package: str) -> Path:
             pass
     except ImportError:
         pass
-    if package == 'robot_description':
-        from robot_description import share_directory
-        return share_directory()
-    if package == 'world_description':
-        return Path(__file__).resolve().parent.parent
+    source = Path(__file__).resolve().parent.parent.parent / package
+    if (source / 'package.xml').is_file():
+        return source
     raise ResourceError(f'package "{package}" not found in the ament index '
                         '(is the workspace sourced?)')

@@ -1,0 +1,290 @@
+"""The schema of a world file: what each section holds (frozen dataclasses), the range of every
+number, and the reader that checks each field as it is read (``Reader``)."""
+from __future__ import annotations
+
+import math
+import re
+from dataclasses import dataclass, field
+from typing import Any, Dict, List, Optional, Set, Tuple, Union
+
+from world_description.errors import WorldConfigError
+from world_description.material_classes import MaterialClass
+from world_description.perturbations import Perturbations
+
+Vec3 = Tuple[float, float, float]
+
+
+@dataclass(frozen=True)
+class Pose:
+    x: float = 0.0
+    y: float = 0.0
+    z: float = 0.0
+    yaw: float = 0.0
+
+
+@dataclass(frozen=True)
+class DiffDriveConfig:
+    left_wheel_joint: str
+    right_wheel_joint: str
+    wheel_radius: float
+    wheel_separation: float
+    # Stall torque of each wheel motor [N m]; also the velocity motor's force limit.
+    wheel_effort: float
+
+
+@dataclass(frozen=True)
+class MecanumConfig:
+    """Four Mecanum wheels driven as virtual omni-wheels (see robot_description's youBot)."""
+
+    # Wheel joints in the order front-left, front-right, rear-right, rear-left.
+    wheel_joints: Tuple[str, str, str, str]
+    wheel_radius: float
+    # k = lx + ly: half the wheelbase plus half the track (ros2_controllers' name).
+    sum_of_robot_center_projection_on_X_Y_axis: float
+    wheel_effort: float
+
+
+@dataclass(frozen=True)
+class DriveLimitsConfig:
+    """Per-robot command limits; None falls back to the simulator's parameters (speeds) or
+    means no limit (accelerations)."""
+
+    max_speed: Optional[float] = None
+    max_turn: Optional[float] = None
+    # How fast the applied command may change, as diff_drive_controller's max_acceleration:
+    # [m/s^2] for each of linear.x and linear.y, [rad/s^2] for angular.z.
+    max_accel: Optional[float] = None
+    max_turn_accel: Optional[float] = None
+
+
+@dataclass(frozen=True)
+class ControllerConfig:
+    """A position-controlled joint group that follows trajectory_msgs/JointTrajectory."""
+
+    name: str
+    joints: Tuple[str, ...]
+    # PyBullet position-motor gains (its constraint solver's kp and kd).
+    position_gain: float = 0.3
+    velocity_gain: float = 1.0
+    # Limits beyond the URDF's (acceleration), in MoveIt's joint_limits.yaml format: a path or
+    # package:// URI, relative paths from the world file's directory. None: no limits.
+    joint_limits: Optional[str] = None
+    # JTC's constraints.<joint>.trajectory: how far a joint may lag its reference while a
+    # trajectory runs [rad or m] before the trajectory is aborted and the group holds where it
+    # is; 0 checks nothing (an action goal's own path tolerances replace it per joint).
+    path_tolerance: float = 0.0
+
+
+@dataclass(frozen=True)
+class SuctionConfig:
+    """A suction tool: grips the material whose face is within ``reach`` of ``link``'s origin."""
+
+    link: str
+    reach: float = 0.01
+    max_payload: float = 12.0      # kg
+    # The SetBool service that arms/releases it, relative to the robot's namespace; the
+    # vacuum switch is published on <service>/holding and <service>/state.
+    service: str = 'suction'
+
+
+@dataclass(frozen=True)
+class RobotConfig:
+    name: str
+    urdf: str
+    namespace: str
+    pose: Pose
+    frame_prefix: str = ''
+    drive: Optional[Union[DiffDriveConfig, MecanumConfig]] = None
+    limits: DriveLimitsConfig = DriveLimitsConfig()
+    controllers: Tuple[ControllerConfig, ...] = ()
+    initial_joint_positions: Tuple[Tuple[str, float], ...] = ()
+    fixed_base: bool = False
+    suction: Optional[SuctionConfig] = None
+
+
+@dataclass(frozen=True)
+class CameraConfig:
+    name: str
+    width: int
+    height: int
+    rate: float
+    vertical_fov_deg: float
+    near: float
+    far: float
+    # Either mounted on a robot link (an optical frame: z forward, x right, y down) ...
+    robot: Optional[str] = None
+    link: Optional[str] = None
+    # ... or fixed in the world, looking from position to look_at.
+    position: Optional[Vec3] = None
+    look_at: Optional[Vec3] = None
+    frame_id: str = ''
+
+
+@dataclass(frozen=True)
+class ObstacleConfig:
+    shape: str
+    size: Tuple[float, ...]
+    position: Vec3
+    yaw: float = 0.0
+    color: Tuple[float, float, float, float] = (0.6, 0.6, 0.6, 1.0)
+    name: str = ''
+    # False: drawn only (a marked area on the floor).
+    collision: bool = True
+
+
+@dataclass(frozen=True)
+class ConveyorConfig:
+    """A belt: a box whose top surface carries what lies on it along its x axis (at ``yaw``)."""
+
+    position: Vec3                 # centre of the belt's top surface
+    length: float
+    width: float
+    yaw: float = 0.0
+    belt_speed: float = 0.05       # m/s along the belt's x axis
+    # A wall across the belt's downstream end: what reaches it stays on the belt (accumulates)
+    # while the belt runs on beneath it, instead of falling off.
+    end_stop: bool = False
+
+
+@dataclass(frozen=True)
+class MaterialsConfig:
+    """The material source: cubes of the cell's material classes dropped at the belt's start,
+    and each class's rule (world_description.material_classes)."""
+
+    classes: Tuple[MaterialClass, ...]
+    size: float = 0.05                           # a class's edge unless it gives its own [m]
+    mass: float = 0.1                            # [kg]
+    gap: Tuple[float, float] = (0.25, 0.45)      # belt travel between two drops [m]
+    lateral_jitter: float = 0.03                 # +- across the belt [m]
+    start_offset: float = 0.1                    # from the belt's upstream end [m]
+    seed: int = 0
+
+    @property
+    def counts(self) -> Tuple[Tuple[str, int], ...]:
+        return tuple((c.name, c.count) for c in self.classes)
+
+    @property
+    def colors(self) -> Tuple[Tuple[str, Tuple[float, float, float, float]], ...]:
+        return tuple((c.name, c.color) for c in self.classes)
+
+    @property
+    def total(self) -> int:
+        return sum(c.count for c in self.classes)
+
+    @property
+    def largest(self) -> float:
+        """The largest class's edge [m]."""
+        return max((c.size for c in self.classes), default=self.size)
+
+    def cls(self, name: str) -> MaterialClass:
+        for c in self.classes:
+            if c.name == name:
+                return c
+        raise KeyError(name)
+
+
+@dataclass(frozen=True)
+class WorldConfig:
+    source: str
+    gravity: float = -9.81
+    # Size of the visible floor patch [m]; the collision plane is infinite.
+    floor_size: float = 4.0
+    robots: List[RobotConfig] = field(default_factory=list)
+    obstacles: List[ObstacleConfig] = field(default_factory=list)
+    cameras: List[CameraConfig] = field(default_factory=list)
+    conveyor: Optional[ConveyorConfig] = None
+    materials: Optional[MaterialsConfig] = None
+    # Realistic sources of failure, all off unless the world turns them on (perturbations.py).
+    perturbations: Perturbations = field(default_factory=Perturbations)
+
+    def robot(self, name: str) -> RobotConfig:
+        for robot in self.robots:
+            if robot.name == name:
+                return robot
+        raise KeyError(name)
+
+
+NAME = re.compile(r'^[A-Za-z][A-Za-z0-9_]*$')
+
+# Every number of a world has a range: a world file, or the copy of one a result or a bag
+# keeps, may come from elsewhere, and a value without one (gravity 1e300) runs a world that is
+# no cell. The ranges hold every cell this simulator can run.
+WORLD_EXTENT_M = 100.0            # each coordinate of what a world places [m]
+GRAVITY_RANGE = (-30.0, 0.0)      # [m/s^2] along z: none to three g, downwards
+TURN_RAD = 6.2832                 # a yaw within a turn either way (2 pi, rounded up) [rad]
+MAX_JOINT_POSITION = 100.0        # an initial joint position [rad or m] (the robot's URDF
+#                                   limits are checked by robot_files.py and the simulator)
+MAX_SIZE_M = WORLD_EXTENT_M       # an obstacle's dimension
+
+
+class Reader:
+    """Typed field access that raises WorldConfigError naming file and field."""
+
+    def __init__(self, source: str) -> None:
+        self.source = source
+
+    def fail(self, where: str, key: str, what: str) -> WorldConfigError:
+        return WorldConfigError(f'{self.source}: {where}.{key} {what}')
+
+    def only(self, data: Any, where: str, allowed: Set[str]) -> None:
+        if not isinstance(data, dict):
+            raise WorldConfigError(f'{self.source}: {where} must be a mapping')
+        unknown = sorted(set(data) - allowed)
+        if unknown:
+            raise WorldConfigError(f'{self.source}: {where}: unknown keys {unknown}; '
+                                   f'allowed: {sorted(allowed)}')
+
+    def list(self, data: Dict[str, Any], key: str, where: str) -> List[Any]:
+        value = data.get(key, []) or []
+        if not isinstance(value, list):
+            raise self.fail(where, key, 'must be a list')
+        return value
+
+    def string(self, data: Dict[str, Any], key: str, where: str,
+               default: Optional[str] = None) -> str:
+        value = data.get(key, default)
+        if value is None:
+            raise self.fail(where, key, 'is required')
+        if not isinstance(value, str):
+            raise self.fail(where, key, f'must be a string, got {value!r}')
+        return value
+
+    def name(self, data: Dict[str, Any], key: str, where: str) -> str:
+        value = self.string(data, key, where)
+        if not NAME.match(value):
+            raise self.fail(where, key, f'"{value}" must be a ROS name ([A-Za-z][A-Za-z0-9_]*)')
+        return value
+
+    def number(self, data: Dict[str, Any], key: str, where: str, *, lo: float, hi: float,
+               default: Optional[float] = None, integer: bool = False) -> float:
+        """A number within [lo, hi] (every number of a world has a range)."""
+        value = data.get(key, default)
+        if value is None:
+            raise self.fail(where, key, 'is required')
+        if isinstance(value, bool) or not isinstance(value, (int, float)):
+            raise self.fail(where, key, f'must be a number, got {value!r}')
+        if integer and math.isfinite(value) and int(value) != value:
+            raise self.fail(where, key, f'must be an integer, got {value}')
+        if not math.isfinite(value) or not (lo <= value <= hi):
+            raise self.fail(where, key, f'must be finite and within [{lo}, {hi}], got {value}')
+        return float(value)
+
+    def vector(self, data: Dict[str, Any], key: str, where: str, n: int, *, lo: float,
+               hi: float, default: Optional[Tuple[float, ...]] = None) -> Tuple[float, ...]:
+        value = data.get(key, default)
+        if value is None:
+            raise self.fail(where, key, 'is required')
+        if not isinstance(value, (list, tuple)) or len(value) != n:
+            raise self.fail(where, key, f'must be a list of {n} numbers, got {value!r}')
+        tmp = {str(i): v for i, v in enumerate(value)}
+        return tuple(self.number(tmp, str(i), f'{where}.{key}', lo=lo, hi=hi) for i in range(n))
+
+    def vec3(self, data: Dict[str, Any], key: str, where: str) -> Tuple[float, float, float]:
+        x, y, z = self.vector(data, key, where, 3, lo=-WORLD_EXTENT_M, hi=WORLD_EXTENT_M)
+        return (x, y, z)
+
+    def rgba(self, data: Dict[str, Any], key: str, where: str,
+             default: Optional[Tuple[float, ...]] = None
+             ) -> Tuple[float, float, float, float]:
+        r, g, b, a = self.vector(data, key, where, 4, lo=0.0, hi=1.0, default=default)
+        return (r, g, b, a)
