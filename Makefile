@@ -1,6 +1,6 @@
 # The two commands: `make demo` runs the main job, `make test` runs the tests.
 # Both create .venv and build ros_ws first when needed (scripts/setup.sh is idempotent).
-.PHONY: setup demo demo-mini panel trials study test bench container container-test clean
+.PHONY: setup demo demo-mini panel trials study check test bench container container-test clean
 
 setup:
 	@bash scripts/setup.sh
@@ -34,6 +34,11 @@ trials: setup
 study: setup
 	@bash scripts/study.sh
 
+# Before each commit: lint, types and the fast unit tests (under 3 minutes).
+check: setup
+	@bash scripts/check.sh
+
+# The whole suite (CI's command).
 test: setup
 	@bash scripts/test.sh
 

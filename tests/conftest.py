@@ -30,6 +30,25 @@ os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
 os.environ.pop('ROS_STATIC_PEERS', None)
 
 
+# Each test's tier by where it is (pytest.ini lists the markers).
+_TIERS = {'unit': 'unit', 'graph': 'graph', 'test_demo.py': 'graph',
+          'test_ament_layout.py': 'layout'}
+
+
+def pytest_collection_modifyitems(config, items):
+    import pytest
+    here = Path(__file__).parent
+    for item in items:
+        first = Path(str(item.fspath)).relative_to(here).parts[0]
+        tier = _TIERS.get(first)
+        if tier is None:
+            raise pytest.UsageError(f'{item.nodeid}: no tier for tests/{first} '
+                                    '(tests/conftest.py _TIERS)')
+        item.add_marker(tier)
+        if tier != 'unit':
+            item.add_marker('slow')
+
+
 def pytest_terminal_summary(terminalreporter):
     """The counts some tests report (tests/helpers.py REPORT): the fuzz tests'."""
     import sys

@@ -261,6 +261,7 @@ def test_a_failed_report_leaves_the_campaign_directory_as_it_was(tmp_path, monke
     assert not [p for p in tmp_path.iterdir() if '.partial' in p.name]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize('status, code', [('error', 1), ('node_timeout', 1), ('completed', 0),
                                           ('incomplete', 0)])
 def test_a_rerun_that_did_not_run_exits_1(tmp_path, monkeypatch, capsys, status, code):

@@ -86,6 +86,7 @@ def world_cases(tmp_path):
     ]
 
 
+@pytest.mark.slow
 def test_a_bad_world_is_one_line_before_anything_starts(capsys, tmp_path, nothing_runs):
     for world, fragment in world_cases(tmp_path):
         out = tmp_path / 'campaign'

@@ -51,6 +51,7 @@ def _drives(layout):
                 yield f'{st.name} -> {other.name}', st.pose, layout.via_turn, other.pose
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize('name', ['pipeline_cell', 'cell_two_trips', 'cell_four_classes',
                                   'cell_mixed_sizes'])
 def test_every_drive_keeps_the_base_clear_of_the_obstacles(name):

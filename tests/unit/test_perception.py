@@ -138,6 +138,7 @@ def test_a_colour_outvoted_flickers_into_lower_confidence():
     assert tracks[0].color == 'orange' and tracks[0].confidence == pytest.approx(0.75)
 
 
+@pytest.mark.slow
 def test_accuracy_on_simulator_frames_with_noise():
     acc = evaluate(runs=2, frames_per_run=90, seed=11, noise=1.0)
     assert acc.visible > 100

@@ -147,6 +147,7 @@ def _drop_all(world, seconds=25.0):
     return world.materials
 
 
+@pytest.mark.slow
 def test_materials_spread_in_mass_size_and_friction(tmp_path):
     config = _cell(tmp_path, '  materials: {mass_spread: 0.2, size_spread: 0.1,'
                              ' friction: [0.3, 0.6]}\n')

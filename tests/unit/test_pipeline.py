@@ -432,6 +432,7 @@ def _footprint_clearance(pose, box_center, box_size, half=(0.285, 0.18)) -> floa
     return worst
 
 
+@pytest.mark.slow
 def test_the_youbot_turns_between_its_stands_and_home_clear_of_the_pool():
     """The heading turns on a profile of its own while the base travels (Mecanum); turning
     fast near a stand must not swing a corner of the base into the pool's walls or platform

@@ -311,6 +311,7 @@ def page_messages(draw):
     return draw(st.text(max_size=200))
 
 
+@pytest.mark.slow
 @settings(SETTINGS, max_examples=600)
 @given(message=page_messages())
 def test_whatever_a_page_sends_is_a_valid_command_or_a_reason(message):

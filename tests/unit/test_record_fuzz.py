@@ -159,6 +159,7 @@ def results(draw):
     return data
 
 
+@pytest.mark.slow
 @SETTINGS
 @given(data=results())
 def test_a_result_read_back_is_refused_or_used_by_every_tool(tmp_path_factory, data):
@@ -200,6 +201,7 @@ def trial_records(draw):
     return _mutated(draw, base)
 
 
+@pytest.mark.slow
 @SETTINGS
 @given(data=trial_records())
 def test_a_bags_trial_record_is_refused_or_safe_to_run(data):

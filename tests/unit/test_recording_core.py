@@ -320,6 +320,7 @@ def test_repair_of_a_closed_bag_without_its_metadata_counts_each_message_once(tm
     assert not result.truncated and not result.notes
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize('storage', STORAGES)
 def test_repair_of_flipped_bytes_recovers_what_is_intact_or_says_why(tmp_path, storage):
     """Bytes flipped anywhere in the file (a bad disk, a careless edit): a UnicodeDecodeError

@@ -114,6 +114,7 @@ def test_a_sweeps_plan_options_are_checked():
         assert says in str(err.value), (plan, str(err.value))
 
 
+@pytest.mark.slow
 def test_a_sweep_runs_every_point_with_the_same_seeds_and_reports_where_it_breaks(
         tmp_path, monkeypatch):
     import coordinator.trial_run as trial_run

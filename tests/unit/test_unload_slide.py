@@ -63,6 +63,7 @@ def test_abeam_brings_the_arm_s_base_level_with_a_point_within_the_slide():
     assert far[1] == pytest.approx(y + right.slide[0])
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize('mass', [0.45, 0.5])
 def test_a_heavy_material_is_held_all_the_way_to_every_pool_drop(mass):
     """From each slot of a stand's row, every drop of the stand is reached by a way whose every
@@ -99,6 +100,7 @@ def test_a_heavy_material_is_held_all_the_way_to_every_pool_drop(mass):
     assert slid > 0
 
 
+@pytest.mark.slow
 def test_an_unload_from_elsewhere_on_the_stand_s_line_drives_there_as_the_arm_goes_down():
     """Standing at its stand, the youBot slides to the drop's pose (the drive's goal is still
     the stand: its drops are the stand's) while the arm goes down onto the material; the plan

@@ -282,6 +282,7 @@ def test_the_clock_is_due_every_step_or_on_its_own_grid(world, rate, period_ms):
     assert sink.clock[-1] == world.sim_time_ns and sink.clock.count(world.sim_time_ns) == 1
 
 
+@pytest.mark.slow
 def test_a_fixed_cameras_frames_over_its_static_backdrop_are_the_same_images():
     """The belt camera draws only what moves, over its static scene drawn once: the frames are
     those drawn whole, bit for bit, as materials ride through the view and the Zu 12's arm
