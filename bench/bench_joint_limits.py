@@ -19,9 +19,9 @@ from pathlib import Path
 
 import numpy as np
 import yaml
+from studies.trial_process import run_trial
 
 from controllers.joint_trajectory import TrajectoryPoint, TrajectoryRequest
-from coordinator.trial_run import run_trial
 from sim_bridge.runner import DriveLimits, NullSink, SimRunner
 from sim_bridge.world import SimWorld
 from world_description import PIPELINE_CELL

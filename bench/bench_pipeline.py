@@ -15,7 +15,8 @@ import time
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
-from coordinator.trial_run import run_trial
+from studies.trial_process import run_trial
+
 from sim_bridge.runner import DriveLimits, NullSink, SimRunner
 from sim_bridge.world import SimWorld
 from world_description import PIPELINE_CELL

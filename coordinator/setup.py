@@ -14,14 +14,12 @@ setup(
     zip_safe=True,
     maintainer='robot-sim maintainers',
     maintainer_email='maintainers@example.org',
-    description='The pipeline coordinator: the paper\'s sorting, delivery and transport run, '
-                'its results and a trial runner.',
+    description='The pipeline coordinator: the cell\'s controller (its two machines, layout '
+                'and rules) and the node that runs it during a trial, scoring its result.',
     license='Apache-2.0',
     entry_points={
         'console_scripts': [
             'coordinator_node = coordinator:coordinator_node_main',
-            'run_trials = coordinator.trials:main',
-            'compare_runs = coordinator.compare:main',
         ],
     },
 )

@@ -160,6 +160,13 @@ if [ "$(cat "$STAMPS/workspace" 2>/dev/null)" != "$ws_hash" ] || [ ! -f "$WS/ins
     fi
     interface_lists+=("$pkg=$list")
   done
+  # A Python package's executables are made afresh: one that moved to another package (the
+  # study tools, from coordinator to studies) would otherwise linger in the old package's lib/
+  # and, first on the PATH, fail to import.
+  for setup_py in "$WS"/src/*/setup.py; do
+    pkg="$(basename "$(dirname "$setup_py")")"
+    rm -rf "${WS:?}/install/$pkg/lib/$pkg"
+  done
   mkdir -p "$WS/log"
   (
     cd "$WS"

@@ -23,7 +23,8 @@ EXECUTABLES = [
     ('teleop', 'control_panel', ['-p', 'port:=0'], 'serving the control panel'),
 ]
 COMMAND_LINE_TOOLS = [('recording', 'bag_analysis'), ('recording', 'bag_repair'),
-                      ('coordinator', 'run_trials')]
+                      ('studies', 'run_trials'), ('studies', 'compare_runs'),
+                      ('studies', 'storyboard')]
 
 
 def _ros2_run_path(package: str, executable: str) -> Path:
@@ -63,7 +64,8 @@ def test_command_line_tool_resolves_and_runs(package, executable):
 def test_every_package_is_in_the_ament_index():
     for package in ('sim_bridge', 'controllers', 'perception', 'robot_description',
                     'sim_bringup', 'sim_interfaces', 'recording', 'arm_kinematics',
-                    'coordinator', 'ros_common', 'world_description', 'teleop', 'live_view'):
+                    'coordinator', 'studies', 'ros_common', 'world_description', 'teleop',
+                    'live_view'):
         share = Path(get_package_share_directory(package))
         assert (share / 'package.xml').is_file()
     assert (Path(get_package_share_directory('robot_description')) / 'urdf' /

@@ -1,4 +1,5 @@
-"""The pipeline coordinator: state machine core, node, results and trial runner."""
+"""The pipeline coordinator: the cell's controller (its two machines, the layout and reach),
+the node that runs it during a trial, and the trial's scored result."""
 
 from ros_common.early_stop import lazy_main
 

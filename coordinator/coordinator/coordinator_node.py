@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import dataclasses
 import functools
+import json
 import math
 import sys
 import threading
@@ -62,8 +63,7 @@ from coordinator.pipeline import (
     Settings,
     known,
 )
-from coordinator.progress import write_progress
-from coordinator.results import (
+from coordinator.scoring import (
     IdentificationCheck,
     PeakJointSpeed,
     RunTrace,
@@ -73,6 +73,7 @@ from coordinator.results import (
 from coordinator.trial_result import TrialResult, code_version
 from ros_common.geometry import yaw_of
 from ros_common.node_main import run_task
+from ros_common.outputs import write_file
 from ros_common.params import Param, declare_params
 from ros_common.services import NoAnswer, call_and_wait
 from ros_common.stamps import duration_from_ns, set_stamp, stamp_from_ns, to_ns
@@ -715,9 +716,11 @@ class CoordinatorNode(Node):
         self.state_pub.publish(msg)
         if self.progress_file is not None:
             try:
-                write_progress(self.progress_file, sim_time=msg.elapsed, delivered=msg.delivered,
-                               total=msg.total, loader=msg.loader_state,
-                               transport=msg.transport_state, status=msg.status)
+                # (Whole or not at all: a campaign's progress line reads it meanwhile.)
+                write_file(self.progress_file, json.dumps(dict(
+                    sim_time=msg.elapsed, delivered=msg.delivered, total=msg.total,
+                    loader=msg.loader_state, transport=msg.transport_state,
+                    status=msg.status)).encode())
             except OSError as exc:
                 self.get_logger().warn(f'progress file {self.progress_file}: {exc}',
                                        throttle_duration_sec=60.0)

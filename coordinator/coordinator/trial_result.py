@@ -93,7 +93,7 @@ class TrialResult:
     scenario_seed: Optional[int] = None
     belt_speed: float = math.nan         # [m/s]
     mode: str = ''                       # lock-step or real-time
-    # A sweep's point: the parameters set for this trial (coordinator.sweep), else {}.
+    # A sweep's point: the parameters set for this trial (studies.sweep), else {}.
     parameters: Dict[str, float] = field(default_factory=dict)
     # What it takes to run the trial again (run_trials --rerun): the world as given, the world
     # file as it was (one mapping, what it extends merged in), the physics step.

@@ -9,9 +9,9 @@ import pytest
 from rcl_interfaces.srv import GetParameters
 from rclpy.qos import qos_profile_sensor_data
 from sensor_msgs.msg import Image
+from studies.trial_process import OUTCOME_FILE, run_trial
 
 from coordinator.layout import CellLayout, layout_from_world
-from coordinator.trial_run import OUTCOME_FILE, run_trial
 from helpers import cpu_load, wait_for
 from world_description import PIPELINE_CELL
 from world_description.resources import resolve_resource

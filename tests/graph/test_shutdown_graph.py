@@ -7,8 +7,8 @@ import signal
 import time
 
 import pytest
+from studies.trial_graph import pipeline_graph
 
-from coordinator.graph import pipeline_graph
 from helpers import NodeProcess, wait_for
 
 SQUARE = ', '.join(['speed 0.5, forward 5s, speed 1.0, left 7.854s'] * 4) + ', stop'

@@ -9,7 +9,8 @@ import signal
 import subprocess
 import time
 
-from coordinator.recorded import result_from_bag
+from studies.recorded import result_from_bag
+
 from helpers import wait_for
 
 

@@ -12,13 +12,13 @@ import time
 import pytest
 from rclpy.serialization import serialize_message
 from sim_interfaces.msg import PipelineState
+from studies.recorded import STATE_TOPIC, TRIAL_KEY, bag_metadata
+from studies.sweep import SweepError, grid, parse_axis
 
-from coordinator import compare, trial_run, trials
-from coordinator.recorded import STATE_TOPIC, TRIAL_KEY, bag_metadata
 from coordinator.records import RecordError, parse_json
-from coordinator.sweep import SweepError, grid, parse_axis
 from coordinator.trial_result import RunInfo, TrialResult, read_result
 from recording.bag_writer import BagWriter
+from studies import compare, run_trials, trial_process
 from world_description.resources import resolve_resource
 from world_description.world_config import world_data
 
@@ -90,7 +90,7 @@ def test_a_grid_is_counted_before_it_is_made():
 
 def test_a_sweep_over_a_world_value_out_of_its_range_leaves_nothing(tmp_path, capsys):
     out = tmp_path / 'sweep'
-    code = trials.main(['--sweep', 'gravity=1e300,2e300', '--out', str(out)])
+    code = run_trials.main(['--sweep', 'gravity=1e300,2e300', '--out', str(out)])
     _one_line_and_2(capsys, code, 'gravity', '1e+300')
     assert not out.exists()
 
@@ -114,11 +114,11 @@ def test_a_bags_trial_record_is_checked_before_anything_uses_it(tmp_path, capsys
                                                                  name):
     """Each gave a traceback in run_trials --rerun, compare_runs or storyboard (or started a
     trial and then crashed): now one line and exit 2, and no trial starts."""
-    from sim_bringup import storyboard
-    monkeypatch.setattr(trial_run, 'run_trial', _no_trial)
+    from studies import storyboard
+    monkeypatch.setattr(trial_process, 'run_trial', _no_trial)
     bag = _bag(tmp_path / 'copied', BAD_RECORDS[name])
     out = tmp_path / 'again'
-    _one_line_and_2(capsys, trials.main(['--rerun', str(bag), '--out', str(out)]))
+    _one_line_and_2(capsys, run_trials.main(['--rerun', str(bag), '--out', str(out)]))
     _one_line_and_2(capsys, compare.main([str(bag), str(bag), '--out', str(tmp_path / 'c')]))
     _one_line_and_2(capsys, storyboard.main([str(bag), '-o', str(tmp_path / 's.png')]))
     assert not (tmp_path / 'c').exists() and not (tmp_path / 's.png').exists()
@@ -129,12 +129,12 @@ def test_a_world_whose_robot_files_are_not_there_is_refused_before_it_runs(tmp_p
                                                                             monkeypatch):
     """A robot URDF path in the embedded world was not checked before the trial started: the
     re-run and the storyboard (which build the cell) refuse it first."""
-    from sim_bringup import storyboard
-    monkeypatch.setattr(trial_run, 'run_trial', _no_trial)
+    from studies import storyboard
+    monkeypatch.setattr(trial_process, 'run_trial', _no_trial)
     robots = [{**r, 'urdf': '/nowhere/robot.urdf'} for r in SCENARIO['world_data']['robots']]
     bag = _bag(tmp_path / 'copied', _trial_json(scenario={
         **SCENARIO, 'world_data': {**SCENARIO['world_data'], 'robots': robots}}))
-    _one_line_and_2(capsys, trials.main(['--rerun', str(bag), '--out', str(tmp_path / 'a')]),
+    _one_line_and_2(capsys, run_trials.main(['--rerun', str(bag), '--out', str(tmp_path / 'a')]),
                     '/nowhere/robot.urdf')
     _one_line_and_2(capsys, storyboard.main([str(bag), '-o', str(tmp_path / 's.png')]),
                     '/nowhere/robot.urdf')
@@ -145,14 +145,14 @@ def _no_trial(*args, **kwargs):
 
 
 def test_a_good_bag_record_still_reads(tmp_path):
-    from coordinator.recorded import load_trial
+    from studies.recorded import load_trial
     result, source = load_trial(_bag(tmp_path, _trial_json()))
     assert (result.trial, result.scenario_seed, result.status) == (0, 7, 'completed')
 
 
 def test_a_bag_with_a_zeroed_block_is_one_line(tmp_path, capsys):
     """An MCAP whose middle was zeroed: rosbags raised OverflowError (a traceback)."""
-    from sim_bringup import storyboard
+    from studies import storyboard
     writer = BagWriter(tmp_path, 'bag', 'mcap', custom_data={TRIAL_KEY: _trial_json()})
     writer.add_topic(STATE_TOPIC, 'sim_interfaces/msg/PipelineState')
     for i in range(400):
@@ -199,8 +199,8 @@ def test_a_damaged_result_is_refused_by_every_tool(tmp_path, capsys, name):
     data.update(BAD_RESULTS[name])
     path.write_text(json.dumps(data))
     started = time.monotonic()
-    _one_line_and_2(capsys, trials.main(['--report-only', '--out', str(tmp_path / 'campaign')]),
-                    'trial_001')
+    _one_line_and_2(capsys, run_trials.main(['--report-only', '--out',
+                                             str(tmp_path / 'campaign')]), 'trial_001')
     _one_line_and_2(capsys, compare.main([str(path), str(path), '--out', str(tmp_path / 'c')]))
     _one_line_and_2(capsys, compare.main([str(tmp_path / 'campaign'), str(tmp_path / 'campaign'),
                                           '--out', str(tmp_path / 'c')]))
@@ -229,7 +229,7 @@ def test_a_record_file_that_is_no_file_is_refused(tmp_path):
 
 # --- output paths and exit codes ----------------------------------------------------------------
 def test_output_paths_are_checked_before_the_work(tmp_path, capsys):
-    from sim_bringup import storyboard
+    from studies import storyboard
     run = tmp_path / 'run'
     _result().write(run / 'trial_000' / 'result.json')
     (tmp_path / 'file').write_text('x')
@@ -240,7 +240,7 @@ def test_output_paths_are_checked_before_the_work(tmp_path, capsys):
     _one_line_and_2(capsys, storyboard.main([str(run), '-o', str(tmp_path)]), 'a directory')
     _one_line_and_2(capsys, storyboard.main([str(run), '-o', str(tmp_path / 'picture')]),
                     '.png')
-    _one_line_and_2(capsys, trials.main(['--rerun', str(run), '--out',
+    _one_line_and_2(capsys, run_trials.main(['--rerun', str(run), '--out',
                                          str(tmp_path / 'file' / 'x')]), 'not a directory')
     assert compare.main([str(run), str(run), '--out', str(tmp_path / 'ok')]) == 0
     assert (tmp_path / 'ok' / 'comparison.md').is_file()
@@ -248,7 +248,7 @@ def test_output_paths_are_checked_before_the_work(tmp_path, capsys):
 
 
 def test_a_failed_report_leaves_the_campaign_directory_as_it_was(tmp_path, monkeypatch):
-    from coordinator import report
+    from studies import report
     campaign = tmp_path / 'campaign'
     _result().write(campaign / 'trial_000' / 'result.json')
 
@@ -274,8 +274,8 @@ def test_a_rerun_that_did_not_run_exits_1(tmp_path, monkeypatch, capsys, status,
         return _result(status=status, completion_time=math.nan,
                        message='sim_node exited 1' if status == 'error' else '',
                        run=RunInfo(trial=trial, wall_time=1.0, code=code))
-    monkeypatch.setattr(trial_run, 'run_trial', fake_trial)
-    assert trials.main(['--rerun', str(run), '--set', 'belt_speed=0.2', '--out',
+    monkeypatch.setattr(trial_process, 'run_trial', fake_trial)
+    assert run_trials.main(['--rerun', str(run), '--set', 'belt_speed=0.2', '--out',
                         str(tmp_path / 'again')]) == code
     if code:
         assert 'did not run to its end' in capsys.readouterr().out

@@ -4,16 +4,16 @@ never a traceback, and never a campaign started on it."""
 import json
 
 import pytest
-
-import coordinator.trial_run as trial_run
-import coordinator.trials as trials
-from coordinator.campaign import (
+import studies.run_trials as trials
+import studies.trial_process as trial_run
+from studies.campaign import (
     CampaignError,
     campaign_lock,
     check_plan,
     read_campaign,
     trial_results,
 )
+
 from coordinator.trial_result import ResultError, RunInfo, TrialResult
 
 WORLD_LINE = 'run_trials: error: --world'
@@ -156,8 +156,8 @@ def test_a_result_file_that_is_not_a_result(capsys, tmp_path, monkeypatch):
         return TrialResult('completed', 61.0, scenario_seed=seed, belt_speed=belt_speed,
                            run=RunInfo(trial=trial, wall_time=9.0, code=code))
     monkeypatch.setattr(trial_run, 'run_trial', fake_trial)
-    import coordinator.report
-    monkeypatch.setattr(coordinator.report, 'write_report', lambda r, out, s: out / 'report.md')
+    import studies.report
+    monkeypatch.setattr(studies.report, 'write_report', lambda r, out, s: out / 'report.md')
     assert trials.main(['--resume', str(tmp_path), '--progress-period', '0.01']) == 0
     assert ran == [0]
     assert 'trial 0 runs again' in capsys.readouterr().out

@@ -1,10 +1,10 @@
-"""compare_runs (coordinator/compare.py): two runs side by side, two campaigns with their
+"""compare_runs (studies/compare.py): two runs side by side, two campaigns with their
 statistics."""
 import math
 
 import pytest
+from studies.compare import load_runs, main, mann_whitney, two_proportions
 
-from coordinator.compare import load_runs, main, mann_whitney, two_proportions
 from coordinator.trial_result import RunInfo, TrialResult
 
 

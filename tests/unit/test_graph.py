@@ -1,16 +1,16 @@
-"""The pipeline run's node graph, described once (coordinator.graph)."""
+"""The pipeline run's node graph, described once (studies.trial_graph)."""
 from pathlib import Path
 
 import pytest
 import yaml
-
-from coordinator.graph import (
+from studies.trial_graph import (
     TIME_STEP,
     GraphNode,
     parameter_text,
     pipeline_graph,
     tick_rate,
 )
+
 from world_description import PIPELINE_CELL
 
 
@@ -95,6 +95,6 @@ def test_a_recorded_trial_keeps_what_ran_in_its_bag():
 
 
 def test_run_trials_refuses_a_physics_step_longer_than_a_control_tick(capsys):
-    from coordinator.trials import main
+    from studies.run_trials import main
     assert main(['--time-step', '0.05', '--out', '/nonexistent/never-made', '--show-graph']) == 2
     assert 'time_step must be within' in capsys.readouterr().err

@@ -1,9 +1,9 @@
-"""Campaign progress and its ETA (coordinator/progress.py)."""
+"""Campaign progress and its ETA (studies/progress.py)."""
 import io
+import json
 
 import pytest
-
-from coordinator.progress import (
+from studies.progress import (
     TYPICAL_COMPLETION_S,
     CampaignBar,
     TrialProgress,
@@ -12,8 +12,8 @@ from coordinator.progress import (
     progress_line,
     read_progress,
     running_figures,
-    write_progress,
 )
+
 from coordinator.trial_result import TrialResult
 
 
@@ -36,7 +36,7 @@ def test_nothing_to_estimate_from_gives_no_eta():
 def test_progress_files_round_trip_and_a_torn_read_is_none(tmp_path):
     path = tmp_path / 'progress.json'
     assert read_progress(path) is None
-    write_progress(path, sim_time=12.5, delivered=3, total=8)
+    path.write_text(json.dumps({'sim_time': 12.5, 'delivered': 3, 'total': 8}))   # (as the node)
     assert read_progress(path) == {'sim_time': 12.5, 'delivered': 3, 'total': 8}
     path.write_text('{"sim_ti')
     assert read_progress(path) is None

@@ -11,8 +11,8 @@ import re
 import pytest
 from hypothesis import HealthCheck, event, given, settings
 from hypothesis import strategies as st
+from studies.recorded import TRIAL_KEY, TrialRecord, bag_metadata
 
-from coordinator.recorded import TRIAL_KEY, TrialRecord, bag_metadata
 from coordinator.records import RecordError
 from coordinator.trial_result import RunInfo, TrialResult
 from helpers import REPORT
@@ -163,9 +163,9 @@ def results(draw):
 @SETTINGS
 @given(data=results())
 def test_a_result_read_back_is_refused_or_used_by_every_tool(tmp_path_factory, data):
-    from coordinator.compare import compare_campaigns, compare_trials
-    from coordinator.report import write_report
-    from coordinator.trials import write_csv
+    from studies.compare import compare_campaigns, compare_trials
+    from studies.report import write_report
+    from studies.run_trials import write_csv
     COUNTS['results'] += 1
     text = _encode(data)
     if text is None:

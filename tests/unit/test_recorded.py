@@ -1,11 +1,10 @@
-"""A recorded trial read from its bag alone (coordinator/recorded.py): what ran from the bag's
+"""A recorded trial read from its bag alone (studies/recorded.py): what ran from the bag's
 metadata, how it went from the coordinator's last state; and what a bag that cannot say is
 told."""
 import pytest
 from rclpy.serialization import serialize_message
 from sim_interfaces.msg import PipelineState
-
-from coordinator.recorded import (
+from studies.recorded import (
     STATE_TOPIC,
     TRIAL_KEY,
     RecordError,
@@ -13,6 +12,7 @@ from coordinator.recorded import (
     load_trial,
     result_from_bag,
 )
+
 from coordinator.trial_result import RunInfo, TrialResult
 from recording.bag_writer import BagWriter
 from world_description.resources import resolve_resource

@@ -1,12 +1,11 @@
-"""Re-running a recorded trial (coordinator/rerun.py): what a result must hold, --set, where
+"""Re-running a recorded trial (studies/rerun.py): what a result must hold, --set, where
 two runs part."""
 import json
 
 import pytest
 import yaml
-
-from coordinator.recorded import RecordError, find_result
-from coordinator.rerun import (
+from studies.recorded import RecordError, find_result
+from studies.rerun import (
     ORIGINAL_WORLD,
     RerunError,
     figures,
@@ -14,6 +13,7 @@ from coordinator.rerun import (
     parse_sets,
     prepare,
 )
+
 from coordinator.trial_result import RunInfo, TrialResult
 from world_description.resources import resolve_resource
 from world_description.world_config import load_world, world_data

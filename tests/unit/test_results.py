@@ -7,20 +7,19 @@ import re
 import cv2
 import numpy as np
 import pytest
+from studies.report import STATE_COLORS, activity, summary_rows, write_report
+from studies.run_trials import trial_plan, write_csv
 
 from coordinator.pipeline import RunResult
-from coordinator.report import STATE_COLORS, activity, write_report
-from coordinator.results import (
+from coordinator.scoring import (
     IdentificationCheck,
     at_destination,
     match_identification,
     regions_from_world,
     score,
-    summary_rows,
     tracks_of,
 )
 from coordinator.trial_result import RunInfo, TrialResult
-from coordinator.trials import trial_plan, write_csv
 from world_description.resources import resolve_resource
 from world_description.world_config import load_world
 
@@ -98,7 +97,7 @@ def test_the_rates_split_as_the_paper_splits_them(regions):
 
 
 def test_the_peak_joint_speed_is_the_largest_fraction_of_any_joints_limit():
-    from coordinator.results import PeakJointSpeed
+    from coordinator.scoring import PeakJointSpeed
     peak = PeakJointSpeed([2.0, 3.0, 1.0])
     peak.update([1.0, -2.7, 0.5])                      # joint 1 at 0.9 of its limit
     peak.update([0.1, 0.1, float('nan')])              # a bad sample is ignored
@@ -185,9 +184,9 @@ def test_a_trial_plan_is_reproducible_and_splits_over_machines():
 
 
 def test_an_interrupted_campaign_goes_on_where_it_stopped(tmp_path, monkeypatch):
-    import coordinator.report
-    import coordinator.trial_run as trial_run
-    import coordinator.trials as trials
+    import studies.report
+    import studies.run_trials as trials
+    import studies.trial_process as trial_run
     plan = trial_plan(4, 0, 7, (0.1, 0.16))
     monkeypatch.setattr(trials, 'code_version', lambda: 'abc123')
     # Trial 0 of this plan finished before the interruption; trial 1's result is of another
@@ -211,7 +210,7 @@ def test_an_interrupted_campaign_goes_on_where_it_stopped(tmp_path, monkeypatch)
                            run=RunInfo(trial=trial, wall_time=90.0, code=code))
     reported = []
     monkeypatch.setattr(trial_run, 'run_trial', fake_trial)
-    monkeypatch.setattr(coordinator.report, 'write_report',
+    monkeypatch.setattr(studies.report, 'write_report',
                         lambda results, out, meta: reported.append(results) or out / 'report.md')
     assert trials.main(['--trials', '4', '--seed0', '7', '--resume', '--out', str(tmp_path),
                         '--progress-period', '0.01']) == 0
@@ -226,8 +225,8 @@ def test_a_campaign_stopped_by_the_user_keeps_a_report_and_resumes_with_its_plan
     """Ctrl-C: the running trial is stopped, the finished ones are in the CSV and the report;
     ``--resume DIR`` alone goes on with the same plan, and a plan option that differs from it
     is refused."""
-    import coordinator.trial_run as trial_run
-    import coordinator.trials as trials
+    import studies.run_trials as trials
+    import studies.trial_process as trial_run
     monkeypatch.setattr(trials, 'code_version', lambda: 'abc123')
     ran, reports = [], []
 
@@ -243,8 +242,8 @@ def test_a_campaign_stopped_by_the_user_keeps_a_report_and_resumes_with_its_plan
         return result
     monkeypatch.setattr(trial_run, 'run_trial', fake_trial)
     monkeypatch.setattr(trials, 'stop_all', lambda: trial_run.INTERRUPTED.set())
-    import coordinator.report
-    monkeypatch.setattr(coordinator.report, 'write_report',
+    import studies.report
+    monkeypatch.setattr(studies.report, 'write_report',
                         lambda results, out, setup: reports.append((results, setup))
                         or out / 'report.md')
     out = tmp_path / 'campaign'
@@ -271,12 +270,12 @@ def test_trials_on_one_machine_never_share_a_dds_domain(tmp_path, monkeypatch):
     import subprocess
     import sys
 
-    import coordinator.trial_run as trial_run
+    import studies.trial_process as trial_run
     monkeypatch.setattr(trial_run, 'DOMAIN_LOCK_DIR', tmp_path)
     with trial_run.domain_lease(150) as first, trial_run.domain_lease(150) as second:
         assert (first, second) == (150, 151)
         holder = subprocess.Popen([sys.executable, '-c', (
-            'import sys, time, coordinator.trial_run as t, pathlib\n'
+            'import sys, time, studies.trial_process as t, pathlib\n'
             f't.DOMAIN_LOCK_DIR = pathlib.Path({str(tmp_path)!r})\n'
             'with t.domain_lease(150) as d:\n'
             '    print(d, flush=True); time.sleep(60)')], stdout=subprocess.PIPE, text=True)
@@ -363,7 +362,7 @@ def test_two_runs_differ_only_where_their_outcome_does_not_in_their_metadata():
 
 
 def test_each_material_not_at_its_destination_says_what_went_wrong():
-    from coordinator.results import failure_cause
+    from coordinator.scoring import failure_cause
 
     def seen(truth_id, material, color, true_color):
         return {'truth_id': truth_id, 'material': material, 'color': color,

@@ -1,4 +1,4 @@
-"""A recorded trial's storyboard (sim_bringup/storyboard.py): its phases from the events, the
+"""A recorded trial's storyboard (studies/storyboard.py): its phases from the events, the
 states recorded last before each, a robot posed where it truly was (its perturbations undone),
 and a camera that sees the whole of any cell."""
 import math
@@ -6,10 +6,7 @@ import math
 import numpy as np
 import pybullet
 import pytest
-
-from sim_bridge.runner import DriveLimits, NullSink, SimRunner
-from sim_bridge.world import SimWorld
-from sim_bringup.storyboard import (
+from studies.storyboard import (
     PANEL,
     Event,
     Material,
@@ -19,6 +16,9 @@ from sim_bringup.storyboard import (
     phases,
     storyboard,
 )
+
+from sim_bridge.runner import DriveLimits, NullSink, SimRunner
+from sim_bridge.world import SimWorld
 from world_description.footprint import footprints
 from world_description.resources import resolve_resource
 from world_description.world_config import load_world

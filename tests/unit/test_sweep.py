@@ -1,4 +1,4 @@
-"""Sweeps (coordinator/sweep.py, run_trials --sweep): the points, their worlds, the plan with
+"""Sweeps (studies/sweep.py, run_trials --sweep): the points, their worlds, the plan with
 the same seeds at every point, the Wilson intervals and the breaking point, and a sweep run
 end to end by the trial runner (trials faked: each point's rates set by its parameter)."""
 import csv
@@ -7,9 +7,8 @@ import math
 
 import pytest
 import yaml
-
-from coordinator.campaign import CampaignError, check_plan
-from coordinator.sweep import (
+from studies.campaign import CampaignError, check_plan
+from studies.sweep import (
     Axis,
     SweepError,
     breaking_point,
@@ -20,6 +19,7 @@ from coordinator.sweep import (
     wilson,
     world_overrides,
 )
+
 from coordinator.trial_result import RunInfo, TrialResult
 from world_description.world_config import load_world
 
@@ -117,8 +117,8 @@ def test_a_sweeps_plan_options_are_checked():
 @pytest.mark.slow
 def test_a_sweep_runs_every_point_with_the_same_seeds_and_reports_where_it_breaks(
         tmp_path, monkeypatch):
-    import coordinator.trial_run as trial_run
-    import coordinator.trials as trials
+    import studies.run_trials as trials
+    import studies.trial_process as trial_run
     monkeypatch.setattr(trials, 'code_version', lambda: 'abc123')
     ran = []
 
@@ -164,7 +164,7 @@ def test_a_sweep_runs_every_point_with_the_same_seeds_and_reports_where_it_break
 
 
 def test_a_sweep_over_a_world_value_the_cell_refuses_stops_before_any_trial(tmp_path, capsys):
-    import coordinator.trials as trials
+    import studies.run_trials as trials
     out = tmp_path / 'study'
     assert trials.main(['--sweep', 'materials.mass=0.1,-1', '--out', str(out)]) == 2
     err = capsys.readouterr().err
@@ -173,7 +173,7 @@ def test_a_sweep_over_a_world_value_the_cell_refuses_stops_before_any_trial(tmp_
 
 
 def test_a_belt_speed_sweeps_report_says_the_belt_was_swept(tmp_path):
-    from coordinator.report import write_report
+    from studies.report import write_report
     result = TrialResult('completed', 60.0, scenario_seed=1, belt_speed=0.2, total=8,
                          parameters={'belt_speed': 0.2}, run=RunInfo(trial=0, code='x'))
     setup = {'seed0': 1, 'belt_speed': (0.1, 0.16), 'parallel': 1}

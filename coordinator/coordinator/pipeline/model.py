@@ -223,7 +223,7 @@ class Settings:
 
 class MaterialStatus(str, Enum):
     """Where a material is in the run, as the coordinator believes (the ground truth decides the
-    result: coordinator.results)."""
+    result: coordinator.scoring)."""
     SEEN = 'seen'                 # confirmed on the belt; waits to be picked
     PICKING = 'picking'           # the Zu 12 is on its way to it, or has it
     ON_PLATE = 'on_plate'         # on the youBot's plate

@@ -24,7 +24,6 @@ setup(
         'console_scripts': [
             'drive_check = sim_bringup:drive_check_main',
             'arm_move = sim_bringup:arm_move_main',
-            'storyboard = sim_bringup.storyboard:main',
         ],
     },
 )

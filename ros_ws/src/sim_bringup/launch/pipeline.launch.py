@@ -5,7 +5,7 @@ vision node, the two arms' kinematics nodes and the coordinator, optionally reco
         [belt_speed:=0.12] [real_time_factor:=1.0] [record:=false] [bag_dir:=bags]
         [publish_link_tf:=true]
 
-The processes and their parameters are the trial runner's (coordinator/graph.py): this file
+The processes and their parameters are the trial runner's (studies/trial_graph.py): this file
 only turns them into launch_ros Node actions. The launch ends when the run ends: every node is
 stopped once the coordinator exits, and the launch's exit code is 0 for a completed run, 1
 otherwise. The result: the coordinator's last log line, `ros2 topic echo
@@ -27,11 +27,11 @@ from launch.actions import (
 from launch.event_handlers import OnProcessExit
 from launch.events import Shutdown
 from launch_ros.actions import Node
+from studies.recorded import bag_metadata
+from studies.trial_graph import TIME_STEP, pipeline_graph
+from studies.trial_process import scenario
 
-from coordinator.graph import TIME_STEP, pipeline_graph
-from coordinator.recorded import bag_metadata
 from coordinator.trial_result import code_version
-from coordinator.trial_run import scenario
 from ros_common.dds import profile_environment
 from sim_bringup.state_publishers import state_publishers
 from world_description import PIPELINE_CELL
@@ -60,7 +60,7 @@ def _nodes(context):
     synchronous = arg('synchronous').lower() == 'true'
     seed, belt, record = (int(arg('scenario_seed')), float(arg('belt_speed')),
                           arg('record').lower() == 'true')
-    # A recorded run keeps what ran in its bag, as a trial runner's does (coordinator.recorded):
+    # A recorded run keeps what ran in its bag, as a trial runner's does (studies.recorded):
     # run_trials --rerun BAG runs it again in lock-step.
     metadata = (bag_metadata(0, seed, belt, code_version(), scenario(PIPELINE_CELL, TIME_STEP))
                 if record else None)

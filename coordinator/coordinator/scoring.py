@@ -358,29 +358,3 @@ class PeakJointSpeed:
 
 def _rate(part: int, whole: int) -> float:
     return part / whole if whole else 0.0
-
-
-def summary_rows(trials: Sequence[TrialResult]) -> Dict[str, float]:
-    """Mean rates and median completion time over trials (for the report)."""
-    if not trials:
-        return {}
-    times = [t.completion_time for t in trials]
-    rates = {k: float(np.mean([getattr(t, k) for t in trials]))
-             for k in ('identification_rate', 'grasp_success_rate', 'handling_success_rate',
-                       'zu12_grasp_rate', 'youbot_grasp_rate', 'transport_rate')}
-    return {
-        'trials': len(trials),
-        'completed': sum(1 for t in trials if t.status == 'completed'),
-        'median_completion_time': float(np.median(times)),
-        'p90_completion_time': float(np.percentile(times, 90)),
-        **rates,
-        # The largest over all trials: the limits hold only if they hold in every run.
-        **{f'peak_joint_speed_{arm}': max(
-            (t.peak_joint_speed.get(arm, {}).get('fraction_of_limit', 0.0) for t in trials),
-            default=0.0) for arm in ('zu12', 'youbot')},
-        # Trials in which the world drove a joint past its speed limit (the simulator braked it
-        # back), and the worst such joint's ratio.
-        'trials_joints_driven_past': sum(1 for t in trials if t.joints_driven_past),
-        'worst_driven_past': max((d['ratio'] for t in trials for d in t.joints_driven_past),
-                                 default=0.0),
-    }

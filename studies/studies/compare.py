@@ -19,12 +19,12 @@ from typing import List, Optional, Sequence, Tuple
 
 import numpy as np
 
-from coordinator.campaign import trial_results
-from coordinator.recorded import RecordError, load_trial
-from coordinator.rerun import figures, first_parting
-from coordinator.sweep import RATES, wilson
 from coordinator.trial_result import TrialResult
 from ros_common.outputs import OutputError, check_output_dir, staged_dir
+from studies.campaign import trial_results
+from studies.recorded import RecordError, load_trial
+from studies.rerun import figures, first_parting
+from studies.sweep import RATES, wilson
 
 SIGNIFICANT = 0.05
 
@@ -103,8 +103,8 @@ def compare_trials(a: TrialResult, b: TrialResult, out: Path, names: Tuple[str, 
 
 
 def _trial_plots(a: TrialResult, b: TrialResult, out: Path) -> None:
-    from coordinator.report import cell_shapes, timeline_image, write_png
     from recording.plot import plot_paths
+    from studies.report import cell_shapes, timeline_image, write_png
     ends = [t.completion_time for t in (a, b) if math.isfinite(t.completion_time)]
     end = max(ends) if ends else max(
         [float(e[0]) for t in (a, b) for e in t.events] or [1.0])

@@ -29,9 +29,9 @@ from typing import Any, Dict, List, Optional, Tuple
 
 import ray
 
-from coordinator.progress import read_progress
 from coordinator.trial_result import RESULT_FILE, RunInfo, TrialResult, code_version
-from coordinator.trial_run import PROGRESS_FILE, PlanItem, run_leased_trial
+from studies.progress import read_progress
+from studies.trial_process import PROGRESS_FILE, PlanItem, run_leased_trial
 
 # Where a worker keeps its trials' directories: <tmp>/run_trials/<campaign>/trial_NNN.
 WORKER_ROOT = 'run_trials'

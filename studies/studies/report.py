@@ -2,20 +2,18 @@
 from __future__ import annotations
 
 import math
-import shutil
-import subprocess
 from pathlib import Path
 from typing import Any, Dict, List, Optional, Sequence, Tuple
 
 import cv2
 import numpy as np
 
-from coordinator.recorded import trial_bag
-from coordinator.results import FAILURE_CAUSES, summary_rows
-from coordinator.sweep_report import sweep_lines
+from coordinator.scoring import FAILURE_CAUSES
 from coordinator.trial_result import TrialResult
 from recording.plot import plot_paths
 from ros_common.outputs import staged_dir
+from studies.recorded import trial_bag
+from studies.sweep_report import sweep_lines
 from world_description.footprint import footprints
 from world_description.resources import ResourceError, resolve_resource
 from world_description.world_config import WorldConfigError, load_world, parse_world
@@ -24,8 +22,33 @@ from world_description.world_config import WorldConfigError, load_world, parse_w
 PAPER_TABLE_2 = (('1-10', 85, 60, 70, 80), ('11-30', 76, 76, 75, 85), ('30-60', 69, 82, 82, 95),
                  ('60-100', 64, 90, 89, 100), ('100-110', 61, 99, 99, 10))
 FONT = cv2.FONT_HERSHEY_SIMPLEX
-STORYBOARD_TIMEOUT = 300.0      # [s] (about 4 s here; a loaded machine, a long run: more)
 
+
+
+def summary_rows(trials: Sequence[TrialResult]) -> Dict[str, float]:
+    """Mean rates and median completion time over trials (for the report)."""
+    if not trials:
+        return {}
+    times = [t.completion_time for t in trials]
+    rates = {k: float(np.mean([getattr(t, k) for t in trials]))
+             for k in ('identification_rate', 'grasp_success_rate', 'handling_success_rate',
+                       'zu12_grasp_rate', 'youbot_grasp_rate', 'transport_rate')}
+    return {
+        'trials': len(trials),
+        'completed': sum(1 for t in trials if t.status == 'completed'),
+        'median_completion_time': float(np.median(times)),
+        'p90_completion_time': float(np.percentile(times, 90)),
+        **rates,
+        # The largest over all trials: the limits hold only if they hold in every run.
+        **{f'peak_joint_speed_{arm}': max(
+            (t.peak_joint_speed.get(arm, {}).get('fraction_of_limit', 0.0) for t in trials),
+            default=0.0) for arm in ('zu12', 'youbot')},
+        # Trials in which the world drove a joint past its speed limit (the simulator braked it
+        # back), and the worst such joint's ratio.
+        'trials_joints_driven_past': sum(1 for t in trials if t.joints_driven_past),
+        'worst_driven_past': max((d['ratio'] for t in trials for d in t.joints_driven_past),
+                                 default=0.0),
+    }
 
 def _canvas(title: str, size: Tuple[int, int] = (900, 500)) -> np.ndarray:
     img = np.full((size[1], size[0], 3), 255, np.uint8)
@@ -292,25 +315,16 @@ def _plots(ok: Sequence[TrialResult], s: Dict[str, float], out_dir: Path,
 
 def _storyboard(trial: TrialResult, out_dir: Path, stage: Path) -> List[str]:
     """The storyboard of a recorded trial and its lines; none for a trial not recorded here.
-    Drawn by ``storyboard`` (sim_bringup: it builds the cell in the simulator, which the
-    coordinator does not import), as the trial runner starts the simulator: by its command."""
+    (Drawn here: the storyboard poses the cell in the simulator again, which this package
+    sits above.)"""
+    from studies.storyboard import StoryboardError, write_storyboard
     trial_dir = out_dir / f'trial_{trial.trial or 0:03d}'
     if trial.trial is None or trial_bag(trial_dir) is None:
         return []
-    tool = shutil.which('storyboard')
-    if tool is None:
-        return [f'(No storyboard of trial {trial.trial}: the `storyboard` tool of sim_bringup '
-                'is not installed.)', '']
     try:
-        done = subprocess.run([tool, str(trial_dir), '-o', str(stage / 'storyboard.png')],
-                              capture_output=True, text=True, timeout=STORYBOARD_TIMEOUT)
-    except subprocess.TimeoutExpired:
-        return [f'(No storyboard of trial {trial.trial}: not drawn within '
-                f'{STORYBOARD_TIMEOUT:.0f} s.)', '']
-    if done.returncode != 0:
-        why = (done.stderr.strip().splitlines() or [f'exit {done.returncode}'])[-1]
-        return [f'(No storyboard of trial {trial.trial}: {why.removeprefix("storyboard: ")})',
-                '']
+        write_storyboard(trial_dir, stage / 'storyboard.png')
+    except StoryboardError as exc:
+        return [f'(No storyboard of trial {trial.trial}: {exc})', '']
     return [f'Trial {trial.trial} seen from above at its phases (its bag\'s states, posed in the '
             'simulator again: `storyboard RUN` draws any recorded trial):', '',
             '![storyboard](storyboard.png)', '']

@@ -113,7 +113,7 @@ def pipeline_graph(seed: int, belt_speed: float, synchronous: bool = True,
     when there is one, first: it must hear the first /clock). A recording goes into
     ``record_dir``/``bag_name`` (without a name, one with the date and time);
     ``recorder_ready``: the file the recorder writes once it records /clock; ``bag_metadata``:
-    the bag's custom data (what ran: coordinator.recorded)."""
+    the bag's custom data (what ran: studies.recorded)."""
     sim_time = {'use_sim_time': True}
     rate = tick_rate(time_step) if synchronous else CONTROL_RATE
     sim = _sim_parameters(seed, belt_speed, synchronous, world, rate, time_step,

@@ -16,9 +16,6 @@ from dataclasses import asdict, replace
 from pathlib import Path
 from typing import Any, Callable, Dict, Iterator, Optional, Set, TypedDict
 
-from coordinator.graph import TIME_STEP, pipeline_graph
-from coordinator.recorded import bag_metadata
-from coordinator.sweep import SweepError, point_world
 from coordinator.trial_result import (
     RESULT_FILE,
     RunInfo,
@@ -27,6 +24,9 @@ from coordinator.trial_result import (
     read_result,
 )
 from ros_common.dds import hold_free_domain, with_profile
+from studies.recorded import bag_metadata
+from studies.sweep import SweepError, point_world
+from studies.trial_graph import TIME_STEP, pipeline_graph
 from world_description import PIPELINE_CELL
 from world_description.resources import ResourceError, resolve_resource
 from world_description.world_config import WorldConfigError, world_data
@@ -153,7 +153,7 @@ class _Trial(TypedDict):
 
 class PlanItem(_Trial, total=False):
     """A trial of a campaign's plan; in a sweep, with its point's ``parameters``
-    (coordinator.sweep: the world's are written into the trial's own world file)."""
+    (studies.sweep: the world's are written into the trial's own world file)."""
     parameters: Dict[str, float]
 
 

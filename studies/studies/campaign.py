@@ -16,10 +16,10 @@ from contextlib import contextmanager
 from pathlib import Path
 from typing import IO, Any, Callable, Dict, Iterator, List, Optional, Tuple
 
-from coordinator.graph import CONTROL_RATE, TIME_STEP
 from coordinator.records import Fields, RecordError, is_int, is_number, parse_json, read_text
-from coordinator.sweep import SweepError, grid, parse_axis
 from coordinator.trial_result import RESULT_FILE, TrialResult, read_result
+from studies.sweep import SweepError, grid, parse_axis
+from studies.trial_graph import CONTROL_RATE, TIME_STEP
 from world_description import PIPELINE_CELL
 
 CAMPAIGN_FILE = 'campaign.json'
@@ -29,7 +29,7 @@ LOCK_FILE = '.run_trials.lock'
 PLAN_DEFAULTS: Dict[str, Any] = {
     'trials': 10, 'seed0': 2026, 'seeds': None, 'first_trial': 0,
     'belt_speed': [0.10, 0.16], 'world': PIPELINE_CELL, 'time_step': TIME_STEP,
-    # A sweep (coordinator.sweep): one or two NAME=VALUES, `trials_per_point` trials at each
+    # A sweep (studies.sweep): one or two NAME=VALUES, `trials_per_point` trials at each
     # point (else `trials`); the report names the first point where a rate is below
     # `break_below`.
     'sweep': None, 'trials_per_point': None, 'break_below': 0.9}

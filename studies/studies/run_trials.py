@@ -22,7 +22,15 @@ from concurrent.futures import FIRST_COMPLETED, Future, ThreadPoolExecutor, wait
 from pathlib import Path
 from typing import Any, Dict, List, Mapping, NoReturn, Optional, Protocol, Sequence, Tuple
 
-from coordinator.campaign import (
+from coordinator.trial_result import (
+    CSV_FIELDS,
+    RESULT_FILE,
+    TrialResult,
+    code_version,
+    read_result,
+)
+from ros_common.outputs import OutputError, check_output_dir
+from studies.campaign import (
     CAMPAIGN_FILE,
     PLAN_DEFAULTS,
     CampaignError,
@@ -32,8 +40,7 @@ from coordinator.campaign import (
     trial_results,
     write_campaign,
 )
-from coordinator.graph import pipeline_graph
-from coordinator.progress import (
+from studies.progress import (
     CampaignBar,
     TrialProgress,
     eta_seconds,
@@ -41,16 +48,10 @@ from coordinator.progress import (
     read_progress,
     running_figures,
 )
-from coordinator.rerun import Rerun, RerunError, figures, first_parting, prepare
-from coordinator.sweep import SweepError, grid, parse_axis, point_world
-from coordinator.trial_result import (
-    CSV_FIELDS,
-    RESULT_FILE,
-    TrialResult,
-    code_version,
-    read_result,
-)
-from coordinator.trial_run import (
+from studies.rerun import Rerun, RerunError, figures, first_parting, prepare
+from studies.sweep import SweepError, grid, parse_axis, point_world
+from studies.trial_graph import pipeline_graph
+from studies.trial_process import (
     INTERRUPTED,
     MAX_DOMAIN,
     PROGRESS_FILE,
@@ -58,7 +59,6 @@ from coordinator.trial_run import (
     run_leased_trial,
     stop_all,
 )
-from ros_common.outputs import OutputError, check_output_dir
 from world_description import PIPELINE_CELL
 
 PROGRESS_PERIOD_S = 10.0     # wall seconds between two progress lines
@@ -205,7 +205,7 @@ def _rebuild(out: Path) -> int:
         print(f'[trials] no trial_*/result.json in {out}', file=sys.stderr)
         return 1
     write_csv(results, out / 'trials.csv')
-    from coordinator.report import write_report
+    from studies.report import write_report
     speeds = [r.belt_speed for r in results if math.isfinite(r.belt_speed)]
     note = (f'{len(results)} trials (lock-step), rebuilt from their results; belt speeds '
             f'{min(speeds):.3f}-{max(speeds):.3f} m/s; seeds and wall times in trials.csv.'
@@ -445,7 +445,7 @@ def _run_again(rerun: Rerun, out: Path, args: argparse.Namespace) -> int:
         print(f'[rerun] the re-run did not run to its end: {again.status}: '
               f'{again.message or "no message"} ({out})', flush=True)
         return 1
-    from coordinator.report import write_report
+    from studies.report import write_report
     write_report(results, out, {'note': f'Trial {original.trial} of {rerun.source} run again; '
                                         f'{changed}.', 'world': rerun.world})
     differ = again.differences(original)
@@ -559,7 +559,7 @@ def _pool(args: argparse.Namespace, trial_options: Dict[str, Any]) -> Optional[P
     why on stderr, if it cannot be used)."""
     if args.ray is None:
         return LocalPool(args.parallel or 1, args.out, trial_options)
-    from coordinator.trials_ray import RayPool  # Ray is imported only with --ray
+    from studies.ray_pool import RayPool  # Ray is imported only with --ray
     try:
         return RayPool(args.ray or None, args.out, trial_options, args.cpus_per_trial,
                        args.collect_bags, args.parallel)
@@ -608,7 +608,7 @@ def _campaign(args: argparse.Namespace, given: Dict[str, Any]) -> int:
     started = time.monotonic()
     interrupted = _run_plan(pool, list(plan), results, total, args)
     write_csv(results, args.out / 'trials.csv')
-    from coordinator.report import write_report
+    from studies.report import write_report
     setup = {'seed0': opts['seed0'], 'belt_speed': (lo, hi), 'parallel': pool.capacity,
              'wall_time': time.monotonic() - started, 'code': code, 'world': opts['world'],
              'break_below': opts['break_below'], 'sweep': opts['sweep']}

@@ -6,9 +6,7 @@ so that a user never waits minutes in silence.
 """
 from __future__ import annotations
 
-import json
 import math
-import os
 import shutil
 import statistics
 from dataclasses import dataclass
@@ -40,13 +38,6 @@ class TrialProgress:
     wall_time: float          # wall seconds since the trial's processes started
     loader: str = ''
     transport: str = ''
-
-
-def write_progress(path: Path, **fields: Any) -> None:
-    """Atomically (a reader never sees half a file)."""
-    tmp = path.with_name(path.name + '.tmp')
-    tmp.write_text(json.dumps(fields))
-    os.replace(tmp, path)
 
 
 def read_progress(path: Path) -> Optional[Dict[str, Any]]:
