@@ -301,8 +301,8 @@ def test_a_plate_slot_whose_material_the_youbot_failed_to_unload_is_not_used_aga
                     failure='dropped on the way to its place')
     new = Material(3, 'orange', np.zeros(3), 0.0, 3)
     run_.materials.update({1: stuck, 2: gone, 3: new})
-    assert 0 in run_.plate_taken() and 2 not in run_.plate_taken()
-    assert 0 not in run_.plate_slots(new) and 2 in run_.plate_slots(new)
+    assert 0 in run_.book.plate_taken() and 2 not in run_.book.plate_taken()
+    assert 0 not in run_.book.plate_slots(new) and 2 in run_.book.plate_slots(new)
     # And the youBot's lifts keep clear of it.
     assert (*layout.plate_slots[0], 0.05) in run_.transport._others(new)
 
@@ -341,7 +341,7 @@ def test_a_pick_path_across_an_elbow_flip_is_solved_on_one_branch():
 
     from coordinator.pipeline import loader
 
-    def solve_path(arm, points, seed):
+    def solve_path(points, seed):
         """Two branches: 'up' (joint 1 at +1) reaches x < 0 only; 'down' (-1) everywhere.
         Each point takes the seed's branch where it can."""
         qs = []
@@ -351,8 +351,10 @@ def test_a_pick_path_across_an_elbow_flip_is_solved_on_one_branch():
             qs.append(seed)
         return qs
 
-    run_ = SimpleNamespace(solve_path=solve_path, event=lambda *a, **k: None)
-    zu12 = loader.Loader(run_)
+    from coordinator.pipeline import Settings
+    arm = SimpleNamespace(name='zu12', solve_path=solve_path)
+    zu12 = loader.Loader(arm, None, None, SimpleNamespace(event=lambda *a, **k: None), None,
+                         Settings(), None, lambda: False)
     path = [(k * 0.05, np.array([-0.1 + 0.02 * k, 0.75, 0.45])) for k in range(10)]
     qs = zu12._solve_along(path, np.array([0.1, 0.75, 0.5]), np.array([0.0, 1.0, 0, 0, 0, 0]))
     assert qs is not None and len(qs) == 11
@@ -384,12 +386,13 @@ def test_every_pool_drop_is_reached_from_every_slot_of_its_stands_row(size):
     for stand in layout.stands:
         row = [k for k, s in enumerate(layout.plate_slots) if layout.slot_row(k) == stand.row]
         for k in row:
-            run_.materials = {
+            run_.materials.clear()
+            run_.materials.update({
                 10 + j: Material(10 + j, 'orange', np.zeros(3), 0.0, 3, status='on_plate',
-                                 slot=j, size=size) for j in range(len(layout.plate_slots))}
+                                 slot=j, size=size) for j in range(len(layout.plate_slots))})
             m = run_.materials[10 + k]
             for d in range(len(stand.drops)):
-                tr._dropped = {stand.name: set(range(len(stand.drops))) - {d}}
+                run_.book._dropped = {stand.name: set(range(len(stand.drops))) - {d}}
                 # (Standing, the planner may slide the base along the stand's line.)
                 path = tr._unload_path(m, stand.pose, np.zeros(5), slide=True)
                 assert path is not None and path.place == d, (stand.name, k, d)
@@ -444,7 +447,8 @@ def test_an_unload_that_stalled_short_of_its_drop_is_a_failure_not_a_delivery():
     tr.arrival = lambda obs: False                          # (the motion's end passed)
     for where, delivered in (('slot', False), ('drop', True)):
         m = Material(1, 'blue', np.zeros(3), 0.0, 3, status='on_plate', slot=0)
-        run_.materials = {1: m}
+        run_.materials.clear()
+        run_.materials[1] = m
         stand = layout.stand_for('blue', 0)
         path = tr._unload_path(m, stand.pose, np.zeros(5))
         tr._carry, tr.queue, tr._drop_pending = path, [m], False
@@ -478,7 +482,7 @@ def test_an_unload_stalled_under_a_load_the_arm_cannot_hold_names_the_joint_and_
     tr._next_unload = lambda obs: None
     tr.arrival = lambda obs: False
     m = Material(1, 'orange', np.zeros(3), 0.0, 3, status='on_plate', slot=0)
-    run_.materials = {1: m}
+    run_.materials[1] = m
     stand = layout.stand_for('orange', 0)
     path = tr._unload_path(m, stand.pose, np.zeros(5))
     tr._carry, tr.queue, tr._drop_pending = path, [m], False
@@ -516,10 +520,10 @@ def test_a_lift_out_of_the_end_stops_queue_keeps_to_the_straight_line_up():
     on = np.array([0.675, 0.75, 0.4 + 0.05 + 0.001])
     zu12._lift = on + np.array([0.0, 0.0, 0.07])
     ready = np.array([1.201, 1.436, -1.222, 1.357, 1.571, -0.37])    # (the world's)
-    q_on, q_lift = run_.solve_path('zu12', [on, zu12._lift], ready)
+    q_on, q_lift = run_.zu12.solve_path([on, zu12._lift], ready)
     pick = SimpleNamespace(timing=PickTiming(lift_height=0.07), contact=1.0)
     for crowded in (True, False):
-        run_.belt = SimpleNamespace(held=lambda m: True, held_by=lambda m, t: True,
+        zu12.belt = SimpleNamespace(held=lambda m: True, held_by=lambda m, t: True,
                                     crowded=lambda m, t, crowded=crowded: crowded)
         way = zu12._lift_way(m, pick, on, q_on, 1.0, q_lift)
         assert np.allclose(way[-1].q, q_lift, atol=1e-9)

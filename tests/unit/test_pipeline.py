@@ -998,9 +998,10 @@ def test_the_youbot_lifts_a_material_straight_off_its_plate_until_clear_of_its_n
     transport, size = run.transport, layout.material_size
     slots = PLATE_SLOTS_IN_BASE_M
     for slot in range(len(slots)):
-        run.materials = {k + 10: Material(k + 10, 'orange', np.zeros(3), 0.0, 3,
-                                          status='on_plate', slot=k)
-                         for k in range(len(slots)) if k != slot}
+        run.materials.clear()
+        run.materials.update({k + 10: Material(k + 10, 'orange', np.zeros(3), 0.0, 3,
+                                               status='on_plate', slot=k)
+                              for k in range(len(slots)) if k != slot})
         m = Material(1, color, np.zeros(3), 0.0, 3, status='on_plate', slot=slot)
         run.materials[1] = m
         path = transport._unload_path(m, layout.stand_for(color, slot).pose, YOUBOT_CARRY_Q)
@@ -1016,7 +1017,7 @@ def test_the_youbot_lifts_a_material_straight_off_its_plate_until_clear_of_its_n
         # Held at the lift's top (the base still drives): straight up, clear of the others.
         assert clear_of_the_plate(transport._lift(obs, m), [
             (*slots[k], size) for k in range(len(slots)) if k != slot], size)
-        limits = run.limits('youbot')
+        limits = run.youbot.limits
         assert all(np.all(np.abs(v) <= limits.velocity) for _, _, v, _ in motion)
         grip = ports.kin.fk(path.contact)
         rose = False

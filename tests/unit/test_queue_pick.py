@@ -23,8 +23,8 @@ def test_a_material_about_to_come_to_rest_in_the_queue_is_met_at_rest_there():
     purple = Material(1, 'purple', np.array([end - 0.021, layout.belt_y, 0.42]), 0.0, 3,
                       size=0.042)
     blue = Material(2, 'blue', np.array([end - 0.12, layout.belt_y, 0.425]), 0.0, 3, size=0.05)
-    run_.materials = {1: purple, 2: blue}
-    run_.belt = BeltModel(layout, run_.materials, 0.0, ran_before=True)
+    run_.materials.update({1: purple, 2: blue})
+    run_.belt = zu12.belt = BeltModel(layout, run_.materials, 0.0, ran_before=True)
     run_.belt.running = True
     belt, timing = run_.belt, PickTiming()
     assert belt.held(purple) and not belt.held(blue)
@@ -60,8 +60,8 @@ def _two_at_the_stop():
                      size=0.05)
     behind = Material(2, 'orange', np.array([end - 0.078, layout.belt_y, 0.425]), 0.0, 3,
                       size=0.05)
-    run_.materials = {1: ahead, 2: behind}
-    run_.belt = BeltModel(layout, run_.materials, 0.0, ran_before=True)
+    run_.materials.update({1: ahead, 2: behind})
+    run_.belt = zu12.belt = BeltModel(layout, run_.materials, 0.0, ran_before=True)
     run_.belt.running = True
     return layout, run_, zu12, ahead, behind
 

@@ -80,9 +80,10 @@ def test_a_heavy_material_is_held_all_the_way_to_every_pool_drop(mass):
         row = [k for k in range(len(layout.plate_slots)) if layout.slot_row(k) == stand.row]
         for k in row[::2]:
             m = Material(1, 'orange', np.zeros(3), 0.0, 3, status='on_plate', slot=k, size=0.05)
-            run_.materials = {1: m}
+            run_.materials.clear()
+            run_.materials[1] = m
             for d in range(len(stand.drops)):
-                tr._dropped = {stand.name: set(range(len(stand.drops))) - {d}}
+                run_.book._dropped = {stand.name: set(range(len(stand.drops))) - {d}}
                 path = tr._unload_path(m, stand.pose, YOUBOT_CARRY_Q, high=True, slide=True)
                 assert path is not None and path.place == d, (stand.name, k, d)
                 assert youbot_holds([path.contact, *path.lift, path.over, path.drop], mass)
@@ -125,11 +126,12 @@ def test_an_unload_from_elsewhere_on_the_stand_s_line_drives_there_as_the_arm_go
     tr = run_.transport
     stand = layout.stand('pool_right')
     m = Material(1, 'orange', np.zeros(3), 0.0, 3, status='on_plate', slot=1, size=0.05)
-    run_.materials, tr.queue, tr._drive_goal = {1: m}, [m], stand.name
+    run_.materials[1] = m
+    tr.queue, tr._drive_goal = [m], stand.name
     # Only a far drop left: held out to only from further along the wall.
     far = max(range(len(stand.drops)), key=lambda d: np.linalg.norm(
         np.asarray(stand.abeam(stand.drops[d])[:2]) - stand.pose[:2]))
-    tr._dropped = {stand.name: set(range(len(stand.drops))) - {far}}
+    run_.book._dropped = {stand.name: set(range(len(stand.drops))) - {far}}
     tr._plan_unload(Observation(0.0, np.zeros(6), YOUBOT_CARRY_Q, stand.pose), m)
     assert tr.state is TransportState.GRASP and tr.driving
     assert tr._drive_goal == stand.name and tr._carry.place == far

@@ -37,7 +37,7 @@ def test_the_way_onto_a_ground_slot_keeps_the_held_material_over_what_rides_on_t
                      layout.belt_top + size + 0.07])
     through = 0
     for k in range(len(layout.regions['ground_target'].slots)):
-        run_.free_places = lambda name, material, k=k: [k]
+        run_.book.free_places = lambda name, material, k=k: [k]
         way = zu12._place_way(m, lift, layout.youbot_home, READY)
         qs = [w.q for w in way.waypoints]
         through += len(qs) == 4                     # (edge, transfer, above, release)
@@ -66,13 +66,13 @@ def test_the_way_back_from_a_low_place_rises_over_it_before_it_swings_to_the_bel
     zu12 = run_.loader
     m = Material(1, 'green', np.zeros(3), 0.0, 3, size=0.052)
     lift = np.array([layout.belt_end_x - 0.026, layout.belt_y, layout.belt_top + 0.122])
-    run_.free_places = lambda name, material: [0]
+    run_.book.free_places = lambda name, material: [0]
     way = zu12._place_way(m, lift, layout.youbot_home, READY)
     zu12._adopt(way)
     zu12._at_release = True
     hover = np.array([0.6, layout.belt_y, layout.belt_top + 0.1])
     edge_point = zu12._edge(hover, zu12._above, loader_module.EDGE_CLEARANCE_M)
-    edge = run_.solve('zu12', edge_point, loader_module.DOWN, 'world', zu12._above_q)
+    edge = run_.zu12.solve(edge_point, loader_module.DOWN, 'world', zu12._above_q)
     assert zu12.over_the_belt(zu12._above_q, edge, 0.0)
     waypoints, _ = zu12._from_release([Waypoint(edge)], edge)
     qs = [w.q for w in waypoints]

@@ -4,7 +4,6 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field, replace
 from typing import (
-    TYPE_CHECKING,
     Any,
     Callable,
     List,
@@ -26,10 +25,11 @@ from controllers.time_optimal import (
     plan,
     timed_path,
 )
-from coordinator.layout import (
-    slot_in_world,
-)
+from coordinator.layout import CellLayout, slot_in_world
+from coordinator.pipeline.arm import Arm
+from coordinator.pipeline.belt import BeltModel
 from coordinator.pipeline.machine import Machine
+from coordinator.pipeline.materials import MaterialBook
 from coordinator.pipeline.model import (
     DOWN,
     EDGE_CLEARANCE_M,
@@ -46,11 +46,13 @@ from coordinator.pipeline.model import (
     LoaderState,
     Material,
     MaterialStatus,
-    Motion,
     Observation,
     Points,
+    Ports,
+    Settings,
     known,
 )
+from coordinator.pipeline.record import EventLog
 from coordinator.reach import zu12_cup_positions
 
 # A lift out of the end stop's queue keeps to the straight line up through a point this often
@@ -69,8 +71,6 @@ QUEUE_REST_S = 0.1
 # lie on two branches [rad].
 IK_JUMP_RAD = 0.5
 
-if TYPE_CHECKING:
-    from coordinator.pipeline.shared import Shared
 
 
 @dataclass
@@ -146,10 +146,17 @@ class Loader(Machine):
 
     state: LoaderState
 
-    name, arm = 'loader', 'zu12'
+    name = 'loader'
 
-    def __init__(self, run: 'Shared') -> None:
-        super().__init__(run, LoaderState.START)
+    def __init__(self, arm: Arm, book: MaterialBook, belt: BeltModel, log: EventLog,
+                 layout: CellLayout, settings: Settings, ports: Ports,
+                 youbot_loading: Callable[[], bool]) -> None:
+        """``youbot_loading``: the one question the Zu 12 asks of the youBot, whether it
+        waits at home for its load."""
+        super().__init__(arm, log, settings, LoaderState.START)
+        self.book, self.belt, self.layout, self.ports = book, belt, layout, ports
+        self.youbot_loading = youbot_loading
+        self.lag = 0.0                    # the longest a pick's plan has taken (real time) [s]
         self.current: Optional[Material] = None     # the material being picked or placed
         self._then: Optional[np.ndarray] = None     # where the cup rises to from its place
         self._above: Optional[np.ndarray] = None    # above the place (x, y, z), joints
@@ -173,21 +180,19 @@ class Loader(Machine):
                          S.DONE: lambda obs: None}
 
     def start(self, obs: Observation) -> None:
-        """The first observation: the arms' poses now are their home poses."""
-        self.run.home_q = {'zu12': np.array(obs.zu12_q, float),
-                           'youbot': np.array(obs.youbot_q, float)}
-        self.enter(LoaderState.WAIT, obs.now, self.run.s.idle_timeout)
+        """The first observation: loading begins."""
+        self.enter(LoaderState.WAIT, obs.now, self.s.idle_timeout)
 
     def _wait(self, obs: Observation) -> None:
-        run, now = self.run, obs.now
-        waiting = [m for m in run.materials.values() if m.status == MaterialStatus.SEEN]
-        accounted = sum(1 for m in run.materials.values() if m.status != MaterialStatus.SEEN)
-        if accounted >= run.layout.total or (not waiting and self.late(now)):
-            why = ('every material handled' if accounted >= run.layout.total else
-                   f'nothing new for {run.s.idle_timeout:.0f} s')
-            run.event(now, EventKind.LOADING_OVER, 'zu12', detail=why)
-            run.event(now, EventKind.RETURNING, 'zu12')
-            return self._move(LoaderState.HOME, obs, [Waypoint(run.home_q['zu12'].copy())])
+        now = obs.now
+        waiting = self.book.with_status(MaterialStatus.SEEN)
+        accounted = len(self.book.materials) - len(waiting)
+        if accounted >= self.layout.total or (not waiting and self.late(now)):
+            why = ('every material handled' if accounted >= self.layout.total else
+                   f'nothing new for {self.s.idle_timeout:.0f} s')
+            self.log.event(now, EventKind.LOADING_OVER, self.arm.name, detail=why)
+            self.log.event(now, EventKind.RETURNING, self.arm.name)
+            return self._move(LoaderState.HOME, obs, [Waypoint(self.arm.home.copy())])
         m = self._next(waiting)
         if m is not None:
             self._plan_pick(obs, m)
@@ -213,7 +218,7 @@ class Loader(Machine):
             # Clear of the place once straight above it: the cup may be switched on there
             # (what it let go is place_height below it), and the youBot may leave.
             self._clear = self._above_q
-        return self.run.plan('zu12', obs.zu12_q, waypoints, wait, start)
+        return self.arm.plan(self.arm.q(obs), waypoints, wait, start)
 
     def _from_release(self, waypoints: List[Waypoint], edge: Optional[np.ndarray] = None
                       ) -> Tuple[List[Waypoint], float]:
@@ -221,7 +226,7 @@ class Loader(Machine):
         and how long the motion waits first."""
         if not self._at_release:
             return list(waypoints), 0.0
-        rise = self.run.s.timing.place_descend
+        rise = self.s.timing.place_descend
         if edge is not None:
             above = known(self._above_q, 'the point above the place')
             # (Up over the place first where the swing from there to the edge would bulge out
@@ -246,7 +251,7 @@ class Loader(Machine):
     def _after_send(self) -> None:
         if self._at_release:
             self._at_release = False
-            self._clear_at = self.run.arrival_time('zu12', known(self._clear, 'the clear point'))
+            self._clear_at = self.arm.arrival_time(known(self._clear, 'the clear point'))
 
     def _edge(self, a: np.ndarray, b: np.ndarray, low: float, arc: bool = False) -> np.ndarray:
         """Where the way from ``a`` (over the belt) to ``b`` (beside it) crosses the belt's near
@@ -255,7 +260,7 @@ class Loader(Machine):
         changing evenly): the way its joints go, turning joint 1, when both ends lie at about
         the same reach. The straight line between two such points passes nearer the base, and
         the joints that set the reach pull in to the crossing and out again."""
-        lay = self.run.layout
+        lay = self.layout
         y = lay.belt_y - math.copysign(lay.belt_width / 2 + EDGE_CLEARANCE_M,
                                        lay.belt_y - b[1])
         a, b = np.asarray(a, float), np.asarray(b, float)
@@ -279,19 +284,23 @@ class Loader(Machine):
         return (self.state not in (LoaderState.PLACE, LoaderState.RISE, LoaderState.HOME)
                 and not self._at_release and now >= self._clear_at)
 
+    def loadable(self, m: Material) -> bool:
+        """Whether the Zu 12 may put ``m`` onto the youBot's plate now: it waits at home, and
+        has a slot for it."""
+        return self.youbot_loading() and bool(self.book.plate_slots(m))
+
     def _next(self, waiting: Sequence[Material]) -> Optional[Material]:
         """The next material to pick: the most downstream one bound for the youBot's plate (the
         youBot waits for them); one the Zu 12 places itself once the end stop holds it (it
         rides to the end)."""
-        run = self.run
-        ride = run.layout.end_stop
-        carried = [m for m in waiting if run.layout.carried(m.color)]
+        ride = self.layout.end_stop
+        carried = [m for m in waiting if self.layout.carried(m.color)]
         # (The youBot takes a load only while it waits at home, with room on its plate: the
         # others ride on, and queue at the end stop until it is back.)
-        now_ = [m for m in carried if run.loadable(m)]
-        now_ += [m for m in waiting if not run.layout.carried(m.color) and not ride]
+        now_ = [m for m in carried if self.loadable(m)]
+        now_ += [m for m in waiting if not self.layout.carried(m.color) and not ride]
         if not now_:
-            now_ = [m for m in waiting if not run.layout.carried(m.color) and run.belt.held(m)]
+            now_ = [m for m in waiting if not self.layout.carried(m.color) and self.belt.held(m)]
         return max(now_, key=lambda m: m.position[0], default=None)
 
     def _plan_pick(self, obs: Observation, m: Material, spent: float = 0.0) -> None:
@@ -304,15 +313,15 @@ class Loader(Machine):
 
         Real time: ``spent`` is how long earlier plans of this pick took since ``obs.now``
         (the port started them late, so they were replaced before they began)."""
-        run, t = self.run, self.run.s.timing
+        t = self.s.timing
         # A second attempt presses 4 mm further down.
         timing = PickTiming(**{**t.__dict__, 'contact_gap': t.contact_gap - 0.004 * m.attempts})
         # Real time: allow for the longest a pick's plan has taken (a motion the port starts
         # later would come too late to a moving material), after what this one has spent.
-        lag = run.lag
-        start = obs.now + run.s.plan_latency + lag + spent
-        pick = PickPlan(m, timing, run.belt.track(m), start, max(
-            start + timing.descend + PICK_LEAD_S, run.belt.reaches(m, run.s.pick_x)))
+        lag = self.lag
+        start = obs.now + self.s.plan_latency + lag + spent
+        pick = PickPlan(m, timing, self.belt.track(m), start, max(
+            start + timing.descend + PICK_LEAD_S, self.belt.reaches(m, self.s.pick_x)))
         if not math.isfinite(pick.contact):
             return self._leave_it(obs, m)   # it does not reach the pick point (belt off)
         why = self._approach(obs, pick) or self._meet(obs, pick)
@@ -327,12 +336,12 @@ class Loader(Machine):
         """The joints over the material at a first guess of the contact time, and over the
         belt's edge on the way there from a place; the contact no sooner than the arm can be
         there. Why not, if it cannot be."""
-        run, m, timing = self.run, pick.m, pick.timing
-        seed = run.motion('zu12').goal if run.has_motion('zu12') else obs.zu12_q
+        m, timing = pick.m, pick.timing
+        seed = self.arm.motion.goal if self.arm.has_motion else self.arm.q(obs)
         # The hover point moves with the contact time: a first guess from a rest-to-rest move
         # there, then later by a little until the arm makes it.
         hover = follow_pick(pick.track, pick.contact, m.size, timing)[0][0][1]
-        q_hover = run.solve('zu12', hover, DOWN, 'world', seed)
+        q_hover = self.arm.solve(hover, DOWN, 'world', seed)
         if q_hover is None:
             return 'no IK solution for the pick'
         pick.q_hover = q_hover
@@ -341,12 +350,12 @@ class Loader(Machine):
             # (From the plate: round the arc, the cup clear of what rides on the belt.)
             edge = (self._edge(hover, self._above, m.size + EDGE_CLEARANCE_M, arc=True)
                     if self._onto_plate else self._edge(hover, self._above, EDGE_CLEARANCE_M))
-            pick.q_edge = run.solve('zu12', edge, DOWN, 'world',
-                                    known(self._above_q, 'the point above the place'))
+            pick.q_edge = self.arm.solve(edge, DOWN, 'world',
+                                         known(self._above_q, 'the point above the place'))
         # (A first guess: the way to the hover point, at rest there; a plan that cannot make
         # it says by how much.)
         way, wait = self._from_release([Waypoint(q_hover)], pick.q_edge)
-        reach = wait + plan(obs.zu12_q, way, run.limits('zu12')).end
+        reach = wait + plan(self.arm.q(obs), way, self.arm.limits).end
         pick.contact = max(pick.contact, pick.start + reach + timing.descend)
         return ''
 
@@ -357,7 +366,7 @@ class Loader(Machine):
         behind), pressed it, and the lift dragged the purple up and off the belt's end. It is
         met once at rest there instead (the belt pauses around that lift; the pause begins
         QUEUE_LIFT_PAUSE_LEAD_S before the contact, after it has come to rest)."""
-        belt = self.run.belt
+        belt = self.belt
         rest = belt.comes_to_rest(m)
         # (Resting there by the contact but not yet as the pause begins, it would stop short.)
         begins = contact - QUEUE_LIFT_PAUSE_LEAD_S - QUEUE_REST_S
@@ -371,22 +380,22 @@ class Loader(Machine):
         swing on from the lift point sags and bulges outwards as it begins (a green lifted
         7 cm from behind an orange came down 1.3 cm and 2 cm sideways onto it, and knocked it
         over)."""
-        run, m, timing = self.run, pick.m, pick.timing
-        if not (run.belt.held_by(m, pick.contact) and run.belt.crowded(m, pick.contact)):
+        m, timing = pick.m, pick.timing
+        if not (self.belt.held_by(m, pick.contact) and self.belt.crowded(m, pick.contact)):
             return timing
-        high = run.layout.material_size + QUEUE_SWING_CLEARANCE_M
+        high = self.layout.material_size + QUEUE_SWING_CLEARANCE_M
         return replace(timing, lift_height=max(timing.lift_height, high))
 
     def _meet(self, obs: Observation, pick: 'PickPlan') -> str:
         """The pick's motion (``pick.points``), its contact moved later until the arm makes
         it; why not (or LEAVE: the material leaves the belt first)."""
-        run, m, timing, track = self.run, pick.m, pick.timing, pick.track
+        m, timing, track = pick.m, pick.timing, pick.track
         refused = ''
         for _ in range(PICK_TRIES):
-            if track(pick.contact)[0] < run.s.pick_x - 1e-6:
-                pick.contact = run.belt.reaches(m, run.s.pick_x)
+            if track(pick.contact)[0] < self.s.pick_x - 1e-6:
+                pick.contact = self.belt.reaches(m, self.s.pick_x)
             pick.contact = self._not_as_it_queues(m, pick.contact, timing)
-            if track(pick.contact + timing.dwell)[0] > (run.layout.belt_end_x - m.size / 2
+            if track(pick.contact + timing.dwell)[0] > (self.layout.belt_end_x - m.size / 2
                                                         + 1e-6):
                 return LEAVE                   # off the end (no stop) before the cup is on it
             path, lift = follow_pick(track, pick.contact, m.size, self._lifting(pick),
@@ -428,18 +437,18 @@ class Loader(Machine):
         (timed_path). The joints' own way from the dwell to the lift point bowed 1.8 cm
         upstream as it began, into the material behind, and lifted the queue with it (the
         ones behind rose up to 4 cm and fell back turned 23 degrees)."""
-        run, timing = self.run, pick.timing
-        if not (run.belt.held_by(m, pick.contact) and run.belt.crowded(m, pick.contact)):
+        timing = pick.timing
+        if not (self.belt.held_by(m, pick.contact) and self.belt.crowded(m, pick.contact)):
             return [Waypoint(q_lift, min_time=timing.lift)]
         rise = float(np.linalg.norm(self._lift - on)) if self._lift is not None else 0.0
         steps = max(1, int(math.ceil(rise / LIFT_LINE_STEP_M - 1e-9)))
         points = [on + (np.asarray(self._lift, float) - on) * k / steps
                   for k in range(1, steps)]
-        line = run.solve_path('zu12', points, q_on) if points else []
+        line = self.arm.solve_path(points, q_on) if points else []
         if line is None or not _continuous([q_on, *line, q_lift]):
             return [Waypoint(q_lift, min_time=timing.lift)]
         try:
-            return timed_path([q_on, *line, q_lift], run.limits('zu12'), t_on,
+            return timed_path([q_on, *line, q_lift], self.arm.limits, t_on,
                               min_time=timing.lift)
         except PlanError:
             return [Waypoint(q_lift, min_time=timing.lift)]
@@ -451,10 +460,10 @@ class Loader(Machine):
         acceleration -320"); then the whole path is solved again from its end backwards, on
         the branch the end is on. None if neither is continuous."""
         points = [p for _, p in path] + [lift]
-        qs = self.run.solve_path('zu12', points, seed)
+        qs = self.arm.solve_path(points, seed)
         if qs is None or _continuous(qs):
             return qs
-        back = self.run.solve_path('zu12', points[::-1], qs[-1])
+        back = self.arm.solve_path(points[::-1], qs[-1])
         if back is None or not _continuous(back):
             return None
         return back[::-1]
@@ -464,7 +473,7 @@ class Loader(Machine):
         the swing starts during the lift, and the place does not wait for an arrival check at
         the lift point and a plan after it. (A missed grasp stops the arm at the lift point
         instead: see _pick.)"""
-        run, m = self.run, pick.m
+        m = pick.m
         self._ahead = None
         place_way = self._place_way(m, self._lift, obs.youbot_pose, pick.q_lift)
         if isinstance(place_way, str):
@@ -473,7 +482,7 @@ class Loader(Machine):
         # of its neighbours' tops, before it swings: a swing begun during the lift dragged a
         # purple into the green queued behind it (the arm stalled, the purple fell back onto
         # the belt).
-        crowded = run.belt.crowded(m, pick.contact)
+        crowded = self.belt.crowded(m, pick.contact)
         through = (pick.waypoints if pick.waypoints[-1].direct else   # (straight up: _lift_way)
                    pick.waypoints[:-1] + [Waypoint(pick.q_lift, stop=crowded,
                                                    min_time=pick.timing.lift)])
@@ -486,27 +495,27 @@ class Loader(Machine):
 
     def _send_pick(self, obs: Observation, pick: 'PickPlan', lag: float, spent: float) -> None:
         """Send the pick; plan it again if the port starts it late; switch the cup on."""
-        run, m, now = self.run, pick.m, obs.now
-        self.current, m.status = m, MaterialStatus.PICKING
+        m, now = pick.m, obs.now
+        self.current = m
+        self.book.picking(m)
         self.move(LoaderState.PICK, obs, pick.points, start=pick.start)
-        late = run.motion('zu12').start - pick.start
+        late = self.arm.motion.start - pick.start
         if late > 1e-9:
             # The port started it later than planned: it would miss the material. This plan
             # took as long as was allowed for it and then ``late``; plan again at once, allowing
             # for that much after this one (the new motion replaces it before it starts).
             took = lag + late
-            run.lag = max(run.lag, PLAN_MARGIN * took)
-            run.event(now, EventKind.REPLANNED, 'zu12', m,
-                      f'the pick would start {late:.2f} s late')
+            self.lag = max(self.lag, PLAN_MARGIN * took)
+            self.log.event(now, EventKind.REPLANNED, self.arm.name, m,
+                           f'the pick would start {late:.2f} s late')
             if self._replans < MAX_REPLANS:
                 self._replans += 1
                 return self._plan_pick(obs, m, spent + took)
             # Still late: hold the arm where it is (replacing the late motion before it
             # starts) and plan afresh on the next observation.
             self._replans = 0
-            hold = obs.zu12_q.copy()
-            run.send(Motion('zu12', [(run.now + run.s.plan_latency, hold, np.zeros_like(hold),
-                                      np.zeros_like(hold))]))
+            hold = self.arm.q(obs).copy()
+            self.arm.hold(hold)
             return self._leave_it(obs, m)
         self._replans = 0
         # The cup is switched on (an armed cup seals on what it touches) now, or from a place
@@ -514,17 +523,17 @@ class Loader(Machine):
         # material again.
         self._arm_pending = self._at_release
         if not self._arm_pending:
-            ok, why = run.ports.grip('zu12', True)
+            ok, why = self.ports.grip(self.arm.name, True)
             if not ok:
                 return self._pick_failed(obs, m, f'the suction did not switch on: {why}')
         self._after_send()
         self._leave = pick.contact + pick.timing.dwell + late
         if self._ahead is not None:
             self._ahead.lift_end += late
-        m.attempts += 1
-        run.count_grasp('zu12')
-        held = ' (held at the stop)' if run.belt.held_by(m, pick.contact) else ''
-        if held and run.belt.crowded(m, pick.contact, behind=True):
+        self.book.attempt(m)
+        self.log.count_grasp(self.arm.name)
+        held = ' (held at the stop)' if self.belt.held_by(m, pick.contact) else ''
+        if held and self.belt.crowded(m, pick.contact, behind=True):
             # Another pressed against it from behind: the belt pauses before the cup comes
             # down, and the queue's pressure with it, until the lift is over
             # (QUEUE_LIFT_PAUSE_LEAD_S). Only the one ahead (the paper's orange behind the
@@ -532,8 +541,8 @@ class Loader(Machine):
             # the paper's trials).
             lifted = self._ahead.lift_end if self._ahead is not None else pick.points[-1][0]
             self.belt_pause = (pick.contact + late - QUEUE_LIFT_PAUSE_LEAD_S, lifted)
-        run.event(now, EventKind.TRACKING, 'zu12', m,
-                  f'contact at {pick.contact:.2f} s, x {pick.track(pick.contact)[0]:.3f}{held}')
+        self.log.event(now, EventKind.TRACKING, self.arm.name, m, f'contact at {pick.contact:.2f} '
+                       f's, x {pick.track(pick.contact)[0]:.3f}{held}')
 
     def pauses_belt(self, now: float) -> bool:
         """Whether the belt pauses now for a lift out of the end stop's queue."""
@@ -542,40 +551,39 @@ class Loader(Machine):
     def _leave_it(self, obs: Observation, m: Material) -> None:
         """The material cannot be picked before it leaves the belt."""
         self.belt_pause = (math.inf, -math.inf)
-        m.status = MaterialStatus.SEEN
+        self.book.left_on_belt(m)
         self.current = None
         self._ahead = None
         if self.state is not LoaderState.WAIT:
-            self.enter(LoaderState.WAIT, obs.now, self.run.s.idle_timeout)
+            self.enter(LoaderState.WAIT, obs.now, self.s.idle_timeout)
 
     def _pick_failed(self, obs: Observation, m: Material, why: str) -> None:
-        run = self.run
         self.belt_pause = (math.inf, -math.inf)
-        run.fail(obs.now, m, EventKind.GRASP_FAILED, why, 'zu12')
-        m.slot = m.place = -1           # (a place kept for it is free again)
+        self.book.give_up(obs.now, m, EventKind.GRASP_FAILED, why, self.arm.name)
+        self.book.free_kept(m)          # (a place kept for it is free again)
         self.current = None
         self._ahead = None
-        self._move(LoaderState.RETREAT, obs, [Waypoint(run.home_q['zu12'].copy())])
+        self._move(LoaderState.RETREAT, obs, [Waypoint(self.arm.home.copy())])
 
     def _pick(self, obs: Observation) -> None:
-        run, m, now = self.run, known(self.current, 'the material'), obs.now
+        m, now = known(self.current, 'the material'), obs.now
         if self._arm_pending:
             if now < self._clear_at:
                 return
             self._arm_pending = False
-            ok, why = run.ports.grip('zu12', True)
+            ok, why = self.ports.grip(self.arm.name, True)
             if not ok:
                 return self._pick_failed(obs, m, f'the suction did not switch on: {why}')
-        if not m.picked and now >= self._leave and obs.zu12_holding:
+        if not m.picked and now >= self._leave and self.arm.holding(obs):
             # Off the belt from here: what the belt queued behind it moves on.
-            run.belt.lifted(m, now)
-            run.count_grasp('zu12', success=True)
-            run.event(now, EventKind.PICKED, 'zu12', m, f'attempt {m.attempts}')
+            self.belt.lifted(m, now)
+            self.log.count_grasp(self.arm.name, success=True)
+            self.log.event(now, EventKind.PICKED, self.arm.name, m, f'attempt {m.attempts}')
             if self._ahead is not None:        # on its way to the place already
                 self._adopt(self._ahead.way)
                 self._ahead = None
-                return self.enter(LoaderState.PLACE, now, run.motion('zu12').end - now
-                                  + run.s.settle_margin)
+                return self.enter(LoaderState.PLACE, now, self.arm.motion.end - now
+                                  + self.s.settle_margin)
         elif not m.picked and now >= self._leave and self._ahead is not None:
             self._stop_at_lift(obs)
         arrived = self.arrival(obs)
@@ -585,49 +593,49 @@ class Loader(Machine):
     def _stop_at_lift(self, obs: Observation) -> None:
         """Not held after the dwell: the motion ends at the lift point instead, at rest, where
         a missed grasp is judged."""
-        run, now = self.run, obs.now
+        now = obs.now
         ahead = known(self._ahead, 'the way ahead')
         self._ahead = None
-        points = run.motion('zu12').points
+        points = self.arm.motion.points
         q_now = min(points, key=lambda p: abs(p[0] - now))[1]
-        after = [p for p in points if p[0] > now + run.s.plan_latency]
-        if float(np.max(np.abs(obs.zu12_q - q_now))) > FOLLOW_TOLERANCE or not after:
-            self.deadline = ahead.lift_end + run.s.settle_margin
+        after = [p for p in points if p[0] > now + self.s.plan_latency]
+        if float(np.max(np.abs(self.arm.q(obs) - q_now))) > FOLLOW_TOLERANCE or not after:
+            self.deadline = ahead.lift_end + self.s.settle_margin
         else:
             # From where the motion has the arm at its next sample, moving, to rest at the
             # lift point: the motion's own samples until then, and the stop from there.
             t1, q1, v1, a1 = after[0]
-            stop = plan(q1, [Waypoint(ahead.q_lift)], run.limits('zu12'), t1, v0=v1, a0=a1)
-            run.send_continuing('zu12', now, t1, stop.points())
-            self.deadline = run.motion('zu12').end + run.s.settle_margin
+            stop = plan(q1, [Waypoint(ahead.q_lift)], self.arm.limits, t1, v0=v1, a0=a1)
+            self.arm.send_continuing(now, t1, stop.points())
+            self.deadline = self.arm.motion.end + self.s.settle_margin
 
     def _picked_or_not(self, obs: Observation, m: Material, arrived: bool) -> None:
         """The pick's motion is over (``arrived``: at its end): on to the place with the
         material held, or another attempt, or a failure."""
-        run, now = self.run, obs.now
+        now = obs.now
         if not arrived:
-            run.ports.grip('zu12', False)
+            self.ports.grip(self.arm.name, False)
             if m.picked:
                 return self._place_failed(obs, m, 'the arm did not reach the lift point')
             # (Real time: the simulator took the motion in too late and refused it.) The
             # material rides on, untouched: another attempt, like a missed grasp.
-            run.event(now, EventKind.ARM_STALLED, 'zu12', m,
-                      f'pick attempt {m.attempts} not completed')
-            if m.attempts <= run.s.max_retries:
+            self.log.event(now, EventKind.ARM_STALLED, self.arm.name, m,
+                           f'pick attempt {m.attempts} not completed')
+            if m.attempts <= self.s.max_retries:
                 return self._plan_pick(obs, m)
             return self._pick_failed(obs, m, 'the arm did not reach the material')
-        if not obs.zu12_holding:
-            run.ports.grip('zu12', False)
+        if not self.arm.holding(obs):
+            self.ports.grip(self.arm.name, False)
             if m.picked:
                 return self._place_failed(obs, m, 'dropped while lifting it')
-            run.event(now, EventKind.GRASP_MISSED, 'zu12', m, f'attempt {m.attempts}')
-            if m.attempts <= run.s.max_retries:
+            self.log.event(now, EventKind.GRASP_MISSED, self.arm.name, m, f'attempt {m.attempts}')
+            if m.attempts <= self.s.max_retries:
                 return self._plan_pick(obs, m)
             return self._pick_failed(obs, m, f'not held after {m.attempts} attempts')
         if not m.picked:                     # (held, but only sealed after the lift began)
-            run.belt.lifted(m, now)
-            run.count_grasp('zu12', success=True)
-            run.event(now, EventKind.PICKED, 'zu12', m, f'attempt {m.attempts}')
+            self.belt.lifted(m, now)
+            self.log.count_grasp(self.arm.name, success=True)
+            self.log.event(now, EventKind.PICKED, self.arm.name, m, f'attempt {m.attempts}')
         self._plan_place(obs, m)
 
     def _plan_place(self, obs: Observation, m: Material) -> None:
@@ -635,44 +643,44 @@ class Loader(Machine):
         above it, in one motion; the release and the rise follow once the arm is there. (A
         pick's motion goes on to the place by itself: this is for a material held only once the
         arm was at the lift point.)"""
-        way = self._place_way(m, self._lift, obs.youbot_pose, self.run.motion('zu12').goal)
+        way = self._place_way(m, self._lift, obs.youbot_pose, self.arm.motion.goal)
         if isinstance(way, str):
             return self._place_failed(obs, m, way)
         self._adopt(way)
-        self.move(LoaderState.PLACE, obs, self.run.plan('zu12', obs.zu12_q, way.waypoints))
+        self.move(LoaderState.PLACE, obs, self.arm.plan(self.arm.q(obs), way.waypoints))
 
     def _place_way(self, m: Material, lift: Optional[np.ndarray], youbot_pose: Pose2D,
                    seed: np.ndarray) -> Union['PlaceWay', str]:
         """The way from the lift point ``lift`` (x, y, z; None: from above the place) onto
         ``m``'s place, or why there is none: over the belt's edge, to ``place_height`` above
         the place, and straight down until the material is just above it."""
-        run, size, lay = self.run, m.size, self.run.layout
+        size, lay = m.size, self.layout
         onto_plate = lay.carried(m.color)
         if not onto_plate:
             region = lay.region_of(m.color)
-            free = run.free_places(region.name, m)
+            free = self.book.free_places(region.name, m)
             if not free:
                 return f'{region.name} is full (its {len(region.slots)} slots are taken)'
-            m.place = free[0]
+            self.book.keep_place(m, free[0])
             target = region.slots[m.place]
         else:
-            free = run.plate_slots(m)
+            free = self.book.plate_slots(m)
             if not free:
                 return 'the youBot plate is full'
-            m.slot = free[0]
-            target = slot_in_world(youbot_pose, run.layout.plate_slots[m.slot],
-                                   run.layout.youbot_base_z, size)
-        t = run.s.timing
+            self.book.keep_slot(m, free[0])
+            target = slot_in_world(youbot_pose, self.layout.plate_slots[m.slot],
+                                   self.layout.youbot_base_z, size)
+        t = self.s.timing
         release = np.asarray(target, float) + np.array([0.0, 0.0, size + t.place_gap])
         # Down onto it from over the materials there already.
         rise = max(t.place_height,
-                   run.set_down_rise(None if onto_plate else lay.destination(m.color)))
+                   self.book.set_down_rise(None if onto_plate else lay.destination(m.color)))
         above = release + np.array([0.0, 0.0, rise])
         # Where the cup rises to over the place when it goes home or waits: clear of the belt
         # (a joint-space move straight from there to a place lower than the belt would sweep
         # the held material through the belt's side).
         transfer = release.copy()
-        transfer[2] = max(above[2], run.layout.belt_top + 2 * size + t.lift_height)
+        transfer[2] = max(above[2], self.layout.belt_top + 2 * size + t.lift_height)
         # Over the belt's near edge (rather than up to the carry height over the place and down
         # again), what the cup holds 5 cm over what can ride on the belt: onto the plate round
         # the arc (the way crosses the edge near the plate; before that it lies over the
@@ -680,7 +688,7 @@ class Loader(Machine):
         edge = (transfer if lift is None else
                 self._edge(lift, above, 2 * size + EDGE_CLEARANCE_M, arc=True) if onto_plate
                 else self._edge(lift, above, size + EDGE_CLEARANCE_M))
-        qs = run.solve_path('zu12', [transfer, above, release, edge], seed)
+        qs = self.arm.solve_path([transfer, above, release, edge], seed)
         if qs is None:
             return 'no IK solution for the place path'
         q_transfer, q_above, q_release, q_edge = qs
@@ -699,7 +707,7 @@ class Loader(Machine):
         SWING_CLEARANCE_M above the tallest material that rides on it. (From the stop to a
         ground place 2 cm further out than the paper's, the way from the edge bulged 13 cm back
         out over the belt, 5 cm above its top, and a 0.49 kg purple struck what rode there.)"""
-        lay = self.run.layout
+        lay = self.layout
         cup = zu12_cup_positions(lay.zu12_base, q_a, q_b)
         half = lay.belt_width / 2 + held / 2
         low = lay.belt_top + lay.material_size + SWING_CLEARANCE_M
@@ -712,42 +720,41 @@ class Loader(Machine):
         self._above, self._above_q, self._onto_plate = way.above, way.above_q, way.onto_plate
 
     def _place_failed(self, obs: Observation, m: Material, why: str) -> None:
-        self.run.ports.grip('zu12', False)
+        self.ports.grip(self.arm.name, False)
         self._pick_failed(obs, m, why)
 
     def _place(self, obs: Observation) -> None:
-        run, m, now = self.run, known(self.current, 'the material'), obs.now
-        if not obs.zu12_holding:
+        m, now = known(self.current, 'the material'), obs.now
+        if not self.arm.holding(obs):
             return self._place_failed(obs, m, 'dropped on the way to its place')
         arrived = self.arrival(obs)
         if arrived is None:
             return
         if not arrived:
             return self._place_failed(obs, m, 'the arm did not reach the place')
-        ok, why = run.ports.grip('zu12', False)
+        ok, why = self.ports.grip(self.arm.name, False)
         if not ok:
             return self._place_failed(obs, m, f'release failed: {why}')
-        if not run.layout.carried(m.color):
-            m.status = MaterialStatus.PLACED
-            run.event(now, EventKind.PLACED, 'zu12', m, f'{run.layout.destination(m.color)} slot '
-                                                 f'{m.place}')
+        if not self.layout.carried(m.color):
+            self.book.placed(m)
+            self.log.event(now, EventKind.PLACED, self.arm.name, m,
+                           f'{self.layout.destination(m.color)} slot {m.place}')
         else:
-            m.status = MaterialStatus.ON_PLATE
-            run.loaded += 1
-            run.event(now, EventKind.LOADED, 'zu12', m, f'plate slot {m.slot}')
+            self.book.loaded_on_plate(m)
+            self.log.event(now, EventKind.LOADED, self.arm.name, m, f'plate slot {m.slot}')
         # The cup stays still while the vacuum lets go, then rises: as the start of the next
         # motion, planned now.
         self.current, self._at_release = None, True
-        self.enter(LoaderState.WAIT, now, run.s.idle_timeout)
+        self.enter(LoaderState.WAIT, now, self.s.idle_timeout)
         self._wait(obs)
 
     def _rise(self, obs: Observation) -> None:
         if self.motion_over(obs, 'the rise from the place'):
-            self.enter(LoaderState.WAIT, obs.now, self.run.s.idle_timeout)
+            self.enter(LoaderState.WAIT, obs.now, self.s.idle_timeout)
 
     def _retreat(self, obs: Observation) -> None:
         if self.motion_over(obs, 'retreat'):
-            self.enter(LoaderState.WAIT, obs.now, self.run.s.idle_timeout)
+            self.enter(LoaderState.WAIT, obs.now, self.s.idle_timeout)
 
     def _home(self, obs: Observation) -> None:
         if self.motion_over(obs, 'home'):

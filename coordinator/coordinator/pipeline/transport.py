@@ -4,13 +4,11 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 from typing import (
-    TYPE_CHECKING,
     Any,
-    Dict,
+    Callable,
     List,
     Optional,
     Sequence,
-    Set,
     Tuple,
     cast,
 )
@@ -30,9 +28,12 @@ from coordinator.layout import (
     GRASP_STANDOFF_M,
     PLATE_TOP_IN_BASE_M,
     POOL,
+    CellLayout,
     world_to_base,
 )
+from coordinator.pipeline.arm import YoubotArm
 from coordinator.pipeline.machine import Machine
+from coordinator.pipeline.materials import MaterialBook
 from coordinator.pipeline.model import (
     RELEASE_HOLD_S,
     SETTLE_S,
@@ -40,16 +41,15 @@ from coordinator.pipeline.model import (
     EventKind,
     Material,
     MaterialStatus,
-    Motion,
     Observation,
     Points,
+    Ports,
+    Settings,
     TransportState,
     known,
 )
+from coordinator.pipeline.record import EventLog
 from coordinator.reach import YOUBOT_LOAD_MAX, youbot_hold_need
-
-if TYPE_CHECKING:
-    from coordinator.pipeline.shared import Shared
 
 
 @dataclass
@@ -85,10 +85,18 @@ class Transport(Machine):
 
     state: TransportState
 
-    name, arm = 'transport', 'youbot'
+    name = 'transport'
 
-    def __init__(self, run: 'Shared') -> None:
-        super().__init__(run, TransportState.WAIT_LOAD)
+    def __init__(self, arm: YoubotArm, book: MaterialBook, log: EventLog, layout: CellLayout,
+                 settings: Settings, ports: Ports, loader_done: Callable[[], bool],
+                 zu12_clear: Callable[[float], bool]) -> None:
+        """``loader_done`` and ``zu12_clear`` are the questions the youBot asks of the Zu 12:
+        whether it has nothing more to load, and whether its cup is clear of the plate at a
+        time (the base may move)."""
+        super().__init__(arm, log, settings, TransportState.WAIT_LOAD)
+        self.arm: YoubotArm = arm
+        self.book, self.layout, self.ports = book, layout, ports
+        self.loader_done, self.zu12_clear = loader_done, zu12_clear
         self.queue: List[Material] = []              # still to unload, the current one first
         self._follower: Optional[PathFollower] = None   # while the base drives
         self._followed = False                           # the port runs the follower
@@ -96,7 +104,6 @@ class Transport(Machine):
         self._target: Optional[Pose2D] = None          # the drive's end pose
         self._carry: Optional[UnloadPath] = None     # the unload's joint positions
         self._armed = False
-        self._dropped: Dict[str, Set[int]] = {}        # pool drop spots used, per stand
         self._drive_deadline = math.inf
         # The arm holds a material up, over the plate, until the base stands at its stand.
         self._drop_pending = False
@@ -122,24 +129,20 @@ class Transport(Machine):
 
     def _steer(self, obs: Observation) -> None:
         """The base along its path, with its follower, until it is there or out of time."""
-        run, follower = self.run, known(self._follower, 'the path follower')
+        follower = known(self._follower, 'the path follower')
         status = follower.update(obs.now, obs.youbot_pose, obs.youbot_velocity[:2],
                                  obs.youbot_velocity[2])
         if not self._followed:
-            run.ports.drive(*status.command)
+            self.ports.drive(*status.command)
         if not (status.finished or obs.now > self._drive_deadline):
             return
         self._follower = None
-        run.ports.follow(None)
-        run.ports.drive(0.0, 0.0, 0.0)
+        self.ports.follow(None)
+        self.ports.drive(0.0, 0.0, 0.0)
         if not status.finished:
-            run.event(obs.now, EventKind.DRIVE_STALLED, 'youbot', detail=(
+            self.log.event(obs.now, EventKind.DRIVE_STALLED, self.arm.name, detail=(
                 f'{status.position_error * 1000:.0f} mm from {self._drive_goal}'))
-        run.event(obs.now, EventKind.ARRIVED, 'youbot', detail=self._drive_goal)
-
-    def dropped(self, stand: str) -> Set[int]:
-        """The stand's pool drop spots used so far."""
-        return self._dropped.get(stand, set())
+        self.log.event(obs.now, EventKind.ARRIVED, self.arm.name, detail=self._drive_goal)
 
     @property
     def loading(self) -> bool:
@@ -151,48 +154,48 @@ class Transport(Machine):
         (or the Zu 12 is done); or the plate has no room for the next one waiting on the belt
         (it goes on the next trip). It waits while a carried material on its way could still
         have a place."""
-        run = self.run
-        if run.loader_done:
+        if self.loader_done():
             return True
-        if any(m.status == MaterialStatus.PICKING and run.layout.carried(m.color)
-               for m in run.materials.values()):
+        if any(m.status == MaterialStatus.PICKING and self.layout.carried(m.color)
+               for m in self.book.materials.values()):
             return False
-        waiting = [m for m in run.materials.values()
-                   if m.status == MaterialStatus.SEEN and run.layout.carried(m.color)]
-        if any(run.plate_slots(m) for m in waiting):
+        waiting = [m for m in self.book.materials.values()
+                   if m.status == MaterialStatus.SEEN and self.layout.carried(m.color)]
+        if any(self.book.plate_slots(m) for m in waiting):
             return False
         if waiting:
             return bool(on_plate)           # (full for what waits: off to make room)
-        coming = [c for c in run.layout.manifest if run.layout.carried(c) and run.to_come(c)]
+        coming = [c for c in self.layout.manifest
+                  if self.layout.carried(c) and self.book.to_come(c)]
         return bool(on_plate) and not any(
-            run.layout.free_slots(c, run.plate_taken(), run.to_come_counts()) for c in coming)
+            self.layout.free_slots(c, self.book.plate_taken(), self.book.to_come_counts())
+            for c in coming)
 
     def _wait_load(self, obs: Observation) -> None:
-        run = self.run
-        on_plate = [m for m in run.materials.values() if m.status == MaterialStatus.ON_PLATE]
-        if not self._load_complete(on_plate) or not run.zu12_clear_of_the_plate(obs.now):
+        on_plate = self.book.with_status(MaterialStatus.ON_PLATE)
+        if not self._load_complete(on_plate) or not self.zu12_clear(obs.now):
             return      # (nor while the Zu 12's cup is over the plate, or swinging home from it)
-        order = [st.name for st in run.layout.stands]
+        order = [st.name for st in self.layout.stands]
         self.queue = sorted(on_plate, key=lambda m: (
-            order.index(self._stand_for(m)), run.layout.destination(m.color) != POOL, m.slot))
+            order.index(self._stand_for(m)), self.layout.destination(m.color) != POOL, m.slot))
         if not self.queue:
             self.enter(TransportState.DONE, obs.now, math.inf)
             return
         self.trips += 1
-        run.event(obs.now, EventKind.DEPARTING, 'youbot',
-                  detail=f'{len(self.queue)} materials, trip {self.trips}')
+        self.log.event(obs.now, EventKind.DEPARTING, self.arm.name,
+                       detail=f'{len(self.queue)} materials, trip {self.trips}')
         # The arm rises to its carry pose while the base drives: folded, it reaches down in
         # front of the base, and its fingers would scrape the floor as the base pitches.
         self._drive_to(obs, self._stand_for(self.queue[0]))
 
     def _stand_for(self, m: Material) -> str:
-        return self.run.layout.stand_for(m.color, m.slot).name
+        return self.layout.stand_for(m.color, m.slot).name
 
     def _drive_to(self, obs: Observation, goal: str) -> None:
         """Home, or to a stand: where it stands for the first material it unloads there (the
         stand's pose, or slid along its line for a heavy one, _unload_path), the arm readied
         for that material on the way."""
-        lay = self.run.layout
+        lay = self.layout
         plan = None
         if goal == 'home':
             target, via = lay.youbot_home, lay.via_back
@@ -212,23 +215,22 @@ class Transport(Machine):
     def _follow(self, obs: Observation, target: Pose2D, via: Sequence[Any], goal: str) -> None:
         """The base off along a path from where it is through ``via`` to ``target`` (at stand
         or home ``goal``)."""
-        run = self.run
         x, y, yaw = (float(v) for v in obs.youbot_pose)
         path = BezierPath(key_poses_between((x, y, yaw), target, via))
         # Mecanum: the heading turns on its own profile in time while the base travels the
         # path, both over the same time (a short path with a large turn takes the turn's).
         self._follower = PathFollower(
-            path, obs.now, run.s.drive_speed, run.s.drive_accel,
-            PDGains(max_speed=run.s.base_max_speed, max_turn=run.s.base_max_turn),
-            turn=TurnLimits(run.s.drive_turn, run.s.drive_turn_accel))
-        self._followed = run.ports.follow(self._follower)
+            path, obs.now, self.s.drive_speed, self.s.drive_accel,
+            PDGains(max_speed=self.s.base_max_speed, max_turn=self.s.base_max_turn),
+            turn=TurnLimits(self.s.drive_turn, self.s.drive_turn_accel))
+        self._followed = self.ports.follow(self._follower)
         self._drive_goal, self._target = goal, target
-        run.event(obs.now, EventKind.DRIVING, 'youbot', detail=f'to {goal}, {path.length:.2f} m')
+        self.log.event(obs.now, EventKind.DRIVING, self.arm.name,
+                       detail=f'to {goal}, {path.length:.2f} m')
         self._drive_deadline = (obs.now + self._follower.profile.duration
-                                + run.s.drive_margin)
+                                + self.s.drive_margin)
 
     def _drive(self, obs: Observation) -> None:
-        run = self.run
         if self._drive_goal == 'home':
             if self.driving:
                 return
@@ -237,14 +239,14 @@ class Transport(Machine):
             # pitches). The cell's youBot starts in the carry pose: nothing is left to do.
             if not self.motion_over(obs, 'carry pose'):
                 return
-            if run.carried_to_come() and not run.loader_done:
+            if self.book.carried_to_come() and not self.loader_done():
                 # More to carry: it waits here, the arm in its carry pose, for the next load.
-                run.event(obs.now, EventKind.WAITING_FOR_LOAD, 'youbot',
-                          detail=f'{run.carried_to_come()} carried materials to come')
+                self.log.event(obs.now, EventKind.WAITING_FOR_LOAD, self.arm.name,
+                               detail=f'{self.book.carried_to_come()} carried materials to come')
                 return self.enter(TransportState.WAIT_LOAD, obs.now, math.inf)
-            run.plan_home('youbot', obs)
-            return self.enter(TransportState.FOLD, obs.now, run.motion('youbot').end
-                              - obs.now + run.s.settle_margin)
+            self.arm.go_home(obs)
+            return self.enter(TransportState.FOLD, obs.now, self.arm.motion.end
+                              - obs.now + self.s.settle_margin)
         # Here only when the arm could not be sent down onto the first material it unloads
         # here (_ready_arm): from the carry pose, the unload is planned (or its failure told).
         if self.queue and not self.motion_over(obs, 'carry pose'):
@@ -253,13 +255,11 @@ class Transport(Machine):
             self._next_unload(obs)
 
     def _next_unload(self, obs: Observation) -> None:
-        run = self.run
         if not self.queue:
             # Home: the arm rises from the drop (its fingers 4 cm over the pool's wall) to the
             # upright carry pose as the base sets off (slowly: in the first 0.3 s it moves 3 cm,
             # the fingers rise further).
-            run.send(Motion('youbot', run.plan('youbot', obs.youbot_q,
-                                               [Waypoint(YOUBOT_CARRY_Q.copy())])))
+            self.arm.send(self.arm.plan(self.arm.q(obs), [Waypoint(YOUBOT_CARRY_Q.copy())]))
             return self._drive_to(obs, 'home')
         m = self.queue[0]
         if self._stand_for(m) != self._drive_goal:
@@ -274,11 +274,10 @@ class Transport(Machine):
         not. Between the stands the arm swings joint 1 round 4.1 rad, and the first grasp there
         waited for it: a stop 12 cm over the material, and the descent from there, added 0.7 s
         to that wait."""
-        run, m = self.run, self.queue[0]
+        m = self.queue[0]
         if path is None:
             # Up to the carry pose; the unload is planned (and its failure told) from there.
-            run.send(Motion('youbot', run.plan('youbot', obs.youbot_q,
-                                               [Waypoint(YOUBOT_CARRY_Q.copy())])))
+            self.arm.send(self.arm.plan(self.arm.q(obs), [Waypoint(YOUBOT_CARRY_Q.copy())]))
             return
         self._approach(obs, m, path, [Waypoint(YOUBOT_CARRY_Q.copy(), stop=False)])
 
@@ -293,24 +292,23 @@ class Transport(Machine):
         degrees, into a neighbour 1 cm away. With ``slide``, where the arm holds the material
         at none of its drops from ``pose``, the base may stand elsewhere along its stand's
         line: abeam the drop nearest there that it holds it at (UnloadPath.pose)."""
-        run = self.run
-        size, t = m.size, run.s.timing
-        mass = run.layout.rule(m.color).mass
+        size, t = m.size, self.s.timing
+        mass = self.layout.rule(m.color).mass
         stand = self._stand_for(m)
-        region = run.layout.region_of(m.color)
+        region = self.layout.region_of(m.color)
         # The swing over to a set-down comes in over what is there already (5 cm over the drop
         # is too little for 55 mm materials): it is as high over the drop as that asks.
-        clear = 0.0 if region.drop else run.set_down_rise(region.name)
+        clear = 0.0 if region.drop else self.book.set_down_rise(region.name)
         if not region.drop:
             # Its destination's free slots, the first the arm reaches from here.
             up = np.array([0.0, 0.0, size + t.place_gap + YOUBOT_GRASP_STANDOFF_M])
-            candidates = [(k, region.slots[k] + up) for k in run.free_places(region.name, m)]
+            candidates = [(k, region.slots[k] + up) for k in self.book.free_places(region.name, m)]
         else:
             # The stand's first unused drop; if the arm cannot reach it from this slot as the
             # base stands (a far slot, a base a centimetre off), the others in turn. A drop
             # spot is used once: a cube dropped onto another can tumble back over the wall.
-            drops = run.layout.stand(stand).drops
-            used = self._dropped.get(stand, set())
+            drops = self.layout.stand(stand).drops
+            used = self.book.dropped(stand)
             candidates = [(k, d) for k, d in enumerate(drops) if k not in used]
         # First a way whose every pose the arm holds with the material at rest (its load
         # within youbot_holds); only if there is none, the first it reaches (a heavy material
@@ -332,7 +330,7 @@ class Transport(Machine):
         heavy material's far drops are beyond what the arm holds (the shoulder sags, or the
         arm stalls). (Taken by the shortest slide, a 0.08 kg orange went to a spot 21 cm in from
         the wall, 7 cm from one that had landed 5 cm off its own, and landed on it.)"""
-        stand = self.run.layout.stand(self._stand_for(m))
+        stand = self.layout.stand(self._stand_for(m))
         for place, point in candidates:
             at = stand.abeam(point)
             if math.hypot(at[0] - pose[0], at[1] - pose[1]) < SLIDE_MIN_M:
@@ -347,16 +345,15 @@ class Transport(Machine):
                     ) -> Optional['UnloadPath']:
         """_unload_path's way to the first of ``candidates`` (place, world point) the arm
         reaches, holding ``load`` kg at rest from the grip on."""
-        run = self.run
-        region = run.layout.region_of(m.color)
-        slot = run.layout.plate_slots[m.slot]
+        region = self.layout.region_of(m.color)
+        slot = self.layout.plate_slots[m.slot]
         contact = np.array([slot[0], slot[1], PLATE_TOP_IN_BASE_M + m.size
                             + YOUBOT_GRASP_STANDOFF_M - 0.004 * m.unload_attempts])
         hover = contact + np.array([0.0, 0.0, 0.05 if high else 0.03])
         lift = [contact + np.array([0.0, 0.0, h]) for h in self._lift_steps(m)]
         for place, drop_world in candidates:
             drop = world_to_base(pose, drop_world)
-            drop[2] -= run.layout.youbot_base_z
+            drop[2] -= self.layout.youbot_base_z
             # Over the drop, at least as high as the lift's top: a swing there keeps what is
             # held over the plate's other materials where a joint motion from the lift's top
             # straight down to a pool drop (lower than the plate) would swing it into the next
@@ -364,19 +361,19 @@ class Transport(Machine):
             over = drop.copy()
             over[2] = max(drop[2] + 0.05, lift[-1][2], drop[2] + clear)
             # (Held from the contact on: the arm must hold it still all the way to its drop.)
-            path = run.solve_tilted([hover, contact, *lift, over, drop],
-                                    np.array(seed, float), load, held_from=1)
+            path = self.arm.solve_tilted([hover, contact, *lift, over, drop],
+                                         np.array(seed, float), load, held_from=1)
             if path is None and region.drop:
                 # A drop spot further in is reached leaning another way: the material, let go
                 # over the pool, need not stay level (one it is set down must). It rises
                 # TILT_CHANGE_RISE_M more first, still level, so that what it holds clears the
                 # others on the plate as the wrist turns.
                 rise = np.array(lift[-1], float) + np.array([0.0, 0.0, TILT_CHANGE_RISE_M])
-                grip = run.solve_tilted([hover, contact, *lift, rise], np.array(seed, float),
-                                        load, held_from=1)
+                grip = self.arm.solve_tilted([hover, contact, *lift, rise], np.array(seed, float),
+                                             load, held_from=1)
                 above = np.array(over, float)
                 above[2] = max(over[2], rise[2])
-                out = (run.solve_tilted([above, drop], grip[-1], load) if grip is not None
+                out = (self.arm.solve_tilted([above, drop], grip[-1], load) if grip is not None
                        else None)
                 path = grip + out if grip is not None and out is not None else None
             if path is not None:
@@ -391,18 +388,17 @@ class Transport(Machine):
         at its top, or going on from there through ``then`` (or ``detour`` where ``then``
         would not keep ``m`` clear of the plate's other materials): at the speed, of those
         tried, that ends soonest and keeps the joints within their limits."""
-        run = self.run
-        limits = run.limits('youbot')
+        limits = self.arm.limits
         others, offset = self._others(m), self._held_offset(obs, m)
         carry = known(self._carry, 'the unload path')
         for way in ((then, detour) if detour else (then,)):
             best = None
             for speed in (UNLOAD_LIFT_END_SPEEDS if way else (0.0,)):
-                lift = timed_path([obs.youbot_q, *carry.lift], limits,
-                                  run.now + run.s.plan_latency, end_speed=speed,
-                                  min_time=run.s.timing.lift)
+                lift = timed_path([self.arm.q(obs), *carry.lift], limits,
+                                  self.arm.clock.now + self.s.plan_latency, end_speed=speed,
+                                  min_time=self.s.timing.lift)
                 try:
-                    points = run.plan('youbot', obs.youbot_q, [*lift, *way])
+                    points = self.arm.plan(self.arm.q(obs), [*lift, *way])
                 except PlanError:
                     continue
                 within = all(np.all(np.abs(v) <= limits.velocity) for _, _, v, _ in points)
@@ -418,7 +414,7 @@ class Transport(Machine):
         """Heights over the grip that the straight lift passes through: up until what it holds
         clears the tallest other material on the plate by PLATE_CLEARANCE_M (its bottom rises
         as far as the grip does)."""
-        tallest = max((o.size for o in self.run.materials.values()
+        tallest = max((o.size for o in self.book.materials.values()
                        if o.on_the_plate and o is not m), default=0.0)
         steps = list(UNLOAD_LIFT_STEPS_M)
         while steps[-1] < tallest + PLATE_CLEARANCE_M - 1e-9:
@@ -428,13 +424,13 @@ class Transport(Machine):
     def _held_offset(self, obs: Observation, m: Material) -> np.ndarray:
         """Where ``m``, gripped over its plate slot, is from the tool (x, y in base_link): the
         grip is a few millimetres off the slot's centre, the material with it."""
-        tool = _YOUBOT_FK.fk(obs.youbot_q)[:2, 3]
-        return cast(np.ndarray, np.asarray(self.run.layout.plate_slots[m.slot], float) - tool)
+        tool = _YOUBOT_FK.fk(self.arm.q(obs))[:2, 3]
+        return cast(np.ndarray, np.asarray(self.layout.plate_slots[m.slot], float) - tool)
 
     def _others(self, m: Material) -> List[Tuple[float, float, float]]:
         """The materials on the plate but ``m``: their slots (x, y) and sizes."""
-        return [(*self.run.layout.plate_slots[o.slot], o.size)
-                for o in self.run.materials.values()
+        return [(*self.layout.plate_slots[o.slot], o.size)
+                for o in self.book.materials.values()
                 if o.on_the_plate and o.slot >= 0 and o.id != m.id]
 
     def _stand_pose(self, obs: Observation) -> Pose2D:
@@ -447,12 +443,13 @@ class Transport(Machine):
         """Down onto the material on the plate; the gripper closes once the arm is there.
         Standing, the base slides along its stand's line first where a heavy material is held
         out to its drop only from elsewhere on it (the arm on its way down meanwhile)."""
-        run, now = self.run, obs.now
+        now = obs.now
         here = self._stand_pose(obs)
-        plan = self._unload_path(m, here, obs.youbot_q, slide=not self.driving)
+        plan = self._unload_path(m, here, self.arm.q(obs), slide=not self.driving)
         if plan is None:
             self.queue.pop(0)
-            run.fail(now, m, EventKind.GRASP_FAILED, 'unload: no IK solution', 'youbot')
+            self.book.give_up(now, m, EventKind.GRASP_FAILED, 'unload: no IK solution',
+                              self.arm.name)
             return self._next_unload(obs)
         if plan.pose is not None and plan.pose is not here:
             self._follow(obs, plan.pose, (), self._drive_goal)
@@ -462,17 +459,17 @@ class Transport(Machine):
                   through: Sequence[Waypoint] = ()) -> None:
         """Down onto ``m`` on the plate through ``through`` and its hover; the gripper closes
         once the arm is there (GRASP)."""
-        run, t = self.run, self.run.s.timing
+        t = self.s.timing
         self._carry, self._armed = plan, False
-        m.place = plan.place                # (kept for it: the pool's drops are the stand's)
-        m.unload_attempts += 1
-        run.count_grasp('youbot')
-        self.move(TransportState.GRASP, obs, run.plan('youbot', obs.youbot_q, [
+        # (The place kept for it: the pool's drops are the stand's.)
+        self.book.unload_attempt(m, plan.place)
+        self.log.count_grasp(self.arm.name)
+        self.move(TransportState.GRASP, obs, self.arm.plan(self.arm.q(obs), [
             *through, Waypoint(plan.hover, stop=False),
             Waypoint(plan.contact, hold=SETTLE_S, min_time=t.descend)]))
 
     def _grasp(self, obs: Observation) -> None:
-        run, m, now = self.run, self.queue[0], obs.now
+        m, now = self.queue[0], obs.now
         arrived = self.arrival(obs)
         if arrived is None:
             return
@@ -481,23 +478,25 @@ class Transport(Machine):
                                        'unload: the arm did not reach the material')
         if not self._armed:
             # Closed only now: its 20 mm reach would take a neighbour on the way down.
-            run.ports.grip('youbot', True)
+            self.ports.grip(self.arm.name, True)
             self._armed = True
             return
-        if not obs.youbot_armed:
+        if not self.arm.armed(obs):
             if self.late(now):
                 return self._unload_failed(obs, m, EventKind.GRASP_FAILED,
                                            'unload: the gripper does not report closing')
             return                      # (the grip state from before the gripper closed)
-        if not obs.youbot_holding:
-            run.ports.grip('youbot', False)
-            run.event(now, EventKind.GRASP_MISSED, 'youbot', m, f'attempt {m.unload_attempts}')
-            if m.unload_attempts <= run.s.max_retries:
+        if not self.arm.holding(obs):
+            self.ports.grip(self.arm.name, False)
+            self.log.event(now, EventKind.GRASP_MISSED, self.arm.name, m,
+                           f'attempt {m.unload_attempts}')
+            if m.unload_attempts <= self.s.max_retries:
                 return self._plan_unload(obs, m)
             return self._unload_failed(obs, m, EventKind.GRASP_FAILED, f'unload: not held after '
                                        f'{m.unload_attempts} attempts')
-        run.count_grasp('youbot', success=True)
-        run.event(now, EventKind.UNLOAD_GRASPED, 'youbot', m, f'attempt {m.unload_attempts}')
+        self.log.count_grasp(self.arm.name, success=True)
+        self.log.event(now, EventKind.UNLOAD_GRASPED, self.arm.name, m,
+                       f'attempt {m.unload_attempts}')
         if self.driving:
             # Up clear of its neighbours, and held there until the base stands.
             self._drop_pending = True
@@ -511,9 +510,9 @@ class Transport(Machine):
     def _carry_out(self, obs: Observation, m: Material, over: np.ndarray, drop: np.ndarray,
                    lift: bool = False) -> None:
         """Over to the material's drop (first up off the plate with ``lift``)."""
-        run, t = self.run, self.run.s.timing
+        t = self.s.timing
         self._drop_pending = False
-        if not run.layout.region_of(m.color).drop:
+        if not self.layout.region_of(m.color).drop:
             # Set down on its slot gently, from above, and still before letting go.
             carry = [Waypoint(over, stop=False),
                      Waypoint(drop, hold=SETTLE_S, min_time=t.place_descend)]
@@ -533,25 +532,25 @@ class Transport(Machine):
                     self._drop_pending = True
                     return self.move(TransportState.CARRY, obs, self._lift(obs, m))
             else:       # (from the lift's top, where it waited for the base to stand)
-                points = run.plan('youbot', obs.youbot_q, carry)
+                points = self.arm.plan(self.arm.q(obs), carry)
                 if not clear_of_the_plate(points, self._others(m), m.size,
                                           self._held_offset(obs, m)):
-                    points = run.plan('youbot', obs.youbot_q, detour)
+                    points = self.arm.plan(self.arm.q(obs), detour)
         except PlanError as exc:
             return self._unload_failed(obs, m, EventKind.FAILED, f'unload: {exc}')
         self.move(TransportState.CARRY, obs, points)
 
     def _unload_failed(self, obs: Observation, m: Material, kind: EventKind, why: str) -> None:
         self._drop_pending = False
-        self.run.ports.grip('youbot', False)
-        m.left_on_plate = True
+        self.ports.grip(self.arm.name, False)
+        self.book.left_on_plate(m)
         self.queue.pop(0)
-        self.run.fail(obs.now, m, kind, why, 'youbot')
+        self.book.give_up(obs.now, m, kind, why, self.arm.name)
         self._next_unload(obs)
 
     def _carry_to_drop(self, obs: Observation) -> None:
-        run, m, now = self.run, self.queue[0], obs.now
-        if not obs.youbot_holding:
+        m, now = self.queue[0], obs.now
+        if not self.arm.holding(obs):
             return self._unload_failed(obs, m, EventKind.FAILED, 'unload: dropped on the way')
         arrived = self.arrival(obs)
         if arrived is None:
@@ -560,32 +559,32 @@ class Transport(Machine):
             if self.driving:
                 return              # (held up over the plate until the base stands)
             if not arrived:
-                run.event(now, EventKind.ARM_STALLED, 'youbot', m,
-                          'the lift off the plate not completed')
+                self.log.event(now, EventKind.ARM_STALLED, self.arm.name, m,
+                               'the lift off the plate not completed')
             # Over to its drop as the base stands now (the drive ends a little off its goal).
-            path = (self._unload_path(m, obs.youbot_pose, obs.youbot_q)
+            path = (self._unload_path(m, obs.youbot_pose, self.arm.q(obs))
                     or known(self._carry, 'the unload path'))
-            self._carry, m.place = path, path.place
+            self._carry = path
+            self.book.keep_place(m, path.place)
             return self._carry_out(obs, m, path.over, path.drop)
         if not arrived:
             held = self._held_beyond(obs, m)
-            run.event(now, EventKind.ARM_STALLED, 'youbot', m,
-                      'unload motion not completed' + held)
+            self.log.event(now, EventKind.ARM_STALLED, self.arm.name, m,
+                           'unload motion not completed' + held)
             short = self._short_of_drop(obs)
             if short > DROP_REACH_TOLERANCE_M:
                 # Let go where it is, and not told delivered: a 0.44 kg blue whose unload
                 # stalled 2 cm over its plate slot was reported set down on the platform.
                 return self._unload_failed(obs, m, EventKind.FAILED, f'unload: the arm stalled '
                                            f'{short:.2f} m short of the drop' + held)
-        run.ports.grip('youbot', False)
-        m.status = MaterialStatus.DELIVERED
-        where = run.layout.destination(m.color)
-        if run.layout.region_of(m.color).drop:
-            self._dropped.setdefault(self._drive_goal, set()).add(m.place)
+        self.ports.grip(self.arm.name, False)
+        self.book.delivered(m, self._drive_goal)
+        where = self.layout.destination(m.color)
+        if self.layout.region_of(m.color).drop:
             where += f' drop {m.place} from {self._drive_goal}'
         else:
             where += f' slot {m.place}'
-        run.event(now, EventKind.DELIVERED, 'youbot', m, where)
+        self.log.event(now, EventKind.DELIVERED, self.arm.name, m, where)
         # The arm stays still while the material falls free of the fingers.
         self.enter(TransportState.RELEASE, now, RELEASE_HOLD_S)
 
@@ -593,8 +592,8 @@ class Transport(Machine):
         """Where the arm, as it stands, holds ``m`` beyond what it may (YOUBOT_LOAD_MAX of a
         joint's effort, at rest): which joint, and the torque it takes ('' where it does not):
         an arm that cannot hold its load sags, and says why."""
-        mass = self.run.layout.rule(m.color).mass
-        joint, torque, effort = youbot_hold_need(obs.youbot_q, mass)
+        mass = self.layout.rule(m.color).mass
+        joint, torque, effort = youbot_hold_need(self.arm.q(obs), mass)
         if torque <= YOUBOT_LOAD_MAX * effort:
             return ''
         return (f'; holding {mass:g} kg there, {joint} needs {torque:.2f} N m at rest '
@@ -604,14 +603,14 @@ class Transport(Machine):
         """How far the gripper is from the unload's drop, across [m] (the arm's forward
         kinematics, where it is and where its motion ends)."""
         drop = known(self._carry, 'the unload path').drop
-        return float(np.linalg.norm(_YOUBOT_FK.fk(obs.youbot_q)[:2, 3]
+        return float(np.linalg.norm(_YOUBOT_FK.fk(self.arm.q(obs))[:2, 3]
                                     - _YOUBOT_FK.fk(drop)[:2, 3]))
 
     def _release(self, obs: Observation) -> None:
         if not self.late(obs.now):
             return
-        still = (obs.youbot_dq is None
-                 or float(np.max(np.abs(obs.youbot_dq))) <= self.run.s.rest_speed)
+        dq = self.arm.dq(obs)
+        still = dq is None or float(np.max(np.abs(dq))) <= self.s.rest_speed
         if still or obs.now > self.deadline + SPRING_BACK_WAIT_S:
             self.queue.pop(0)
             self._next_unload(obs)

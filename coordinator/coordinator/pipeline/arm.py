@@ -1,0 +1,208 @@
+"""An arm of the cell, as the coordinator drives it (no ROS): its limits, its home, its plans
+and the motion it follows, its arrival, and its IK through the port. One object per robot arm,
+the only writer of its motion: a second arm of a kind is a second object."""
+from __future__ import annotations
+
+import math
+from typing import List, Optional, Sequence
+
+import numpy as np
+
+from controllers import youbot_arm, zu12_arm
+from controllers.arrays import Vector
+from controllers.time_optimal import SAMPLE_PERIOD_S, JointLimits, Waypoint, plan
+from coordinator.pipeline.clock import Clock
+from coordinator.pipeline.model import (
+    DOWN,
+    EventKind,
+    Motion,
+    Observation,
+    Points,
+    Ports,
+    Settings,
+    known,
+)
+from coordinator.pipeline.record import EventLog
+from coordinator.reach import youbot_holds, youbot_tool_quaternion
+
+
+class Arm:
+    """One arm: ``name`` is its robot's (the ports' and the observation's key)."""
+
+    def __init__(self, name: str, limits: JointLimits, ports: Ports, settings: Settings,
+                 clock: Clock, log: EventLog) -> None:
+        self.name, self.limits = name, limits
+        self.ports, self.s, self.clock, self.log = ports, settings, clock, log
+        self._motion: Optional[Motion] = None
+        self._home: Optional[np.ndarray] = None
+
+    # --- where it is ----------------------------------------------------------------------------
+    def q(self, obs: Observation) -> np.ndarray:
+        """Its joint positions as observed."""
+        return obs.zu12_q if self.name == 'zu12' else obs.youbot_q
+
+    def dq(self, obs: Observation) -> Optional[np.ndarray]:
+        """Its measured joint velocities, if known."""
+        return obs.zu12_dq if self.name == 'zu12' else obs.youbot_dq
+
+    def holding(self, obs: Observation) -> bool:
+        """Whether its gripping tool holds something, as last published."""
+        return obs.zu12_holding if self.name == 'zu12' else obs.youbot_holding
+
+    def armed(self, obs: Observation) -> bool:
+        """Whether its gripping tool is switched on (closed), as last published."""
+        return obs.zu12_armed if self.name == 'zu12' else obs.youbot_armed
+
+    @property
+    def home(self) -> np.ndarray:
+        """Its start (and end) pose: where it stood at the run's first observation."""
+        return known(self._home, f'the {self.name}\'s home pose')
+
+    def started(self, obs: Observation) -> None:
+        """The run's first observation: the arm's pose now is its home pose."""
+        self._home = np.array(self.q(obs), float)
+
+    # --- its motions ----------------------------------------------------------------------------
+    def plan(self, q: Vector, waypoints: Sequence[Waypoint], wait: float = 0.0,
+             start: Optional[float] = None) -> Points:
+        """A time-optimal motion from rest at ``q`` through ``waypoints``, starting ``wait``
+        after the plan latency from now (the convention of every plan here), or at ``start``."""
+        t0 = self.clock.now + self.s.plan_latency if start is None else start
+        motion = plan(q, waypoints, self.limits, t0 + wait)
+        # The controller starts from where the arm is: the start sample is sent only as the end
+        # of a wait (a hold at the current position).
+        points = motion.points()
+        if len(points) == 1:            # already there: hold it, a sample period on
+            t, q, v, a = points[0]
+            return [(t + SAMPLE_PERIOD_S, q, v, a)]
+        return points[0 if wait > 0.0 else 1:]
+
+    def send(self, points: Points, start: Optional[float] = None) -> Motion:
+        """Send a motion planned now, its first segment starting after the plan latency (the
+        convention of every plan here) or at ``start``; the port may schedule it later,
+        whole."""
+        motion = Motion(self.name, points)
+        motion.start = self.clock.now + self.s.plan_latency if start is None else start
+        delay = self.ports.trajectory(self.name, motion.points, motion.start)
+        if delay:
+            motion.delay(delay)
+        self._motion = motion
+        return motion
+
+    def send_continuing(self, now: float, t1: float, points: Points) -> None:
+        """Replace the running motion from its sample at ``t1`` on by ``points`` (which begin
+        there, in that sample's state). The message repeats the motion's own samples between
+        ``now`` and ``t1`` and is stamped ``now``: the controller, which skips the points
+        already past when it takes it, joins it from where the running motion has the arm,
+        whenever it arrives. (A new motion starts in the future, from rest: a controller holds
+        its position until then, and from there a point of a motion it was following is out of
+        reach; nor may the port delay it, which would tear it off that motion.)"""
+        kept = [p for p in self.motion.points if now < p[0] < t1 - 1e-9]
+        motion = Motion(self.name, kept + list(points), start=now)
+        self.ports.trajectory(self.name, motion.points, now, continuing=True)
+        self._motion = motion
+
+    def hold(self, q: np.ndarray) -> None:
+        """Hold still at ``q`` from the plan latency on (replacing a motion not yet begun)."""
+        self.send([(self.clock.now + self.s.plan_latency, q, np.zeros_like(q),
+                    np.zeros_like(q))])
+
+    def go_home(self, obs: Observation, say: bool = True) -> None:
+        """Back to its home pose (``say``: as a ``returning`` event)."""
+        self.send(self.plan(self.q(obs), [Waypoint(self.home.copy())]))
+        if say:
+            self.log.event(obs.now, EventKind.RETURNING, self.name)
+
+    @property
+    def has_motion(self) -> bool:
+        return self._motion is not None
+
+    @property
+    def motion(self) -> Motion:
+        """Its current motion (one has been sent)."""
+        return known(self._motion, f'a motion of the {self.name}')
+
+    def arrived(self, obs: Observation) -> Optional[bool]:
+        """After a motion's end: True when the arm is at its goal and at rest (its measured
+        joint velocities, if known), None while it may still get there, False once it is later
+        than the settle margin (a stalled arm). At rest matters when the simulator took the
+        motion in late: at its planned end the arm is then still moving, near its goal."""
+        motion, now, dq = self._motion, obs.now, self.dq(obs)
+        if motion is None or now < motion.end:
+            return None
+        if (float(np.max(np.abs(self.q(obs) - motion.goal))) <= self.s.arrive_tolerance
+                and (dq is None or float(np.max(np.abs(dq))) <= self.s.rest_speed)):
+            return True
+        return False if now > motion.end + self.s.settle_margin else None
+
+    def arrival_time(self, q: np.ndarray) -> float:
+        """When its current motion passes closest to ``q`` (as the port scheduled it)."""
+        return min(self.motion.points, key=lambda p: float(np.max(np.abs(p[1] - q))))[0]
+
+    # --- its kinematics, through the port -------------------------------------------------------
+    def solve(self, position: Vector, orientation: Vector, frame: str,
+              seed: Vector) -> Optional[np.ndarray]:
+        q, why = self.ports.solve(self.name, position, orientation, frame, seed)
+        if q is None:
+            self.log.event(self.clock.now, EventKind.IK_FAILED, self.name,
+                           detail=f'{np.round(position, 3).tolist()}: {why}')
+        return q
+
+    def solve_path(self, positions: Sequence[Vector],
+                   seed: Vector) -> Optional[List[np.ndarray]]:
+        """Joint positions for the tool pointing down at each of ``positions`` (world), each
+        seeded with the one before; None if any has no solution."""
+        qs = []
+        for p in positions:
+            q = self.solve(p, DOWN, 'world', seed)
+            if q is None:
+                return None
+            qs.append(q)
+            seed = q
+        return qs
+
+
+class YoubotArm(Arm):
+    """The youBot's arm: it reaches the plate's far slots only leaning outwards, so its paths
+    are solved at one tool tilt, and it holds a load only in some poses."""
+
+    def solve_tilted(self, points: Sequence[np.ndarray], seed: np.ndarray,
+                     payload: float = 0.0, held_from: int = 0) -> Optional[List[np.ndarray]]:
+        """Joint positions for a path whose every point has the same tool tilt: a material
+        held at one tilt stays level only if it is set down at the same tilt. From point
+        ``held_from`` on the arm holds ``payload`` kg: a tilt whose poses there its joints
+        cannot hold at rest (youbot_holds) is not taken."""
+        heavy = False
+        for tilt_deg in range(0, 90, 10):
+            plan: List[np.ndarray] = []
+            q = seed
+            for p in points:
+                solution, _ = self.ports.solve(self.name, p, youbot_tool_quaternion(
+                    p, math.radians(tilt_deg)), 'base_link', q)
+                if solution is None:
+                    break
+                q = solution
+                plan.append(q)
+            if len(plan) == len(points):
+                if youbot_holds(plan[held_from:], payload):
+                    return plan
+                heavy = True
+        why = (f'not held at rest with {payload} kg' if heavy else 'at any one tilt up to 80 deg')
+        self.log.event(self.clock.now, EventKind.IK_FAILED, self.name,
+                       detail=f'{np.round(points[1 if len(points) > 1 else 0], 3).tolist()} via '
+                              f'{np.round(points[-1], 3).tolist()} {why}')
+        return None
+
+
+def zu12_limits(settings: Settings) -> JointLimits:
+    """The Zu 12's joint limits, the velocity scaled by its setting."""
+    return JointLimits(np.asarray(zu12_arm.JOINT_VELOCITY_LIMITS),
+                       np.asarray(zu12_arm.JOINT_ACCELERATION_LIMITS),
+                       np.asarray(zu12_arm.JOINT_JERK_LIMITS)).scaled(settings.zu12_scaling)
+
+
+def youbot_limits(settings: Settings) -> JointLimits:
+    """The youBot arm's joint limits, the velocity scaled by its setting."""
+    return JointLimits(np.full(5, youbot_arm.JOINT_VELOCITY_LIMIT),
+                       np.full(5, youbot_arm.JOINT_ACCELERATION_LIMIT),
+                       np.full(5, youbot_arm.JOINT_JERK_LIMIT)).scaled(settings.youbot_scaling)
