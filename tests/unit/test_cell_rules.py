@@ -414,6 +414,7 @@ def test_after_a_release_the_youbot_waits_for_its_arm_to_come_to_rest():
 
     def release_at(now, speed):
         tr.queue = [Material(1, 'orange', np.zeros(3), 0.0, 3, status='delivered')]
+        tr.state = TransportState.CARRY                 # (it has just let go at the drop)
         tr.enter(TransportState.RELEASE, 0.0, RELEASE_HOLD_S)
         went_on.clear()
         tr._release(Observation(now, np.zeros(6), np.zeros(5), pose,
@@ -434,7 +435,7 @@ def test_an_unload_that_stalled_short_of_its_drop_is_a_failure_not_a_delivery():
     from test_pipeline import _YoubotIK
 
     from coordinator.pipeline import Material, Observation, Pipeline, Settings
-    from coordinator.pipeline.model import MaterialStatus
+    from coordinator.pipeline.model import MaterialStatus, TransportState
     from coordinator.pipeline.transport import DROP_REACH_TOLERANCE_M
     class Ports(_YoubotIK):
         def grip(self, arm, on):
@@ -452,6 +453,7 @@ def test_an_unload_that_stalled_short_of_its_drop_is_a_failure_not_a_delivery():
         stand = layout.stand_for('blue', 0)
         path = tr._unload_path(m, stand.pose, np.zeros(5))
         tr._carry, tr.queue, tr._drop_pending = path, [m], False
+        tr.state = TransportState.CARRY                     # (carrying it to its drop)
         q = path.contact if where == 'slot' else path.drop
         obs = Observation(10.0, np.zeros(6), q, stand.pose, youbot_holding=True)
         assert (tr._short_of_drop(obs) > DROP_REACH_TOLERANCE_M) is not delivered

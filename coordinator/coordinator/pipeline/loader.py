@@ -28,7 +28,7 @@ from controllers.time_optimal import (
 from coordinator.layout import CellLayout, slot_in_world
 from coordinator.pipeline.arm import Arm
 from coordinator.pipeline.belt import BeltModel
-from coordinator.pipeline.machine import Machine
+from coordinator.pipeline.machine import Machine, transition_table
 from coordinator.pipeline.materials import MaterialBook
 from coordinator.pipeline.model import (
     DOWN,
@@ -139,6 +139,25 @@ def _crossing(g: Callable[[float], float], samples: int = 200) -> float:
     return 0.0 if abs(gs[0]) <= abs(gs[-1]) else 1.0
 
 
+_S = LoaderState
+# The states each state may be followed by (the loader's only way between states; `enter`
+# checks it, docs/pipeline.md draws it: pipeline_diagram).
+LOADER_TRANSITIONS = transition_table({
+    _S.START: (_S.WAIT,),
+    # A pick; the rise from a place with nothing to pick yet; a pick given up before it began;
+    # loading over.
+    _S.WAIT: (_S.PICK, _S.RISE, _S.RETREAT, _S.HOME),
+    # The pick planned again (a missed grasp, a late start); on to the place; a pick that
+    # cannot be made in time (back to waiting); a failure.
+    _S.PICK: (_S.PICK, _S.PLACE, _S.WAIT, _S.RETREAT),
+    _S.PLACE: (_S.WAIT, _S.RETREAT),
+    _S.RISE: (_S.WAIT,),
+    _S.RETREAT: (_S.WAIT,),
+    _S.HOME: (_S.DONE,),
+    _S.DONE: (),
+})
+
+
 class Loader(Machine):
     """The Zu 12: picks materials off the running belt (meeting each where it will be, and
     moving with it while the cup is on it); a class it places itself onto its destination once
@@ -147,6 +166,7 @@ class Loader(Machine):
     state: LoaderState
 
     name = 'loader'
+    TRANSITIONS = LOADER_TRANSITIONS
 
     def __init__(self, arm: Arm, book: MaterialBook, belt: BeltModel, log: EventLog,
                  layout: CellLayout, settings: Settings, ports: Ports,

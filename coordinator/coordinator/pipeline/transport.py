@@ -32,7 +32,7 @@ from coordinator.layout import (
     world_to_base,
 )
 from coordinator.pipeline.arm import YoubotArm
-from coordinator.pipeline.machine import Machine
+from coordinator.pipeline.machine import Machine, transition_table
 from coordinator.pipeline.materials import MaterialBook
 from coordinator.pipeline.model import (
     RELEASE_HOLD_S,
@@ -78,6 +78,23 @@ SLIDE_MIN_M = 0.03
 UNLOAD_LIFT_END_SPEEDS = (0.0, 0.25, 0.5, 0.75, 1.0)
 
 
+_S = TransportState
+# The states each state may be followed by (`enter` checks it; pipeline_diagram draws it).
+TRANSPORT_TRANSITIONS = transition_table({
+    _S.WAIT_LOAD: (_S.DRIVE, _S.DONE),
+    # On to the next stand (or the slide along a stand's line); the arm down onto the first
+    # material there as the base drives; home: wait for the next load, or fold.
+    _S.DRIVE: (_S.DRIVE, _S.GRASP, _S.WAIT_LOAD, _S.FOLD),
+    # A missed grasp tried again; off the plate; the unload given up, on to the next (at
+    # another stand, or home).
+    _S.GRASP: (_S.GRASP, _S.CARRY, _S.DRIVE),
+    _S.CARRY: (_S.CARRY, _S.RELEASE, _S.GRASP, _S.DRIVE),
+    _S.RELEASE: (_S.GRASP, _S.DRIVE),
+    _S.FOLD: (_S.DONE,),
+    _S.DONE: (),
+})
+
+
 class Transport(Machine):
     """The youBot: waits for its load, drives along Bezier paths with a PD follower, unloads
     one material at a time (into the pool over its wall, onto another destination's free
@@ -86,6 +103,7 @@ class Transport(Machine):
     state: TransportState
 
     name = 'transport'
+    TRANSITIONS = TRANSPORT_TRANSITIONS
 
     def __init__(self, arm: YoubotArm, book: MaterialBook, log: EventLog, layout: CellLayout,
                  settings: Settings, ports: Ports, loader_done: Callable[[], bool],
