@@ -339,7 +339,7 @@ def test_a_pick_path_across_an_elbow_flip_is_solved_on_one_branch():
     the path is solved again from its end, on the branch the end is on."""
     from types import SimpleNamespace
 
-    from coordinator.pipeline import loader
+    from coordinator.pipeline import loader, pick_geometry
 
     def solve_path(points, seed):
         """Two branches: 'up' (joint 1 at +1) reaches x < 0 only; 'down' (-1) everywhere.
@@ -359,7 +359,7 @@ def test_a_pick_path_across_an_elbow_flip_is_solved_on_one_branch():
     qs = zu12._solve_along(path, np.array([0.1, 0.75, 0.5]), np.array([0.0, 1.0, 0, 0, 0, 0]))
     assert qs is not None and len(qs) == 11
     assert all(q[1] == -1.0 for q in qs)               # all on the branch that reaches
-    assert loader._continuous(qs)
+    assert pick_geometry.continuous(qs)
     # A path that one branch covers is kept as solved.
     short = path[:4]
     qs = zu12._solve_along(short, np.array([-0.05, 0.75, 0.5]), np.array([0, 1.0, 0, 0, 0, 0]))
@@ -436,7 +436,7 @@ def test_an_unload_that_stalled_short_of_its_drop_is_a_failure_not_a_delivery():
 
     from coordinator.pipeline import Material, Observation, Pipeline, Settings
     from coordinator.pipeline.model import MaterialStatus, TransportState
-    from coordinator.pipeline.transport import DROP_REACH_TOLERANCE_M
+    from coordinator.pipeline.unload_geometry import DROP_REACH_TOLERANCE_M
     class Ports(_YoubotIK):
         def grip(self, arm, on):
             return True, ''

@@ -1050,7 +1050,7 @@ def test_a_material_held_over_the_plate_clears_each_neighbour_by_its_own_height(
     held 2.5 cm over the top of a 40 mm neighbour clears it, but not a 60 mm one."""
     from coordinator.layout import PLATE_SLOTS_IN_BASE_M, PLATE_TOP_IN_BASE_M
     from coordinator.pipeline import YOUBOT_GRASP_STANDOFF_M, clear_of_the_plate
-    from coordinator.pipeline.transport import PLATE_CLEARANCE_M
+    from coordinator.pipeline.unload_geometry import PLATE_CLEARANCE_M
     from coordinator.reach import youbot_tool_quaternion
     ports = _YoubotIK()
     sx, sy = PLATE_SLOTS_IN_BASE_M[2]

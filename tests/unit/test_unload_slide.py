@@ -20,7 +20,8 @@ from coordinator.layout import (
 )
 from coordinator.pipeline import Material, Observation, Pipeline, Settings
 from coordinator.pipeline.model import TransportState
-from coordinator.pipeline.transport import SLIDE_MIN_M, YOUBOT_CARRY_Q
+from coordinator.pipeline.transport import SLIDE_MIN_M
+from coordinator.pipeline.unload_geometry import YOUBOT_CARRY_Q
 from coordinator.reach import youbot_holds
 
 
@@ -128,6 +129,7 @@ def test_an_unload_from_elsewhere_on_the_stand_s_line_drives_there_as_the_arm_go
     m = Material(1, 'orange', np.zeros(3), 0.0, 3, status='on_plate', slot=1, size=0.05)
     run_.materials[1] = m
     tr.queue, tr._drive_goal = [m], stand.name
+    tr.state = TransportState.DRIVE                       # (there, the base standing)
     # Only a far drop left: held out to only from further along the wall.
     far = max(range(len(stand.drops)), key=lambda d: np.linalg.norm(
         np.asarray(stand.abeam(stand.drops[d])[:2]) - stand.pose[:2]))

@@ -14,8 +14,8 @@ from test_pipeline import Zu12IK
 
 from controllers.time_optimal import Waypoint
 from coordinator.layout import layout_from_world
-from coordinator.pipeline import Material, Pipeline, Settings
-from coordinator.pipeline import loader as loader_module
+from coordinator.pipeline import Material, Pipeline, Settings, model, pick_geometry
+from coordinator.pipeline.pick_geometry import edge_point, over_the_belt
 
 READY = np.array([1.201, 1.436, -1.222, 1.357, 1.571, -0.37])      # (the world's)
 
@@ -44,11 +44,11 @@ def test_the_way_onto_a_ground_slot_keeps_the_held_material_over_what_rides_on_t
         # From the edge on (the lift point is over the belt by design): what the cup holds
         # never comes down among what rides on the belt.
         with monkeypatch.context() as patch:
-            patch.setattr(loader_module, 'SWING_CLEARANCE_M', 0.0)
-            assert not any(zu12.over_the_belt(a, b, size) for a, b in zip(qs, qs[1:])), k
+            patch.setattr(pick_geometry, 'SWING_CLEARANCE_M', 0.0)
+            assert not any(over_the_belt(layout, a, b, size) for a, b in zip(qs, qs[1:])), k
         # Without the transfer point, some ways do.
         if len(qs) == 4:
-            assert zu12.over_the_belt(qs[0], qs[2], size)
+            assert over_the_belt(layout, qs[0], qs[2], size)
     assert through > 0
 
 
@@ -71,12 +71,12 @@ def test_the_way_back_from_a_low_place_rises_over_it_before_it_swings_to_the_bel
     zu12._adopt(way)
     zu12._at_release = True
     hover = np.array([0.6, layout.belt_y, layout.belt_top + 0.1])
-    edge_point = zu12._edge(hover, zu12._above, loader_module.EDGE_CLEARANCE_M)
-    edge = run_.zu12.solve(edge_point, loader_module.DOWN, 'world', zu12._above_q)
-    assert zu12.over_the_belt(zu12._above_q, edge, 0.0)
+    crossing = edge_point(layout, hover, zu12._above, model.EDGE_CLEARANCE_M)
+    edge = run_.zu12.solve(crossing, model.DOWN, 'world', zu12._above_q)
+    assert over_the_belt(layout, zu12._above_q, edge, 0.0)
     waypoints, _ = zu12._from_release([Waypoint(edge)], edge)
     qs = [w.q for w in waypoints]
     assert np.allclose(qs[1], way.then)             # up over the place first
     with pytest.MonkeyPatch.context() as patch:
-        patch.setattr(loader_module, 'SWING_CLEARANCE_M', 0.0)
-        assert not any(zu12.over_the_belt(a, b, 0.0) for a, b in zip(qs, qs[1:]))
+        patch.setattr(pick_geometry, 'SWING_CLEARANCE_M', 0.0)
+        assert not any(over_the_belt(layout, a, b, 0.0) for a, b in zip(qs, qs[1:]))

@@ -34,10 +34,10 @@ from coordinator.pipeline.model import (
     TransportState,
     known,
 )
-from coordinator.pipeline.transport import (
+from coordinator.pipeline.transport import Transport
+from coordinator.pipeline.unload_geometry import (
     YOUBOT_CARRY_Q,
     YOUBOT_GRASP_STANDOFF_M,
-    Transport,
     clear_of_the_plate,
 )
 from coordinator.reach import youbot_tool_quaternion

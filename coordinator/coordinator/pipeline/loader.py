@@ -52,25 +52,21 @@ from coordinator.pipeline.model import (
     Settings,
     known,
 )
+from coordinator.pipeline.pick_geometry import (
+    continuous,
+    edge_point,
+    lift_line,
+    over_the_belt,
+    place_points,
+)
 from coordinator.pipeline.record import EventLog
-from coordinator.reach import zu12_cup_positions
 
-# A lift out of the end stop's queue keeps to the straight line up through a point this often
-# [m].
-LIFT_LINE_STEP_M = 0.01
-# A swing of the Zu 12's joints keeps what its cup holds (or the cup) this far above anything
-# that can ride on the belt wherever it passes over the belt [m].
-SWING_CLEARANCE_M = 0.02
 # What the Zu 12 lifts out of the end stop's queue rises this far over the tallest material
 # that can stand next to it before it swings away [m].
 QUEUE_SWING_CLEARANCE_M = 0.05
 # A material met at rest in the end stop's queue is met this long after its belt pause began,
 # and that no sooner than it came to rest there [s].
 QUEUE_REST_S = 0.1
-# Two IK solutions a pick path's sample apart (50 ms) that differ by more than this in a joint
-# lie on two branches [rad].
-IK_JUMP_RAD = 0.5
-
 
 
 @dataclass
@@ -110,33 +106,6 @@ class PickPlan:
     q_lift: np.ndarray = field(default_factory=lambda: np.zeros(0))
     waypoints: List[Waypoint] = field(default_factory=list)
     points: Points = field(default_factory=list)
-
-
-def _continuous(qs: Sequence[np.ndarray]) -> bool:
-    """Whether no joint moves more than IK_JUMP_RAD between two neighbouring solutions."""
-    return all(float(np.max(np.abs(b - a))) <= IK_JUMP_RAD for a, b in zip(qs, qs[1:]))
-
-
-def _polar(v: np.ndarray) -> Tuple[float, float]:
-    return math.hypot(v[0], v[1]), math.atan2(v[1], v[0])
-
-
-def _crossing(g: Callable[[float], float], samples: int = 200) -> float:
-    """The first fraction f in [0, 1] where g changes sign (bisected), or the end of [0, 1]
-    where |g| is smaller if it does not."""
-    fs = np.linspace(0.0, 1.0, samples + 1)
-    gs = [g(f) for f in fs]
-    for k in range(samples):
-        if gs[k] == 0.0 or gs[k] * gs[k + 1] < 0.0:
-            lo, hi = fs[k], fs[k + 1]
-            for _ in range(30):
-                mid = (lo + hi) / 2
-                if g(lo) * g(mid) <= 0.0:
-                    hi = mid
-                else:
-                    lo = mid
-            return float((lo + hi) / 2)
-    return 0.0 if abs(gs[0]) <= abs(gs[-1]) else 1.0
 
 
 _S = LoaderState
@@ -252,7 +221,7 @@ class Loader(Machine):
             # (Up over the place first where the swing from there to the edge would bulge out
             # over the belt, low: see _place_way.)
             then = known(self._then, 'the rise from the place')
-            over = ([Waypoint(then, stop=False)] if self.over_the_belt(above, edge, 0.0)
+            over = ([Waypoint(then, stop=False)] if over_the_belt(self.layout, above, edge, 0.0)
                      and float(np.max(np.abs(then - above))) > 1e-6 else [])
             first = [Waypoint(above, stop=False, min_time=rise), *over,
                      Waypoint(edge, stop=False)]
@@ -272,31 +241,6 @@ class Loader(Machine):
         if self._at_release:
             self._at_release = False
             self._clear_at = self.arm.arrival_time(known(self._clear, 'the clear point'))
-
-    def _edge(self, a: np.ndarray, b: np.ndarray, low: float, arc: bool = False) -> np.ndarray:
-        """Where the way from ``a`` (over the belt) to ``b`` (beside it) crosses the belt's near
-        edge, EDGE_CLEARANCE_M outside it, and at least ``low`` above its top. The way is the
-        straight line, or with ``arc`` the arc round the Zu 12's base (angle, reach and height
-        changing evenly): the way its joints go, turning joint 1, when both ends lie at about
-        the same reach. The straight line between two such points passes nearer the base, and
-        the joints that set the reach pull in to the crossing and out again."""
-        lay = self.layout
-        y = lay.belt_y - math.copysign(lay.belt_width / 2 + EDGE_CLEARANCE_M,
-                                       lay.belt_y - b[1])
-        a, b = np.asarray(a, float), np.asarray(b, float)
-        if arc:
-            base = np.array(lay.zu12_base[:2], float)
-            (ra, ta), (rb, tb) = (_polar(p[:2] - base) for p in (a, b))
-            tb = ta + math.remainder(tb - ta, 2 * math.pi)
-            f = _crossing(lambda f: base[1] + (ra + f * (rb - ra)) * math.sin(
-                ta + f * (tb - ta)) - y)
-            r, t = ra + f * (rb - ra), ta + f * (tb - ta)
-            p = np.array([base[0] + r * math.cos(t), y, a[2] + f * (b[2] - a[2])])
-        else:
-            f = (a[1] - y) / (a[1] - b[1]) if abs(a[1] - b[1]) > 1e-9 else 0.0
-            p = a + min(max(f, 0.0), 1.0) * (b - a)
-        p[1], p[2] = y, max(p[2], lay.belt_top + low)
-        return p
 
     def clear_of_the_plate(self, now: float) -> bool:
         """Whether the cup is away from the youBot's plate: not placing there, nor rising from
@@ -368,8 +312,9 @@ class Loader(Machine):
         # From a place: back over the belt's edge on the way to the hover point.
         if self._at_release and self._above is not None:
             # (From the plate: round the arc, the cup clear of what rides on the belt.)
-            edge = (self._edge(hover, self._above, m.size + EDGE_CLEARANCE_M, arc=True)
-                    if self._onto_plate else self._edge(hover, self._above, EDGE_CLEARANCE_M))
+            lay, above = self.layout, self._above
+            edge = (edge_point(lay, hover, above, m.size + EDGE_CLEARANCE_M, arc=True)
+                    if self._onto_plate else edge_point(lay, hover, above, EDGE_CLEARANCE_M))
             pick.q_edge = self.arm.solve(edge, DOWN, 'world',
                                          known(self._above_q, 'the point above the place'))
         # (A first guess: the way to the hover point, at rest there; a plan that cannot make
@@ -424,7 +369,7 @@ class Loader(Machine):
             qs = self._solve_along(path, lift, pick.q_hover)
             if qs is None:
                 return 'no IK solution for the pick path'
-            if not _continuous([pick.q_hover, qs[0]]):
+            if not continuous([pick.q_hover, qs[0]]):
                 pick.q_hover = qs[0]            # (on the other branch, solved from the end)
             times = np.array([t for t, _ in path])
             q_path = np.array(qs[:-1])
@@ -460,12 +405,9 @@ class Loader(Machine):
         timing = pick.timing
         if not (self.belt.held_by(m, pick.contact) and self.belt.crowded(m, pick.contact)):
             return [Waypoint(q_lift, min_time=timing.lift)]
-        rise = float(np.linalg.norm(self._lift - on)) if self._lift is not None else 0.0
-        steps = max(1, int(math.ceil(rise / LIFT_LINE_STEP_M - 1e-9)))
-        points = [on + (np.asarray(self._lift, float) - on) * k / steps
-                  for k in range(1, steps)]
+        points = lift_line(on, self._lift) if self._lift is not None else []
         line = self.arm.solve_path(points, q_on) if points else []
-        if line is None or not _continuous([q_on, *line, q_lift]):
+        if line is None or not continuous([q_on, *line, q_lift]):
             return [Waypoint(q_lift, min_time=timing.lift)]
         try:
             return timed_path([q_on, *line, q_lift], self.arm.limits, t_on,
@@ -481,10 +423,10 @@ class Loader(Machine):
         the branch the end is on. None if neither is continuous."""
         points = [p for _, p in path] + [lift]
         qs = self.arm.solve_path(points, seed)
-        if qs is None or _continuous(qs):
+        if qs is None or continuous(qs):
             return qs
         back = self.arm.solve_path(points[::-1], qs[-1])
-        if back is None or not _continuous(back):
+        if back is None or not continuous(back):
             return None
         return back[::-1]
 
@@ -691,23 +633,17 @@ class Loader(Machine):
             target = slot_in_world(youbot_pose, self.layout.plate_slots[m.slot],
                                    self.layout.youbot_base_z, size)
         t = self.s.timing
-        release = np.asarray(target, float) + np.array([0.0, 0.0, size + t.place_gap])
         # Down onto it from over the materials there already.
-        rise = max(t.place_height,
-                   self.book.set_down_rise(None if onto_plate else lay.destination(m.color)))
-        above = release + np.array([0.0, 0.0, rise])
-        # Where the cup rises to over the place when it goes home or waits: clear of the belt
-        # (a joint-space move straight from there to a place lower than the belt would sweep
-        # the held material through the belt's side).
-        transfer = release.copy()
-        transfer[2] = max(above[2], self.layout.belt_top + 2 * size + t.lift_height)
+        release, above, transfer = place_points(
+            target, size, t, self.book.set_down_rise(
+                None if onto_plate else lay.destination(m.color)), lay.belt_top)
         # Over the belt's near edge (rather than up to the carry height over the place and down
         # again), what the cup holds 5 cm over what can ride on the belt: onto the plate round
         # the arc (the way crosses the edge near the plate; before that it lies over the
         # belt), onto the ground target on the straight line, 5 cm over the belt's top.
         edge = (transfer if lift is None else
-                self._edge(lift, above, 2 * size + EDGE_CLEARANCE_M, arc=True) if onto_plate
-                else self._edge(lift, above, size + EDGE_CLEARANCE_M))
+                edge_point(lay, lift, above, 2 * size + EDGE_CLEARANCE_M, arc=True) if onto_plate
+                else edge_point(lay, lift, above, size + EDGE_CLEARANCE_M))
         qs = self.arm.solve_path([transfer, above, release, edge], seed)
         if qs is None:
             return 'no IK solution for the place path'
@@ -716,23 +652,10 @@ class Loader(Machine):
         # can bulge back out over the belt: then through the transfer point (above the place,
         # clear of the belt) first, and straight down from there.
         over = ([Waypoint(q_transfer, stop=False)]
-                if self.over_the_belt(q_edge, q_above, size) else [])
+                if over_the_belt(self.layout, q_edge, q_above, size) else [])
         return PlaceWay([Waypoint(q_edge, stop=False), *over, Waypoint(q_above, stop=False),
                          Waypoint(q_release, hold=SETTLE_S, min_time=t.place_descend)],
                         q_transfer, above, q_above, onto_plate)
-
-    def over_the_belt(self, q_a: np.ndarray, q_b: np.ndarray, held: float) -> bool:
-        """Whether the Zu 12's joints going straight from ``q_a`` to ``q_b`` bring what its
-        cup holds (``held``: its size; 0 for the empty cup) over the belt lower than
-        SWING_CLEARANCE_M above the tallest material that rides on it. (From the stop to a
-        ground place 2 cm further out than the paper's, the way from the edge bulged 13 cm back
-        out over the belt, 5 cm above its top, and a 0.49 kg purple struck what rode there.)"""
-        lay = self.layout
-        cup = zu12_cup_positions(lay.zu12_base, q_a, q_b)
-        half = lay.belt_width / 2 + held / 2
-        low = lay.belt_top + lay.material_size + SWING_CLEARANCE_M
-        return bool(np.any((np.abs(cup[:, 1] - lay.belt_y) < half) & (cup[:, 0] < lay.belt_end_x)
-                           & (cup[:, 2] - held < low)))
 
     def _adopt(self, way: 'PlaceWay') -> None:
         """The place the arm is on its way to: where the cup rises from it to."""

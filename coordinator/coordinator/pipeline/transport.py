@@ -10,12 +10,10 @@ from typing import (
     Optional,
     Sequence,
     Tuple,
-    cast,
 )
 
 import numpy as np
 
-from controllers.arrays import Vector
 from controllers.bezier import BezierPath, Pose2D, key_poses_between
 from controllers.path_follower import PathFollower, PDGains, TurnLimits
 from controllers.time_optimal import (
@@ -23,10 +21,7 @@ from controllers.time_optimal import (
     Waypoint,
     timed_path,
 )
-from controllers.youbot_kinematics import YoubotKinematics
 from coordinator.layout import (
-    GRASP_STANDOFF_M,
-    PLATE_TOP_IN_BASE_M,
     POOL,
     CellLayout,
     world_to_base,
@@ -49,6 +44,15 @@ from coordinator.pipeline.model import (
     known,
 )
 from coordinator.pipeline.record import EventLog
+from coordinator.pipeline.unload_geometry import (
+    DROP_REACH_TOLERANCE_M,
+    YOUBOT_CARRY_Q,
+    YOUBOT_GRASP_STANDOFF_M,
+    clear_of_the_plate,
+    grip_points,
+    held_offset,
+    short_of,
+)
 from coordinator.reach import YOUBOT_LOAD_MAX, youbot_hold_need
 
 
@@ -67,9 +71,6 @@ class UnloadPath:
 # A youBot unload whose drop is reached at another tool tilt than its grip rises this much more
 # before the wrist turns [m].
 TILT_CHANGE_RISE_M = 0.06
-# The youBot's lift off the plate: heights over the grip [m], the last clear of the neighbours
-# (of the paper's 5 cm materials; taller neighbours take it higher, 1 cm at a time).
-UNLOAD_LIFT_STEPS_M = (0.01, 0.02, 0.03, 0.04, 0.05, 0.06)
 # A heavy material's unload slides the base along its stand's line only this far or further
 # (nearer, it is unloaded from where the base stands) [m].
 SLIDE_MIN_M = 0.03
@@ -364,11 +365,8 @@ class Transport(Machine):
         """_unload_path's way to the first of ``candidates`` (place, world point) the arm
         reaches, holding ``load`` kg at rest from the grip on."""
         region = self.layout.region_of(m.color)
-        slot = self.layout.plate_slots[m.slot]
-        contact = np.array([slot[0], slot[1], PLATE_TOP_IN_BASE_M + m.size
-                            + YOUBOT_GRASP_STANDOFF_M - 0.004 * m.unload_attempts])
-        hover = contact + np.array([0.0, 0.0, 0.05 if high else 0.03])
-        lift = [contact + np.array([0.0, 0.0, h]) for h in self._lift_steps(m)]
+        contact, hover, lift = grip_points(self.layout.plate_slots[m.slot], m.size,
+                                           m.unload_attempts, high, self._tallest_other(m))
         for place, drop_world in candidates:
             drop = world_to_base(pose, drop_world)
             drop[2] -= self.layout.youbot_base_z
@@ -428,22 +426,14 @@ class Transport(Machine):
         raise PlanError('no motion off the plate within the joint limits and clear of the '
                         'other materials')
 
-    def _lift_steps(self, m: Material) -> Tuple[float, ...]:
-        """Heights over the grip that the straight lift passes through: up until what it holds
-        clears the tallest other material on the plate by PLATE_CLEARANCE_M (its bottom rises
-        as far as the grip does)."""
-        tallest = max((o.size for o in self.book.materials.values()
-                       if o.on_the_plate and o is not m), default=0.0)
-        steps = list(UNLOAD_LIFT_STEPS_M)
-        while steps[-1] < tallest + PLATE_CLEARANCE_M - 1e-9:
-            steps.append(round(steps[-1] + 0.01, 6))
-        return tuple(steps)
+    def _tallest_other(self, m: Material) -> float:
+        """The tallest material on the plate but ``m`` (0: none)."""
+        return max((o.size for o in self.book.materials.values()
+                    if o.on_the_plate and o is not m), default=0.0)
 
     def _held_offset(self, obs: Observation, m: Material) -> np.ndarray:
-        """Where ``m``, gripped over its plate slot, is from the tool (x, y in base_link): the
-        grip is a few millimetres off the slot's centre, the material with it."""
-        tool = _YOUBOT_FK.fk(self.arm.q(obs))[:2, 3]
-        return cast(np.ndarray, np.asarray(self.layout.plate_slots[m.slot], float) - tool)
+        """Where ``m``, gripped over its plate slot, is from the tool (held_offset)."""
+        return held_offset(self.arm.q(obs), self.layout.plate_slots[m.slot])
 
     def _others(self, m: Material) -> List[Tuple[float, float, float]]:
         """The materials on the plate but ``m``: their slots (x, y) and sizes."""
@@ -620,9 +610,7 @@ class Transport(Machine):
     def _short_of_drop(self, obs: Observation) -> float:
         """How far the gripper is from the unload's drop, across [m] (the arm's forward
         kinematics, where it is and where its motion ends)."""
-        drop = known(self._carry, 'the unload path').drop
-        return float(np.linalg.norm(_YOUBOT_FK.fk(self.arm.q(obs))[:2, 3]
-                                    - _YOUBOT_FK.fk(drop)[:2, 3]))
+        return short_of(self.arm.q(obs), known(self._carry, 'the unload path').drop)
 
     def _release(self, obs: Observation) -> None:
         if not self.late(obs.now):
@@ -636,46 +624,3 @@ class Transport(Machine):
     def _fold(self, obs: Observation) -> None:
         if self.motion_over(obs, 'home pose'):
             self.enter(TransportState.DONE, obs.now, math.inf)
-
-
-# The youBot's arm upright (the datasheet's candle pose) while the base drives home.
-YOUBOT_CARRY_Q = np.zeros(5)
-# The youBot's fingertips reach 10.4 mm beyond gripper_tcp: it grasps a material's top face with
-# the TCP this far above it, so that the fingertips do not push the material away.
-YOUBOT_GRASP_STANDOFF_M = GRASP_STANDOFF_M
-
-
-# What the youBot holds passes this far over the tops of the plate's other materials [m].
-PLATE_CLEARANCE_M = 0.01
-_YOUBOT_FK = YoubotKinematics('gripper_tcp')
-# An unload whose arm stalled with the gripper further than this from its drop, across, is a
-# failure, not a delivery [m] (a shoulder that sagged 0.24 rad under 0.38 kg left it 2 cm off
-# across, still over the pool).
-DROP_REACH_TOLERANCE_M = 0.05
-
-
-def clear_of_the_plate(points: Points, others: Sequence[Tuple[float, float, float]],
-                       size: float, offset: Vector = (0.0, 0.0), steps: int = 8) -> bool:
-    """Whether a youBot motion (samples of time, positions, velocities, accelerations) keeps
-    the material of edge ``size`` it holds (gripped by its top face, its centre ``offset``
-    from the tool in x and y) ``PLATE_CLEARANCE_M`` over each of the plate's ``others`` (slot
-    x, y and edge) wherever it passes over one: along the path the controller follows between
-    the samples (cubic in position and velocity)."""
-    if not others:
-        return True
-    shift = np.asarray(offset, float)
-    for (t0, q0, v0, _), (t1, q1, v1, _) in zip(points, points[1:]):
-        h = t1 - t0
-        for x in np.linspace(0.0, 1.0, steps, endpoint=False):
-            q = ((2 * x**3 - 3 * x**2 + 1) * q0 + (x**3 - 2 * x**2 + x) * h * v0
-                 + (-2 * x**3 + 3 * x**2) * q1 + (x**3 - x**2) * h * v1)
-            tool = _YOUBOT_FK.fk(q)[:3, 3]
-            px, py = tool[:2] + shift
-            bottom = tool[2] - YOUBOT_GRASP_STANDOFF_M - size
-            for sx, sy, other in others:
-                # Over it: the two nearer than their half edges and 5 mm, centre to centre.
-                reach = (size + other) / 2 + 0.005
-                if (bottom < PLATE_TOP_IN_BASE_M + other + PLATE_CLEARANCE_M
-                        and abs(px - sx) < reach and abs(py - sy) < reach):
-                    return False
-    return True

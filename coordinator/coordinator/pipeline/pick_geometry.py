@@ -1,0 +1,116 @@
+"""The geometry of the Zu 12's picks and places (no ROS, no state): where its way crosses the
+belt's near edge, whether a swing of its joints passes low over the belt, the straight lift out
+of a queue, the points over a place, and whether two IK solutions lie on one branch. The loader
+(loader.py) plans with these; each has its own unit tests (tests/unit/test_pick_geometry.py)."""
+from __future__ import annotations
+
+import math
+from typing import Callable, List, Sequence, Tuple
+
+import numpy as np
+
+from controllers.arrays import Vector
+from controllers.pick_place import PickTiming
+from coordinator.layout import CellLayout
+from coordinator.pipeline.model import EDGE_CLEARANCE_M
+from coordinator.reach import zu12_cup_positions
+
+# A lift out of the end stop's queue keeps to the straight line up through a point this often
+# [m].
+LIFT_LINE_STEP_M = 0.01
+# A swing of the Zu 12's joints keeps what its cup holds (or the cup) this far above anything
+# that can ride on the belt wherever it passes over the belt [m].
+SWING_CLEARANCE_M = 0.02
+# Two IK solutions a pick path's sample apart (50 ms) that differ by more than this in a joint
+# lie on two branches [rad].
+IK_JUMP_RAD = 0.5
+
+
+def continuous(qs: Sequence[np.ndarray]) -> bool:
+    """Whether no joint moves more than IK_JUMP_RAD between two neighbouring solutions."""
+    return all(float(np.max(np.abs(b - a))) <= IK_JUMP_RAD for a, b in zip(qs, qs[1:]))
+
+
+def polar(v: np.ndarray) -> Tuple[float, float]:
+    """(reach, angle) of a vector in the plane."""
+    return math.hypot(v[0], v[1]), math.atan2(v[1], v[0])
+
+
+def crossing(g: Callable[[float], float], samples: int = 200) -> float:
+    """The first fraction f in [0, 1] where g changes sign (bisected), or the end of [0, 1]
+    where |g| is smaller if it does not."""
+    fs = np.linspace(0.0, 1.0, samples + 1)
+    gs = [g(f) for f in fs]
+    for k in range(samples):
+        if gs[k] == 0.0 or gs[k] * gs[k + 1] < 0.0:
+            lo, hi = fs[k], fs[k + 1]
+            for _ in range(30):
+                mid = (lo + hi) / 2
+                if g(lo) * g(mid) <= 0.0:
+                    hi = mid
+                else:
+                    lo = mid
+            return float((lo + hi) / 2)
+    return 0.0 if abs(gs[0]) <= abs(gs[-1]) else 1.0
+
+
+def edge_point(lay: CellLayout, a: Vector, b: Vector, low: float,
+               arc: bool = False) -> np.ndarray:
+    """Where the way from ``a`` (over the belt) to ``b`` (beside it) crosses the belt's near
+    edge, EDGE_CLEARANCE_M outside it, and at least ``low`` above its top. The way is the
+    straight line, or with ``arc`` the arc round the Zu 12's base (angle, reach and height
+    changing evenly): the way its joints go, turning joint 1, when both ends lie at about the
+    same reach. The straight line between two such points passes nearer the base, and the
+    joints that set the reach pull in to the crossing and out again."""
+    a, b = np.asarray(a, float), np.asarray(b, float)
+    y = lay.belt_y - math.copysign(lay.belt_width / 2 + EDGE_CLEARANCE_M, lay.belt_y - b[1])
+    if arc:
+        base = np.array(lay.zu12_base[:2], float)
+        (ra, ta), (rb, tb) = (polar(p[:2] - base) for p in (a, b))
+        tb = ta + math.remainder(tb - ta, 2 * math.pi)
+        f = crossing(lambda f: base[1] + (ra + f * (rb - ra)) * math.sin(
+            ta + f * (tb - ta)) - y)
+        r, t = ra + f * (rb - ra), ta + f * (tb - ta)
+        p = np.array([base[0] + r * math.cos(t), y, a[2] + f * (b[2] - a[2])])
+    else:
+        f = (a[1] - y) / (a[1] - b[1]) if abs(a[1] - b[1]) > 1e-9 else 0.0
+        p = a + min(max(f, 0.0), 1.0) * (b - a)
+    p[1], p[2] = y, max(p[2], lay.belt_top + low)
+    return p
+
+
+def over_the_belt(lay: CellLayout, q_a: np.ndarray, q_b: np.ndarray, held: float) -> bool:
+    """Whether the Zu 12's joints going straight from ``q_a`` to ``q_b`` bring what its cup
+    holds (``held``: its size; 0 for the empty cup) over the belt lower than SWING_CLEARANCE_M
+    above the tallest material that rides on it. (From the stop to a ground place 2 cm further
+    out than the paper's, the way from the edge bulged 13 cm back out over the belt, 5 cm above
+    its top, and a 0.49 kg purple struck what rode there.)"""
+    cup = zu12_cup_positions(lay.zu12_base, q_a, q_b)
+    half = lay.belt_width / 2 + held / 2
+    low = lay.belt_top + lay.material_size + SWING_CLEARANCE_M
+    return bool(np.any((np.abs(cup[:, 1] - lay.belt_y) < half) & (cup[:, 0] < lay.belt_end_x)
+                       & (cup[:, 2] - held < low)))
+
+
+def lift_line(on: np.ndarray, lift: np.ndarray) -> List[np.ndarray]:
+    """The points strictly between ``on`` (the cup on the material) and ``lift`` on the
+    straight line up, LIFT_LINE_STEP_M apart at most (none for a rise shorter than that)."""
+    on, lift = np.asarray(on, float), np.asarray(lift, float)
+    rise = float(np.linalg.norm(lift - on))
+    steps = max(1, int(math.ceil(rise / LIFT_LINE_STEP_M - 1e-9)))
+    return [on + (lift - on) * k / steps for k in range(1, steps)]
+
+
+def place_points(target: Vector, size: float, timing: PickTiming, set_down_rise: float,
+                 belt_top: float) -> Tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The cup's points over a place whose top centre is ``target``, for a material of edge
+    ``size``: where it lets go (the material ``place_gap`` over the place), above that (by
+    ``place_height``, or ``set_down_rise`` to clear what is there already), and the transfer
+    point it rises to from there when it goes home or waits: clear of the belt (a joint-space
+    move straight from there to a place lower than the belt would sweep the held material
+    through the belt's side)."""
+    release = np.asarray(target, float) + np.array([0.0, 0.0, size + timing.place_gap])
+    above = release + np.array([0.0, 0.0, max(timing.place_height, set_down_rise)])
+    transfer = release.copy()
+    transfer[2] = max(above[2], belt_top + 2 * size + timing.lift_height)
+    return release, above, transfer
