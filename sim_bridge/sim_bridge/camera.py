@@ -1,5 +1,6 @@
-"""PyBullet's OpenGL matrices for a camera of the world (its pinhole model is
-world_description.camera_geometry), and a reusable image buffer."""
+"""A camera of the world (``SimCamera``: fixed, or on a robot's link), PyBullet's OpenGL
+matrices for it (its pinhole model is world_description.camera_geometry), and a reusable image
+buffer."""
 from __future__ import annotations
 
 import array
@@ -10,6 +11,11 @@ import cv2
 import numpy as np
 
 from controllers.arrays import Vector
+from controllers.transforms import rpy_matrix
+from sim_bridge.errors import WorldError
+from sim_bridge.robot import SimRobot
+from world_description.camera_geometry import intrinsics_from_fov, look_at_rotation
+from world_description.world_config import CameraConfig
 
 
 def projection_matrix(width: int, height: int, vertical_fov_deg: float, near: float,
@@ -75,3 +81,47 @@ class ImageBuffer:
         rgba = np.asarray(rgba, dtype=np.uint8).reshape(self.height, self.width, 4)
         self._view[...] = rgba[:, :, :3]
         return self.data
+
+
+class SimCamera:
+    def __init__(self, config: CameraConfig, robot: Optional[SimRobot],
+                 pose_error: Optional[Tuple[np.ndarray, np.ndarray]] = None) -> None:
+        """``pose_error``: the camera's position [m] and rotation (about its optical axes)
+        [rad] off the pose the world file gives it, which the vision is told (a mis-calibrated
+        camera, a perturbation)."""
+        self.config = config
+        self.robot = robot
+        offset, angles = pose_error if pose_error is not None else (np.zeros(3), np.zeros(3))
+        self._offset = np.asarray(offset, float)
+        self._tilt = rpy_matrix(*(float(a) for a in angles))
+        self.intrinsics = intrinsics_from_fov(config.width, config.height,
+                                              config.vertical_fov_deg)
+        self._projection = projection_matrix(config.width, config.height,
+                                             config.vertical_fov_deg, config.near, config.far)
+        self._link = ''
+        if robot is None:
+            if config.position is None or config.look_at is None:
+                raise WorldError(f'camera "{config.name}": a camera on no robot needs a position '
+                                 'and a point to look at')
+            self._fixed_view = self._view(np.asarray(config.position, float),
+                                          look_at_rotation(config.position, config.look_at))
+        elif config.link is None or config.link not in robot.link_index:
+            raise WorldError(f'camera "{config.name}": robot "{robot.config.name}" has no link '
+                             f'"{config.link}"')
+        else:
+            self._link = config.link
+
+    def view_matrix(self) -> Tuple[float, ...]:
+        if self.robot is None:
+            return self._fixed_view
+        pos, rot = self.robot.link_world_pose(self._link)
+        return self._view(np.asarray(pos, float), np.asarray(rot, float))
+
+    def _view(self, position: np.ndarray, rotation: np.ndarray) -> Tuple[float, ...]:
+        """The view from an optical frame's pose, off it by the camera's pose error."""
+        return view_matrix_from_optical(position + rotation @ self._offset,
+                                        rotation @ self._tilt)
+
+    @property
+    def projection(self) -> Tuple[float, ...]:
+        return self._projection
