@@ -1064,3 +1064,23 @@ def test_a_material_held_over_the_plate_clears_each_neighbour_by_its_own_height(
     assert (bottom >= PLATE_TOP_IN_BASE_M + other + PLATE_CLEARANCE_M - 1e-9) is clear
     # Beside it (a slot on), nothing is under what it holds.
     assert clear_of_the_plate(still, [(sx - 0.064, sy, 0.06)], held)
+
+
+def test_odometry_is_turned_into_the_cells_frame_from_the_bases_start_pose():
+    """The youBot's odom frame is its start pose in the cell (REP-105): a pose in it, and its
+    twist in the base's own frame, become a pose and a velocity along the cell's axes (what
+    the coordinator's path follower steers by)."""
+    import math
+
+    from coordinator.cell_odometry import odometry_in_cell
+    home = (1.0, -0.5, math.pi / 2)
+    pose, velocity = odometry_in_cell(home, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
+    assert pose == pytest.approx(home)
+    # 1 m ahead in odom is 1 m along the cell's y (the start pose faces +y); the base, turned
+    # a further quarter turn, drives along its own x: along the cell's -x.
+    pose, velocity = odometry_in_cell(home, 1.0, 0.0, math.pi / 2, 0.3, 0.0, 0.2)
+    assert pose == pytest.approx((1.0, 0.5, math.pi))
+    assert velocity == pytest.approx((-0.3, 0.0, 0.2), abs=1e-12)
+    # Sideways in its own frame (Mecanum): along the cell's -y there.
+    _, velocity = odometry_in_cell(home, 1.0, 0.0, math.pi / 2, 0.0, 0.4, 0.0)
+    assert velocity == pytest.approx((0.0, -0.4, 0.0), abs=1e-12)

@@ -71,14 +71,11 @@ class ServedClient(FakeClient):
 def test_a_coordinator_stopped_in_a_call_ends_its_run_as_interrupted(monkeypatch):
     """Ctrl-C or SIGTERM while the coordinator waits for a service: the run was stopped (it
     ends as interrupted), not a node that did not answer (node_timeout, exit 1)."""
-    from types import SimpleNamespace
-
-    from coordinator import coordinator_node as node
-    coordinator = SimpleNamespace(service_timeout=0.3)
+    from coordinator import ros_ports
     stopped = threading.Event()
-    monkeypatch.setattr(node.rclpy, 'ok', lambda: not stopped.is_set())
-    with pytest.raises(node.NodeTimeout, match='did not answer'):
-        node.CoordinatorNode._call(coordinator, ServedClient(set()), 'req', 'IK')
+    monkeypatch.setattr(ros_ports.rclpy, 'ok', lambda: not stopped.is_set())
+    with pytest.raises(ros_ports.NodeTimeout, match='did not answer'):
+        ros_ports.call_service(ServedClient(set()), 'req', 'IK', timeout=0.3)
     threading.Timer(0.1, stopped.set).start()
-    with pytest.raises(node._Stopped):
-        node.CoordinatorNode._call(coordinator, ServedClient(set()), 'req', 'IK')
+    with pytest.raises(ros_ports.Stopped):
+        ros_ports.call_service(ServedClient(set()), 'req', 'IK', timeout=0.3)
