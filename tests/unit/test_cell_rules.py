@@ -223,7 +223,7 @@ def test_a_set_down_swings_in_over_what_is_at_its_destination_already(monkeypatc
     comes in over the first with what it holds SET_DOWN_CLEARANCE_M above it (a 5 cm rise
     over the drop swept the second youBot's blue through the first and pushed it off its
     slot)."""
-    from coordinator.pipeline import loader, model, transport
+    from coordinator.pipeline import model, pick_planner, transport
     classes = copy.deepcopy(PAPER)
     classes['purple'].update(count=2, size=0.06)
     classes['blue'].update(count=2, size=0.055)
@@ -231,7 +231,7 @@ def test_a_set_down_swings_in_over_what_is_at_its_destination_already(monkeypatc
     layout = layout_from_world(world(classes))
     swings = {'zu12': [], 'youbot': []}
     carry_out = transport.Transport._carry_out
-    place_way = loader.Loader._place_way
+    place_way = pick_planner.PickPlanner.place_way
 
     def youbot(self, obs, m, over, drop, **kwargs):
         swings['youbot'].append((m.color, over[2] - drop[2]))
@@ -245,7 +245,7 @@ def test_a_set_down_swings_in_over_what_is_at_its_destination_already(monkeypatc
         return way
 
     monkeypatch.setattr(transport.Transport, '_carry_out', youbot)
-    monkeypatch.setattr(loader.Loader, '_place_way', zu12)
+    monkeypatch.setattr(pick_planner.PickPlanner, 'place_way', zu12)
     cell = FakeCell(layout, ['orange', 'blue', 'purple', 'orange', 'blue', 'orange', 'purple',
                              'orange'])
     r = run(cell).result
@@ -263,21 +263,21 @@ def test_the_cup_rises_straight_up_from_a_place_before_it_swings_away(monkeypatc
     there), and only then swings away: a joint motion from the release straight towards home
     swept two materials off their slots beside it. (The fake's joints are the cup's position,
     so the sweep itself shows only on the real arm: this holds the plan to the way up.)"""
-    from coordinator.pipeline import loader
+    from coordinator.pipeline import cup
     classes = copy.deepcopy(PAPER)
     classes['purple']['count'] = 3
     classes['orange']['count'] = 2
     layout = layout_from_world(world(classes))
     firsts = []
-    from_release = loader.Loader._from_release
+    from_release = cup.CupPlace.from_release
 
     def record(self, waypoints, edge=None):
         way, wait = from_release(self, waypoints, edge)
-        if self._at_release and not self._onto_plate:
-            firsts.append((way[0], self._above_q, self._above))
+        if self.at_release and not self.onto_plate:
+            firsts.append((way[0], self.above_q, self.above))
         return way, wait
 
-    monkeypatch.setattr(loader.Loader, '_from_release', record)
+    monkeypatch.setattr(cup.CupPlace, 'from_release', record)
     # (The last purple is the last material: from its place the arm goes home.)
     cell = FakeCell(layout, ['purple', 'orange', 'purple', 'blue', 'orange', 'purple'])
     r = run(cell).result
@@ -313,10 +313,10 @@ def test_a_pick_whose_joint_path_is_out_of_the_limits_meets_the_material_further
     joints' path there: the pick is planned to meet the material a little later, instead of
     giving it up (a 47 mm orange was, "joint 3 acceleration -320 is beyond its limit")."""
     from controllers.time_optimal import PlanError
-    from coordinator.pipeline import loader
+    from coordinator.pipeline import cup
     layout = layout_from_world(world(copy.deepcopy(PAPER)))
     refused = []
-    plan = loader.Loader._plan
+    plan = cup.CupPlace.plan
 
     def refuse_once(self, obs, waypoints, start=None, edge=None):
         if any(w.direct for w in waypoints) and not refused:       # (a pick's path)
@@ -324,7 +324,7 @@ def test_a_pick_whose_joint_path_is_out_of_the_limits_meets_the_material_further
             raise PlanError('waypoint 5: joint 3 acceleration -320.373 is beyond its limit')
         return plan(self, obs, waypoints, start, edge)
 
-    monkeypatch.setattr(loader.Loader, '_plan', refuse_once)
+    monkeypatch.setattr(cup.CupPlace, 'plan', refuse_once)
     cell = FakeCell(layout, ['orange', 'purple', 'orange', 'blue', 'orange', 'orange',
                              'orange', 'orange'])
     r = run(cell).result
@@ -339,7 +339,7 @@ def test_a_pick_path_across_an_elbow_flip_is_solved_on_one_branch():
     the path is solved again from its end, on the branch the end is on."""
     from types import SimpleNamespace
 
-    from coordinator.pipeline import loader, pick_geometry
+    from coordinator.pipeline import pick_geometry, pick_planner
 
     def solve_path(points, seed):
         """Two branches: 'up' (joint 1 at +1) reaches x < 0 only; 'down' (-1) everywhere.
@@ -353,16 +353,15 @@ def test_a_pick_path_across_an_elbow_flip_is_solved_on_one_branch():
 
     from coordinator.pipeline import Settings
     arm = SimpleNamespace(name='zu12', solve_path=solve_path)
-    zu12 = loader.Loader(arm, None, None, SimpleNamespace(event=lambda *a, **k: None), None,
-                         Settings(), None, lambda: False)
+    zu12 = pick_planner.PickPlanner(arm, None, None, None, None, Settings())
     path = [(k * 0.05, np.array([-0.1 + 0.02 * k, 0.75, 0.45])) for k in range(10)]
-    qs = zu12._solve_along(path, np.array([0.1, 0.75, 0.5]), np.array([0.0, 1.0, 0, 0, 0, 0]))
+    qs = zu12.solve_along(path, np.array([0.1, 0.75, 0.5]), np.array([0.0, 1.0, 0, 0, 0, 0]))
     assert qs is not None and len(qs) == 11
     assert all(q[1] == -1.0 for q in qs)               # all on the branch that reaches
     assert pick_geometry.continuous(qs)
     # A path that one branch covers is kept as solved.
     short = path[:4]
-    qs = zu12._solve_along(short, np.array([-0.05, 0.75, 0.5]), np.array([0, 1.0, 0, 0, 0, 0]))
+    qs = zu12.solve_along(short, np.array([-0.05, 0.75, 0.5]), np.array([0, 1.0, 0, 0, 0, 0]))
     assert all(q[1] == 1.0 for q in qs)
 
 
@@ -517,17 +516,17 @@ def test_a_lift_out_of_the_end_stops_queue_keeps_to_the_straight_line_up():
     layout = layout_from_world(world(copy.deepcopy(PAPER)))      # (the Zu 12 at the origin)
     ik = Zu12IK()
     run_ = Pipeline(layout, ik, Settings())
-    zu12 = run_.loader
+    zu12 = run_.loader.planner
     m = Material(1, 'purple', np.array([0.675, 0.75, 0.425]), 0.0, 3, size=0.05)
     on = np.array([0.675, 0.75, 0.4 + 0.05 + 0.001])
-    zu12._lift = on + np.array([0.0, 0.0, 0.07])
+    zu12.lift_point = on + np.array([0.0, 0.0, 0.07])
     ready = np.array([1.201, 1.436, -1.222, 1.357, 1.571, -0.37])    # (the world's)
-    q_on, q_lift = run_.zu12.solve_path([on, zu12._lift], ready)
+    q_on, q_lift = run_.zu12.solve_path([on, zu12.lift_point], ready)
     pick = SimpleNamespace(timing=PickTiming(lift_height=0.07), contact=1.0)
     for crowded in (True, False):
         zu12.belt = SimpleNamespace(held=lambda m: True, held_by=lambda m, t: True,
                                     crowded=lambda m, t, crowded=crowded: crowded)
-        way = zu12._lift_way(m, pick, on, q_on, 1.0, q_lift)
+        way = zu12.lift_way(m, pick, on, q_on, 1.0, q_lift)
         assert np.allclose(way[-1].q, q_lift, atol=1e-9)
         if not crowded:
             assert len(way) == 1

@@ -5,8 +5,7 @@ import pytest
 from test_zu12_swing import _cell
 
 from controllers.pick_place import PickTiming
-from coordinator.pipeline import Material
-from coordinator.pipeline import loader as loader_module
+from coordinator.pipeline import Material, pick_planner
 from coordinator.pipeline.belt import BeltModel
 from coordinator.pipeline.model import QUEUE_LIFT_PAUSE_LEAD_S
 
@@ -24,7 +23,8 @@ def test_a_material_about_to_come_to_rest_in_the_queue_is_met_at_rest_there():
                       size=0.042)
     blue = Material(2, 'blue', np.array([end - 0.12, layout.belt_y, 0.425]), 0.0, 3, size=0.05)
     run_.materials.update({1: purple, 2: blue})
-    run_.belt = zu12.belt = BeltModel(layout, run_.materials, 0.0, ran_before=True)
+    belt = BeltModel(layout, run_.materials, 0.0, ran_before=True)
+    run_.belt = zu12.belt = zu12.planner.belt = belt
     run_.belt.running = True
     belt, timing = run_.belt, PickTiming()
     assert belt.held(purple) and not belt.held(blue)
@@ -34,21 +34,21 @@ def test_a_material_about_to_come_to_rest_in_the_queue_is_met_at_rest_there():
     assert not belt.held_by(blue, rest - 0.01) and belt.held_by(blue, rest)
     # Met just before it rests: later, at rest.
     contact = rest - 0.2
-    met = zu12._not_as_it_queues(blue, contact, timing)
-    assert met == pytest.approx(rest + QUEUE_LIFT_PAUSE_LEAD_S + loader_module.QUEUE_REST_S)
+    met = zu12.planner.not_as_it_queues(blue, contact, timing)
+    assert met == pytest.approx(rest + QUEUE_LIFT_PAUSE_LEAD_S + pick_planner.QUEUE_REST_S)
     assert belt.held_by(blue, met - QUEUE_LIFT_PAUSE_LEAD_S)         # at rest as the belt pauses
     # Met just after it rests, before the belt's pause would begin: later too (the belt
     # paused 0.35 s before it came to rest, it stopped 8 cm short, and the cup missed it).
-    assert zu12._not_as_it_queues(blue, rest + 0.3, timing) == pytest.approx(met)
+    assert zu12.planner.not_as_it_queues(blue, rest + 0.3, timing) == pytest.approx(met)
     # At rest long enough before the pause: unchanged.
-    settled = rest + QUEUE_LIFT_PAUSE_LEAD_S + loader_module.QUEUE_REST_S + 0.05
-    assert zu12._not_as_it_queues(blue, settled, timing) == settled
+    settled = rest + QUEUE_LIFT_PAUSE_LEAD_S + pick_planner.QUEUE_REST_S + 0.05
+    assert zu12.planner.not_as_it_queues(blue, settled, timing) == settled
     # Met well before it gets there (it rests after the lift): unchanged.
     early = rest - timing.dwell - timing.lift - 0.1
-    assert zu12._not_as_it_queues(blue, early, timing) == early
+    assert zu12.planner.not_as_it_queues(blue, early, timing) == early
     # Nothing held ahead of it: it comes to rest against the stop alone, met on the move.
     run_.materials.pop(1)
-    assert zu12._not_as_it_queues(blue, belt.comes_to_rest(blue) - 0.2, timing) == (
+    assert zu12.planner.not_as_it_queues(blue, belt.comes_to_rest(blue) - 0.2, timing) == (
         belt.comes_to_rest(blue) - 0.2)
 
 
@@ -61,7 +61,8 @@ def _two_at_the_stop():
     behind = Material(2, 'orange', np.array([end - 0.078, layout.belt_y, 0.425]), 0.0, 3,
                       size=0.05)
     run_.materials.update({1: ahead, 2: behind})
-    run_.belt = zu12.belt = BeltModel(layout, run_.materials, 0.0, ran_before=True)
+    belt = BeltModel(layout, run_.materials, 0.0, ran_before=True)
+    run_.belt = zu12.belt = zu12.planner.belt = belt
     run_.belt.running = True
     return layout, run_, zu12, ahead, behind
 
@@ -75,11 +76,11 @@ def test_a_lift_out_of_the_queue_rises_over_the_tallest_material_that_can_stand_
     layout, run_, zu12, _, green = _two_at_the_stop()
     timing = run_.s.timing                 # (the cell's: a 7 cm lift)
     queued = SimpleNamespace(m=green, timing=timing, contact=1.0)
-    high = zu12._lifting(queued).lift_height
-    assert high == pytest.approx(layout.material_size + loader_module.QUEUE_SWING_CLEARANCE_M)
+    high = zu12.planner.lifting(queued).lift_height
+    assert high == pytest.approx(layout.material_size + pick_planner.QUEUE_SWING_CLEARANCE_M)
     assert high > timing.lift_height
     run_.materials.pop(1)                  # alone at the stop: the lift as before
-    assert zu12._lifting(queued).lift_height == timing.lift_height
+    assert zu12.planner.lifting(queued).lift_height == timing.lift_height
 
 
 def test_the_belt_pauses_for_a_lift_only_with_a_material_behind():

@@ -38,7 +38,7 @@ def test_the_way_onto_a_ground_slot_keeps_the_held_material_over_what_rides_on_t
     through = 0
     for k in range(len(layout.regions['ground_target'].slots)):
         run_.book.free_places = lambda name, material, k=k: [k]
-        way = zu12._place_way(m, lift, layout.youbot_home, READY)
+        way = zu12.planner.place_way(m, lift, layout.youbot_home, READY)
         qs = [w.q for w in way.waypoints]
         through += len(qs) == 4                     # (edge, transfer, above, release)
         # From the edge on (the lift point is over the belt by design): what the cup holds
@@ -67,14 +67,14 @@ def test_the_way_back_from_a_low_place_rises_over_it_before_it_swings_to_the_bel
     m = Material(1, 'green', np.zeros(3), 0.0, 3, size=0.052)
     lift = np.array([layout.belt_end_x - 0.026, layout.belt_y, layout.belt_top + 0.122])
     run_.book.free_places = lambda name, material: [0]
-    way = zu12._place_way(m, lift, layout.youbot_home, READY)
+    way = zu12.planner.place_way(m, lift, layout.youbot_home, READY)
     zu12._adopt(way)
-    zu12._at_release = True
+    zu12.cup.released()
     hover = np.array([0.6, layout.belt_y, layout.belt_top + 0.1])
-    crossing = edge_point(layout, hover, zu12._above, model.EDGE_CLEARANCE_M)
-    edge = run_.zu12.solve(crossing, model.DOWN, 'world', zu12._above_q)
-    assert over_the_belt(layout, zu12._above_q, edge, 0.0)
-    waypoints, _ = zu12._from_release([Waypoint(edge)], edge)
+    crossing = edge_point(layout, hover, zu12.cup.above, model.EDGE_CLEARANCE_M)
+    edge = run_.zu12.solve(crossing, model.DOWN, 'world', zu12.cup.above_q)
+    assert over_the_belt(layout, zu12.cup.above_q, edge, 0.0)
+    waypoints, _ = zu12.cup.from_release([Waypoint(edge)], edge)
     qs = [w.q for w in waypoints]
     assert np.allclose(qs[1], way.then)             # up over the place first
     with pytest.MonkeyPatch.context() as patch:

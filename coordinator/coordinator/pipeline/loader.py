@@ -1,112 +1,46 @@
 """The loader: the Zu 12 picks materials off the running belt and sets them down."""
 from __future__ import annotations
 
+import functools
 import math
-from dataclasses import dataclass, field, replace
 from typing import (
-    Any,
     Callable,
     List,
     Optional,
     Sequence,
     Tuple,
-    Union,
 )
 
 import numpy as np
 
-from controllers.bezier import Pose2D
-from controllers.pick_place import PickTiming, follow_pick
+from controllers.pick_place import PickTiming
 from controllers.time_optimal import (
-    SAMPLE_PERIOD_S,
-    PlanError,
-    TooLate,
     Waypoint,
     plan,
-    timed_path,
 )
-from coordinator.layout import CellLayout, slot_in_world
+from coordinator.layout import CellLayout
 from coordinator.pipeline.arm import Arm
 from coordinator.pipeline.belt import BeltModel
+from coordinator.pipeline.cup import CupPlace
 from coordinator.pipeline.machine import Machine, transition_table
 from coordinator.pipeline.materials import MaterialBook
 from coordinator.pipeline.model import (
-    DOWN,
-    EDGE_CLEARANCE_M,
     FOLLOW_TOLERANCE,
     MAX_REPLANS,
     PICK_LEAD_S,
-    PICK_REPLAN_STEP_S,
-    PICK_TRIES,
     PLAN_MARGIN,
     QUEUE_LIFT_PAUSE_LEAD_S,
-    RELEASE_HOLD_S,
-    SETTLE_S,
     EventKind,
     LoaderState,
     Material,
     MaterialStatus,
     Observation,
-    Points,
     Ports,
     Settings,
     known,
 )
-from coordinator.pipeline.pick_geometry import (
-    continuous,
-    edge_point,
-    lift_line,
-    over_the_belt,
-    place_points,
-)
+from coordinator.pipeline.pick_planner import LEAVE, Ahead, PickPlan, PickPlanner, PlaceWay
 from coordinator.pipeline.record import EventLog
-
-# What the Zu 12 lifts out of the end stop's queue rises this far over the tallest material
-# that can stand next to it before it swings away [m].
-QUEUE_SWING_CLEARANCE_M = 0.05
-# A material met at rest in the end stop's queue is met this long after its belt pause began,
-# and that no sooner than it came to rest there [s].
-QUEUE_REST_S = 0.1
-
-
-@dataclass
-class PlaceWay:
-    """A held material's way onto its place (joints), and the rise from there."""
-    waypoints: List[Waypoint]     # from the lift point: over the belt's edge, above, down
-    then: np.ndarray              # where the cup rises to over the place (not to a pick)
-    above: np.ndarray             # above the place (x, y, z)
-    above_q: np.ndarray
-    onto_plate: bool
-
-
-@dataclass
-class Ahead:
-    """A pick's motion that goes on to the place: the way there, and the lift point it passes
-    on the way."""
-    way: PlaceWay
-    q_lift: np.ndarray
-    lift_end: float               # (about when it passes it)
-
-
-# A pick that cannot be made before the material leaves the belt.
-LEAVE = 'leave'
-
-
-@dataclass
-class PickPlan:
-    """A pick as it is planned: its material and timing, where the belt takes the material, and
-    the motion to meet it there (joints over it, over the belt's edge, at the lift point)."""
-    m: Material
-    timing: PickTiming
-    track: Callable[[float], np.ndarray]
-    start: float                  # when the motion starts
-    contact: float                # when the cup is on the material
-    q_hover: np.ndarray = field(default_factory=lambda: np.zeros(0))
-    q_edge: Optional[np.ndarray] = None
-    q_lift: np.ndarray = field(default_factory=lambda: np.zeros(0))
-    waypoints: List[Waypoint] = field(default_factory=list)
-    points: Points = field(default_factory=list)
-
 
 _S = LoaderState
 # The states each state may be followed by (the loader's only way between states; `enter`
@@ -147,25 +81,20 @@ class Loader(Machine):
         self.youbot_loading = youbot_loading
         self.lag = 0.0                    # the longest a pick's plan has taken (real time) [s]
         self.current: Optional[Material] = None     # the material being picked or placed
-        self._then: Optional[np.ndarray] = None     # where the cup rises to from its place
-        self._above: Optional[np.ndarray] = None    # above the place (x, y, z), joints
-        self._above_q: Optional[np.ndarray] = None
-        self._lift: Optional[np.ndarray] = None     # the last pick's lift point (x, y, z)
-        self._onto_plate = False                    # the last place was on the youBot's plate
-        self._clear: Optional[np.ndarray] = None    # clear of the place once here (joints)
+        self.cup = CupPlace(arm, layout, settings)
+        self.planner = PickPlanner(arm, book, belt, self.cup, layout, settings)
         self._leave = math.inf                      # when the cup lifts the material
         self._ahead: Optional[Ahead] = None         # the pick's motion goes on to the place
         self._replans = 0                           # pick plans the port started late
-        # The cup has just let go on the plate or the ground target: the next motion rises
-        # first (straight up, after the release hold), whatever it is.
-        self._at_release = False
-        self._clear_at = -math.inf                  # when the cup is clear of the place
         self._arm_pending = False                   # the cup goes on once it is clear
         # When the belt pauses for a lift out of the end stop's queue (from, to) [s].
         self.belt_pause: Tuple[float, float] = (math.inf, -math.inf)
         S = LoaderState
         self.handlers = {S.WAIT: self._wait, S.PICK: self._pick, S.PLACE: self._place,
-                         S.RISE: self._rise, S.RETREAT: self._retreat, S.HOME: self._home,
+                         S.RISE: functools.partial(self._when_there, 'the rise from the place',
+                                                   S.WAIT),
+                         S.RETREAT: functools.partial(self._when_there, 'retreat', S.WAIT),
+                         S.HOME: functools.partial(self._when_there, 'home', S.DONE),
                          S.DONE: lambda obs: None}
 
     def start(self, obs: Observation) -> None:
@@ -185,7 +114,7 @@ class Loader(Machine):
         m = self._next(waiting)
         if m is not None:
             self._plan_pick(obs, m)
-        if self.state is LoaderState.WAIT and self._at_release:
+        if self.state is LoaderState.WAIT and self.cup.at_release:
             # Nothing to pick yet: up from the place, to wait there.
             self._move(LoaderState.RISE, obs, [])
 
@@ -194,59 +123,15 @@ class Loader(Machine):
         """Send a motion through ``waypoints`` (planned from rest where the arm is); from a
         place the cup has just let go at, it first stays still while the material falls free
         and rises straight up."""
-        points = self._plan(obs, waypoints, start)
+        points = self.cup.plan(obs, waypoints, start)
         self.move(state, obs, points, start)
-        self._after_send()
-
-    def _plan(self, obs: Observation, waypoints: List[Waypoint],
-              start: Optional[float] = None, edge: Optional[np.ndarray] = None) -> Points:
-        """From a release: the hold, then straight up to above the place and over the belt's
-        edge at ``edge`` (joints; towards a pick), or without it up to the carry height."""
-        waypoints, wait = self._from_release(waypoints, edge)
-        if self._at_release:
-            # Clear of the place once straight above it: the cup may be switched on there
-            # (what it let go is place_height below it), and the youBot may leave.
-            self._clear = self._above_q
-        return self.arm.plan(self.arm.q(obs), waypoints, wait, start)
-
-    def _from_release(self, waypoints: List[Waypoint], edge: Optional[np.ndarray] = None
-                      ) -> Tuple[List[Waypoint], float]:
-        """``waypoints``, after the rise from a place the cup has just let go at (see _plan),
-        and how long the motion waits first."""
-        if not self._at_release:
-            return list(waypoints), 0.0
-        rise = self.s.timing.place_descend
-        if edge is not None:
-            above = known(self._above_q, 'the point above the place')
-            # (Up over the place first where the swing from there to the edge would bulge out
-            # over the belt, low: see _place_way.)
-            then = known(self._then, 'the rise from the place')
-            over = ([Waypoint(then, stop=False)] if over_the_belt(self.layout, above, edge, 0.0)
-                     and float(np.max(np.abs(then - above))) > 1e-6 else [])
-            first = [Waypoint(above, stop=False, min_time=rise), *over,
-                     Waypoint(edge, stop=False)]
-        else:
-            # Straight up over the place first (over what else is there: a swing from the
-            # release towards home swept two materials off their slots beside it), then on.
-            above = known(self._above_q, 'the point above the place')
-            then = known(self._then, 'the rise from the place')
-            first = [Waypoint(above, stop=False, min_time=rise)]
-            if float(np.max(np.abs(then - above))) > 1e-6:
-                first.append(Waypoint(then, stop=not waypoints))
-            elif not waypoints:
-                first = [Waypoint(above, min_time=rise)]
-        return first + list(waypoints), RELEASE_HOLD_S
-
-    def _after_send(self) -> None:
-        if self._at_release:
-            self._at_release = False
-            self._clear_at = self.arm.arrival_time(known(self._clear, 'the clear point'))
+        self.cup.after_send()
 
     def clear_of_the_plate(self, now: float) -> bool:
         """Whether the cup is away from the youBot's plate: not placing there, nor rising from
         it, nor swinging home (over it)."""
         return (self.state not in (LoaderState.PLACE, LoaderState.RISE, LoaderState.HOME)
-                and not self._at_release and now >= self._clear_at)
+                and self.cup.clear(now))
 
     def loadable(self, m: Material) -> bool:
         """Whether the Zu 12 may put ``m`` onto the youBot's plate now: it waits at home, and
@@ -288,172 +173,13 @@ class Loader(Machine):
             start + timing.descend + PICK_LEAD_S, self.belt.reaches(m, self.s.pick_x)))
         if not math.isfinite(pick.contact):
             return self._leave_it(obs, m)   # it does not reach the pick point (belt off)
-        why = self._approach(obs, pick) or self._meet(obs, pick)
+        why = self.planner.approach(obs, pick) or self.planner.meet(obs, pick)
         if why == LEAVE:
             return self._leave_it(obs, m)
         if why:
             return self._pick_failed(obs, m, why)
-        self._onward(obs, pick)
+        self._ahead = self.planner.onward(obs, pick)
         self._send_pick(obs, pick, lag, spent)
-
-    def _approach(self, obs: Observation, pick: 'PickPlan') -> str:
-        """The joints over the material at a first guess of the contact time, and over the
-        belt's edge on the way there from a place; the contact no sooner than the arm can be
-        there. Why not, if it cannot be."""
-        m, timing = pick.m, pick.timing
-        seed = self.arm.motion.goal if self.arm.has_motion else self.arm.q(obs)
-        # The hover point moves with the contact time: a first guess from a rest-to-rest move
-        # there, then later by a little until the arm makes it.
-        hover = follow_pick(pick.track, pick.contact, m.size, timing)[0][0][1]
-        q_hover = self.arm.solve(hover, DOWN, 'world', seed)
-        if q_hover is None:
-            return 'no IK solution for the pick'
-        pick.q_hover = q_hover
-        # From a place: back over the belt's edge on the way to the hover point.
-        if self._at_release and self._above is not None:
-            # (From the plate: round the arc, the cup clear of what rides on the belt.)
-            lay, above = self.layout, self._above
-            edge = (edge_point(lay, hover, above, m.size + EDGE_CLEARANCE_M, arc=True)
-                    if self._onto_plate else edge_point(lay, hover, above, EDGE_CLEARANCE_M))
-            pick.q_edge = self.arm.solve(edge, DOWN, 'world',
-                                         known(self._above_q, 'the point above the place'))
-        # (A first guess: the way to the hover point, at rest there; a plan that cannot make
-        # it says by how much.)
-        way, wait = self._from_release([Waypoint(q_hover)], pick.q_edge)
-        reach = wait + plan(self.arm.q(obs), way, self.arm.limits).end
-        pick.contact = max(pick.contact, pick.start + reach + timing.descend)
-        return ''
-
-    def _not_as_it_queues(self, m: Material, contact: float, timing: PickTiming) -> float:
-        """The contact, or later: not while the material comes to rest against another in the
-        end stop's queue, between the cup's contact and the lift. Met on the move there, the
-        cup carried a 50 mm blue on into the purple the stop held (the camera's estimate 4 mm
-        behind), pressed it, and the lift dragged the purple up and off the belt's end. It is
-        met once at rest there instead (the belt pauses around that lift; the pause begins
-        QUEUE_LIFT_PAUSE_LEAD_S before the contact, after it has come to rest)."""
-        belt = self.belt
-        rest = belt.comes_to_rest(m)
-        # (Resting there by the contact but not yet as the pause begins, it would stop short.)
-        begins = contact - QUEUE_LIFT_PAUSE_LEAD_S - QUEUE_REST_S
-        if begins < rest <= contact + timing.dwell + timing.lift and belt.crowded(m, rest):
-            return rest + QUEUE_LIFT_PAUSE_LEAD_S + QUEUE_REST_S
-        return contact
-
-    def _lifting(self, pick: 'PickPlan') -> PickTiming:
-        """The pick's timing, its lift high enough out of the end stop's queue for what it holds
-        to pass QUEUE_SWING_CLEARANCE_M over the tallest material that can be next to it: the
-        swing on from the lift point sags and bulges outwards as it begins (a green lifted
-        7 cm from behind an orange came down 1.3 cm and 2 cm sideways onto it, and knocked it
-        over)."""
-        m, timing = pick.m, pick.timing
-        if not (self.belt.held_by(m, pick.contact) and self.belt.crowded(m, pick.contact)):
-            return timing
-        high = self.layout.material_size + QUEUE_SWING_CLEARANCE_M
-        return replace(timing, lift_height=max(timing.lift_height, high))
-
-    def _meet(self, obs: Observation, pick: 'PickPlan') -> str:
-        """The pick's motion (``pick.points``), its contact moved later until the arm makes
-        it; why not (or LEAVE: the material leaves the belt first)."""
-        m, timing, track = pick.m, pick.timing, pick.track
-        refused = ''
-        for _ in range(PICK_TRIES):
-            if track(pick.contact)[0] < self.s.pick_x - 1e-6:
-                pick.contact = self.belt.reaches(m, self.s.pick_x)
-            pick.contact = self._not_as_it_queues(m, pick.contact, timing)
-            if track(pick.contact + timing.dwell)[0] > (self.layout.belt_end_x - m.size / 2
-                                                        + 1e-6):
-                return LEAVE                   # off the end (no stop) before the cup is on it
-            path, lift = follow_pick(track, pick.contact, m.size, self._lifting(pick),
-                                     SAMPLE_PERIOD_S)
-            self._lift = np.asarray(lift, float)
-            qs = self._solve_along(path, lift, pick.q_hover)
-            if qs is None:
-                return 'no IK solution for the pick path'
-            if not continuous([pick.q_hover, qs[0]]):
-                pick.q_hover = qs[0]            # (on the other branch, solved from the end)
-            times = np.array([t for t, _ in path])
-            q_path = np.array(qs[:-1])
-            v = np.gradient(q_path, times, axis=0, edge_order=2)
-            a = np.gradient(v, times, axis=0, edge_order=2)
-            # To the hover point at its time, with the path's velocity; along the path (sent as
-            # it is); then up to the lift point, at rest, as fast as the joints allow.
-            waypoints = [Waypoint(q_path[0], velocity=v[0], acceleration=a[0], at=times[0])]
-            waypoints += [Waypoint(q, velocity=vk, acceleration=ak, at=tk, direct=True)
-                          for q, vk, ak, tk in zip(q_path[1:], v[1:], a[1:], times[1:])]
-            waypoints += self._lift_way(m, pick, path[-1][1], q_path[-1], times[-1], qs[-1])
-            pick.waypoints, pick.q_lift = waypoints, qs[-1]
-            try:
-                pick.points = self._plan(obs, waypoints, pick.start, pick.q_edge)
-                return ''
-            except TooLate as too_late:
-                pick.contact += max(too_late.by, 0.0) + PICK_LEAD_S / 2
-            except PlanError as exc:
-                # The joints' path along this stretch of the track is out of the limits (the
-                # IK changes branch somewhere on it): meet the material a little further on.
-                refused = f'no motion for the pick: {exc}'
-                pick.contact += PICK_REPLAN_STEP_S
-        return refused or 'the arm cannot meet the material in time'
-
-    def _lift_way(self, m: Material, pick: 'PickPlan', on: np.ndarray, q_on: np.ndarray,
-                  t_on: float, q_lift: np.ndarray) -> List[Waypoint]:
-        """From the dwell (the cup on the material at ``on``, joints ``q_on``, at ``t_on``) up
-        to the lift point: as fast as the joints allow; out of the end stop's queue, with
-        another material right behind, straight up along the line, timed along it
-        (timed_path). The joints' own way from the dwell to the lift point bowed 1.8 cm
-        upstream as it began, into the material behind, and lifted the queue with it (the
-        ones behind rose up to 4 cm and fell back turned 23 degrees)."""
-        timing = pick.timing
-        if not (self.belt.held_by(m, pick.contact) and self.belt.crowded(m, pick.contact)):
-            return [Waypoint(q_lift, min_time=timing.lift)]
-        points = lift_line(on, self._lift) if self._lift is not None else []
-        line = self.arm.solve_path(points, q_on) if points else []
-        if line is None or not continuous([q_on, *line, q_lift]):
-            return [Waypoint(q_lift, min_time=timing.lift)]
-        try:
-            return timed_path([q_on, *line, q_lift], self.arm.limits, t_on,
-                              min_time=timing.lift)
-        except PlanError:
-            return [Waypoint(q_lift, min_time=timing.lift)]
-
-    def _solve_along(self, path: Any, lift: np.ndarray, seed: np.ndarray
-                     ) -> Optional[List[np.ndarray]]:
-        """Joints along a pick's path and at its lift point, on one IK branch: near the Zu 12's
-        base its elbow can flip between two samples (a path the planner refuses, "joint 3
-        acceleration -320"); then the whole path is solved again from its end backwards, on
-        the branch the end is on. None if neither is continuous."""
-        points = [p for _, p in path] + [lift]
-        qs = self.arm.solve_path(points, seed)
-        if qs is None or continuous(qs):
-            return qs
-        back = self.arm.solve_path(points[::-1], qs[-1])
-        if back is None or not continuous(back):
-            return None
-        return back[::-1]
-
-    def _onward(self, obs: Observation, pick: 'PickPlan') -> None:
-        """On to the place in the same motion, through the lift point without stopping there:
-        the swing starts during the lift, and the place does not wait for an arrival check at
-        the lift point and a plan after it. (A missed grasp stops the arm at the lift point
-        instead: see _pick.)"""
-        m = pick.m
-        self._ahead = None
-        place_way = self._place_way(m, self._lift, obs.youbot_pose, pick.q_lift)
-        if isinstance(place_way, str):
-            return                      # (the place is planned, or its failure told, later)
-        # Lifted out of a queue (at the end stop), it comes to rest at the lift point, clear
-        # of its neighbours' tops, before it swings: a swing begun during the lift dragged a
-        # purple into the green queued behind it (the arm stalled, the purple fell back onto
-        # the belt).
-        crowded = self.belt.crowded(m, pick.contact)
-        through = (pick.waypoints if pick.waypoints[-1].direct else   # (straight up: _lift_way)
-                   pick.waypoints[:-1] + [Waypoint(pick.q_lift, stop=crowded,
-                                                   min_time=pick.timing.lift)])
-        try:
-            whole = self._plan(obs, through + place_way.waypoints, pick.start, pick.q_edge)
-        except PlanError:
-            return                      # (the place is planned at the lift point then)
-        self._ahead = Ahead(place_way, pick.q_lift, pick.points[-1][0])
-        pick.points = whole
 
     def _send_pick(self, obs: Observation, pick: 'PickPlan', lag: float, spent: float) -> None:
         """Send the pick; plan it again if the port starts it late; switch the cup on."""
@@ -483,12 +209,12 @@ class Loader(Machine):
         # The cup is switched on (an armed cup seals on what it touches) now, or from a place
         # once it has risen from there: switched on where it let go, it would take the same
         # material again.
-        self._arm_pending = self._at_release
+        self._arm_pending = self.cup.at_release
         if not self._arm_pending:
             ok, why = self.ports.grip(self.arm.name, True)
             if not ok:
                 return self._pick_failed(obs, m, f'the suction did not switch on: {why}')
-        self._after_send()
+        self.cup.after_send()
         self._leave = pick.contact + pick.timing.dwell + late
         if self._ahead is not None:
             self._ahead.lift_end += late
@@ -530,7 +256,7 @@ class Loader(Machine):
     def _pick(self, obs: Observation) -> None:
         m, now = known(self.current, 'the material'), obs.now
         if self._arm_pending:
-            if now < self._clear_at:
+            if now < self.cup.clear_at:
                 return
             self._arm_pending = False
             ok, why = self.ports.grip(self.arm.name, True)
@@ -605,62 +331,16 @@ class Loader(Machine):
         above it, in one motion; the release and the rise follow once the arm is there. (A
         pick's motion goes on to the place by itself: this is for a material held only once the
         arm was at the lift point.)"""
-        way = self._place_way(m, self._lift, obs.youbot_pose, self.arm.motion.goal)
+        way = self.planner.place_way(m, self.planner.lift_point, obs.youbot_pose,
+                                     self.arm.motion.goal)
         if isinstance(way, str):
             return self._place_failed(obs, m, way)
         self._adopt(way)
         self.move(LoaderState.PLACE, obs, self.arm.plan(self.arm.q(obs), way.waypoints))
 
-    def _place_way(self, m: Material, lift: Optional[np.ndarray], youbot_pose: Pose2D,
-                   seed: np.ndarray) -> Union['PlaceWay', str]:
-        """The way from the lift point ``lift`` (x, y, z; None: from above the place) onto
-        ``m``'s place, or why there is none: over the belt's edge, to ``place_height`` above
-        the place, and straight down until the material is just above it."""
-        size, lay = m.size, self.layout
-        onto_plate = lay.carried(m.color)
-        if not onto_plate:
-            region = lay.region_of(m.color)
-            free = self.book.free_places(region.name, m)
-            if not free:
-                return f'{region.name} is full (its {len(region.slots)} slots are taken)'
-            self.book.keep_place(m, free[0])
-            target = region.slots[m.place]
-        else:
-            free = self.book.plate_slots(m)
-            if not free:
-                return 'the youBot plate is full'
-            self.book.keep_slot(m, free[0])
-            target = slot_in_world(youbot_pose, self.layout.plate_slots[m.slot],
-                                   self.layout.youbot_base_z, size)
-        t = self.s.timing
-        # Down onto it from over the materials there already.
-        release, above, transfer = place_points(
-            target, size, t, self.book.set_down_rise(
-                None if onto_plate else lay.destination(m.color)), lay.belt_top)
-        # Over the belt's near edge (rather than up to the carry height over the place and down
-        # again), what the cup holds 5 cm over what can ride on the belt: onto the plate round
-        # the arc (the way crosses the edge near the plate; before that it lies over the
-        # belt), onto the ground target on the straight line, 5 cm over the belt's top.
-        edge = (transfer if lift is None else
-                edge_point(lay, lift, above, 2 * size + EDGE_CLEARANCE_M, arc=True) if onto_plate
-                else edge_point(lay, lift, above, size + EDGE_CLEARANCE_M))
-        qs = self.arm.solve_path([transfer, above, release, edge], seed)
-        if qs is None:
-            return 'no IK solution for the place path'
-        q_transfer, q_above, q_release, q_edge = qs
-        # Over to a place lower than the belt, the joints' way from the edge down to above it
-        # can bulge back out over the belt: then through the transfer point (above the place,
-        # clear of the belt) first, and straight down from there.
-        over = ([Waypoint(q_transfer, stop=False)]
-                if over_the_belt(self.layout, q_edge, q_above, size) else [])
-        return PlaceWay([Waypoint(q_edge, stop=False), *over, Waypoint(q_above, stop=False),
-                         Waypoint(q_release, hold=SETTLE_S, min_time=t.place_descend)],
-                        q_transfer, above, q_above, onto_plate)
-
-    def _adopt(self, way: 'PlaceWay') -> None:
+    def _adopt(self, way: PlaceWay) -> None:
         """The place the arm is on its way to: where the cup rises from it to."""
-        self._then = way.then
-        self._above, self._above_q, self._onto_plate = way.above, way.above_q, way.onto_plate
+        self.cup.adopt(way.then, way.above, way.above_q, way.onto_plate)
 
     def _place_failed(self, obs: Observation, m: Material, why: str) -> None:
         self.ports.grip(self.arm.name, False)
@@ -687,18 +367,13 @@ class Loader(Machine):
             self.log.event(now, EventKind.LOADED, self.arm.name, m, f'plate slot {m.slot}')
         # The cup stays still while the vacuum lets go, then rises: as the start of the next
         # motion, planned now.
-        self.current, self._at_release = None, True
+        self.current = None
+        self.cup.released()
         self.enter(LoaderState.WAIT, now, self.s.idle_timeout)
         self._wait(obs)
 
-    def _rise(self, obs: Observation) -> None:
-        if self.motion_over(obs, 'the rise from the place'):
-            self.enter(LoaderState.WAIT, obs.now, self.s.idle_timeout)
-
-    def _retreat(self, obs: Observation) -> None:
-        if self.motion_over(obs, 'retreat'):
-            self.enter(LoaderState.WAIT, obs.now, self.s.idle_timeout)
-
-    def _home(self, obs: Observation) -> None:
-        if self.motion_over(obs, 'home'):
-            self.enter(LoaderState.DONE, obs.now, math.inf)
+    def _when_there(self, what: str, then: LoaderState, obs: Observation) -> None:
+        """A motion to ``what`` (a rise, a retreat, home): once it is over, ``then``."""
+        if self.motion_over(obs, what):
+            self.enter(then, obs.now, math.inf if then is LoaderState.DONE
+                       else self.s.idle_timeout)

@@ -1,0 +1,310 @@
+"""How the Zu 12 meets a material on the moving belt and takes it to its place (no ROS): the
+pick's motion (over it at a first guess, then met where the belt will have taken it, down, on
+it while the cup seals, up), the lift out of the end stop's queue, and the way onto its place.
+The loader (loader.py) decides what to pick and when; this plans it, with the arm's IK and the
+pure geometry of pick_geometry.py."""
+from __future__ import annotations
+
+from dataclasses import dataclass, field, replace
+from typing import Any, Callable, List, Optional, Union
+
+import numpy as np
+
+from controllers.bezier import Pose2D
+from controllers.pick_place import PickTiming, follow_pick
+from controllers.time_optimal import (
+    SAMPLE_PERIOD_S,
+    PlanError,
+    TooLate,
+    Waypoint,
+    plan,
+    timed_path,
+)
+from coordinator.layout import CellLayout, slot_in_world
+from coordinator.pipeline.arm import Arm
+from coordinator.pipeline.belt import BeltModel
+from coordinator.pipeline.cup import CupPlace
+from coordinator.pipeline.materials import MaterialBook
+from coordinator.pipeline.model import (
+    DOWN,
+    EDGE_CLEARANCE_M,
+    PICK_LEAD_S,
+    PICK_REPLAN_STEP_S,
+    PICK_TRIES,
+    QUEUE_LIFT_PAUSE_LEAD_S,
+    SETTLE_S,
+    Material,
+    Observation,
+    Points,
+    Settings,
+    known,
+)
+from coordinator.pipeline.pick_geometry import (
+    continuous,
+    edge_point,
+    lift_line,
+    over_the_belt,
+    place_points,
+)
+
+# What the Zu 12 lifts out of the end stop's queue rises this far over the tallest material
+# that can stand next to it before it swings away [m].
+QUEUE_SWING_CLEARANCE_M = 0.05
+# A material met at rest in the end stop's queue is met this long after its belt pause began,
+# and that no sooner than it came to rest there [s].
+QUEUE_REST_S = 0.1
+
+
+@dataclass
+class PlaceWay:
+    """A held material's way onto its place (joints), and the rise from there."""
+    waypoints: List[Waypoint]     # from the lift point: over the belt's edge, above, down
+    then: np.ndarray              # where the cup rises to over the place (not to a pick)
+    above: np.ndarray             # above the place (x, y, z)
+    above_q: np.ndarray
+    onto_plate: bool
+
+
+@dataclass
+class Ahead:
+    """A pick's motion that goes on to the place: the way there, and the lift point it passes
+    on the way."""
+    way: PlaceWay
+    q_lift: np.ndarray
+    lift_end: float               # (about when it passes it)
+
+
+# A pick that cannot be made before the material leaves the belt.
+LEAVE = 'leave'
+
+
+@dataclass
+class PickPlan:
+    """A pick as it is planned: its material and timing, where the belt takes the material, and
+    the motion to meet it there (joints over it, over the belt's edge, at the lift point)."""
+    m: Material
+    timing: PickTiming
+    track: Callable[[float], np.ndarray]
+    start: float                  # when the motion starts
+    contact: float                # when the cup is on the material
+    q_hover: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    q_edge: Optional[np.ndarray] = None
+    q_lift: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    waypoints: List[Waypoint] = field(default_factory=list)
+    points: Points = field(default_factory=list)
+
+
+class PickPlanner:
+    """Plans the Zu 12's picks and places; keeps the last pick's lift point."""
+
+    def __init__(self, arm: Arm, book: MaterialBook, belt: BeltModel, cup: CupPlace,
+                 layout: CellLayout, settings: Settings) -> None:
+        self.arm, self.book, self.belt, self.cup = arm, book, belt, cup
+        self.layout, self.s = layout, settings
+        self.lift_point: Optional[np.ndarray] = None     # the last pick's lift point (x, y, z)
+
+    def approach(self, obs: Observation, pick: 'PickPlan') -> str:
+        """The joints over the material at a first guess of the contact time, and over the
+        belt's edge on the way there from a place; the contact no sooner than the arm can be
+        there. Why not, if it cannot be."""
+        m, timing = pick.m, pick.timing
+        seed = self.arm.motion.goal if self.arm.has_motion else self.arm.q(obs)
+        # The hover point moves with the contact time: a first guess from a rest-to-rest move
+        # there, then later by a little until the arm makes it.
+        hover = follow_pick(pick.track, pick.contact, m.size, timing)[0][0][1]
+        q_hover = self.arm.solve(hover, DOWN, 'world', seed)
+        if q_hover is None:
+            return 'no IK solution for the pick'
+        pick.q_hover = q_hover
+        # From a place: back over the belt's edge on the way to the hover point.
+        if self.cup.at_release and self.cup.above is not None:
+            # (From the plate: round the arc, the cup clear of what rides on the belt.)
+            lay, above = self.layout, self.cup.above
+            edge = (edge_point(lay, hover, above, m.size + EDGE_CLEARANCE_M, arc=True)
+                    if self.cup.onto_plate else edge_point(lay, hover, above, EDGE_CLEARANCE_M))
+            pick.q_edge = self.arm.solve(edge, DOWN, 'world',
+                                         known(self.cup.above_q, 'the point above the place'))
+        # (A first guess: the way to the hover point, at rest there; a plan that cannot make
+        # it says by how much.)
+        way, wait = self.cup.from_release([Waypoint(q_hover)], pick.q_edge)
+        reach = wait + plan(self.arm.q(obs), way, self.arm.limits).end
+        pick.contact = max(pick.contact, pick.start + reach + timing.descend)
+        return ''
+
+    def not_as_it_queues(self, m: Material, contact: float, timing: PickTiming) -> float:
+        """The contact, or later: not while the material comes to rest against another in the
+        end stop's queue, between the cup's contact and the lift. Met on the move there, the
+        cup carried a 50 mm blue on into the purple the stop held (the camera's estimate 4 mm
+        behind), pressed it, and the lift dragged the purple up and off the belt's end. It is
+        met once at rest there instead (the belt pauses around that lift; the pause begins
+        QUEUE_LIFT_PAUSE_LEAD_S before the contact, after it has come to rest)."""
+        belt = self.belt
+        rest = belt.comes_to_rest(m)
+        # (Resting there by the contact but not yet as the pause begins, it would stop short.)
+        begins = contact - QUEUE_LIFT_PAUSE_LEAD_S - QUEUE_REST_S
+        if begins < rest <= contact + timing.dwell + timing.lift and belt.crowded(m, rest):
+            return rest + QUEUE_LIFT_PAUSE_LEAD_S + QUEUE_REST_S
+        return contact
+
+    def lifting(self, pick: 'PickPlan') -> PickTiming:
+        """The pick's timing, its lift high enough out of the end stop's queue for what it holds
+        to pass QUEUE_SWING_CLEARANCE_M over the tallest material that can be next to it: the
+        swing on from the lift point sags and bulges outwards as it begins (a green lifted
+        7 cm from behind an orange came down 1.3 cm and 2 cm sideways onto it, and knocked it
+        over)."""
+        m, timing = pick.m, pick.timing
+        if not (self.belt.held_by(m, pick.contact) and self.belt.crowded(m, pick.contact)):
+            return timing
+        high = self.layout.material_size + QUEUE_SWING_CLEARANCE_M
+        return replace(timing, lift_height=max(timing.lift_height, high))
+
+    def meet(self, obs: Observation, pick: 'PickPlan') -> str:
+        """The pick's motion (``pick.points``), its contact moved later until the arm makes
+        it; why not (or LEAVE: the material leaves the belt first)."""
+        m, timing, track = pick.m, pick.timing, pick.track
+        refused = ''
+        for _ in range(PICK_TRIES):
+            if track(pick.contact)[0] < self.s.pick_x - 1e-6:
+                pick.contact = self.belt.reaches(m, self.s.pick_x)
+            pick.contact = self.not_as_it_queues(m, pick.contact, timing)
+            if track(pick.contact + timing.dwell)[0] > (self.layout.belt_end_x - m.size / 2
+                                                        + 1e-6):
+                return LEAVE                   # off the end (no stop) before the cup is on it
+            path, lift = follow_pick(track, pick.contact, m.size, self.lifting(pick),
+                                     SAMPLE_PERIOD_S)
+            self.lift_point = np.asarray(lift, float)
+            qs = self.solve_along(path, lift, pick.q_hover)
+            if qs is None:
+                return 'no IK solution for the pick path'
+            if not continuous([pick.q_hover, qs[0]]):
+                pick.q_hover = qs[0]            # (on the other branch, solved from the end)
+            times = np.array([t for t, _ in path])
+            q_path = np.array(qs[:-1])
+            v = np.gradient(q_path, times, axis=0, edge_order=2)
+            a = np.gradient(v, times, axis=0, edge_order=2)
+            # To the hover point at its time, with the path's velocity; along the path (sent as
+            # it is); then up to the lift point, at rest, as fast as the joints allow.
+            waypoints = [Waypoint(q_path[0], velocity=v[0], acceleration=a[0], at=times[0])]
+            waypoints += [Waypoint(q, velocity=vk, acceleration=ak, at=tk, direct=True)
+                          for q, vk, ak, tk in zip(q_path[1:], v[1:], a[1:], times[1:])]
+            waypoints += self.lift_way(m, pick, path[-1][1], q_path[-1], times[-1], qs[-1])
+            pick.waypoints, pick.q_lift = waypoints, qs[-1]
+            try:
+                pick.points = self.cup.plan(obs, waypoints, pick.start, pick.q_edge)
+                return ''
+            except TooLate as too_late:
+                pick.contact += max(too_late.by, 0.0) + PICK_LEAD_S / 2
+            except PlanError as exc:
+                # The joints' path along this stretch of the track is out of the limits (the
+                # IK changes branch somewhere on it): meet the material a little further on.
+                refused = f'no motion for the pick: {exc}'
+                pick.contact += PICK_REPLAN_STEP_S
+        return refused or 'the arm cannot meet the material in time'
+
+    def lift_way(self, m: Material, pick: 'PickPlan', on: np.ndarray, q_on: np.ndarray,
+                  t_on: float, q_lift: np.ndarray) -> List[Waypoint]:
+        """From the dwell (the cup on the material at ``on``, joints ``q_on``, at ``t_on``) up
+        to the lift point: as fast as the joints allow; out of the end stop's queue, with
+        another material right behind, straight up along the line, timed along it
+        (timed_path). The joints' own way from the dwell to the lift point bowed 1.8 cm
+        upstream as it began, into the material behind, and lifted the queue with it (the
+        ones behind rose up to 4 cm and fell back turned 23 degrees)."""
+        timing = pick.timing
+        if not (self.belt.held_by(m, pick.contact) and self.belt.crowded(m, pick.contact)):
+            return [Waypoint(q_lift, min_time=timing.lift)]
+        points = lift_line(on, self.lift_point) if self.lift_point is not None else []
+        line = self.arm.solve_path(points, q_on) if points else []
+        if line is None or not continuous([q_on, *line, q_lift]):
+            return [Waypoint(q_lift, min_time=timing.lift)]
+        try:
+            return timed_path([q_on, *line, q_lift], self.arm.limits, t_on,
+                              min_time=timing.lift)
+        except PlanError:
+            return [Waypoint(q_lift, min_time=timing.lift)]
+
+    def solve_along(self, path: Any, lift: np.ndarray, seed: np.ndarray
+                     ) -> Optional[List[np.ndarray]]:
+        """Joints along a pick's path and at its lift point, on one IK branch: near the Zu 12's
+        base its elbow can flip between two samples (a path the planner refuses, "joint 3
+        acceleration -320"); then the whole path is solved again from its end backwards, on
+        the branch the end is on. None if neither is continuous."""
+        points = [p for _, p in path] + [lift]
+        qs = self.arm.solve_path(points, seed)
+        if qs is None or continuous(qs):
+            return qs
+        back = self.arm.solve_path(points[::-1], qs[-1])
+        if back is None or not continuous(back):
+            return None
+        return back[::-1]
+
+    def onward(self, obs: Observation, pick: 'PickPlan') -> Optional[Ahead]:
+        """On to the place in the same motion, through the lift point without stopping there:
+        the swing starts during the lift, and the place does not wait for an arrival check at
+        the lift point and a plan after it. (A missed grasp stops the arm at the lift point
+        instead: see _pick.)"""
+        m = pick.m
+        place_way = self.place_way(m, self.lift_point, obs.youbot_pose, pick.q_lift)
+        if isinstance(place_way, str):
+            return None                 # (the place is planned, or its failure told, later)
+        # Lifted out of a queue (at the end stop), it comes to rest at the lift point, clear
+        # of its neighbours' tops, before it swings: a swing begun during the lift dragged a
+        # purple into the green queued behind it (the arm stalled, the purple fell back onto
+        # the belt).
+        crowded = self.belt.crowded(m, pick.contact)
+        through = (pick.waypoints if pick.waypoints[-1].direct else   # (straight up: _lift_way)
+                   pick.waypoints[:-1] + [Waypoint(pick.q_lift, stop=crowded,
+                                                   min_time=pick.timing.lift)])
+        try:
+            whole = self.cup.plan(obs, through + place_way.waypoints, pick.start, pick.q_edge)
+        except PlanError:
+            return None                 # (the place is planned at the lift point then)
+        ahead = Ahead(place_way, pick.q_lift, pick.points[-1][0])
+        pick.points = whole
+        return ahead
+
+    def place_way(self, m: Material, lift: Optional[np.ndarray], youbot_pose: Pose2D,
+                   seed: np.ndarray) -> Union['PlaceWay', str]:
+        """The way from the lift point ``lift`` (x, y, z; None: from above the place) onto
+        ``m``'s place, or why there is none: over the belt's edge, to ``place_height`` above
+        the place, and straight down until the material is just above it."""
+        size, lay = m.size, self.layout
+        onto_plate = lay.carried(m.color)
+        if not onto_plate:
+            region = lay.region_of(m.color)
+            free = self.book.free_places(region.name, m)
+            if not free:
+                return f'{region.name} is full (its {len(region.slots)} slots are taken)'
+            self.book.keep_place(m, free[0])
+            target = region.slots[m.place]
+        else:
+            free = self.book.plate_slots(m)
+            if not free:
+                return 'the youBot plate is full'
+            self.book.keep_slot(m, free[0])
+            target = slot_in_world(youbot_pose, self.layout.plate_slots[m.slot],
+                                   self.layout.youbot_base_z, size)
+        t = self.s.timing
+        # Down onto it from over the materials there already.
+        release, above, transfer = place_points(
+            target, size, t, self.book.set_down_rise(
+                None if onto_plate else lay.destination(m.color)), lay.belt_top)
+        # Over the belt's near edge (rather than up to the carry height over the place and down
+        # again), what the cup holds 5 cm over what can ride on the belt: onto the plate round
+        # the arc (the way crosses the edge near the plate; before that it lies over the
+        # belt), onto the ground target on the straight line, 5 cm over the belt's top.
+        edge = (transfer if lift is None else
+                edge_point(lay, lift, above, 2 * size + EDGE_CLEARANCE_M, arc=True) if onto_plate
+                else edge_point(lay, lift, above, size + EDGE_CLEARANCE_M))
+        qs = self.arm.solve_path([transfer, above, release, edge], seed)
+        if qs is None:
+            return 'no IK solution for the place path'
+        q_transfer, q_above, q_release, q_edge = qs
+        # Over to a place lower than the belt, the joints' way from the edge down to above it
+        # can bulge back out over the belt: then through the transfer point (above the place,
+        # clear of the belt) first, and straight down from there.
+        over = ([Waypoint(q_transfer, stop=False)]
+                if over_the_belt(self.layout, q_edge, q_above, size) else [])
+        return PlaceWay([Waypoint(q_edge, stop=False), *over, Waypoint(q_above, stop=False),
+                         Waypoint(q_release, hold=SETTLE_S, min_time=t.place_descend)],
+                        q_transfer, above, q_above, onto_plate)
+
