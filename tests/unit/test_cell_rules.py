@@ -304,7 +304,7 @@ def test_a_plate_slot_whose_material_the_youbot_failed_to_unload_is_not_used_aga
     assert 0 in run_.book.plate_taken() and 2 not in run_.book.plate_taken()
     assert 0 not in run_.book.plate_slots(new) and 2 in run_.book.plate_slots(new)
     # And the youBot's lifts keep clear of it.
-    assert (*layout.plate_slots[0], 0.05) in run_.transport._others(new)
+    assert (*layout.plate_slots[0], 0.05) in run_.transport.planner.others(new)
 
 
 def test_a_pick_whose_joint_path_is_out_of_the_limits_meets_the_material_further_on(
@@ -393,7 +393,7 @@ def test_every_pool_drop_is_reached_from_every_slot_of_its_stands_row(size):
             for d in range(len(stand.drops)):
                 run_.book._dropped = {stand.name: set(range(len(stand.drops))) - {d}}
                 # (Standing, the planner may slide the base along the stand's line.)
-                path = tr._unload_path(m, stand.pose, np.zeros(5), slide=True)
+                path = tr.planner.unload_path(m, stand.pose, np.zeros(5), slide=True)
                 assert path is not None and path.place == d, (stand.name, k, d)
 
 
@@ -435,7 +435,7 @@ def test_an_unload_that_stalled_short_of_its_drop_is_a_failure_not_a_delivery():
 
     from coordinator.pipeline import Material, Observation, Pipeline, Settings
     from coordinator.pipeline.model import MaterialStatus, TransportState
-    from coordinator.pipeline.unload_geometry import DROP_REACH_TOLERANCE_M
+    from coordinator.pipeline.unload_geometry import DROP_REACH_TOLERANCE_M, short_of
     class Ports(_YoubotIK):
         def grip(self, arm, on):
             return True, ''
@@ -450,12 +450,12 @@ def test_an_unload_that_stalled_short_of_its_drop_is_a_failure_not_a_delivery():
         run_.materials.clear()
         run_.materials[1] = m
         stand = layout.stand_for('blue', 0)
-        path = tr._unload_path(m, stand.pose, np.zeros(5))
+        path = tr.planner.unload_path(m, stand.pose, np.zeros(5))
         tr._carry, tr.queue, tr._drop_pending = path, [m], False
         tr.state = TransportState.CARRY                     # (carrying it to its drop)
         q = path.contact if where == 'slot' else path.drop
         obs = Observation(10.0, np.zeros(6), q, stand.pose, youbot_holding=True)
-        assert (tr._short_of_drop(obs) > DROP_REACH_TOLERANCE_M) is not delivered
+        assert (short_of(q, path.drop) > DROP_REACH_TOLERANCE_M) is not delivered
         tr._carry_to_drop(obs)
         assert (m.status is MaterialStatus.DELIVERED) is delivered, m
         assert m.left_on_plate is not delivered
@@ -485,7 +485,7 @@ def test_an_unload_stalled_under_a_load_the_arm_cannot_hold_names_the_joint_and_
     m = Material(1, 'orange', np.zeros(3), 0.0, 3, status='on_plate', slot=0)
     run_.materials[1] = m
     stand = layout.stand_for('orange', 0)
-    path = tr._unload_path(m, stand.pose, np.zeros(5))
+    path = tr.planner.unload_path(m, stand.pose, np.zeros(5))
     tr._carry, tr.queue, tr._drop_pending = path, [m], False
     # Stalled with the arm stretched out flat (the shoulder at its forward limit).
     q = np.array([0.0, 1.5, 0.0, 0.0, 0.0])

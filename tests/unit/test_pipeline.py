@@ -1004,7 +1004,7 @@ def test_the_youbot_lifts_a_material_straight_off_its_plate_until_clear_of_its_n
                               for k in range(len(slots)) if k != slot})
         m = Material(1, color, np.zeros(3), 0.0, 3, status='on_plate', slot=slot)
         run.materials[1] = m
-        path = transport._unload_path(m, layout.stand_for(color, slot).pose, YOUBOT_CARRY_Q)
+        path = transport.planner.unload_path(m, layout.stand_for(color, slot).pose, YOUBOT_CARRY_Q)
         assert path is not None
         transport._carry = path
         obs = Observation(0.0, np.zeros(6), path.contact.copy(), (0.0, 0.0, 0.0))

@@ -20,8 +20,8 @@ from coordinator.layout import (
 )
 from coordinator.pipeline import Material, Observation, Pipeline, Settings
 from coordinator.pipeline.model import TransportState
-from coordinator.pipeline.transport import SLIDE_MIN_M
 from coordinator.pipeline.unload_geometry import YOUBOT_CARRY_Q
+from coordinator.pipeline.unload_planner import SLIDE_MIN_M
 from coordinator.reach import youbot_holds
 
 
@@ -85,7 +85,7 @@ def test_a_heavy_material_is_held_all_the_way_to_every_pool_drop(mass):
             run_.materials[1] = m
             for d in range(len(stand.drops)):
                 run_.book._dropped = {stand.name: set(range(len(stand.drops))) - {d}}
-                path = tr._unload_path(m, stand.pose, YOUBOT_CARRY_Q, high=True, slide=True)
+                path = tr.planner.unload_path(m, stand.pose, YOUBOT_CARRY_Q, high=True, slide=True)
                 assert path is not None and path.place == d, (stand.name, k, d)
                 assert youbot_holds([path.contact, *path.lift, path.over, path.drop], mass)
                 if path.pose is not stand.pose:
@@ -97,7 +97,7 @@ def test_a_heavy_material_is_held_all_the_way_to_every_pool_drop(mass):
                     assert stand.slide[0] - 1e-9 <= along @ heading <= stand.slide[1] + 1e-9
                     assert np.linalg.norm(along) >= SLIDE_MIN_M
                     # Without the slide, the arm holds it out to no drop as the base stands.
-                    assert tr._unload_way(m, stand.pose, YOUBOT_CARRY_Q, True, mass, [
+                    assert tr.planner.unload_way(m, stand.pose, YOUBOT_CARRY_Q, True, mass, [
                         (d, stand.drops[d])], 0.0) is None
     assert slid > 0
 
@@ -128,7 +128,7 @@ def test_an_unload_from_elsewhere_on_the_stand_s_line_drives_there_as_the_arm_go
     stand = layout.stand('pool_right')
     m = Material(1, 'orange', np.zeros(3), 0.0, 3, status='on_plate', slot=1, size=0.05)
     run_.materials[1] = m
-    tr.queue, tr._drive_goal = [m], stand.name
+    tr.queue, tr.base.goal = [m], stand.name
     tr.state = TransportState.DRIVE                       # (there, the base standing)
     # Only a far drop left: held out to only from further along the wall.
     far = max(range(len(stand.drops)), key=lambda d: np.linalg.norm(
@@ -136,8 +136,8 @@ def test_an_unload_from_elsewhere_on_the_stand_s_line_drives_there_as_the_arm_go
     run_.book._dropped = {stand.name: set(range(len(stand.drops))) - {far}}
     tr._plan_unload(Observation(0.0, np.zeros(6), YOUBOT_CARRY_Q, stand.pose), m)
     assert tr.state is TransportState.GRASP and tr.driving
-    assert tr._drive_goal == stand.name and tr._carry.place == far
-    assert tr._target == tr._carry.pose == stand.abeam(stand.drops[far])
+    assert tr.base.goal == stand.name and tr._carry.place == far
+    assert tr.base.target == tr._carry.pose == stand.abeam(stand.drops[far])
     end = Ports.followed.path.key_poses[-1]
-    assert tuple(end) == pytest.approx(tr._target)
-    assert tr._stand_pose(None) == tr._target       # (what it plans for while it drives)
+    assert tuple(end) == pytest.approx(tr.base.target)
+    assert tr.base.stand_pose(None) == tr.base.target       # (what it plans for while it drives)

@@ -1,0 +1,212 @@
+"""How the youBot takes a material off its plate and over to its drop (no ROS): the joints of an
+unload at one tool tilt, from where the base stands or slid along its stand's line for a heavy
+material, and the lift off the plate clear of the others; with the pure geometry of
+unload_geometry.py. The transport (transport.py) decides what to unload and when."""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import List, Optional, Sequence, Tuple
+
+import numpy as np
+
+from controllers.bezier import Pose2D
+from controllers.time_optimal import PlanError, Waypoint, timed_path
+from coordinator.layout import CellLayout, world_to_base
+from coordinator.pipeline.arm import YoubotArm
+from coordinator.pipeline.materials import MaterialBook
+from coordinator.pipeline.model import Material, Observation, Points, Settings
+from coordinator.pipeline.unload_geometry import (
+    YOUBOT_GRASP_STANDOFF_M,
+    clear_of_the_plate,
+    grip_points,
+    held_offset,
+)
+from coordinator.reach import YOUBOT_LOAD_MAX, youbot_hold_need
+
+
+@dataclass
+class UnloadPath:
+    """The youBot's joint positions for one unload, all at one tool tilt."""
+    hover: np.ndarray             # over the material on the plate
+    contact: np.ndarray           # the fingers round it
+    lift: List[np.ndarray]        # up off the plate, straight, to clear of its neighbours
+    over: np.ndarray              # 5 cm above its drop
+    drop: np.ndarray              # where it is let go
+    place: int = -1               # the destination's slot it is set down on (not the pool)
+    pose: Optional[Pose2D] = None  # where the base stands for it
+
+
+# A youBot unload whose drop is reached at another tool tilt than its grip rises this much more
+# before the wrist turns [m].
+TILT_CHANGE_RISE_M = 0.06
+# A heavy material's unload slides the base along its stand's line only this far or further
+# (nearer, it is unloaded from where the base stands) [m].
+SLIDE_MIN_M = 0.03
+# The speeds at its top tried for a lift that goes on to the drop, as fractions of its own top
+# speed: the one whose whole motion ends soonest within the joints' limits is kept.
+UNLOAD_LIFT_END_SPEEDS = (0.0, 0.25, 0.5, 0.75, 1.0)
+
+
+class UnloadPlanner:
+    """Plans the youBot's unloads."""
+
+    def __init__(self, arm: YoubotArm, book: MaterialBook, layout: CellLayout,
+                 settings: Settings) -> None:
+        self.arm, self.book, self.layout, self.s = arm, book, layout, settings
+
+    def stand_for(self, m: Material) -> str:
+        """The stand the base unloads ``m`` from."""
+        return self.layout.stand_for(m.color, m.slot).name
+
+    def unload_path(self, m: Material, pose: Pose2D, seed: np.ndarray,
+                     high: bool = False, slide: bool = False) -> Optional['UnloadPath']:
+        """Joint positions over the material on the plate (5 cm over it with ``high``, else 3), on
+        it, up its straight lift clear of its neighbours, above its drop and at its drop, for
+        the base standing at ``pose``. The fingers come down from 3 cm over its top face (the
+        neighbours' tops are level with it). The material rises 6 cm, over their 5 cm, before it
+        swings out, through a point every centimetre at the same tool tilt: between two points
+        6 cm apart the joints' straight line swings what is held 2 cm sideways and tilts it 8
+        degrees, into a neighbour 1 cm away. With ``slide``, where the arm holds the material
+        at none of its drops from ``pose``, the base may stand elsewhere along its stand's
+        line: abeam the drop nearest there that it holds it at (UnloadPath.pose)."""
+        size, t = m.size, self.s.timing
+        mass = self.layout.rule(m.color).mass
+        stand = self.stand_for(m)
+        region = self.layout.region_of(m.color)
+        # The swing over to a set-down comes in over what is there already (5 cm over the drop
+        # is too little for 55 mm materials): it is as high over the drop as that asks.
+        clear = 0.0 if region.drop else self.book.set_down_rise(region.name)
+        if not region.drop:
+            # Its destination's free slots, the first the arm reaches from here.
+            up = np.array([0.0, 0.0, size + t.place_gap + YOUBOT_GRASP_STANDOFF_M])
+            candidates = [(k, region.slots[k] + up) for k in self.book.free_places(region.name, m)]
+        else:
+            # The stand's first unused drop; if the arm cannot reach it from this slot as the
+            # base stands (a far slot, a base a centimetre off), the others in turn. A drop
+            # spot is used once: a cube dropped onto another can tumble back over the wall.
+            drops = self.layout.stand(stand).drops
+            used = self.book.dropped(stand)
+            candidates = [(k, d) for k, d in enumerate(drops) if k not in used]
+        # First a way whose every pose the arm holds with the material at rest (its load
+        # within youbot_holds); only if there is none, the first it reaches (a heavy material
+        # held out over a far drop sags the arm, but is still delivered).
+        for load in (mass, 0.0) if mass > 0.0 else (0.0,):
+            path = self.unload_way(m, pose, seed, high, load, candidates, clear)
+            if path is None and slide and load > 0.0:
+                path = self.slid_way(m, pose, seed, high, load, candidates, clear)
+            if path is not None:
+                return path
+        return None
+
+    def slid_way(self, m: Material, pose: Pose2D, seed: np.ndarray, high: bool, load: float,
+                  candidates: Sequence[Tuple[int, np.ndarray]], clear: float
+                  ) -> Optional['UnloadPath']:
+        """_unload_path's way to a candidate from the base slid along its stand's line abeam
+        of it (UnloadStand.abeam; at least SLIDE_MIN_M from ``pose``), in the candidates' order
+        (the pool's spots nearest its wall first, a destination's slots nearest the stand): a
+        heavy material's far drops are beyond what the arm holds (the shoulder sags, or the
+        arm stalls). (Taken by the shortest slide, a 0.08 kg orange went to a spot 21 cm in from
+        the wall, 7 cm from one that had landed 5 cm off its own, and landed on it.)"""
+        stand = self.layout.stand(self.stand_for(m))
+        for place, point in candidates:
+            at = stand.abeam(point)
+            if math.hypot(at[0] - pose[0], at[1] - pose[1]) < SLIDE_MIN_M:
+                continue
+            path = self.unload_way(m, at, seed, high, load, [(place, point)], clear)
+            if path is not None:
+                return path
+        return None
+
+    def unload_way(self, m: Material, pose: Pose2D, seed: np.ndarray, high: bool,
+                    load: float, candidates: Sequence[Tuple[int, np.ndarray]], clear: float
+                    ) -> Optional['UnloadPath']:
+        """_unload_path's way to the first of ``candidates`` (place, world point) the arm
+        reaches, holding ``load`` kg at rest from the grip on."""
+        region = self.layout.region_of(m.color)
+        contact, hover, lift = grip_points(self.layout.plate_slots[m.slot], m.size,
+                                           m.unload_attempts, high, self.tallest_other(m))
+        for place, drop_world in candidates:
+            drop = world_to_base(pose, drop_world)
+            drop[2] -= self.layout.youbot_base_z
+            # Over the drop, at least as high as the lift's top: a swing there keeps what is
+            # held over the plate's other materials where a joint motion from the lift's top
+            # straight down to a pool drop (lower than the plate) would swing it into the next
+            # one. Taken only when that is so (_lift).
+            over = drop.copy()
+            over[2] = max(drop[2] + 0.05, lift[-1][2], drop[2] + clear)
+            # (Held from the contact on: the arm must hold it still all the way to its drop.)
+            path = self.arm.solve_tilted([hover, contact, *lift, over, drop],
+                                         np.array(seed, float), load, held_from=1)
+            if path is None and region.drop:
+                # A drop spot further in is reached leaning another way: the material, let go
+                # over the pool, need not stay level (one it is set down must). It rises
+                # TILT_CHANGE_RISE_M more first, still level, so that what it holds clears the
+                # others on the plate as the wrist turns.
+                rise = np.array(lift[-1], float) + np.array([0.0, 0.0, TILT_CHANGE_RISE_M])
+                grip = self.arm.solve_tilted([hover, contact, *lift, rise], np.array(seed, float),
+                                             load, held_from=1)
+                above = np.array(over, float)
+                above[2] = max(over[2], rise[2])
+                out = (self.arm.solve_tilted([above, drop], grip[-1], load) if grip is not None
+                       else None)
+                path = grip + out if grip is not None and out is not None else None
+            if path is not None:
+                return UnloadPath(path[0], path[1], path[2:-2], path[-2], path[-1], place,
+                                  pose)
+        return None
+
+    def lift(self, obs: Observation, m: Material, carry: UnloadPath,
+             then: Sequence[Waypoint] = (), detour: Sequence[Waypoint] = ()) -> Points:
+        """The motion from the grip: the straight lift off the plate, timed along the line (a
+        joint motion between its ends would swing the material into its neighbours), at rest
+        at its top, or going on from there through ``then`` (or ``detour`` where ``then``
+        would not keep ``m`` clear of the plate's other materials): at the speed, of those
+        tried, that ends soonest and keeps the joints within their limits."""
+        limits = self.arm.limits
+        others, offset = self.others(m), self.held_offset(obs, m)
+        for way in ((then, detour) if detour else (then,)):
+            best = None
+            for speed in (UNLOAD_LIFT_END_SPEEDS if way else (0.0,)):
+                lift = timed_path([self.arm.q(obs), *carry.lift], limits,
+                                  self.arm.clock.now + self.s.plan_latency, end_speed=speed,
+                                  min_time=self.s.timing.lift)
+                try:
+                    points = self.arm.plan(self.arm.q(obs), [*lift, *way])
+                except PlanError:
+                    continue
+                within = all(np.all(np.abs(v) <= limits.velocity) for _, _, v, _ in points)
+                if (within and (best is None or points[-1][0] < best[-1][0])
+                        and clear_of_the_plate(points, others, m.size, offset)):
+                    best = points
+            if best is not None:
+                return best
+        raise PlanError('no motion off the plate within the joint limits and clear of the '
+                        'other materials')
+
+    def tallest_other(self, m: Material) -> float:
+        """The tallest material on the plate but ``m`` (0: none)."""
+        return max((o.size for o in self.book.materials.values()
+                    if o.on_the_plate and o is not m), default=0.0)
+
+    def held_offset(self, obs: Observation, m: Material) -> np.ndarray:
+        """Where ``m``, gripped over its plate slot, is from the tool (held_offset)."""
+        return held_offset(self.arm.q(obs), self.layout.plate_slots[m.slot])
+
+    def others(self, m: Material) -> List[Tuple[float, float, float]]:
+        """The materials on the plate but ``m``: their slots (x, y) and sizes."""
+        return [(*self.layout.plate_slots[o.slot], o.size)
+                for o in self.book.materials.values()
+                if o.on_the_plate and o.slot >= 0 and o.id != m.id]
+
+    def held_beyond(self, obs: Observation, m: Material) -> str:
+        """Where the arm, as it stands, holds ``m`` beyond what it may (YOUBOT_LOAD_MAX of a
+        joint's effort, at rest): which joint, and the torque it takes ('' where it does not):
+        an arm that cannot hold its load sags, and says why."""
+        mass = self.layout.rule(m.color).mass
+        joint, torque, effort = youbot_hold_need(self.arm.q(obs), mass)
+        if torque <= YOUBOT_LOAD_MAX * effort:
+            return ''
+        return (f'; holding {mass:g} kg there, {joint} needs {torque:.2f} N m at rest '
+                f'(its motor: {effort:g} N m)')
+
