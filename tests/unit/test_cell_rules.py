@@ -301,8 +301,8 @@ def test_a_plate_slot_whose_material_the_youbot_failed_to_unload_is_not_used_aga
                     failure='dropped on the way to its place')
     new = Material(3, 'orange', np.zeros(3), 0.0, 3)
     run_.materials.update({1: stuck, 2: gone, 3: new})
-    assert 0 in run_.book.plate_taken() and 2 not in run_.book.plate_taken()
-    assert 0 not in run_.book.plate_slots(new) and 2 in run_.book.plate_slots(new)
+    assert 0 in run_.loader.room.plate_taken() and 2 not in run_.loader.room.plate_taken()
+    assert 0 not in run_.loader.room.plate_slots(new) and 2 in run_.loader.room.plate_slots(new)
     # And the youBot's lifts keep clear of it.
     assert (*layout.plate_slots[0], 0.05) in run_.transport.planner.others(new)
 

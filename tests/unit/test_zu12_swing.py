@@ -37,7 +37,7 @@ def test_the_way_onto_a_ground_slot_keeps_the_held_material_over_what_rides_on_t
                      layout.belt_top + size + 0.07])
     through = 0
     for k in range(len(layout.regions['ground_target'].slots)):
-        run_.book.free_places = lambda name, material, k=k: [k]
+        zu12.planner.room.free_places = lambda name, material, k=k: [k]
         way = zu12.planner.place_way(m, lift, layout.youbot_home, READY)
         qs = [w.q for w in way.waypoints]
         through += len(qs) == 4                     # (edge, transfer, above, release)
@@ -66,7 +66,7 @@ def test_the_way_back_from_a_low_place_rises_over_it_before_it_swings_to_the_bel
     zu12 = run_.loader
     m = Material(1, 'green', np.zeros(3), 0.0, 3, size=0.052)
     lift = np.array([layout.belt_end_x - 0.026, layout.belt_y, layout.belt_top + 0.122])
-    run_.book.free_places = lambda name, material: [0]
+    zu12.planner.room.free_places = lambda name, material: [0]
     way = zu12.planner.place_way(m, lift, layout.youbot_home, READY)
     zu12._adopt(way)
     zu12.cup.released()

@@ -41,6 +41,7 @@ from coordinator.pipeline.model import (
 )
 from coordinator.pipeline.pick_planner import LEAVE, Ahead, PickPlan, PickPlanner, PlaceWay
 from coordinator.pipeline.record import EventLog
+from coordinator.pipeline.room import Room
 
 _S = LoaderState
 # The states each state may be followed by (the loader's only way between states; `enter`
@@ -78,6 +79,7 @@ class Loader(Machine):
         waits at home for its load."""
         super().__init__(arm, log, settings, LoaderState.START)
         self.book, self.belt, self.layout, self.ports = book, belt, layout, ports
+        self.room = Room(book, layout, settings)          # (a view: questions on the book)
         self.youbot_loading = youbot_loading
         self.lag = 0.0                    # the longest a pick's plan has taken (real time) [s]
         self.current: Optional[Material] = None     # the material being picked or placed
@@ -136,7 +138,7 @@ class Loader(Machine):
     def loadable(self, m: Material) -> bool:
         """Whether the Zu 12 may put ``m`` onto the youBot's plate now: it waits at home, and
         has a slot for it."""
-        return self.youbot_loading() and bool(self.book.plate_slots(m))
+        return self.youbot_loading() and bool(self.room.plate_slots(m))
 
     def _next(self, waiting: Sequence[Material]) -> Optional[Material]:
         """The next material to pick: the most downstream one bound for the youBot's plate (the

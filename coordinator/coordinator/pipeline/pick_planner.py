@@ -46,6 +46,7 @@ from coordinator.pipeline.pick_geometry import (
     over_the_belt,
     place_points,
 )
+from coordinator.pipeline.room import Room
 
 # What the Zu 12 lifts out of the end stop's queue rises this far over the tallest material
 # that can stand next to it before it swings away [m].
@@ -100,6 +101,7 @@ class PickPlanner:
     def __init__(self, arm: Arm, book: MaterialBook, belt: BeltModel, cup: CupPlace,
                  layout: CellLayout, settings: Settings) -> None:
         self.arm, self.book, self.belt, self.cup = arm, book, belt, cup
+        self.room = Room(book, layout, settings)
         self.layout, self.s = layout, settings
         self.lift_point: Optional[np.ndarray] = None     # the last pick's lift point (x, y, z)
 
@@ -271,13 +273,13 @@ class PickPlanner:
         onto_plate = lay.carried(m.color)
         if not onto_plate:
             region = lay.region_of(m.color)
-            free = self.book.free_places(region.name, m)
+            free = self.room.free_places(region.name, m)
             if not free:
                 return f'{region.name} is full (its {len(region.slots)} slots are taken)'
             self.book.keep_place(m, free[0])
             target = region.slots[m.place]
         else:
-            free = self.book.plate_slots(m)
+            free = self.room.plate_slots(m)
             if not free:
                 return 'the youBot plate is full'
             self.book.keep_slot(m, free[0])
@@ -286,7 +288,7 @@ class PickPlanner:
         t = self.s.timing
         # Down onto it from over the materials there already.
         release, above, transfer = place_points(
-            target, size, t, self.book.set_down_rise(
+            target, size, t, self.room.set_down_rise(
                 None if onto_plate else lay.destination(m.color)), lay.belt_top)
         # Over the belt's near edge (rather than up to the carry height over the place and down
         # again), what the cup holds 5 cm over what can ride on the belt: onto the plate round

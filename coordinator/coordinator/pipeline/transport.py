@@ -38,6 +38,7 @@ from coordinator.pipeline.model import (
     known,
 )
 from coordinator.pipeline.record import EventLog
+from coordinator.pipeline.room import Room
 from coordinator.pipeline.unload_geometry import (
     DROP_REACH_TOLERANCE_M,
     YOUBOT_CARRY_Q,
@@ -82,6 +83,7 @@ class Transport(Machine):
         super().__init__(arm, log, settings, TransportState.WAIT_LOAD)
         self.arm: YoubotArm = arm
         self.book, self.layout, self.ports = book, layout, ports
+        self.room = Room(book, layout, settings)          # (a view: questions on the book)
         self.loader_done, self.zu12_clear = loader_done, zu12_clear
         self.queue: List[Material] = []              # still to unload, the current one first
         self.base = BaseDrive(arm.name, ports, log, settings)
@@ -127,14 +129,14 @@ class Transport(Machine):
             return False
         waiting = [m for m in self.book.materials.values()
                    if m.status == MaterialStatus.SEEN and self.layout.carried(m.color)]
-        if any(self.book.plate_slots(m) for m in waiting):
+        if any(self.room.plate_slots(m) for m in waiting):
             return False
         if waiting:
             return bool(on_plate)           # (full for what waits: off to make room)
         coming = [c for c in self.layout.manifest
-                  if self.layout.carried(c) and self.book.to_come(c)]
+                  if self.layout.carried(c) and self.room.to_come(c)]
         return bool(on_plate) and not any(
-            self.layout.free_slots(c, self.book.plate_taken(), self.book.to_come_counts())
+            self.layout.free_slots(c, self.room.plate_taken(), self.room.to_come_counts())
             for c in coming)
 
     def _wait_load(self, obs: Observation) -> None:
@@ -185,10 +187,10 @@ class Transport(Machine):
             # pitches). The cell's youBot starts in the carry pose: nothing is left to do.
             if not self.motion_over(obs, 'carry pose'):
                 return
-            if self.book.carried_to_come() and not self.loader_done():
+            if self.room.carried_to_come() and not self.loader_done():
                 # More to carry: it waits here, the arm in its carry pose, for the next load.
                 self.log.event(obs.now, EventKind.WAITING_FOR_LOAD, self.arm.name,
-                               detail=f'{self.book.carried_to_come()} carried materials to come')
+                               detail=f'{self.room.carried_to_come()} carried materials to come')
                 return self.enter(TransportState.WAIT_LOAD, obs.now, math.inf)
             self.arm.go_home(obs)
             return self.enter(TransportState.FOLD, obs.now, self.arm.motion.end

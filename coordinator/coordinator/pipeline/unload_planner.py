@@ -16,6 +16,7 @@ from coordinator.layout import CellLayout, world_to_base
 from coordinator.pipeline.arm import YoubotArm
 from coordinator.pipeline.materials import MaterialBook
 from coordinator.pipeline.model import Material, Observation, Points, Settings
+from coordinator.pipeline.room import Room
 from coordinator.pipeline.unload_geometry import (
     YOUBOT_GRASP_STANDOFF_M,
     clear_of_the_plate,
@@ -54,6 +55,7 @@ class UnloadPlanner:
     def __init__(self, arm: YoubotArm, book: MaterialBook, layout: CellLayout,
                  settings: Settings) -> None:
         self.arm, self.book, self.layout, self.s = arm, book, layout, settings
+        self.room = Room(book, layout, settings)
 
     def stand_for(self, m: Material) -> str:
         """The stand the base unloads ``m`` from."""
@@ -76,11 +78,11 @@ class UnloadPlanner:
         region = self.layout.region_of(m.color)
         # The swing over to a set-down comes in over what is there already (5 cm over the drop
         # is too little for 55 mm materials): it is as high over the drop as that asks.
-        clear = 0.0 if region.drop else self.book.set_down_rise(region.name)
+        clear = 0.0 if region.drop else self.room.set_down_rise(region.name)
         if not region.drop:
             # Its destination's free slots, the first the arm reaches from here.
             up = np.array([0.0, 0.0, size + t.place_gap + YOUBOT_GRASP_STANDOFF_M])
-            candidates = [(k, region.slots[k] + up) for k in self.book.free_places(region.name, m)]
+            candidates = [(k, region.slots[k] + up) for k in self.room.free_places(region.name, m)]
         else:
             # The stand's first unused drop; if the arm cannot reach it from this slot as the
             # base stands (a far slot, a base a centimetre off), the others in turn. A drop
