@@ -1,6 +1,6 @@
 """A campaign's state on disk, checked before it is used: its plan (``campaign.json``), its
-trials' results (``trial_NNN/result.json``), and the lock that keeps a second runner out of
-its directory.
+trials' results (``trial_NNN/result.json``), the lock that keeps a second runner out of its
+directory, and its CSV and report rebuilt from what is there.
 
 Every file here may have been left by a crash, edited by hand or written by another version:
 each is read into the types the runner needs, or refused with one line that names the file
@@ -8,18 +8,21 @@ and what is wrong with it (``CampaignError``).
 """
 from __future__ import annotations
 
+import csv
 import fcntl
 import json
 import math
 import os
+import sys
 from contextlib import contextmanager
 from pathlib import Path
-from typing import IO, Any, Callable, Dict, Iterator, List, Optional, Tuple
+from typing import IO, Any, Callable, Dict, Iterator, List, Optional, Sequence, Tuple
 
 from coordinator.records import Fields, RecordError, is_int, is_number, parse_json, read_text
-from coordinator.trial_result import RESULT_FILE, TrialResult, read_result
+from coordinator.trial_result import CSV_FIELDS, RESULT_FILE, TrialResult, read_result
 from studies.sweep import SweepError, grid, parse_axis
 from studies.trial_graph import CONTROL_RATE, TIME_STEP
+from studies.trial_process import PlanItem
 from world_description import PIPELINE_CELL
 
 CAMPAIGN_FILE = 'campaign.json'
@@ -184,3 +187,58 @@ def campaign_lock(out: Path) -> Iterator[None]:
         yield
     finally:
         handle.close()
+
+
+def write_csv(trials: Sequence[TrialResult], path: Path) -> None:
+    """The trials' rows, written whole or not at all (a signal mid-write leaves the last)."""
+    scratch = path.with_name(path.name + '.new')
+    with open(scratch, 'w', newline='') as f:
+        writer = csv.DictWriter(f, CSV_FIELDS)
+        writer.writeheader()
+        for t in sorted(trials, key=lambda t: t.trial or 0):
+            writer.writerow(t.to_row())
+    os.replace(scratch, path)
+
+
+def rebuild(out: Path) -> int:
+    results, problems = trial_results(out)
+    if problems:
+        for line in problems:
+            print(f'run_trials: error: {line}; remove it, or run_trials --resume {out} runs '
+                  'that trial again', file=sys.stderr)
+        return 2
+    if not results:
+        print(f'[trials] no trial_*/result.json in {out}', file=sys.stderr)
+        return 1
+    write_csv(results, out / 'trials.csv')
+    from studies.report import write_report
+    speeds = [r.belt_speed for r in results if math.isfinite(r.belt_speed)]
+    note = (f'{len(results)} trials (lock-step), rebuilt from their results; belt speeds '
+            f'{min(speeds):.3f}-{max(speeds):.3f} m/s; seeds and wall times in trials.csv.'
+            if speeds else f'{len(results)} trials, rebuilt from their results.')
+    try:
+        plan = (read_campaign(out) or {}).get('plan', {})
+    except CampaignError:
+        plan = {}
+    world = plan.get('world') if isinstance(plan, dict) else None
+    report = write_report(results, out, {'note': note, **({'world': world} if world else {}),
+                                         'break_below': plan.get('break_below')})
+    print(f'[trials] {len(results)} trials: CSV {out / "trials.csv"}, report {report}')
+    return 0
+
+
+def finished_result(out: Path, item: PlanItem, code: str) -> Optional[TrialResult]:
+    """The result of a planned trial already in ``out`` (same seed and belt speed, made by the
+    same code), if any; a result file that cannot be used is said so, and the trial runs
+    again."""
+    path = out / f'trial_{item["trial"]:03d}' / RESULT_FILE
+    r, problem = read_result(path)
+    if problem is not None:
+        print(f'[trials] {path}: {problem}; trial {item["trial"]} runs again', flush=True)
+    if r is None:
+        return None
+    if (r.scenario_seed != item['seed'] or r.belt_speed != item['belt_speed']
+            or r.parameters != item.get('parameters', {})
+            or r.status == 'interrupted' or r.run.code != code):
+        return None
+    return r if r.trial is not None else r.with_run(trial=item['trial'])

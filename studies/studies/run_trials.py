@@ -9,25 +9,18 @@ the material order, spacing and lateral placement; the belt speed is drawn per t
 from __future__ import annotations
 
 import argparse
-import csv
 import math
 import os
-import random
 import shlex
 import signal
 import sys
-import tempfile
 import time
-from concurrent.futures import FIRST_COMPLETED, Future, ThreadPoolExecutor, wait
 from pathlib import Path
-from typing import Any, Dict, List, Mapping, NoReturn, Optional, Protocol, Sequence, Tuple
+from typing import Any, Dict, List, NoReturn, Optional, Sequence
 
 from coordinator.trial_result import (
-    CSV_FIELDS,
-    RESULT_FILE,
     TrialResult,
     code_version,
-    read_result,
 )
 from ros_common.outputs import OutputError, check_output_dir
 from studies.campaign import (
@@ -36,27 +29,25 @@ from studies.campaign import (
     CampaignError,
     campaign_lock,
     check_plan,
+    finished_result,
     read_campaign,
-    trial_results,
+    rebuild,
     write_campaign,
+    write_csv,
 )
+from studies.plan import check_sweep_worlds, check_world, plan_of
+from studies.pool import LocalPool, Pool, campaign_progress
 from studies.progress import (
     CampaignBar,
-    TrialProgress,
-    eta_seconds,
     progress_line,
-    read_progress,
     running_figures,
 )
 from studies.rerun import Rerun, RerunError, figures, first_parting, prepare
-from studies.sweep import SweepError, grid, parse_axis, point_world
 from studies.trial_graph import pipeline_graph
 from studies.trial_process import (
     INTERRUPTED,
     MAX_DOMAIN,
-    PROGRESS_FILE,
     PlanItem,
-    run_leased_trial,
     stop_all,
 )
 from world_description import PIPELINE_CELL
@@ -65,177 +56,6 @@ PROGRESS_PERIOD_S = 10.0     # wall seconds between two progress lines
 # A trial with one of these ended without an outcome of the cell (its processes failed or were
 # stopped): a re-run that ends so has failed (exit 1), whatever it changed.
 DID_NOT_RUN = ('error', 'node_timeout', 'interrupted')
-
-
-class Pool(Protocol):
-    """Where a campaign's trials run (``LocalPool``; ``trials_ray.RayPool``): trials are
-    submitted while it has room, and their results taken as they finish."""
-
-    running: Dict[int, float]       # trial -> when it started (monotonic)
-
-    @property
-    def capacity(self) -> int:
-        """Trials it runs at once."""
-
-    def describe(self) -> str: ...
-
-    def has_room(self) -> bool: ...
-
-    def busy(self) -> bool: ...
-
-    def submit(self, item: PlanItem) -> None: ...
-
-    def wait(self, timeout: float) -> Optional[TrialResult]:
-        """The next finished trial's result, or None after ``timeout`` seconds."""
-
-    def progress(self) -> Mapping[int, Optional[Dict[str, Any]]]:
-        """The running trials' progress, by trial."""
-
-    def stop(self) -> None:
-        """Stop the running trials (soon: a user stopped the campaign)."""
-
-    def close(self) -> None: ...
-
-    def drain(self) -> List[TrialResult]:
-        """After ``close``: the results of the trials that were running, now ended."""
-
-
-class LocalPool:
-    """Trials as process groups on this machine, ``parallel`` at a time."""
-
-    def __init__(self, parallel: int, out: Path, options: Dict[str, Any]) -> None:
-        self.capacity, self._out, self._options = parallel, out, options
-        self._pool = ThreadPoolExecutor(parallel)
-        self._futures: Dict['Future[TrialResult]', PlanItem] = {}
-        self.running: Dict[int, float] = {}          # trial -> when it started (monotonic)
-
-    def describe(self) -> str:
-        return f'{self.capacity} at a time'
-
-    def has_room(self) -> bool:
-        return len(self._futures) < self.capacity
-
-    def busy(self) -> bool:
-        return bool(self._futures)
-
-    def submit(self, item: PlanItem) -> None:
-        self.running[item['trial']] = time.monotonic()
-        self._futures[self._pool.submit(run_leased_trial, item, self._out,
-                                        self._options)] = item
-
-    def wait(self, timeout: float) -> Optional[TrialResult]:
-        """The next finished trial's result, or None after ``timeout`` seconds."""
-        finished, _ = wait(self._futures, timeout=timeout, return_when=FIRST_COMPLETED)
-        if not finished:
-            return None
-        done = finished.pop()
-        item = self._futures.pop(done)
-        self.running.pop(item['trial'], None)
-        return done.result()
-
-    def progress(self) -> Dict[int, Optional[Dict[str, Any]]]:
-        """The running trials' progress files, by trial (None: none yet)."""
-        return {trial: read_progress(self._out / f'trial_{trial:03d}' / PROGRESS_FILE)
-                for trial in self.running}
-
-    def stop(self) -> None:
-        """Stop the running trials (their results read 'interrupted'; their bags closed)."""
-        stop_all()
-
-    def close(self) -> None:
-        self._pool.shutdown(wait=True)
-
-    def drain(self) -> List[TrialResult]:
-        """After ``close``: the results of the trials that were running, now ended."""
-        out = []
-        for future in list(self._futures):
-            if future.done() and not future.cancelled() and future.exception() is None:
-                out.append(future.result())
-        self._futures.clear()
-        return out
-
-
-def _progress(pool: Pool, results: List[TrialResult], pending: int
-              ) -> Tuple[List[TrialProgress], Optional[float]]:
-    """Every running trial's simulated time and deliveries, and the campaign's ETA."""
-    now, states = time.monotonic(), []
-    reports = pool.progress()
-    for trial, since in sorted(pool.running.items()):
-        p = reports.get(trial) or {}
-        states.append(TrialProgress(trial, float(p.get('sim_time', 0.0)),
-                                    int(p.get('delivered', 0)), int(p.get('total', 0)),
-                                    now - since, p.get('loader', '-'), p.get('transport', '-')))
-    ok = [r for r in results if r.status == 'completed']
-    eta = eta_seconds(states, [r.run.wall_time for r in results],
-                      [r.completion_time for r in ok], pending, pool.capacity)
-    return states, eta
-
-
-def trial_plan(count: int, first: int, seed0: int, belt_range: Sequence[float]
-               ) -> List[PlanItem]:
-    rng = random.Random(seed0)
-    plan: List[PlanItem] = []
-    for k in range(first + count):
-        seed = rng.randrange(1, 2 ** 31 - 1)
-        speed = round(rng.uniform(*belt_range), 4)
-        if k >= first:
-            plan.append(PlanItem(trial=k, seed=seed, belt_speed=speed))
-    return plan
-
-
-def write_csv(trials: Sequence[TrialResult], path: Path) -> None:
-    """The trials' rows, written whole or not at all (a signal mid-write leaves the last)."""
-    scratch = path.with_name(path.name + '.new')
-    with open(scratch, 'w', newline='') as f:
-        writer = csv.DictWriter(f, CSV_FIELDS)
-        writer.writeheader()
-        for t in sorted(trials, key=lambda t: t.trial or 0):
-            writer.writerow(t.to_row())
-    os.replace(scratch, path)
-
-
-def _rebuild(out: Path) -> int:
-    results, problems = trial_results(out)
-    if problems:
-        for line in problems:
-            print(f'run_trials: error: {line}; remove it, or run_trials --resume {out} runs '
-                  'that trial again', file=sys.stderr)
-        return 2
-    if not results:
-        print(f'[trials] no trial_*/result.json in {out}', file=sys.stderr)
-        return 1
-    write_csv(results, out / 'trials.csv')
-    from studies.report import write_report
-    speeds = [r.belt_speed for r in results if math.isfinite(r.belt_speed)]
-    note = (f'{len(results)} trials (lock-step), rebuilt from their results; belt speeds '
-            f'{min(speeds):.3f}-{max(speeds):.3f} m/s; seeds and wall times in trials.csv.'
-            if speeds else f'{len(results)} trials, rebuilt from their results.')
-    try:
-        plan = (read_campaign(out) or {}).get('plan', {})
-    except CampaignError:
-        plan = {}
-    world = plan.get('world') if isinstance(plan, dict) else None
-    report = write_report(results, out, {'note': note, **({'world': world} if world else {}),
-                                         'break_below': plan.get('break_below')})
-    print(f'[trials] {len(results)} trials: CSV {out / "trials.csv"}, report {report}')
-    return 0
-
-
-def _finished(out: Path, item: PlanItem, code: str) -> Optional[TrialResult]:
-    """The result of a planned trial already in ``out`` (same seed and belt speed, made by the
-    same code), if any; a result file that cannot be used is said so, and the trial runs
-    again."""
-    path = out / f'trial_{item["trial"]:03d}' / RESULT_FILE
-    r, problem = read_result(path)
-    if problem is not None:
-        print(f'[trials] {path}: {problem}; trial {item["trial"]} runs again', flush=True)
-    if r is None:
-        return None
-    if (r.scenario_seed != item['seed'] or r.belt_speed != item['belt_speed']
-            or r.parameters != item.get('parameters', {})
-            or r.status == 'interrupted' or r.run.code != code):
-        return None
-    return r if r.trial is not None else r.with_run(trial=item['trial'])
 
 
 def _terminated(signum: int, frame: Any) -> None:
@@ -277,26 +97,6 @@ def _plan_options(args: argparse.Namespace, given: Dict[str, Any]) -> Dict[str, 
         raise CampaignError(f'{args.out} holds a campaign already ({CAMPAIGN_FILE}): go on '
                             f'with --resume {args.out}, or give another --out')
     return check_plan({**PLAN_DEFAULTS, **stored, **given}, 'the plan')
-
-
-def check_world(world: str) -> None:
-    """The cell's world file is one the pipeline can run (CampaignError otherwise): read here,
-    once, before any process starts."""
-    from coordinator.layout import LayoutError, layout_from_world
-    from world_description.resources import ResourceError, resolve_resource
-    from world_description.robot_files import check_robot_files
-    from world_description.world_config import WorldConfigError, load_world
-    path: Optional[Path] = None
-    try:
-        path = resolve_resource(world)
-        config = load_world(path)
-        layout_from_world(config)
-        check_robot_files(config)          # (its robots' URDFs: the simulator's first read)
-    except (WorldConfigError, LayoutError, ResourceError) as exc:
-        text = ' '.join(str(exc).split())
-        named = world in text or (path is not None and str(path) in text)
-        raise CampaignError(f'--world: {text}' if named else f'--world {world}: {text}') \
-            from None
 
 
 class _Parser(argparse.ArgumentParser):
@@ -399,7 +199,7 @@ def _main(argv: Optional[Sequence[str]]) -> int:
             raise CampaignError(f'--out {args.out}: {exc.strerror or exc}') from None
         with campaign_lock(args.out):
             if args.report_only:
-                return _rebuild(args.out)
+                return rebuild(args.out)
             return _campaign(args, given)
     except CampaignError as exc:
         print(f'run_trials: error: {exc}', file=sys.stderr, flush=True)
@@ -503,50 +303,9 @@ def _check_arguments(args: argparse.Namespace, parser: argparse.ArgumentParser) 
         parser.error('--cpus-per-trial must be > 0')
 
 
-def _plan(opts: Dict[str, Any]) -> List[PlanItem]:
-    if opts.get('sweep'):
-        return _sweep_plan(opts)
-    lo, hi = opts['belt_speed']
-    plan = trial_plan(opts['trials'], opts['first_trial'], opts['seed0'], (lo, hi))
-    if opts['seeds'] is not None:
-        plan = [{**item, 'trial': k, 'seed': seed} for k, (item, seed) in enumerate(
-            zip(trial_plan(len(opts['seeds']), 0, opts['seed0'], (lo, hi)), opts['seeds']))]
-    return plan
-
-
-def _sweep_plan(opts: Dict[str, Any]) -> List[PlanItem]:
-    """Each point of the sweep with the same seeds (and, unless the sweep sets it, the same
-    belt speeds): trial = point * trials per point + k."""
-    per = opts['trials_per_point'] or opts['trials']
-    points = grid([parse_axis(spec) for spec in opts['sweep']])
-    base = trial_plan(per, 0, opts['seed0'], opts['belt_speed'])
-    plan: List[PlanItem] = []
-    for i, point in enumerate(points):
-        for k, item in enumerate(base):
-            plan.append(PlanItem(trial=i * per + k, seed=item['seed'],
-                                 belt_speed=point.get('belt_speed', item['belt_speed']),
-                                 parameters=dict(point)))
-    return plan[opts['first_trial']:]
-
-
-def check_sweep_worlds(opts: Dict[str, Any]) -> None:
-    """Every point of a sweep gives a world the pipeline can run (CampaignError naming the
-    first that does not), before any trial starts."""
-    if not opts.get('sweep'):
-        return
-    with tempfile.TemporaryDirectory(prefix='run_trials-sweep-') as scratch:
-        for i, point in enumerate(grid([parse_axis(spec) for spec in opts['sweep']])):
-            try:
-                world = point_world(opts['world'], point, Path(scratch) / str(i))
-            except SweepError as exc:
-                raise CampaignError(str(exc)) from None
-            if world != opts['world']:
-                check_world(world)
-
-
 def _show_graph(opts: Dict[str, Any]) -> int:
     check_world(opts['world'])
-    first = _plan(opts)[0]
+    first = plan_of(opts)[0]
     print(f"# trial {first['trial']}: seed {first['seed']}, belt {first['belt_speed']} m/s")
     for node in pipeline_graph(first['seed'], first['belt_speed'], world=opts['world'],
                                time_step=opts['time_step']):
@@ -587,11 +346,12 @@ def _campaign(args: argparse.Namespace, given: Dict[str, Any]) -> int:
         check_world(opts['world'])
         check_sweep_worlds(opts)
     lo, hi = opts['belt_speed']
-    plan = _plan(opts)
+    plan = plan_of(opts)
     results: List[TrialResult] = []
     code = code_version()
     if args.resume is not None:
-        done = [r for r in (_finished(args.out, item, code) for item in plan) if r is not None]
+        done = [r for r in (finished_result(args.out, item, code) for item in plan)
+                if r is not None]
         plan = [item for item in plan if item['trial'] not in {r.trial for r in done}]
         results.extend(done)
         print(f'[trials] resuming: {len(done)} trials of the plan already in {args.out} '
@@ -643,7 +403,7 @@ def _run_plan(pool: Pool, pending: List[PlanItem], results: List[TrialResult], t
         while pool.busy():
             r = pool.wait(args.progress_period)
             if r is None:
-                states, eta = _progress(pool, results, len(pending))
+                states, eta = campaign_progress(pool, results, len(pending))
                 if bar is not None:
                     bar.update(results, states, eta)
                 else:
@@ -654,7 +414,7 @@ def _run_plan(pool: Pool, pending: List[PlanItem], results: List[TrialResult], t
             write_csv(results, args.out / 'trials.csv')      # partial results survive
             say(_finished_line(r, len(results), total, time.monotonic() - started))
             if bar is not None:
-                bar.update(results, *_progress(pool, results, len(pending)), finished=1)
+                bar.update(results, *campaign_progress(pool, results, len(pending)), finished=1)
             while pending and pool.has_room():
                 pool.submit(pending.pop(0))
     except KeyboardInterrupt:

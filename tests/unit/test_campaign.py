@@ -13,6 +13,7 @@ from studies.campaign import (
     read_campaign,
     trial_results,
 )
+from studies.plan import trial_plan
 
 from coordinator.trial_result import ResultError, RunInfo, TrialResult
 
@@ -137,7 +138,7 @@ def test_a_result_file_that_is_not_a_result(capsys, tmp_path, monkeypatch):
     """A result.json holding [] gave an AttributeError with --resume and --report-only: the
     report names it, and a resumed campaign runs that trial again."""
     monkeypatch.setattr(trials, 'code_version', lambda: 'abc123')
-    plan = trials.trial_plan(2, 0, 7, (0.1, 0.16))
+    plan = trial_plan(2, 0, 7, (0.1, 0.16))
     (tmp_path / 'campaign.json').write_text(json.dumps(
         {'plan': {'trials': 2, 'seed0': 7}, 'code': 'abc123'}))
     for k, content in ((0, []), (1, {'trial': 1, 'scenario_seed': plan[1]['seed'],

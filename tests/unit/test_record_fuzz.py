@@ -163,9 +163,9 @@ def results(draw):
 @SETTINGS
 @given(data=results())
 def test_a_result_read_back_is_refused_or_used_by_every_tool(tmp_path_factory, data):
+    from studies.campaign import write_csv
     from studies.compare import compare_campaigns, compare_trials
     from studies.report import write_report
-    from studies.run_trials import write_csv
     COUNTS['results'] += 1
     text = _encode(data)
     if text is None:

@@ -7,8 +7,9 @@ import re
 import cv2
 import numpy as np
 import pytest
+from studies.campaign import write_csv
+from studies.plan import trial_plan
 from studies.report import STATE_COLORS, activity, summary_rows, write_report
-from studies.run_trials import trial_plan, write_csv
 
 from coordinator.pipeline import RunResult
 from coordinator.scoring import (
@@ -241,7 +242,8 @@ def test_a_campaign_stopped_by_the_user_keeps_a_report_and_resumes_with_its_plan
         result.write(out_dir / f'trial_{trial:03d}' / 'result.json')
         return result
     monkeypatch.setattr(trial_run, 'run_trial', fake_trial)
-    monkeypatch.setattr(trials, 'stop_all', lambda: trial_run.INTERRUPTED.set())
+    import studies.pool
+    monkeypatch.setattr(studies.pool, 'stop_all', lambda: trial_run.INTERRUPTED.set())
     import studies.report
     monkeypatch.setattr(studies.report, 'write_report',
                         lambda results, out, setup: reports.append((results, setup))
