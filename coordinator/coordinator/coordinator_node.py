@@ -38,7 +38,7 @@ from controllers.lockstep import CommandCounter
 from controllers.youbot_arm import JOINT_NAMES as YOUBOT_JOINTS
 from controllers.zu12_arm import JOINT_NAMES as ZU12_JOINTS
 from coordinator.joint_speeds import speed_limits
-from coordinator.layout import CellLayout, LayoutError, layout_from_world, with_extra_materials
+from coordinator.layout import CellLayout, LayoutError
 from coordinator.observer import Observer
 from coordinator.pipeline import (
     Event,
@@ -55,6 +55,7 @@ from coordinator.scoring import (
     destinations,
 )
 from coordinator.trial_result import TrialResult, code_version
+from coordinator.world_layout import layout_from_world, with_extra_materials
 from ros_common.node_main import run_task
 from ros_common.outputs import write_file
 from ros_common.params import Param, declare_params

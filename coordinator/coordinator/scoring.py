@@ -26,9 +26,10 @@ from typing import Any, Dict, FrozenSet, List, Mapping, Optional, Sequence, Tupl
 import numpy as np
 
 from controllers.arrays import Vector
-from coordinator.layout import CellLayout, layout_from_world
+from coordinator.layout import CellLayout
 from coordinator.pipeline import Event, EventKind, RunResult
 from coordinator.trial_result import MAX_DRIVEN_PAST, TrialResult
+from coordinator.world_layout import layout_from_world
 
 TruePose = Tuple[str, np.ndarray]            # (true colour, centre position)
 

@@ -198,7 +198,8 @@ def _write(img: np.ndarray, out: Path) -> None:
 
 def scenario(world: str) -> str:
     """The campaign's world, and its classes' rules (as far as the file can be read now)."""
-    from coordinator.layout import LayoutError, layout_from_world
+    from coordinator.layout import LayoutError
+    from coordinator.world_layout import layout_from_world
     try:
         layout = layout_from_world(load_world(resolve_resource(world)))
     except (WorldConfigError, LayoutError) as exc:

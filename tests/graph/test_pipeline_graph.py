@@ -11,7 +11,8 @@ from rclpy.qos import qos_profile_sensor_data
 from sensor_msgs.msg import Image
 from studies.trial_process import OUTCOME_FILE, run_trial
 
-from coordinator.layout import CellLayout, layout_from_world
+from coordinator.layout import CellLayout
+from coordinator.world_layout import layout_from_world
 from helpers import cpu_load, wait_for
 from world_description import PIPELINE_CELL
 from world_description.resources import resolve_resource

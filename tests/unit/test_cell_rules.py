@@ -8,7 +8,8 @@ import yaml
 from test_material_classes import PAPER_CLASSES as PAPER
 from test_pipeline import FakeCell, kinds, run
 
-from coordinator.layout import SLOT_GAP_M, LayoutError, layout_from_world
+from coordinator.layout import SLOT_GAP_M, LayoutError
+from coordinator.world_layout import layout_from_world
 from world_description.resources import resolve_resource
 from world_description.world_config import parse_world
 

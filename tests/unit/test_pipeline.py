@@ -9,7 +9,7 @@ import pytest
 
 from controllers.conveyor import Item, advance
 from controllers.time_optimal import Waypoint
-from coordinator.layout import CellLayout, LayoutError, layout_from_world
+from coordinator.layout import CellLayout, LayoutError
 from coordinator.pipeline import (
     YOUBOT_CARRY_Q,
     Detection,
@@ -20,6 +20,7 @@ from coordinator.pipeline import (
     Settings,
     youbot_tool_quaternion,
 )
+from coordinator.world_layout import layout_from_world
 from world_description.resources import resolve_resource
 from world_description.world_config import load_world
 

@@ -10,8 +10,9 @@ import numpy as np
 
 from controllers.arrays import Vector
 from controllers.youbot_kinematics import YoubotKinematics
-from coordinator.layout import GRASP_STANDOFF_M, PLATE_TOP_IN_BASE_M
+from coordinator.layout import PLATE_TOP_IN_BASE_M
 from coordinator.pipeline.model import Points
+from coordinator.world_layout import GRASP_STANDOFF_M
 
 # The youBot's arm upright (the datasheet's candle pose) while the base drives home.
 YOUBOT_CARRY_Q = np.zeros(5)
