@@ -176,7 +176,8 @@ class CoordinatorNode(Node):
             drive=lambda vx, vy, wz: self.ports.drive(vx, vy, wz))
         self.ports = RosPorts(self, ARMS, sim, self.settings, self.synchronous,
                               self.service_timeout, commands, now=self.observer.now,
-                              set_follower=self.observer.set_follower, on_event=self._on_event)
+                              set_follower=self.observer.inputs.set_follower,
+                              on_event=self._on_event)
         latched = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL)
         self.state_pub = self.create_publisher(PipelineState, '~/state', latched)
         self.get_logger().info(
@@ -190,7 +191,7 @@ class CoordinatorNode(Node):
     def _on_event(self, e: Event) -> None:
         """What the node does on the pipeline's events beyond publishing them."""
         if e.kind is EventKind.SEEN:
-            self.observer.check_identification(self.pipeline.materials.get(e.material))
+            self.observer.inputs.check_identification(self.pipeline.materials.get(e.material))
         if e.kind is EventKind.LOADING_OVER:
             # No material will be seen again: no camera frame is waited for any more.
             self.observer.stop_frames()
@@ -230,9 +231,9 @@ class CoordinatorNode(Node):
     # --- the end ------------------------------------------------------------------------------
     def _report(self) -> TrialResult:
         result = known(self.pipeline.result, 'the result')
-        seen = self.observer
-        truth = seen.final_truth(self.pipeline.start_time + result.completion_time)
-        with seen._lock:
+        truth = self.observer.final_truth(self.pipeline.start_time + result.completion_time)
+        seen = self.observer.inputs
+        with seen.lock:
             identified = seen.identifications.finish()
             trace = RunTrace(
                 seed=self.seed, belt_speed=self.layout.belt_speed,

@@ -40,37 +40,31 @@ STARTUP_GRACE_S = 1.0      # simulated seconds in which a lost camera frame is t
 STOP_CHECK_S = 0.2         # wall seconds between looks at a stop while waiting
 
 
-class Observer:
-    """The node's inputs and the run's clock. ``speed_joints``: each arm's joints with a speed
-    limit (their peaks are kept); ``drive``: the base's command, for the path follower run on
-    every odometry message in real time."""
+class Inputs:
+    """What the coordinator hears, as it comes (the executor's threads): the arms' joint states
+    (and the peaks of their speeds), the grips, the base's odometry in the cell's frame, the
+    vision's detections by frame, the ground truth, what the simulator braked. ``lock`` guards
+    it all and is notified as each message is taken in. ``now``: the run's clock; ``drive``:
+    the base's command, for the path follower run on every odometry message in real time."""
 
     def __init__(self, node: Node, layout: CellLayout, arms: Mapping[str, Sequence[str]],
-                 sim: str, synchronous: bool, rate: float, dt_ns: int, state_period_ns: int,
-                 camera_period_ns: Optional[int], service_timeout: float, drive_lead: float,
-                 commands: CommandCounter, speed_joints: Dict[str, Dict[str, float]],
+                 sim: str, synchronous: bool, drive_lead: float,
+                 speed_joints: Dict[str, Dict[str, float]], now: Callable[[], float],
                  drive: Callable[[float, float, float], None]) -> None:
-        self.node, self.layout, self.arms = node, layout, arms
-        self.synchronous, self.rate, self.dt_ns = synchronous, rate, dt_ns
-        self.service_timeout, self._commands, self.drive = service_timeout, commands, drive
-        # Lock-step: the simulated time of the last step the simulator reported [ns].
-        self._lockstep_ns = 0
-        self.steps_per_tick = max(1, round(1e9 / rate / dt_ns))
-        self.state_grid = DueGrid(dt_ns, state_period_ns)
-        self.camera_grid = (DueGrid(dt_ns, camera_period_ns) if camera_period_ns else None)
-        self._lock = threading.Condition()
+        self.node, self.layout, self.arms, self.synchronous = node, layout, arms, synchronous
+        self.now, self.drive = now, drive
+        self.lock = threading.Condition()
         # arm: (stamp [ns], positions, velocities if the message has them)
-        self._joints: Dict[str, Tuple[int, np.ndarray, Optional[np.ndarray]]] = {}
-        self._grip: Dict[str, Tuple[int, bool, bool]] = {}      # arm: (stamp, holding, armed)
+        self.joints: Dict[str, Tuple[int, np.ndarray, Optional[np.ndarray]]] = {}
+        self.grip: Dict[str, Tuple[int, bool, bool]] = {}      # arm: (stamp, holding, armed)
         # (stamp, the base's pose in the cell (x, y, yaw), its velocity (vx, vy in the cell, wz))
-        self._odom: Optional[Tuple[int, Tuple[float, float, float],
-                                   Tuple[float, float, float]]] = None
+        self.odom: Optional[Tuple[int, Tuple[float, float, float],
+                                  Tuple[float, float, float]]] = None
         self._follower: Optional[PathFollower] = None      # real time: the base's drive
         self.drive_lead = DriveLead(drive_lead)
-        self._detections: Dict[int, List[Detection]] = {}
-        self._markers: List[Tuple[int, list]] = []
+        self.detections: Dict[int, List[Detection]] = {}   # by camera frame stamp [ns]
+        self.markers: List[Tuple[int, list]] = []           # the ground truth, newest last
         self.identifications = IdentificationCheck()
-        self._start_time = 0.0
         # Every joint with a speed limit in each robot's URDF (arm, gripper, wheels), as the
         # simulator's joint states report it; and what the simulator braked (~/joint_limits).
         self.speed_joints = speed_joints
@@ -96,11 +90,6 @@ class Observer:
         node.create_subscription(
             DiagnosticArray, f'{sim}/joint_limits', self._on_joint_limits,
             QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL))
-        self.step_client = node.create_client(StepSimulation, f'{sim}/step')
-        self.param_get_client = node.create_client(GetParameters, f'{sim}/get_parameters')
-
-    def _call(self, client, request, what: str, idempotent: bool = True):
-        return call_service(client, request, what, self.service_timeout, idempotent)
 
     # --- inputs -------------------------------------------------------------------------------
     def _on_joints(self, arm: str, names: Sequence[str], msg: JointState) -> None:
@@ -114,31 +103,31 @@ class Observer:
         limited = self.speed_joints[arm]
         speeds = (np.array([msg.velocity[index[n]] for n in limited])
                   if velocity is not None and all(n in index for n in limited) else None)
-        with self._lock:
-            self._joints[arm] = (to_ns(msg.header.stamp),
+        with self.lock:
+            self.joints[arm] = (to_ns(msg.header.stamp),
                                  np.array([msg.position[index[n]] for n in names]), velocity)
             if speeds is not None:
                 self.peak[arm].update(speeds, to_ns(msg.header.stamp) * 1e-9)
-            self._lock.notify_all()
+            self.lock.notify_all()
 
     def _on_joint_limits(self, msg: DiagnosticArray) -> None:
         driven = driven_past(msg)
-        with self._lock:
+        with self.lock:
             self.driven_past = driven
 
     def _on_grip(self, arm: str, msg: GripState) -> None:
-        with self._lock:
-            self._grip[arm] = (to_ns(msg.header.stamp), bool(msg.holding), bool(msg.armed))
-            self._lock.notify_all()
+        with self.lock:
+            self.grip[arm] = (to_ns(msg.header.stamp), bool(msg.holding), bool(msg.armed))
+            self.lock.notify_all()
 
     def _on_odom(self, msg: Odometry) -> None:
         p, q, v = msg.pose.pose.position, msg.pose.pose.orientation, msg.twist.twist
         pose, world = odometry_in_cell(self.layout.youbot_home, p.x, p.y, yaw_of(q),
                                        v.linear.x, v.linear.y, v.angular.z)
         stamp = to_ns(msg.header.stamp) * 1e-9
-        with self._lock:
-            self._odom = (to_ns(msg.header.stamp), pose, world)
-            self._lock.notify_all()
+        with self.lock:
+            self.odom = (to_ns(msg.header.stamp), pose, world)
+            self.lock.notify_all()
             if self._follower is not None:
                 # Real time: the base controller, on every odometry message. A decision held
                 # up by IK calls must not leave the base running on its last command. The
@@ -152,31 +141,81 @@ class Observer:
         stamp = to_ns(msg.header.stamp)
         dets = [Detection(d.id, d.color, np.array([d.position.x, d.position.y, d.position.z]),
                           stamp * 1e-9, d.hits) for d in msg.detections]
-        with self._lock:
-            self._detections[stamp] = dets
-            self._lock.notify_all()
+        with self.lock:
+            self.detections[stamp] = dets
+            self.lock.notify_all()
 
     def _on_markers(self, msg: MarkerArray) -> None:
         if not msg.markers:
             return
         truth = [(m.ns, np.array([m.pose.position.x, m.pose.position.y, m.pose.position.z]))
                  for m in msg.markers]
-        with self._lock:
-            self._markers.append((to_ns(msg.markers[0].header.stamp), truth))
-            del self._markers[:-50]
-            self.identifications.truth(self._markers[-1][0], truth)
-            self._lock.notify_all()
+        with self.lock:
+            self.markers.append((to_ns(msg.markers[0].header.stamp), truth))
+            del self.markers[:-50]
+            self.identifications.truth(self.markers[-1][0], truth)
+            self.lock.notify_all()
+
+    def set_follower(self, follower: Optional[PathFollower]) -> bool:
+        """Real time: run ``follower`` on every odometry message (None: no more)."""
+        with self.lock:
+            self._follower = follower
+            return self._follower is not None
+
+    def drop_detections(self) -> None:
+        """No more detections: the reader goes."""
+        if self._detections_sub is not None:
+            self.node.destroy_subscription(self._detections_sub)
+            self._detections_sub = None
+
+    def check_identification(self, m: Optional[Material]) -> None:
+        """A material the pipeline has confirmed (None: not known to it), as the vision reported
+        it."""
+        with self.lock:
+            if m is None or m.detection is None:
+                self.identifications.unknown()
+            else:
+                # The vision's own report, at its frame's time: not where the belt model has
+                # carried it since (in real time the coordinator may see a frame late).
+                d = m.detection
+                self.identifications.seen(round(d.stamp * 1e9), d.position, d.color, m.id)
+
+    def have_states(self) -> bool:
+        """Both arms' joints and grips and the base's odometry have come (under the lock)."""
+        return len(self.joints) == 2 and len(self.grip) == 2 and self.odom is not None
+
+
+class Observer:
+    """The run's clock and its observations: in lock-step it requests every step and waits for
+    exactly its messages; in real time it follows the simulator's clock. ``inputs``: what it
+    has heard (``Inputs``)."""
+
+    def __init__(self, node: Node, layout: CellLayout, arms: Mapping[str, Sequence[str]],
+                 sim: str, synchronous: bool, rate: float, dt_ns: int, state_period_ns: int,
+                 camera_period_ns: Optional[int], service_timeout: float, drive_lead: float,
+                 commands: CommandCounter, speed_joints: Dict[str, Dict[str, float]],
+                 drive: Callable[[float, float, float], None]) -> None:
+        self.node, self.layout = node, layout
+        self.synchronous, self.rate, self.dt_ns = synchronous, rate, dt_ns
+        self.service_timeout, self._commands = service_timeout, commands
+        # Lock-step: the simulated time of the last step the simulator reported [ns].
+        self._lockstep_ns = 0
+        self.steps_per_tick = max(1, round(1e9 / rate / dt_ns))
+        self.state_grid = DueGrid(dt_ns, state_period_ns)
+        self.camera_grid = (DueGrid(dt_ns, camera_period_ns) if camera_period_ns else None)
+        self._start_time = 0.0
+        self.inputs = Inputs(node, layout, arms, sim, synchronous, drive_lead, speed_joints,
+                             self.now, drive)
+        self.step_client = node.create_client(StepSimulation, f'{sim}/step')
+        self.param_get_client = node.create_client(GetParameters, f'{sim}/get_parameters')
+
+    def _call(self, client, request, what: str, idempotent: bool = True):
+        return call_service(client, request, what, self.service_timeout, idempotent)
 
     def now(self) -> float:
         if self.synchronous:
             return self._lockstep_ns * 1e-9
         return self.node.get_clock().now().nanoseconds * 1e-9
-
-    def set_follower(self, follower: Optional[PathFollower]) -> bool:
-        """Real time: run ``follower`` on every odometry message (None: no more)."""
-        with self._lock:
-            self._follower = follower
-            return self._follower is not None
 
     @property
     def start_time(self) -> float:
@@ -187,24 +226,7 @@ class Observer:
         node's frames (it is lazy) and the simulator's rendering of them; lock-step waits for
         no frame any more."""
         self.camera_grid = None
-        self._drop_detections()
-
-    def _drop_detections(self) -> None:
-        if self._detections_sub is not None:
-            self.node.destroy_subscription(self._detections_sub)
-            self._detections_sub = None
-
-    def check_identification(self, m: Optional[Material]) -> None:
-        """A material the pipeline has confirmed (None: not known to it), as the vision reported
-        it."""
-        with self._lock:
-            if m is None or m.detection is None:
-                self.identifications.unknown()
-            else:
-                # The vision's own report, at its frame's time: not where the belt model has
-                # carried it since (in real time the coordinator may see a frame late).
-                d = m.detection
-                self.identifications.seen(round(d.stamp * 1e9), d.position, d.color, m.id)
+        self.inputs.drop_detections()
 
     def belt_runs_at_layout_speed(self) -> bool:
         """Whether the simulator's belt already runs at the run's speed: started with its belt
@@ -280,9 +302,9 @@ class Observer:
             self._wait_states(after * self.dt_ns, first=True)
             return self._observe(after * self.dt_ns, [])
         end = time.monotonic() + self.service_timeout
-        with self._lock:
+        with self.inputs.lock:
             # (Woken by each state message; the clock runs with them.)
-            if not self._wait(lambda: self._have_states() and self.now() > 0.0,
+            if not self._wait(lambda: self.inputs.have_states() and self.now() > 0.0,
                               self.service_timeout):
                 raise NodeTimeout('no joint_states, grip states and odometry from the '
                                   'simulator (is sim_node running with the cell world?)')
@@ -293,8 +315,8 @@ class Observer:
         # that took seconds of simulated time, in which the first two materials rode past the
         # camera unseen (the purple, held at the end stop behind one of them, was then picked
         # where that one stood). A detections message is answered for a frame: they flow.
-        with self._lock:
-            if not self._wait(lambda: bool(self._detections), end - time.monotonic()):
+        with self.inputs.lock:
+            if not self._wait(lambda: bool(self.inputs.detections), end - time.monotonic()):
                 raise NodeTimeout(f'no detections from the vision node: no camera frame reached '
                                   f'it through {CAMERA_TOPIC}, or its answers did not reach '
                                   f'this node')
@@ -307,13 +329,13 @@ class Observer:
             # a core).
             target = obs.now + 1.0 / self.rate
             end = time.monotonic() + self.service_timeout
-            with self._lock:
+            with self.inputs.lock:
                 while self.now() < target:
                     if time.monotonic() > end:
                         raise NodeTimeout('the simulated clock stopped (simulator gone?)')
                     if not rclpy.ok():
                         raise Stopped()
-                    self._lock.wait(0.005)
+                    self.inputs.lock.wait(0.005)
             return self._observe(round(self.now() * 1e9), None)
         before, after = self._step(self.steps_per_tick)
         state_due = self.state_grid.advance(before, after)
@@ -334,26 +356,24 @@ class Observer:
             left = end - time.monotonic()
             if left <= 0.0:
                 return False
-            self._lock.wait(min(left, STOP_CHECK_S))
+            self.inputs.lock.wait(min(left, STOP_CHECK_S))
         return True
 
-    def _have_states(self) -> bool:
-        """Both arms' joints and grips and the base's odometry have come (under the lock)."""
-        return len(self._joints) == 2 and len(self._grip) == 2 and self._odom is not None
-
     def _wait_states(self, stamp_ns: int, first: bool = False) -> None:
+        heard = self.inputs
+
         def ready() -> bool:
-            stamps = [j[0] for j in self._joints.values()] + [g[0] for g in self._grip.values()]
-            stamps += [self._odom[0]] if self._odom else []
+            stamps = [j[0] for j in heard.joints.values()] + [g[0] for g in heard.grip.values()]
+            stamps += [heard.odom[0]] if heard.odom else []
             if len(stamps) < 5:
                 return False
             return all(s >= stamp_ns for s in stamps) if first else \
                 all(s == stamp_ns for s in stamps)
-        with self._lock:
+        with self.inputs.lock:
             if not self._wait(ready, self.service_timeout):
-                have = {**{f'{a} joints': j[0] for a, j in self._joints.items()},
-                        **{f'{a} grip': g[0] for a, g in self._grip.items()},
-                        'odom': self._odom[0] if self._odom else None}
+                have = {**{f'{a} joints': j[0] for a, j in self.inputs.joints.items()},
+                        **{f'{a} grip': g[0] for a, g in self.inputs.grip.items()},
+                        'odom': self.inputs.odom[0] if self.inputs.odom else None}
                 raise NodeTimeout(f'no states from the simulator for t = {stamp_ns * 1e-9:.3f} s'
                                   f' (latest stamps [ns]: {have})')
 
@@ -362,8 +382,8 @@ class Observer:
             # The first frames can go out before DDS has matched the camera's best-effort
             # subscriber: nothing is in view yet, so a lost one there changes nothing.
             startup = stamp * 1e-9 - self._start_time < STARTUP_GRACE_S
-            with self._lock:
-                if self._wait(functools.partial(self._detections.__contains__, stamp),
+            with self.inputs.lock:
+                if self._wait(functools.partial(self.inputs.detections.__contains__, stamp),
                               1.0 if startup else self.service_timeout):
                     continue
             if not startup:
@@ -373,20 +393,20 @@ class Observer:
                                    f'{stamp * 1e-9:.3f} s (not matched yet); going on')
 
     def _observe(self, t_ns: int, frames: Optional[Sequence[int]]) -> Observation:
-        with self._lock:
+        with self.inputs.lock:
             if frames is None:               # real time: whatever arrived since last time
-                frames = sorted(self._detections)
-            dets = [d for f in frames for d in self._detections.pop(f, [])]
-            for f in [f for f in self._detections if f <= t_ns]:
-                del self._detections[f]
-            odom = known(self._odom, 'odometry')
+                frames = sorted(self.inputs.detections)
+            dets = [d for f in frames for d in self.inputs.detections.pop(f, [])]
+            for f in [f for f in self.inputs.detections if f <= t_ns]:
+                del self.inputs.detections[f]
+            odom = known(self.inputs.odom, 'odometry')
             return Observation(
-                now=t_ns * 1e-9, zu12_q=self._joints['zu12'][1],
-                youbot_q=self._joints['youbot'][1], youbot_pose=odom[1],
-                youbot_velocity=odom[2], zu12_holding=self._grip['zu12'][1],
-                youbot_holding=self._grip['youbot'][1], detections=dets,
-                zu12_armed=self._grip['zu12'][2], youbot_armed=self._grip['youbot'][2],
-                zu12_dq=self._joints['zu12'][2], youbot_dq=self._joints['youbot'][2])
+                now=t_ns * 1e-9, zu12_q=self.inputs.joints['zu12'][1],
+                youbot_q=self.inputs.joints['youbot'][1], youbot_pose=odom[1],
+                youbot_velocity=odom[2], zu12_holding=self.inputs.grip['zu12'][1],
+                youbot_holding=self.inputs.grip['youbot'][1], detections=dets,
+                zu12_armed=self.inputs.grip['zu12'][2], youbot_armed=self.inputs.grip['youbot'][2],
+                zu12_dq=self.inputs.joints['zu12'][2], youbot_dq=self.inputs.joints['youbot'][2])
 
     def final_truth(self, end: float) -> list:
         """The materials' true poses after the run (the score's ground truth)."""
@@ -396,10 +416,10 @@ class Observer:
                     self._step(self.steps_per_tick)
             except NodeTimeout:
                 pass
-        with self._lock:
+        with self.inputs.lock:
             # (Stopped by Ctrl-C or SIGTERM, nothing more comes: the newest there is.)
-            self._lock.wait_for(lambda: bool(self._markers)
-                                and self._markers[-1][0] * 1e-9 >= end,
+            self.inputs.lock.wait_for(lambda: bool(self.inputs.markers)
+                                and self.inputs.markers[-1][0] * 1e-9 >= end,
                                 timeout=5.0 if rclpy.ok() else 0.0)
-            return self._markers[-1][1] if self._markers else []
+            return self.inputs.markers[-1][1] if self.inputs.markers else []
 
