@@ -184,7 +184,8 @@ def step_cost(seconds: float = 20.0, rounds: int = 10) -> Dict[str, Any]:
     """Steps per second of the pipeline cell: through SimWorld.step (the watch included) and
     PyBullet's own stepSimulation with the same belt and materials (the watch alone
     removed), then with 200 spawned boxes."""
-    from sim_bridge.entities import Entities, State
+    from sim_bridge.entities import Entities
+    from sim_bridge.entity_types import State
     from sim_bridge.world import SimWorld
     from world_description.resources import resolve_resource
     from world_description.world_config import load_world
@@ -193,9 +194,10 @@ def step_cost(seconds: float = 20.0, rounds: int = 10) -> Dict[str, Any]:
         world = SimWorld(load_world(resolve_resource(PIPELINE)))
         entities = Entities(world, lambda w=world: w.sim_time)
         for k in range(boxes):
-            entities.spawn(f'b{k}', False, 'shape://box?size=0.03,0.03,0.03&mass=0.1', '', '',
-                           State((-2.0 + (k % 20) * 0.06, 2.0 + (k // 20) * 0.06, 0.016),
-                                 (0.0, 0.0, 0.0, 1.0)))
+            entities.spawner.spawn(f'b{k}', False, 'shape://box?size=0.03,0.03,0.03&mass=0.1',
+                                   '', '', State((-2.0 + (k % 20) * 0.06,
+                                                  2.0 + (k // 20) * 0.06, 0.016),
+                                                 (0.0, 0.0, 0.0, 1.0)))
         for _ in range(2400):                    # (the materials on the belt, the boxes at rest)
             world.step()
         # Rounds of each, interleaved (the machine's noise is slower than a round); medians.
@@ -215,7 +217,7 @@ def step_cost(seconds: float = 20.0, rounds: int = 10) -> Dict[str, Any]:
         out[f'{boxes} spawned boxes'] = {
             'materials': len(world.materials), 'steps_per_s_watched': watched,
             'steps_per_s_unwatched': unwatched, 'watch_cost_fraction': 1.0 - watched / unwatched}
-        entities.close()
+        entities.spawner.close()
         world.close()
     return out
 

@@ -69,7 +69,9 @@ from simulation_interfaces.srv import (
 from ros_common.deferred_reply import DeferredReplies
 from ros_common.services import SERVICE_QOS
 from ros_common.stamps import stamp_from_ns
-from sim_bridge.entities import MAX_TAGS, Entities, EntityError, Filters, Info, State
+from sim_bridge.entities import Entities
+from sim_bridge.entity_types import MAX_TAGS, EntityError, Filters, Info, State
+from sim_bridge.spawning import named_poses
 from sim_bridge.stepping import StepJob, Stepping
 
 F = SimulatorFeatures
@@ -418,9 +420,9 @@ class SimulationInterfaces:
                pose: Any) -> Tuple[Result, str]:
         p, q = pose.pose.position, pose.pose.orientation
         try:
-            final = self._entities.spawn(name, allow_renaming, uri, resource, namespace,
-                                         State((p.x, p.y, p.z), (q.x, q.y, q.z, q.w)),
-                                         pose.header.frame_id)
+            final = self._entities.spawner.spawn(name, allow_renaming, uri, resource, namespace,
+                                                 State((p.x, p.y, p.z), (q.x, q.y, q.z, q.w)),
+                                                 pose.header.frame_id)
         except EntityError as exc:
             self._node.get_logger().warn(f'spawn_entity {name or uri!r}: {exc}')
             return _error_result(exc, spawn=True), ''
@@ -434,7 +436,7 @@ class SimulationInterfaces:
         return self._entity_call(response, delete)
 
     def _get_spawnables(self, request: Any, response: Any) -> Any:
-        for s in self._entities.spawnables():
+        for s in self._entities.spawner.spawnables():
             bounds = Bounds()
             if s.half_extents is not None:
                 h = s.half_extents
@@ -453,7 +455,7 @@ class SimulationInterfaces:
                                       f'{len(wanted)} tags: at most {MAX_TAGS}')
             return response
         every = request.tags.filter_mode == TagsFilter.FILTER_MODE_ALL
-        for p in self._entities.named_poses():
+        for p in named_poses(self._entities.world):
             if wanted:
                 have = [t in p.tags for t in wanted]
                 if not (all(have) if every else any(have)):
@@ -465,7 +467,7 @@ class SimulationInterfaces:
         return response
 
     def _get_named_pose_bounds(self, request: Any, response: Any) -> Any:
-        pose = next((p for p in self._entities.named_poses() if p.name == request.name), None)
+        pose = next((p for p in named_poses(self._entities.world) if p.name == request.name), None)
         if pose is None:
             response.result = _result(Result.RESULT_NOT_FOUND, f'no named pose {request.name!r}')
         elif pose.box is None:

@@ -524,7 +524,7 @@ class SimNode(Node):
     def destroy_node(self) -> None:
         # Leave no robot driving on a stale command.
         self._runner.stop_all()
-        self._entities.close()
+        self._entities.spawner.close()
         self._world.close()
         super().destroy_node()
 

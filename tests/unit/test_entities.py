@@ -8,17 +8,18 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from sim_bridge.entities import (
+from sim_bridge.entities import Entities
+from sim_bridge.entity_types import (
     DYNAMIC_OBJECT,
     ROBOT,
     STATIC_OBJECT,
-    Entities,
     EntityError,
     Filters,
     Info,
     State,
 )
 from sim_bridge.runner import DriveLimits, NullSink, SimRunner
+from sim_bridge.spawning import named_poses
 from sim_bridge.world import SimWorld
 from world_description.resources import resolve_resource
 from world_description.world_config import load_world
@@ -33,7 +34,7 @@ def cell():
     runner = SimRunner(world, DriveLimits(), 100.0)
     entities = Entities(world, lambda: world.sim_time)
     yield world, runner, entities
-    entities.close()
+    entities.spawner.close()
     world.close()
 
 
@@ -105,36 +106,39 @@ def test_moving_a_mobile_robot_and_a_material(cell):
 
 def test_spawned_shapes_fall_and_are_deleted(cell):
     world, runner, entities = cell
-    name = entities.spawn('crate', False, 'shape://box?size=0.2,0.1,0.1&mass=1&color=blue', '',
-                          '', State((1.5, 1.5, 0.5), UPRIGHT))
+    spawner = entities.spawner
+    name = entities.spawner.spawn('crate', False,
+                                  'shape://box?size=0.2,0.1,0.1&mass=1&color=blue', '', '',
+                                  State((1.5, 1.5, 0.5), UPRIGHT))
     assert name == 'crate' and entities.info('crate').category == DYNAMIC_OBJECT
     _run(world, runner, 1.5)
     assert entities.state('crate').position[2] == pytest.approx(0.05, abs=3e-3)   # on the floor
     lo, hi = entities.bounds('crate')
     assert hi == pytest.approx((0.1, 0.05, 0.05)) and lo == pytest.approx((-0.1, -0.05, -0.05))
     # A static post, a taken name, renaming, a shape inside another body.
-    post = entities.spawn('post', False, 'shape://cylinder?radius=0.05&length=0.4&mass=0', '',
-                          '', State((1.5, 1.0, 0.2), UPRIGHT))
+    post = entities.spawner.spawn('post', False,
+                                  'shape://cylinder?radius=0.05&length=0.4&mass=0', '', '',
+                                  State((1.5, 1.0, 0.2), UPRIGHT))
     assert entities.info(post).category == STATIC_OBJECT
     assert 'static' in _error('failed', entities.set_state, post,
                               State((1.5, 1.0, 0.2), UPRIGHT, (0.1, 0.0, 0.0)))
-    _error('name_not_unique', entities.spawn, 'crate', False, 'shape://sphere?radius=0.05', '',
+    _error('name_not_unique', spawner.spawn, 'crate', False, 'shape://sphere?radius=0.05', '',
            '', State((1.5, 2.0, 0.5), UPRIGHT))
-    again = entities.spawn('crate', True, 'shape://sphere?radius=0.05', '', '',
-                           State((1.5, 2.0, 0.5), UPRIGHT))
+    again = entities.spawner.spawn('crate', True, 'shape://sphere?radius=0.05', '', '',
+                                   State((1.5, 2.0, 0.5), UPRIGHT))
     assert again == 'crate_1'
-    assert 'inside' in _error('invalid_pose', entities.spawn, 'buried', False,
+    assert 'inside' in _error('invalid_pose', spawner.spawn, 'buried', False,
                               'shape://box?size=0.3,0.3,0.3', '', '',
                               State((1.5, 1.5, 0.0), UPRIGHT))
     assert 'buried' not in entities.names()
-    _error('name_invalid', entities.spawn, 'material_99', False, 'shape://sphere?radius=0.05',
+    _error('name_invalid', spawner.spawn, 'material_99', False, 'shape://sphere?radius=0.05',
            '', '', State((1.5, 2.5, 0.5), UPRIGHT))
-    _error('failed', entities.spawn, 'x', False, 'shape://box?size=0.1,0.1', '', '',
+    _error('failed', spawner.spawn, 'x', False, 'shape://box?size=0.1,0.1', '', '',
            State((1.5, 2.5, 0.5), UPRIGHT))
-    _error('unsupported_format', entities.spawn, 'x', False, 'shape://cone?radius=1', '', '',
+    _error('unsupported_format', spawner.spawn, 'x', False, 'shape://cone?radius=1', '', '',
            State((1.5, 2.5, 0.5), UPRIGHT))
-    _error('no_resource', entities.spawn, 'x', False, '', '', '', State((1, 2, 0.5), UPRIGHT))
-    _error('namespace_invalid', entities.spawn, 'x', False, 'shape://sphere?radius=0.05', '',
+    _error('no_resource', spawner.spawn, 'x', False, '', '', '', State((1, 2, 0.5), UPRIGHT))
+    _error('namespace_invalid', spawner.spawn, 'x', False, 'shape://sphere?radius=0.05', '',
            'bad ns', State((1.5, 2.5, 0.5), UPRIGHT))
     entities.delete('crate')
     assert 'crate' not in entities.names()
@@ -145,9 +149,10 @@ def test_spawned_shapes_fall_and_are_deleted(cell):
 
 def test_a_spawned_material_rides_the_belt_and_is_one_of_the_cells(cell):
     world, runner, entities = cell
-    drop = next(p for p in entities.named_poses() if p.name == 'belt_drop')
+    spawner = entities.spawner
+    drop = next(p for p in named_poses(world) if p.name == 'belt_drop')
     _run(world, runner, 1.0)             # (the plan's first material drops there at the start)
-    name = entities.spawn('extra', False, 'material://orange', '', '', drop.pose)
+    name = entities.spawner.spawn('extra', False, 'material://orange', '', '', drop.pose)
     material = next(m for m in world.materials if m.name == 'extra')
     assert material.color == 'orange' and 'material' in entities.info(name).tags
     start = entities.state(name).position
@@ -157,41 +162,42 @@ def test_a_spawned_material_rides_the_belt_and_is_one_of_the_cells(cell):
     assert moved[0] == pytest.approx(2.0 * speed, rel=0.05) and abs(moved[1]) < 1e-3
     # The plan's materials keep their ids (the spawned one takes the next free index).
     assert [m.index for m in world.materials] == sorted(m.index for m in world.materials)
-    _error('not_found', entities.spawn, 'x', False, 'material://green', '', '', drop.pose)
+    _error('not_found', spawner.spawn, 'x', False, 'material://green', '', '', drop.pose)
     entities.delete(name)
     assert material not in world.materials
 
 
 def test_a_urdf_spawns_from_a_package_a_file_or_its_text(cell, tmp_path):
     world, runner, entities = cell
-    name = entities.spawn('', True, 'package://robot_description/urdf/mini_robot.urdf', '',
-                          '', State((2.0, 2.0, 0.1), UPRIGHT))
+    spawner = entities.spawner
+    name = entities.spawner.spawn('', True, 'package://robot_description/urdf/mini_robot.urdf', '',
+                                  '', State((2.0, 2.0, 0.1), UPRIGHT))
     assert name.startswith('mini_robot')
     urdf = tmp_path / 'block.urdf'
     urdf.write_text('<robot name="block"><link name="base"><inertial><mass value="1"/>'
                     '<inertia ixx="0.01" ixy="0" ixz="0" iyy="0.01" iyz="0" izz="0.01"/>'
                     '</inertial><collision><geometry><box size="0.1 0.1 0.1"/></geometry>'
                     '</collision></link></robot>')
-    assert entities.spawn('b1', False, f'file://{urdf}', '', '',
-                          State((2.5, 2.0, 0.3), UPRIGHT)) == 'b1'
-    assert entities.spawn('b2', False, '', urdf.read_text(), '',
-                          State((2.5, 2.5, 0.3), UPRIGHT)) == 'b2'
+    assert entities.spawner.spawn('b1', False, f'file://{urdf}', '', '',
+                                  State((2.5, 2.0, 0.3), UPRIGHT)) == 'b1'
+    assert entities.spawner.spawn('b2', False, '', urdf.read_text(), '',
+                                  State((2.5, 2.5, 0.3), UPRIGHT)) == 'b2'
     _run(world, runner, 1.0)
     assert entities.state('b2').position[2] == pytest.approx(0.05, abs=3e-3)
-    _error('not_found', entities.spawn, 'x', False, f'file://{tmp_path}/none.urdf', '', '',
+    _error('not_found', spawner.spawn, 'x', False, f'file://{tmp_path}/none.urdf', '', '',
            State((3.0, 3.0, 0.3), UPRIGHT))
-    _error('unsupported_format', entities.spawn, 'x', False, 'model.sdf', '', '',
+    _error('unsupported_format', spawner.spawn, 'x', False, 'model.sdf', '', '',
            State((3.0, 3.0, 0.3), UPRIGHT))
-    _error('parse_error', entities.spawn, 'x', False, '', 'not a urdf', '',
+    _error('parse_error', spawner.spawn, 'x', False, '', 'not a urdf', '',
            State((3.0, 3.0, 0.3), UPRIGHT))
-    _error('parse_error', entities.spawn, 'x', False, '', '<robot name="r"><link', '',
+    _error('parse_error', spawner.spawn, 'x', False, '', '<robot name="r"><link', '',
            State((3.0, 3.0, 0.3), UPRIGHT))
 
 
 def test_a_reset_of_the_state_puts_spawned_bodies_back(cell):
     world, runner, entities = cell
-    entities.spawn('ball', False, 'shape://sphere?radius=0.05&mass=0.2', '', '',
-                   State((1.5, 1.5, 0.5), UPRIGHT))
+    entities.spawner.spawn('ball', False, 'shape://sphere?radius=0.05&mass=0.2', '', '',
+                           State((1.5, 1.5, 0.5), UPRIGHT))
     _run(world, runner, 1.0)
     assert entities.state('ball').position[2] < 0.1
     runner.reset()
@@ -201,10 +207,10 @@ def test_a_reset_of_the_state_puts_spawned_bodies_back(cell):
 
 def test_spawnables_and_named_poses(cell):
     world, runner, entities = cell
-    uris = [s.uri for s in entities.spawnables()]
+    uris = [s.uri for s in entities.spawner.spawnables()]
     assert {'material://purple', 'material://orange', 'material://blue'} <= set(uris)
     assert 'package://robot_description/urdf/youbot.urdf' in uris
-    poses = {p.name: p for p in entities.named_poses()}
+    poses = {p.name: p for p in named_poses(world)}
     assert {'ground_target', 'pool_floor', 'pool_platform', 'youbot_start', 'zu12_start',
             'belt_drop'} <= set(poses)
     assert poses['pool_floor'].pose.position == pytest.approx((2.1, -1.3, 0.002))
@@ -226,23 +232,24 @@ def test_a_name_filter_runs_in_linear_time_and_its_limits_say_why(cell):
 
 
 def test_a_urdf_text_is_checked_before_pybullet_reads_it_and_leaves_no_file(cell, tmp_path):
-    from sim_bridge.entities import SCRATCH_PREFIX
+    from sim_bridge.entity_types import SCRATCH_PREFIX
     from world_description.urdf_check import MAX_LINKS, MAX_URDF_BYTES
     world, runner, entities = cell
-    scratch = entities._scratch.path
+    spawner = entities.spawner
+    scratch = entities.spawner._scratch.path
     here = State((3.0, 3.0, 0.3), UPRIGHT)
     # 315 kB of "<robot ": a regular expression over the text took two minutes; expat
     # stops at its first malformed byte.
-    assert 'not well-formed' in _error('parse_error', entities.spawn, 'x', False, '',
+    assert 'not well-formed' in _error('parse_error', spawner.spawn, 'x', False, '',
                                        '<robot ' * 45_000, '', here)
-    assert 'bytes' in _error('parse_error', entities.spawn, 'x', False, '',
+    assert 'bytes' in _error('parse_error', spawner.spawn, 'x', False, '',
                              '<robot name="r">' + ' ' * MAX_URDF_BYTES + '</robot>', '', here)
     laughs = ('<?xml version="1.0"?><!DOCTYPE r [<!ENTITY a "aaaaaaaaaa">'
               '<!ENTITY b "&a;&a;&a;&a;&a;&a;&a;&a;&a;&a;">]><robot name="r">&b;</robot>')
-    assert 'document type' in _error('parse_error', entities.spawn, 'x', False, '', laughs,
+    assert 'document type' in _error('parse_error', spawner.spawn, 'x', False, '', laughs,
                                      '', here)
     links = ''.join(f'<link name="l{k}"/>' for k in range(MAX_LINKS + 1))
-    assert 'links' in _error('parse_error', entities.spawn, 'x', False, '',
+    assert 'links' in _error('parse_error', spawner.spawn, 'x', False, '',
                              f'<robot name="r">{links}</robot>', '', here)
     fifo = tmp_path / 'pipe.obj'
     os.mkfifo(fifo)
@@ -250,18 +257,18 @@ def test_a_urdf_text_is_checked_before_pybullet_reads_it_and_leaves_no_file(cell
                        ('relative.obj', 'not_found'), ('/dev/zero', 'unsupported_format')):
         text = (f'<robot name="m"><link name="b"><visual><geometry><mesh filename="{mesh}"/>'
                 '</geometry></visual></link></robot>')
-        _error(code, entities.spawn, 'x', False, '', text, '', here)
+        _error(code, spawner.spawn, 'x', False, '', text, '', here)
     big = tmp_path / 'big.urdf'
     big.write_text('<robot name="big">' + ' ' * MAX_URDF_BYTES + '</robot>')
-    _error('parse_error', entities.spawn, 'x', False, f'file://{big}', '', '', here)
+    _error('parse_error', spawner.spawn, 'x', False, f'file://{big}', '', '', here)
     block = ('<robot name="block"><link name="base"><inertial><mass value="1"/>'
              '<inertia ixx="0.01" ixy="0" ixz="0" iyy="0.01" iyz="0" izz="0.01"/></inertial>'
              '<collision><geometry><box size="0.1 0.1 0.1"/></geometry></collision></link>'
              '</robot>')
-    assert entities.spawn('', True, '', block, '', here).startswith('block')
+    assert entities.spawner.spawn('', True, '', block, '', here).startswith('block')
     assert [p.name for p in scratch.iterdir()] == ['.owner.lock']   # nothing else kept
     assert scratch.name.startswith(SCRATCH_PREFIX)
-    entities.close()
+    entities.spawner.close()
     assert not scratch.exists()
 
 
@@ -290,18 +297,20 @@ def test_a_scratch_directory_of_a_dead_run_is_removed_by_the_next(tmp_path):
 
 
 def test_spawned_entities_are_bounded_in_number_and_size_of_request(cell):
-    from sim_bridge.entities import MAX_NAME_CHARS, MAX_SPAWNED
+    from sim_bridge.entity_types import MAX_NAME_CHARS, MAX_SPAWNED
     world, runner, entities = cell
+    spawner = entities.spawner
     for k in range(MAX_SPAWNED):
-        entities.spawn(f'b{k}', False, 'shape://box?size=0.02,0.02,0.02&mass=0', '', '',
-                       State((-1.0 + (k % 20) * 0.05, 2.0 + (k // 20) * 0.05, 0.5), UPRIGHT))
-    assert 'at most' in _error('failed', entities.spawn, 'one_more', False,
+        entities.spawner.spawn(f'b{k}', False, 'shape://box?size=0.02,0.02,0.02&mass=0', '',
+                               '', State((-1.0 + (k % 20) * 0.05, 2.0 + (k // 20) * 0.05, 0.5),
+                                         UPRIGHT))
+    assert 'at most' in _error('failed', spawner.spawn, 'one_more', False,
                                'shape://sphere?radius=0.01', '', '',
                                State((3.0, -2.0, 0.5), UPRIGHT))
     entities.delete('b0')
-    entities.spawn('one_more', False, 'shape://sphere?radius=0.01', '', '',
-                   State((3.0, -2.0, 0.5), UPRIGHT))
-    _error('name_invalid', entities.spawn, 'n' * (MAX_NAME_CHARS + 1), False,
+    entities.spawner.spawn('one_more', False, 'shape://sphere?radius=0.01', '', '',
+                           State((3.0, -2.0, 0.5), UPRIGHT))
+    _error('name_invalid', spawner.spawn, 'n' * (MAX_NAME_CHARS + 1), False,
            'shape://sphere?radius=0.01', '', '', State((3.0, -2.5, 0.5), UPRIGHT))
     assert 'at most' in _error('failed', entities.set_info, 'youbot',
                                Info(ROBOT, 'd' * 5000, []))
@@ -312,11 +321,12 @@ def test_spawned_entities_are_bounded_in_number_and_size_of_request(cell):
                                              ((0.0, 0.0, 0.0), (0.0, 0.0, 60.0))])
 def test_a_state_set_from_outside_is_held_to_speed_limits(cell, linear, angular):
     world, runner, entities = cell
-    entities.spawn('ball', False, 'shape://sphere?radius=0.05&mass=0.2', '', '',
-                   State((1.5, 1.5, 0.5), UPRIGHT))
+    spawner = entities.spawner
+    entities.spawner.spawn('ball', False, 'shape://sphere?radius=0.05&mass=0.2', '', '',
+                           State((1.5, 1.5, 0.5), UPRIGHT))
     assert 'velocity' in _error('invalid_pose', entities.set_state, 'ball',
                                 State((1.5, 1.5, 0.5), UPRIGHT, linear, angular))
-    assert 'velocity' in _error('invalid_pose', entities.spawn, 'thrown', False,
+    assert 'velocity' in _error('invalid_pose', spawner.spawn, 'thrown', False,
                                 'shape://sphere?radius=0.05&mass=0.2', '', '',
                                 State((1.5, 2.5, 0.5), UPRIGHT, linear, angular))
     entities.set_state('ball', State((1.5, 1.5, 0.5), UPRIGHT, (10.0, 0.0, 0.0)))
@@ -330,10 +340,10 @@ def test_a_body_whose_state_goes_wrong_is_taken_out_before_the_next_step(cell):
     never stepped on, and never reported."""
     world, runner, entities = cell
     p = world.client
-    entities.spawn('ball', False, 'shape://sphere?radius=0.05&mass=0.2', '', '',
-                   State((1.5, 1.5, 0.5), UPRIGHT))
-    entities.spawn('crate', False, 'shape://box?size=0.1,0.1,0.1&mass=1', '', '',
-                   State((1.5, 2.0, 0.5), UPRIGHT))
+    entities.spawner.spawn('ball', False, 'shape://sphere?radius=0.05&mass=0.2', '', '',
+                           State((1.5, 1.5, 0.5), UPRIGHT))
+    entities.spawner.spawn('crate', False, 'shape://box?size=0.1,0.1,0.1&mass=1', '', '',
+                           State((1.5, 2.0, 0.5), UPRIGHT))
     _run(world, runner, 3.0)                      # (a material is on the belt by now)
     material = world.materials[0]
     lost = []
@@ -360,7 +370,7 @@ def test_a_body_whose_state_goes_wrong_is_taken_out_before_the_next_step(cell):
     for name in entities.names():
         state = entities.state(name)
         assert np.all(np.isfinite(state.position + state.linear))
-    entities.spawn('crate', False, 'shape://box?size=0.1,0.1,0.1&mass=1', '', '',
-                   State((1.5, 2.0, 0.5), UPRIGHT))
+    entities.spawner.spawn('crate', False, 'shape://box?size=0.1,0.1,0.1&mass=1', '', '',
+                           State((1.5, 2.0, 0.5), UPRIGHT))
     _run(world, runner, 0.5)
     assert entities.state('crate').position[2] == pytest.approx(0.05, abs=3e-3)
