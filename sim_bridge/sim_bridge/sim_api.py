@@ -213,7 +213,7 @@ class SimulationInterfaces:
     def _on_cancel(self, goal_handle: Any) -> CancelResponse:
         job = self._goals.get(bytes(goal_handle.goal_id.uuid))
         if job is not None:
-            self._stepping.cancel(job)
+            job.cancel()
         return CancelResponse.ACCEPT
 
     async def _execute(self, goal_handle: Any) -> Any:

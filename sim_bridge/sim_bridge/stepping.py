@@ -6,7 +6,7 @@ from __future__ import annotations
 import collections
 import time
 from dataclasses import dataclass
-from typing import Callable, Deque, Optional, Tuple
+from typing import Any, Callable, Deque, Optional, Tuple
 
 from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
@@ -46,6 +46,10 @@ class StepJob:
     @property
     def stepped(self) -> int:
         return self.steps - self.remaining
+
+    def cancel(self) -> None:
+        """End the job after its current chunk."""
+        self.canceled = True
 
 
 class Stepping:
@@ -226,14 +230,15 @@ class Stepping:
                                 'after their replies')
         elif self._jobs or request.steps > self._chunk:
             job = StepJob(request.steps, request.steps, request, response)
-            self._queue(job)
+            self._jobs.append(job)
+            self._chunk_timer.reset()
             return self._replies.later(job)
         elif self._claim_commands(request, response):
             self.stopped = False
             self._runner.advance(request.steps, self._sink)
             self._end_step()
             response.success = True
-        self._stamp(response)
+        _stamp(response, self._world)
         return response
 
     def submit(self, steps: int, on_done: Callable[[StepJob], None],
@@ -244,20 +249,9 @@ class Stepping:
         if not (self.synchronous or self.paused):
             return None
         job = StepJob(steps, steps, on_done=on_done, on_progress=on_progress)
-        self._queue(job)
-        return job
-
-    def cancel(self, job: StepJob) -> None:
-        """End a submitted job after its current chunk."""
-        job.canceled = True
-
-    def _queue(self, job: StepJob) -> None:
         self._jobs.append(job)
         self._chunk_timer.reset()
-
-    def _stamp(self, response) -> None:
-        response.step_count = self._world.step_count
-        response.sim_time = stamp_from_ns(self._world.sim_time_ns)
+        return job
 
     def _claim_commands(self, request, response) -> bool:
         """Whether the commands announced with a step request are in (taking them if so);
@@ -318,7 +312,13 @@ class Stepping:
 
     def _finish(self, job: StepJob) -> None:
         if job.response is not None:
-            self._stamp(job.response)
+            _stamp(job.response, self._world)
             self._replies.send(job, job.response)
         elif job.on_done is not None:
             job.on_done(job)
+
+
+def _stamp(response: Any, world: Any) -> None:
+    """A step reply's step count and simulated time: the world's now."""
+    response.step_count = world.step_count
+    response.sim_time = stamp_from_ns(world.sim_time_ns)

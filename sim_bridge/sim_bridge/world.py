@@ -36,7 +36,7 @@ from world_description.world_config import (
 # world's too, as they were before the split.)
 __all__ = ['FLOOR_COLOR', 'OMNI_WHEEL_SCALE', 'URDF_FLAGS', 'BaseState', 'DiffDrive',
            'JointGroup', 'JointStates', 'MecanumDrive', 'SimCamera', 'SimRobot', 'SimWorld',
-           'Transform', 'WorldError', 'build_floor']
+           'Transform', 'WorldError', 'add_obstacle', 'build_floor', 'draw']
 
 FLOOR_COLOR = (0.82, 0.80, 0.76, 1.0)
 
@@ -66,7 +66,7 @@ class SimWorld:
         p = self._p
         p.setTimeStep(time_step)
         p.setGravity(0.0, 0.0, config.gravity)
-        self._build_floor(config.floor_size)
+        self.floor = build_floor(self._p, config.floor_size)
         self._obstacle_names: Dict[int, str] = {}
         self.obstacles: Dict[int, Any] = {}          # body: its ObstacleConfig
         # Fixed cameras' static scenes in the default light, by camera (None: the static
@@ -76,7 +76,10 @@ class SimWorld:
         self._backdrops: Dict[str, Optional[StaticBackdrop]] = {}
         self._relit = False            # a frame was rendered with light arguments
         for obstacle in config.obstacles:
-            self._add_obstacle(obstacle)
+            body = add_obstacle(self._p, obstacle)
+            self.obstacles[body] = obstacle
+            self._obstacle_names[body] = (f'the {obstacle.name}' if obstacle.name else
+                                          f'an obstacle ({obstacle.shape})')
         base_dir = Path(config.source).parent if config.source else None
         # The world's perturbations, drawn from the scenario's seed (off unless the world file
         # turns them on).
@@ -275,24 +278,13 @@ class SimWorld:
                 self._backdrops[key] = self._measure_backdrop(camera)
             backdrop = self._backdrops[key]
         if backdrop is None or self._static_visuals is None:
-            return self._render(self._p, camera, lighting)[0]
+            return draw(self._p, camera, lighting)[0]
         self._show_static(False)
         try:
-            rgba, depth = self._render(self._p, camera, lighting)
+            rgba, depth = draw(self._p, camera, lighting)
         finally:
             self._show_static(True)
         return backdrop.fill(rgba, depth)
-
-    @staticmethod
-    def _render(client: BulletClient, camera: SimCamera, lighting: Optional[Dict[str, Any]]
-                ) -> Tuple[np.ndarray, np.ndarray]:
-        c = camera.config
-        _, _, rgba, depth, _ = client.getCameraImage(
-            c.width, c.height, camera.view_matrix(), camera.projection, shadow=0,
-            renderer=pybullet.ER_TINY_RENDERER, flags=pybullet.ER_NO_SEGMENTATION_MASK,
-            **(lighting or {}))
-        return (np.asarray(rgba, dtype=np.uint8).reshape(c.height, c.width, 4),
-                np.asarray(depth, dtype=np.float32).reshape(c.height, c.width))
 
     def _show_static(self, shown: bool) -> None:
         for v in self._static_visuals or ():
@@ -304,7 +296,7 @@ class SimWorld:
         if self._static_visuals is None:
             return None
         return StaticBackdrop.measure(self._static_visuals,
-                                      lambda client: self._render(client, camera, None))
+                                      lambda client: draw(client, camera, None))
 
     def body_name(self, body: int, link: int = -1) -> str:
         """What a body of the world is, for messages: 'the floor', 'youbot's arm_link_5', ..."""
@@ -340,28 +332,35 @@ class SimWorld:
         except pybullet.error:
             pass
 
-    def _build_floor(self, size: float) -> None:
-        self.floor = build_floor(self._p, size)
 
-    def _add_obstacle(self, obstacle: Any) -> None:
-        p = self._p
-        s = obstacle.size
-        if obstacle.shape == 'box':
-            kwargs = {'halfExtents': [v / 2 for v in s]}
-            col = p.createCollisionShape(pybullet.GEOM_BOX, **kwargs)
-            vis = p.createVisualShape(pybullet.GEOM_BOX, rgbaColor=obstacle.color, **kwargs)
-        elif obstacle.shape == 'cylinder':
-            col = p.createCollisionShape(pybullet.GEOM_CYLINDER, radius=s[0], height=s[1])
-            vis = p.createVisualShape(pybullet.GEOM_CYLINDER, radius=s[0], length=s[1],
-                                      rgbaColor=obstacle.color)
-        else:
-            col = p.createCollisionShape(pybullet.GEOM_SPHERE, radius=s[0])
-            vis = p.createVisualShape(pybullet.GEOM_SPHERE, radius=s[0], rgbaColor=obstacle.color)
-        if not obstacle.collision:
-            col = -1
-        body = p.createMultiBody(0.0, col, vis, basePosition=obstacle.position,
-                                 baseOrientation=p.getQuaternionFromEuler((0.0, 0.0,
-                                                                          obstacle.yaw)))
-        self.obstacles[body] = obstacle
-        self._obstacle_names[body] = (f'the {obstacle.name}' if obstacle.name else
-                                      f'an obstacle ({obstacle.shape})')
+def draw(client: BulletClient, camera: SimCamera, lighting: Optional[Dict[str, Any]]
+         ) -> Tuple[np.ndarray, np.ndarray]:
+    """A camera's frame drawn by PyBullet's CPU renderer: RGBA and depth."""
+    c = camera.config
+    _, _, rgba, depth, _ = client.getCameraImage(
+        c.width, c.height, camera.view_matrix(), camera.projection, shadow=0,
+        renderer=pybullet.ER_TINY_RENDERER, flags=pybullet.ER_NO_SEGMENTATION_MASK,
+        **(lighting or {}))
+    return (np.asarray(rgba, dtype=np.uint8).reshape(c.height, c.width, 4),
+            np.asarray(depth, dtype=np.float32).reshape(c.height, c.width))
+
+
+def add_obstacle(p: BulletClient, obstacle: Any) -> int:
+    """An obstacle of the world file as a fixed body; its id."""
+    s = obstacle.size
+    if obstacle.shape == 'box':
+        kwargs = {'halfExtents': [v / 2 for v in s]}
+        col = p.createCollisionShape(pybullet.GEOM_BOX, **kwargs)
+        vis = p.createVisualShape(pybullet.GEOM_BOX, rgbaColor=obstacle.color, **kwargs)
+    elif obstacle.shape == 'cylinder':
+        col = p.createCollisionShape(pybullet.GEOM_CYLINDER, radius=s[0], height=s[1])
+        vis = p.createVisualShape(pybullet.GEOM_CYLINDER, radius=s[0], length=s[1],
+                                  rgbaColor=obstacle.color)
+    else:
+        col = p.createCollisionShape(pybullet.GEOM_SPHERE, radius=s[0])
+        vis = p.createVisualShape(pybullet.GEOM_SPHERE, radius=s[0], rgbaColor=obstacle.color)
+    if not obstacle.collision:
+        col = -1
+    body = p.createMultiBody(0.0, col, vis, basePosition=obstacle.position,
+                             baseOrientation=p.getQuaternionFromEuler((0.0, 0.0, obstacle.yaw)))
+    return int(body)
