@@ -19,11 +19,11 @@ from pathlib import Path
 
 import numpy as np
 import yaml
-from studies.trial_process import run_trial
 
 from controllers.joint_trajectory import TrajectoryPoint, TrajectoryRequest
 from sim_bridge.runner import DriveLimits, NullSink, SimRunner
 from sim_bridge.world import SimWorld
+from studies.trial_process import run_trial
 from world_description import PIPELINE_CELL
 from world_description.resources import resolve_resource
 from world_description.world_config import load_world

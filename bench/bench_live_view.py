@@ -25,9 +25,9 @@ from pathlib import Path
 from typing import Dict, List
 
 import foxglove
+
 from live_view.bridge import SlowClients
 from live_view.gate import Gate, self_signed_certificate
-
 from ros_common.web_access import WebAccess
 
 HERE = Path(__file__).resolve().parent

@@ -15,10 +15,9 @@ import time
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
-from studies.trial_process import run_trial
-
 from sim_bridge.runner import DriveLimits, NullSink, SimRunner
 from sim_bridge.world import SimWorld
+from studies.trial_process import run_trial
 from world_description import PIPELINE_CELL
 from world_description.resources import resolve_resource
 from world_description.world_config import load_world

@@ -42,7 +42,7 @@ esac
 version="unknown"
 if git -C "$ROOT" rev-parse --short=12 HEAD >/dev/null 2>&1; then
   version="$(git -C "$ROOT" rev-parse --short=12 HEAD)"
-  # dirty as the results count it (coordinator.trial_result.code_version): code outside docs/
+  # dirty as the results count it (trial_record.result.code_version): code outside docs/
   [ -z "$(git -C "$ROOT" status --porcelain --untracked-files=no -- . ':(exclude)docs' \
     ':(exclude)*.md')" ] || version+="-dirty"
 fi

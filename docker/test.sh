@@ -53,7 +53,7 @@ python - "$work/container" "$work/host" <<'PY' || failed=1
 import sys
 from pathlib import Path
 
-from coordinator.trial_result import read_result
+from trial_record.result import read_result
 
 runs = []
 for folder in sys.argv[1:]:

@@ -64,8 +64,8 @@ def test_command_line_tool_resolves_and_runs(package, executable):
 def test_every_package_is_in_the_ament_index():
     for package in ('sim_bridge', 'controllers', 'perception', 'robot_description',
                     'sim_bringup', 'sim_interfaces', 'recording', 'arm_kinematics',
-                    'coordinator', 'studies', 'ros_common', 'world_description', 'teleop',
-                    'live_view'):
+                    'coordinator', 'cell_layout', 'trial_record', 'studies', 'ros_common',
+                    'world_description', 'teleop', 'live_view'):
         share = Path(get_package_share_directory(package))
         assert (share / 'package.xml').is_file()
     assert (Path(get_package_share_directory('robot_description')) / 'urdf' /

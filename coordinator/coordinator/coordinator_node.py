@@ -34,11 +34,12 @@ from rclpy.parameter import Parameter as RosParameter
 from rclpy.qos import DurabilityPolicy, QoSProfile
 from sim_interfaces.msg import PipelineState
 
+from cell_layout.joint_speeds import speed_limits
+from cell_layout.layout import CellLayout, LayoutError
+from cell_layout.world_layout import layout_from_world, with_extra_materials
 from controllers.lockstep import CommandCounter
 from controllers.youbot_arm import JOINT_NAMES as YOUBOT_JOINTS
 from controllers.zu12_arm import JOINT_NAMES as ZU12_JOINTS
-from coordinator.joint_speeds import speed_limits
-from coordinator.layout import CellLayout, LayoutError
 from coordinator.observer import Observer
 from coordinator.pipeline import (
     Event,
@@ -49,17 +50,16 @@ from coordinator.pipeline import (
     known,
 )
 from coordinator.ros_ports import RosPorts, Stopped
-from coordinator.scoring import (
-    RunTrace,
-    build_result,
-    destinations,
-)
-from coordinator.trial_result import TrialResult, code_version
-from coordinator.world_layout import layout_from_world, with_extra_materials
 from ros_common.node_main import run_task
 from ros_common.outputs import write_file
 from ros_common.params import Param, declare_params
 from ros_common.stamps import stamp_from_ns
+from trial_record.result import TrialResult, code_version
+from trial_record.scoring import (
+    RunTrace,
+    build_result,
+    destinations,
+)
 from world_description import PIPELINE_CELL
 from world_description.resources import resolve_resource
 from world_description.world_config import WorldConfig, load_world

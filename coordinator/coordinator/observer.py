@@ -24,16 +24,16 @@ from sim_interfaces.msg import GripState, MaterialDetectionArray
 from sim_interfaces.srv import StepSimulation
 from visualization_msgs.msg import MarkerArray
 
+from cell_layout.joint_speeds import driven_past
+from cell_layout.layout import CellLayout
 from controllers.lockstep import CommandCounter, DueGrid
 from controllers.path_follower import DriveLead, PathFollower
 from coordinator.cell_odometry import odometry_in_cell
-from coordinator.joint_speeds import driven_past
-from coordinator.layout import CellLayout
 from coordinator.pipeline import Detection, Material, NodeTimeout, Observation, known
 from coordinator.ros_ports import GRIP_SERVICES, Stopped, call_service
-from coordinator.scoring import IdentificationCheck, PeakJointSpeed
 from ros_common.geometry import yaw_of
 from ros_common.stamps import to_ns
+from trial_record.scoring import IdentificationCheck, PeakJointSpeed
 
 CAMERA_TOPIC = '/belt_camera/image_raw'
 STARTUP_GRACE_S = 1.0      # simulated seconds in which a lost camera frame is tolerated

@@ -18,11 +18,11 @@ from contextlib import contextmanager
 from pathlib import Path
 from typing import IO, Any, Callable, Dict, Iterator, List, Optional, Sequence, Tuple
 
-from coordinator.records import Fields, RecordError, is_int, is_number, parse_json, read_text
-from coordinator.trial_result import CSV_FIELDS, RESULT_FILE, TrialResult, read_result
 from studies.sweep import SweepError, grid, parse_axis
 from studies.trial_graph import CONTROL_RATE, TIME_STEP
 from studies.trial_process import PlanItem
+from trial_record.records import Fields, RecordError, is_int, is_number, parse_json, read_text
+from trial_record.result import CSV_FIELDS, RESULT_FILE, TrialResult, read_result
 from world_description import PIPELINE_CELL
 
 CAMPAIGN_FILE = 'campaign.json'

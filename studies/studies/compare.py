@@ -19,12 +19,12 @@ from typing import List, Optional, Sequence, Tuple
 
 import numpy as np
 
-from coordinator.trial_result import TrialResult
 from ros_common.outputs import OutputError, check_output_dir, staged_dir
 from studies.campaign import trial_results
 from studies.recorded import RecordError, load_trial
 from studies.rerun import figures, first_parting
 from studies.sweep import RATES, wilson
+from trial_record.result import TrialResult
 
 SIGNIFICANT = 0.05
 

@@ -69,8 +69,8 @@ def check_sweep_worlds(opts: Dict[str, Any]) -> None:
 def check_world(world: str) -> None:
     """The cell's world file is one the pipeline can run (CampaignError otherwise): read here,
     once, before any process starts."""
-    from coordinator.layout import LayoutError
-    from coordinator.world_layout import layout_from_world
+    from cell_layout.layout import LayoutError
+    from cell_layout.world_layout import layout_from_world
     from world_description.resources import ResourceError, resolve_resource
     from world_description.robot_files import check_robot_files
     from world_description.world_config import WorldConfigError, load_world

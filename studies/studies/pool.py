@@ -8,9 +8,9 @@ from concurrent.futures import FIRST_COMPLETED, Future, ThreadPoolExecutor, wait
 from pathlib import Path
 from typing import Any, Dict, List, Mapping, Optional, Protocol, Tuple
 
-from coordinator.trial_result import TrialResult
 from studies.progress import TrialProgress, eta_seconds, read_progress
 from studies.trial_process import PROGRESS_FILE, PlanItem, run_leased_trial, stop_all
+from trial_record.result import TrialResult
 
 
 class Pool(Protocol):

@@ -13,7 +13,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Dict, List, Optional, Sequence
 
-from coordinator.records import (
+from trial_record.records import (
     MAX_COUNT,
     MAX_SIM_TIME_S,
     Fields,
@@ -21,7 +21,7 @@ from coordinator.records import (
     parse_json,
     read_text,
 )
-from coordinator.trial_result import TrialResult
+from trial_record.result import TrialResult
 
 # Before any trial has finished, a trial is taken to need this much simulated time [s]
 # (about the median completion of the current schedule, docs/trials/current); afterwards the

@@ -29,9 +29,9 @@ from typing import Any, Dict, List, Optional, Tuple
 
 import ray
 
-from coordinator.trial_result import RESULT_FILE, RunInfo, TrialResult, code_version
 from studies.progress import read_progress
 from studies.trial_process import PROGRESS_FILE, PlanItem, run_leased_trial
+from trial_record.result import RESULT_FILE, RunInfo, TrialResult, code_version
 
 # Where a worker keeps its trials' directories: <tmp>/run_trials/<campaign>/trial_NNN.
 WORKER_ROOT = 'run_trials'

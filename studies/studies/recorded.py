@@ -17,8 +17,9 @@ from typing import Any, Dict, Optional, Tuple
 
 import yaml
 
-from coordinator.records import Fields, RecordError, parse_json, read_text
-from coordinator.trial_result import (
+from recording.analysis import AnalysisError, open_reader, read_messages
+from trial_record.records import Fields, RecordError, parse_json, read_text
+from trial_record.result import (
     MAX_BELT_SPEED,
     MAX_SEED,
     MAX_TRIAL,
@@ -28,7 +29,6 @@ from coordinator.trial_result import (
     check_scenario,
     read_result,
 )
-from recording.analysis import AnalysisError, open_reader, read_messages
 
 TRIAL_KEY = 'robot_sim.trial'
 STATE_TOPIC = '/coordinator_node/state'

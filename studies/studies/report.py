@@ -8,12 +8,12 @@ from typing import Any, Dict, List, Optional, Sequence, Tuple
 import cv2
 import numpy as np
 
-from coordinator.scoring import FAILURE_CAUSES
-from coordinator.trial_result import TrialResult
 from recording.plot import plot_paths
 from ros_common.outputs import staged_dir
 from studies.recorded import trial_bag
 from studies.sweep_report import sweep_lines
+from trial_record.result import TrialResult
+from trial_record.scoring import FAILURE_CAUSES
 from world_description.footprint import footprints
 from world_description.resources import ResourceError, resolve_resource
 from world_description.world_config import WorldConfigError, load_world, parse_world
@@ -198,8 +198,8 @@ def _write(img: np.ndarray, out: Path) -> None:
 
 def scenario(world: str) -> str:
     """The campaign's world, and its classes' rules (as far as the file can be read now)."""
-    from coordinator.layout import LayoutError
-    from coordinator.world_layout import layout_from_world
+    from cell_layout.layout import LayoutError
+    from cell_layout.world_layout import layout_from_world
     try:
         layout = layout_from_world(load_world(resolve_resource(world)))
     except (WorldConfigError, LayoutError) as exc:

@@ -11,10 +11,10 @@ from typing import Dict, List, Sequence, Tuple
 
 import yaml
 
-from coordinator.trial_result import TrialResult
 from ros_common.outputs import OutputError, make_dir
 from studies.recorded import RecordError, load_trial
 from studies.sweep import TRIAL_PARAMETERS, SweepError, point_world
+from trial_record.result import TrialResult
 
 ORIGINAL_WORLD = 'original_world.yaml'
 

@@ -18,10 +18,6 @@ import time
 from pathlib import Path
 from typing import Any, Dict, List, NoReturn, Optional, Sequence
 
-from coordinator.trial_result import (
-    TrialResult,
-    code_version,
-)
 from ros_common.outputs import OutputError, check_output_dir
 from studies.campaign import (
     CAMPAIGN_FILE,
@@ -49,6 +45,10 @@ from studies.trial_process import (
     MAX_DOMAIN,
     PlanItem,
     stop_all,
+)
+from trial_record.result import (
+    TrialResult,
+    code_version,
 )
 from world_description import PIPELINE_CELL
 

@@ -25,11 +25,11 @@ import cv2
 import numpy as np
 import pybullet
 
-from coordinator.trial_result import TrialResult
 from recording.analysis import AnalysisError, open_reader, read_messages
 from ros_common.outputs import OutputError, check_output_file, make_dir, write_file
 from sim_bridge.world import SimWorld, WorldError
 from studies.recorded import RecordError, is_bag, load_trial, trial_bag
+from trial_record.result import TrialResult
 from world_description.footprint import footprints
 from world_description.robot_files import check_robot_files
 from world_description.world_config import WorldConfig, WorldConfigError, parse_world

@@ -16,7 +16,7 @@ from typing import Any, Callable, Dict, List, Optional, Sequence, Tuple
 
 import yaml
 
-from coordinator.trial_result import TrialResult
+from trial_record.result import TrialResult
 from world_description.resources import resolve_resource
 from world_description.world_config import WorldConfigError, load_world
 

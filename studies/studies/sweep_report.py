@@ -9,8 +9,8 @@ from typing import Dict, List, Optional, Sequence, Tuple
 import cv2
 import numpy as np
 
-from coordinator.trial_result import TrialResult
 from studies.sweep import RATES, PointSummary, breaking_point, summarise
+from trial_record.result import TrialResult
 
 FONT = cv2.FONT_HERSHEY_SIMPLEX
 RATE_COLORS = {'identification': (180, 119, 31), 'grasp': (14, 127, 255),

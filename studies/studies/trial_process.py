@@ -16,17 +16,17 @@ from dataclasses import asdict, replace
 from pathlib import Path
 from typing import Any, Callable, Dict, Iterator, Optional, Set, TypedDict
 
-from coordinator.trial_result import (
+from ros_common.dds import hold_free_domain, with_profile
+from studies.recorded import bag_metadata
+from studies.sweep import SweepError, point_world
+from studies.trial_graph import TIME_STEP, pipeline_graph
+from trial_record.result import (
     RESULT_FILE,
     RunInfo,
     TrialResult,
     code_version,
     read_result,
 )
-from ros_common.dds import hold_free_domain, with_profile
-from studies.recorded import bag_metadata
-from studies.sweep import SweepError, point_world
-from studies.trial_graph import TIME_STEP, pipeline_graph
 from world_description import PIPELINE_CELL
 from world_description.resources import ResourceError, resolve_resource
 from world_description.world_config import WorldConfigError, world_data

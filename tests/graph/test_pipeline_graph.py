@@ -9,11 +9,11 @@ import pytest
 from rcl_interfaces.srv import GetParameters
 from rclpy.qos import qos_profile_sensor_data
 from sensor_msgs.msg import Image
-from studies.trial_process import OUTCOME_FILE, run_trial
 
-from coordinator.layout import CellLayout
-from coordinator.world_layout import layout_from_world
+from cell_layout.layout import CellLayout
+from cell_layout.world_layout import layout_from_world
 from helpers import cpu_load, wait_for
+from studies.trial_process import OUTCOME_FILE, run_trial
 from world_description import PIPELINE_CELL
 from world_description.resources import resolve_resource
 from world_description.world_config import load_world

@@ -7,10 +7,10 @@ import subprocess
 
 import cv2
 import numpy as np
+
 from studies.recorded import result_from_bag
 from studies.storyboard import CAPTION, PANEL
-
-from coordinator.trial_result import read_result
+from trial_record.result import read_result
 
 SHORT_CELL = '''extends: package://world_description/worlds/pipeline_cell.yaml
 materials:

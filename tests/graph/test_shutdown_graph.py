@@ -7,9 +7,9 @@ import signal
 import time
 
 import pytest
-from studies.trial_graph import pipeline_graph
 
 from helpers import NodeProcess, wait_for
+from studies.trial_graph import pipeline_graph
 
 SQUARE = ', '.join(['speed 0.5, forward 5s, speed 1.0, left 7.854s'] * 4) + ', stop'
 # ros2 launch's grace after SIGINT before it escalates to SIGTERM (sigterm_timeout).

@@ -237,8 +237,8 @@ def test_a_material_spawned_on_the_belt_is_sorted(start_node, probe, tmp_path):
     import json
 
     import yaml
-    from studies.trial_graph import pipeline_graph
 
+    from studies.trial_graph import pipeline_graph
     from world_description.resources import resolve_resource
     world = yaml.safe_load(resolve_resource(
         'package://world_description/worlds/pipeline_cell.yaml').read_text())

@@ -9,9 +9,8 @@ import signal
 import subprocess
 import time
 
-from studies.recorded import result_from_bag
-
 from helpers import wait_for
+from studies.recorded import result_from_bag
 
 
 def _session_processes(sid: int):

@@ -12,13 +12,13 @@ import time
 import pytest
 from rclpy.serialization import serialize_message
 from sim_interfaces.msg import PipelineState
-from studies.recorded import STATE_TOPIC, TRIAL_KEY, bag_metadata
-from studies.sweep import SweepError, grid, parse_axis
 
-from coordinator.records import RecordError, parse_json
-from coordinator.trial_result import RunInfo, TrialResult, read_result
 from recording.bag_writer import BagWriter
 from studies import compare, run_trials, trial_process
+from studies.recorded import STATE_TOPIC, TRIAL_KEY, bag_metadata
+from studies.sweep import SweepError, grid, parse_axis
+from trial_record.records import RecordError, parse_json
+from trial_record.result import RunInfo, TrialResult, read_result
 from world_description.resources import resolve_resource
 from world_description.world_config import world_data
 

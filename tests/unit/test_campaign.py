@@ -4,6 +4,7 @@ never a traceback, and never a campaign started on it."""
 import json
 
 import pytest
+
 import studies.run_trials as trials
 import studies.trial_process as trial_run
 from studies.campaign import (
@@ -14,8 +15,7 @@ from studies.campaign import (
     trial_results,
 )
 from studies.plan import trial_plan
-
-from coordinator.trial_result import ResultError, RunInfo, TrialResult
+from trial_record.result import ResultError, RunInfo, TrialResult
 
 WORLD_LINE = 'run_trials: error: --world'
 

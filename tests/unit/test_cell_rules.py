@@ -8,8 +8,8 @@ import yaml
 from test_material_classes import PAPER_CLASSES as PAPER
 from test_pipeline import FakeCell, kinds, run
 
-from coordinator.layout import SLOT_GAP_M, LayoutError
-from coordinator.world_layout import layout_from_world
+from cell_layout.layout import SLOT_GAP_M, LayoutError
+from cell_layout.world_layout import layout_from_world
 from world_description.resources import resolve_resource
 from world_description.world_config import parse_world
 
@@ -469,8 +469,8 @@ def test_an_unload_that_stalled_short_of_its_drop_is_a_failure_not_a_delivery():
 def test_an_unload_stalled_under_a_load_the_arm_cannot_hold_names_the_joint_and_its_torque():
     from test_pipeline import _YoubotIK
 
+    from cell_layout.reach import youbot_hold_need
     from coordinator.pipeline import Material, Observation, Pipeline, Settings
-    from coordinator.reach import youbot_hold_need
 
     class Ports(_YoubotIK):
         def grip(self, arm, on):

@@ -3,9 +3,9 @@ statistics."""
 import math
 
 import pytest
-from studies.compare import load_runs, main, mann_whitney, two_proportions
 
-from coordinator.trial_result import RunInfo, TrialResult
+from studies.compare import load_runs, main, mann_whitney, two_proportions
+from trial_record.result import RunInfo, TrialResult
 
 
 def test_two_proportions():

@@ -9,16 +9,16 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from controllers.bezier import BezierPath, key_poses_between
-from controllers.path_follower import PathFollower, PDGains, TurnLimits, simulate_kinematic
-from coordinator.pipeline import Settings
-from coordinator.world_layout import (
+from cell_layout.world_layout import (
     YOUBOT_HALF_LENGTH_M,
     YOUBOT_HALF_WIDTH_M,
     _footprint,
     _overlap,
     layout_from_world,
 )
+from controllers.bezier import BezierPath, key_poses_between
+from controllers.path_follower import PathFollower, PDGains, TurnLimits, simulate_kinematic
+from coordinator.pipeline import Settings
 from world_description.resources import resolve_resource
 from world_description.world_config import load_world
 

@@ -1,8 +1,8 @@
 """The cell seen from above (world_description/footprint.py) under the report's paths."""
 import numpy as np
 import pytest
-from studies.report import cell_shapes
 
+from studies.report import cell_shapes
 from world_description.footprint import footprints
 from world_description.resources import resolve_resource
 from world_description.world_config import load_world, world_data

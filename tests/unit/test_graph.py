@@ -3,6 +3,7 @@ from pathlib import Path
 
 import pytest
 import yaml
+
 from studies.trial_graph import (
     TIME_STEP,
     GraphNode,
@@ -10,7 +11,6 @@ from studies.trial_graph import (
     pipeline_graph,
     tick_rate,
 )
-
 from world_description import PIPELINE_CELL
 
 

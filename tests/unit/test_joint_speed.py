@@ -7,12 +7,12 @@ import numpy as np
 import pybullet
 import pytest
 
-from coordinator.joint_speeds import driven_past, speed_limits
-from coordinator.records import RecordError
-from coordinator.trial_result import TrialResult
+from cell_layout.joint_speeds import driven_past, speed_limits
 from sim_bridge.joint_speed import DRIVEN_PAST, BrakeBook, Braked
 from sim_bridge.runner import DriveLimits, NullSink, SimRunner
 from sim_bridge.world import SimWorld
+from trial_record.records import RecordError
+from trial_record.result import TrialResult
 from world_description import PIPELINE_CELL, YOUBOT_WORLD
 from world_description.resources import resolve_resource
 from world_description.world_config import load_world

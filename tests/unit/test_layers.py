@@ -15,13 +15,15 @@ from helpers import ROOT
 FLOORS = (
     ('controllers', 'world_description'),                          # the ROS-free ground floor
     ('robot_description', 'ros_common'),
-    ('sim_bridge', 'perception', 'arm_kinematics', 'recording', 'teleop'),
+    ('sim_bridge', 'perception', 'arm_kinematics', 'recording', 'teleop',
+     'cell_layout'),                                               # the cell's model, no ROS
+    ('trial_record',),                                             # a trial's record, no ROS
     ('coordinator', 'live_view'),
     ('studies',),
     ('sim_bringup',),                                              # launch files and tools
 )
 FLOOR = {package: level for level, packages in enumerate(FLOORS) for package in packages}
-ROS_FREE = FLOORS[0]
+ROS_FREE = (*FLOORS[0], 'cell_layout', 'trial_record')
 ROS_MODULES = ('rclpy', 'builtin_interfaces', 'rcl_interfaces', 'rosgraph_msgs', 'launch',
                'launch_ros')
 # (ament_index_python, a plain lookup of installed files, is not among them: the floor finds

@@ -4,6 +4,7 @@ import logging
 import struct
 
 import pytest
+
 from live_view.bridge import ClientOutbox, SlowClients, TopicFilter, graph_change
 
 

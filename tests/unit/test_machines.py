@@ -8,14 +8,14 @@ import numpy as np
 import pytest
 from test_cell_rules import PAPER, FakeCell, run, world
 
+from cell_layout.world_layout import layout_from_world
 from coordinator.pipeline import LoaderState, Pipeline, Settings, TransportState
 from coordinator.pipeline.diagram import diagrams, in_file, main
 from coordinator.pipeline.loader import LOADER_TRANSITIONS
 from coordinator.pipeline.machine import STRICT_ENV, TransitionError, transition_table
-from coordinator.pipeline.model import EventKind
 from coordinator.pipeline.transport import TRANSPORT_TRANSITIONS
-from coordinator.world_layout import layout_from_world
 from helpers import ROOT
+from trial_record.events import EventKind
 
 
 def test_every_state_has_a_row_and_only_the_final_state_has_no_way_out():

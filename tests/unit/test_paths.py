@@ -154,8 +154,8 @@ def test_key_poses_between_keeps_the_start_heading_for_via_points():
 def _stand_to_stand():
     """The youBot's turn between its two unload stands beside the pool, as the cell plans it:
     where it starts, its follower (a new one each call), and the pool's west wall's face (x)."""
+    from cell_layout.world_layout import layout_from_world
     from coordinator.pipeline import Settings
-    from coordinator.world_layout import layout_from_world
     from world_description.resources import resolve_resource
     from world_description.world_config import load_world
     world = load_world(resolve_resource('package://world_description/worlds/pipeline_cell.yaml'))

@@ -7,9 +7,10 @@ from typing import Dict, List, Optional
 import numpy as np
 import pytest
 
+from cell_layout.layout import CellLayout, LayoutError
+from cell_layout.world_layout import layout_from_world
 from controllers.conveyor import Item, advance
 from controllers.time_optimal import Waypoint
-from coordinator.layout import CellLayout, LayoutError
 from coordinator.pipeline import (
     YOUBOT_CARRY_Q,
     Detection,
@@ -20,7 +21,6 @@ from coordinator.pipeline import (
     Settings,
     youbot_tool_quaternion,
 )
-from coordinator.world_layout import layout_from_world
 from world_description.resources import resolve_resource
 from world_description.world_config import load_world
 
@@ -695,7 +695,7 @@ def test_a_pool_drop_out_of_reach_is_swapped_for_another():
     # from the far slot, as the base stood, no tilt reached its drop): the material goes to
     # the stand's next drop (it has a spare) instead of failing.
     layout = cell_layout()
-    from coordinator.layout import world_to_base
+    from cell_layout.layout import world_to_base
     blocked = []
     stand = layout.stand('pool_right')
     b = world_to_base(stand.pose, stand.drops[0])
@@ -991,7 +991,7 @@ def test_the_youbot_lifts_a_material_straight_off_its_plate_until_clear_of_its_n
     grip to the top of the lift swung it 2 cm sideways and tilted it 8 degrees), and on its way
     to the drop it passes over the other materials, never into them (a swing from the lift's
     top down to a pool drop lower than the plate knocked one over: campaign trial 31)."""
-    from coordinator.layout import PLATE_SLOTS_IN_BASE_M, PLATE_TOP_IN_BASE_M
+    from cell_layout.layout import PLATE_SLOTS_IN_BASE_M, PLATE_TOP_IN_BASE_M
     from coordinator.pipeline import YOUBOT_GRASP_STANDOFF_M, Material, clear_of_the_plate
     ports = _YoubotIK()
     layout = cell_layout()
@@ -1049,10 +1049,10 @@ def test_a_material_held_over_the_plate_clears_each_neighbour_by_its_own_height(
         held, other, clear):
     """The lift's check judges each material on the plate by its own edge: a 40 mm material
     held 2.5 cm over the top of a 40 mm neighbour clears it, but not a 60 mm one."""
-    from coordinator.layout import PLATE_SLOTS_IN_BASE_M, PLATE_TOP_IN_BASE_M
+    from cell_layout.layout import PLATE_SLOTS_IN_BASE_M, PLATE_TOP_IN_BASE_M
+    from cell_layout.reach import youbot_tool_quaternion
     from coordinator.pipeline import YOUBOT_GRASP_STANDOFF_M, clear_of_the_plate
     from coordinator.pipeline.unload_geometry import PLATE_CLEARANCE_M
-    from coordinator.reach import youbot_tool_quaternion
     ports = _YoubotIK()
     sx, sy = PLATE_SLOTS_IN_BASE_M[2]
     bottom = PLATE_TOP_IN_BASE_M + 0.04 + 0.025           # the held material's bottom

@@ -3,6 +3,7 @@ import io
 import json
 
 import pytest
+
 from studies.progress import (
     TYPICAL_COMPLETION_S,
     CampaignBar,
@@ -13,8 +14,7 @@ from studies.progress import (
     read_progress,
     running_figures,
 )
-
-from coordinator.trial_result import TrialResult
+from trial_record.result import TrialResult
 
 
 def test_a_running_trial_is_projected_from_its_own_pace():

@@ -11,11 +11,11 @@ import re
 import pytest
 from hypothesis import HealthCheck, event, given, settings
 from hypothesis import strategies as st
-from studies.recorded import TRIAL_KEY, TrialRecord, bag_metadata
 
-from coordinator.records import RecordError
-from coordinator.trial_result import RunInfo, TrialResult
 from helpers import REPORT
+from studies.recorded import TRIAL_KEY, TrialRecord, bag_metadata
+from trial_record.records import RecordError
+from trial_record.result import RunInfo, TrialResult
 from world_description.resources import resolve_resource
 from world_description.world_config import world_data
 
@@ -171,7 +171,7 @@ def test_a_result_read_back_is_refused_or_used_by_every_tool(tmp_path_factory, d
     if text is None:
         event('not even JSON')
         return
-    from coordinator.records import parse_json
+    from trial_record.records import parse_json
     try:
         result = TrialResult.from_dict(parse_json(text, 'fuzzed'), 'fuzzed')
     except RecordError as exc:

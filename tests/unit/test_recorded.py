@@ -4,6 +4,8 @@ told."""
 import pytest
 from rclpy.serialization import serialize_message
 from sim_interfaces.msg import PipelineState
+
+from recording.bag_writer import BagWriter
 from studies.recorded import (
     STATE_TOPIC,
     TRIAL_KEY,
@@ -12,9 +14,7 @@ from studies.recorded import (
     load_trial,
     result_from_bag,
 )
-
-from coordinator.trial_result import RunInfo, TrialResult
-from recording.bag_writer import BagWriter
+from trial_record.result import RunInfo, TrialResult
 from world_description.resources import resolve_resource
 from world_description.world_config import world_data
 

@@ -4,6 +4,7 @@ import json
 
 import pytest
 import yaml
+
 from studies.recorded import RecordError, find_result
 from studies.rerun import (
     ORIGINAL_WORLD,
@@ -13,8 +14,7 @@ from studies.rerun import (
     parse_sets,
     prepare,
 )
-
-from coordinator.trial_result import RunInfo, TrialResult
+from trial_record.result import RunInfo, TrialResult
 from world_description.resources import resolve_resource
 from world_description.world_config import load_world, world_data
 

@@ -7,12 +7,13 @@ import re
 import cv2
 import numpy as np
 import pytest
+
+from coordinator.pipeline import RunResult
 from studies.campaign import write_csv
 from studies.plan import trial_plan
 from studies.report import STATE_COLORS, activity, summary_rows, write_report
-
-from coordinator.pipeline import RunResult
-from coordinator.scoring import (
+from trial_record.result import RunInfo, TrialResult
+from trial_record.scoring import (
     IdentificationCheck,
     at_destination,
     match_identification,
@@ -20,7 +21,6 @@ from coordinator.scoring import (
     score,
     tracks_of,
 )
-from coordinator.trial_result import RunInfo, TrialResult
 from world_description.resources import resolve_resource
 from world_description.world_config import load_world
 
@@ -98,7 +98,7 @@ def test_the_rates_split_as_the_paper_splits_them(regions):
 
 
 def test_the_peak_joint_speed_is_the_largest_fraction_of_any_joints_limit():
-    from coordinator.scoring import PeakJointSpeed
+    from trial_record.scoring import PeakJointSpeed
     peak = PeakJointSpeed([2.0, 3.0, 1.0])
     peak.update([1.0, -2.7, 0.5])                      # joint 1 at 0.9 of its limit
     peak.update([0.1, 0.1, float('nan')])              # a bad sample is ignored
@@ -303,7 +303,7 @@ def test_the_code_version_names_the_commit_and_uncommitted_code_changes(tmp_path
     import subprocess
     import sys
 
-    import coordinator.trial_result as trial_result
+    import trial_record.result as trial_result
     if shutil.which('git') is None:
         pytest.skip('git is not installed')
     repo = tmp_path / 'repo'
@@ -338,7 +338,7 @@ def test_outside_a_checkout_the_code_version_is_the_one_the_image_was_built_from
     import shutil
     import sys
 
-    import coordinator.trial_result as trial_result
+    import trial_record.result as trial_result
     (tmp_path / 'pkg').mkdir()
     shutil.copy(trial_result.__file__, tmp_path / 'pkg' / 'trials.py')
     monkeypatch.setenv('GIT_CEILING_DIRECTORIES', str(tmp_path))   # no checkout above it
@@ -364,7 +364,7 @@ def test_two_runs_differ_only_where_their_outcome_does_not_in_their_metadata():
 
 
 def test_each_material_not_at_its_destination_says_what_went_wrong():
-    from coordinator.scoring import failure_cause
+    from trial_record.scoring import failure_cause
 
     def seen(truth_id, material, color, true_color):
         return {'truth_id': truth_id, 'material': material, 'color': color,

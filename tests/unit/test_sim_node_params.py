@@ -116,7 +116,7 @@ def test_a_joint_driven_past_its_limit_is_told_in_the_form_a_trials_result_reads
 
     from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 
-    from coordinator.joint_speeds import driven_past
+    from cell_layout.joint_speeds import driven_past
     from world_description import YOUBOT_WORLD
     node = make(context, world=YOUBOT_WORLD, synchronous=True)
     try:

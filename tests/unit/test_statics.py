@@ -52,7 +52,7 @@ def test_the_static_torques_are_the_engines_at_any_pose_with_any_payload(engine)
 def test_the_youbot_holds_its_load_upright_but_not_stretched_out():
     """Upright (the candle) the joints hold almost nothing; stretched out level, 0.38 kg takes
     the shoulder past its 9.5 N m (the simulated arm sagged 0.24 rad there)."""
-    from coordinator.reach import YOUBOT_LOAD_MAX, youbot_holds, youbot_statics
+    from cell_layout.reach import YOUBOT_LOAD_MAX, youbot_holds, youbot_statics
     statics = youbot_statics()
     assert statics.load(np.zeros(5), 0.5) < 0.05
     level = np.array([0.0, 1.5708, 0.0, 0.0, 0.0])          # shoulder forward, arm level

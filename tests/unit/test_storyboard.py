@@ -6,6 +6,9 @@ import math
 import numpy as np
 import pybullet
 import pytest
+
+from sim_bridge.runner import DriveLimits, NullSink, SimRunner
+from sim_bridge.world import SimWorld
 from studies.storyboard import (
     PANEL,
     Event,
@@ -16,9 +19,6 @@ from studies.storyboard import (
     phases,
     storyboard,
 )
-
-from sim_bridge.runner import DriveLimits, NullSink, SimRunner
-from sim_bridge.world import SimWorld
 from world_description.footprint import footprints
 from world_description.resources import resolve_resource
 from world_description.world_config import load_world

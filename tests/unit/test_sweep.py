@@ -7,6 +7,7 @@ import math
 
 import pytest
 import yaml
+
 from studies.campaign import CampaignError, check_plan
 from studies.sweep import (
     Axis,
@@ -19,8 +20,7 @@ from studies.sweep import (
     wilson,
     world_overrides,
 )
-
-from coordinator.trial_result import RunInfo, TrialResult
+from trial_record.result import RunInfo, TrialResult
 from world_description.world_config import load_world
 
 

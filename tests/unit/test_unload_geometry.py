@@ -4,8 +4,8 @@ check that a motion keeps it clear of the plate's other materials."""
 import numpy as np
 import pytest
 
+from cell_layout.layout import PLATE_SLOTS_IN_BASE_M, PLATE_TOP_IN_BASE_M
 from controllers.youbot_kinematics import YoubotKinematics
-from coordinator.layout import PLATE_SLOTS_IN_BASE_M, PLATE_TOP_IN_BASE_M
 from coordinator.pipeline.unload_geometry import (
     PLATE_CLEARANCE_M,
     REGRIP_PRESS_M,

@@ -11,18 +11,18 @@ from test_cell_rules import world
 from test_material_classes import PAPER_CLASSES as PAPER
 from test_pipeline import _YoubotIK
 
-from controllers.youbot_arm import ARM_BASE_IN_BASE_LINK_M
-from coordinator.pipeline import Material, Observation, Pipeline, Settings
-from coordinator.pipeline.model import TransportState
-from coordinator.pipeline.unload_geometry import YOUBOT_CARRY_Q
-from coordinator.pipeline.unload_planner import SLIDE_MIN_M
-from coordinator.reach import youbot_holds
-from coordinator.world_layout import (
+from cell_layout.reach import youbot_holds
+from cell_layout.world_layout import (
     STAND_SLIDE_MAX_M,
     YOUBOT_HALF_LENGTH_M,
     layout_from_world,
     stand_slide,
 )
+from controllers.youbot_arm import ARM_BASE_IN_BASE_LINK_M
+from coordinator.pipeline import Material, Observation, Pipeline, Settings
+from coordinator.pipeline.model import TransportState
+from coordinator.pipeline.unload_geometry import YOUBOT_CARRY_Q
+from coordinator.pipeline.unload_planner import SLIDE_MIN_M
 
 
 def test_the_paper_s_stands_slide_the_whole_way_along_the_pool_s_wall():

@@ -12,10 +12,10 @@ from test_cell_rules import world
 from test_material_classes import PAPER_CLASSES as PAPER
 from test_pipeline import Zu12IK
 
+from cell_layout.world_layout import layout_from_world
 from controllers.time_optimal import Waypoint
 from coordinator.pipeline import Material, Pipeline, Settings, model, pick_geometry
 from coordinator.pipeline.pick_geometry import edge_point, over_the_belt
-from coordinator.world_layout import layout_from_world
 
 READY = np.array([1.201, 1.436, -1.222, 1.357, 1.571, -0.37])      # (the world's)
 

@@ -6,7 +6,7 @@ down on their destination's next free slot, and loads the ones the youBot carrie
 plate. The transport (the youBot) waits for its load, drives along Bezier paths with a PD
 follower, unloads with its arm (into the pool from over its wall, onto any other destination's
 next free slot) and drives home. Both arms end at their start poses. Which class goes where is
-the world file's (coordinator.layout's rules): no class is named here.
+the world file's (cell_layout.layout's rules): no class is named here.
 
 The machine acts through ``Ports`` (IK, trajectories, suction, belt, base twist, events) and
 sees the world through ``Observation``; the node implements both over ROS, tests fake them.
@@ -14,12 +14,11 @@ Every state has a deadline; a missed grasp is retried, then reported; a material
 the belt end is reported; a port that stops answering (``NodeTimeout``) ends the run. The run
 always ends with a ``RunResult``.
 """
+from cell_layout.reach import youbot_tool_quaternion
 from coordinator.pipeline.core import Pipeline
 from coordinator.pipeline.loader import Loader
 from coordinator.pipeline.model import (
     Detection,
-    Event,
-    EventKind,
     LoaderState,
     Material,
     MaterialStatus,
@@ -28,7 +27,6 @@ from coordinator.pipeline.model import (
     Observation,
     Points,
     Ports,
-    RunResult,
     Settings,
     Tally,
     TransportState,
@@ -40,7 +38,7 @@ from coordinator.pipeline.unload_geometry import (
     YOUBOT_GRASP_STANDOFF_M,
     clear_of_the_plate,
 )
-from coordinator.reach import youbot_tool_quaternion
+from trial_record.events import Event, EventKind, RunResult
 
 __all__ = ['Detection', 'Event', 'EventKind', 'Loader', 'LoaderState', 'Material',
            'MaterialStatus', 'Motion', 'NodeTimeout', 'Observation', 'Pipeline', 'Points',

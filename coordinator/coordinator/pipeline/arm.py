@@ -8,22 +8,14 @@ from typing import List, Optional, Sequence
 
 import numpy as np
 
+from cell_layout.reach import youbot_holds, youbot_tool_quaternion
 from controllers import youbot_arm, zu12_arm
 from controllers.arrays import Vector
 from controllers.time_optimal import SAMPLE_PERIOD_S, JointLimits, Waypoint, plan
 from coordinator.pipeline.clock import Clock
-from coordinator.pipeline.model import (
-    DOWN,
-    EventKind,
-    Motion,
-    Observation,
-    Points,
-    Ports,
-    Settings,
-    known,
-)
+from coordinator.pipeline.model import DOWN, Motion, Observation, Points, Ports, Settings, known
 from coordinator.pipeline.record import EventLog
-from coordinator.reach import youbot_holds, youbot_tool_quaternion
+from trial_record.events import EventKind
 
 
 class Arm:

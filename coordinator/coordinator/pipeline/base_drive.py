@@ -9,8 +9,9 @@ from typing import Any, Optional, Sequence
 
 from controllers.bezier import BezierPath, Pose2D, key_poses_between
 from controllers.path_follower import PathFollower, PDGains, TurnLimits
-from coordinator.pipeline.model import EventKind, Observation, Ports, Settings, known
+from coordinator.pipeline.model import Observation, Ports, Settings, known
 from coordinator.pipeline.record import EventLog
+from trial_record.events import EventKind
 
 
 class BaseDrive:

@@ -13,8 +13,8 @@ from typing import Callable, Dict, List, Sequence, Tuple, cast
 
 import numpy as np
 
+from cell_layout.layout import CellLayout
 from controllers.conveyor import Item, advance, held
-from coordinator.layout import CellLayout
 from coordinator.pipeline.model import QUEUE_CLEARANCE_M, Detection, Material, MaterialStatus
 
 # Materials the belt still carries, as the coordinator believes: those a failed pick left there

@@ -6,8 +6,8 @@ from typing import Dict, List, Optional
 
 import numpy as np
 
+from cell_layout.layout import CellLayout
 from controllers.arrays import Vector
-from coordinator.layout import CellLayout
 from coordinator.pipeline.arm import Arm, YoubotArm, youbot_limits, zu12_limits
 from coordinator.pipeline.belt import BeltModel
 from coordinator.pipeline.clock import Clock
@@ -15,21 +15,19 @@ from coordinator.pipeline.loader import Loader
 from coordinator.pipeline.materials import MaterialBook
 from coordinator.pipeline.model import (
     QUEUE_MARGIN_M,
-    Event,
-    EventKind,
     LoaderState,
     Material,
     MaterialStatus,
     NodeTimeout,
     Observation,
     Ports,
-    RunResult,
     Settings,
     Tally,
     TransportState,
 )
 from coordinator.pipeline.record import EventLog
 from coordinator.pipeline.transport import Transport
+from trial_record.events import Event, EventKind, RunResult
 
 
 class Pipeline:

@@ -8,8 +8,8 @@ from typing import List, Optional, Tuple
 
 import numpy as np
 
+from cell_layout.layout import CellLayout
 from controllers.time_optimal import Waypoint
-from coordinator.layout import CellLayout
 from coordinator.pipeline.arm import Arm
 from coordinator.pipeline.model import RELEASE_HOLD_S, Observation, Points, Settings, known
 from coordinator.pipeline.pick_geometry import over_the_belt

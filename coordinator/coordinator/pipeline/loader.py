@@ -13,12 +13,12 @@ from typing import (
 
 import numpy as np
 
+from cell_layout.layout import CellLayout
 from controllers.pick_place import PickTiming
 from controllers.time_optimal import (
     Waypoint,
     plan,
 )
-from coordinator.layout import CellLayout
 from coordinator.pipeline.arm import Arm
 from coordinator.pipeline.belt import BeltModel
 from coordinator.pipeline.cup import CupPlace
@@ -30,7 +30,6 @@ from coordinator.pipeline.model import (
     PICK_LEAD_S,
     PLAN_MARGIN,
     QUEUE_LIFT_PAUSE_LEAD_S,
-    EventKind,
     LoaderState,
     Material,
     MaterialStatus,
@@ -42,6 +41,7 @@ from coordinator.pipeline.model import (
 from coordinator.pipeline.pick_planner import LEAVE, Ahead, PickPlan, PickPlanner, PlaceWay
 from coordinator.pipeline.record import EventLog
 from coordinator.pipeline.room import Room
+from trial_record.events import EventKind
 
 _S = LoaderState
 # The states each state may be followed by (the loader's only way between states; `enter`

@@ -8,16 +8,10 @@ from typing import Dict, List, Set
 
 import numpy as np
 
-from coordinator.layout import CellLayout
-from coordinator.pipeline.model import (
-    Detection,
-    EventKind,
-    Material,
-    MaterialStatus,
-    Settings,
-    Tally,
-)
+from cell_layout.layout import CellLayout
+from coordinator.pipeline.model import Detection, Material, MaterialStatus, Settings, Tally
 from coordinator.pipeline.record import EventLog
+from trial_record.events import EventKind
 
 
 class MaterialBook:

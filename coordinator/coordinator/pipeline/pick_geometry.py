@@ -9,11 +9,11 @@ from typing import Callable, List, Sequence, Tuple
 
 import numpy as np
 
+from cell_layout.layout import CellLayout
+from cell_layout.reach import zu12_cup_positions
 from controllers.arrays import Vector
 from controllers.pick_place import PickTiming
-from coordinator.layout import CellLayout
 from coordinator.pipeline.model import EDGE_CLEARANCE_M
-from coordinator.reach import zu12_cup_positions
 
 # A lift out of the end stop's queue keeps to the straight line up through a point this often
 # [m].

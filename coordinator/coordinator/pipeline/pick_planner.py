@@ -10,6 +10,7 @@ from typing import Any, Callable, List, Optional, Union
 
 import numpy as np
 
+from cell_layout.layout import CellLayout, slot_in_world
 from controllers.bezier import Pose2D
 from controllers.pick_place import PickTiming, follow_pick
 from controllers.time_optimal import (
@@ -20,7 +21,6 @@ from controllers.time_optimal import (
     plan,
     timed_path,
 )
-from coordinator.layout import CellLayout, slot_in_world
 from coordinator.pipeline.arm import Arm
 from coordinator.pipeline.belt import BeltModel
 from coordinator.pipeline.cup import CupPlace

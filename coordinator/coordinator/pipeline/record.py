@@ -4,7 +4,8 @@ from __future__ import annotations
 
 from typing import Dict, List, Optional
 
-from coordinator.pipeline.model import Event, EventKind, Material, Ports
+from coordinator.pipeline.model import Material, Ports
+from trial_record.events import Event, EventKind
 
 
 class EventLog:

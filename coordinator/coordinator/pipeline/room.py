@@ -5,7 +5,7 @@ from __future__ import annotations
 
 from typing import Dict, List, Optional
 
-from coordinator.layout import CellLayout
+from cell_layout.layout import CellLayout
 from coordinator.pipeline.materials import MaterialBook
 from coordinator.pipeline.model import (
     SET_DOWN_CLEARANCE_M,

@@ -11,13 +11,13 @@ from typing import (
 
 import numpy as np
 
+from cell_layout.layout import (
+    POOL,
+    CellLayout,
+)
 from controllers.time_optimal import (
     PlanError,
     Waypoint,
-)
-from coordinator.layout import (
-    POOL,
-    CellLayout,
 )
 from coordinator.pipeline.arm import YoubotArm
 from coordinator.pipeline.base_drive import BaseDrive
@@ -27,7 +27,6 @@ from coordinator.pipeline.model import (
     RELEASE_HOLD_S,
     SETTLE_S,
     SPRING_BACK_WAIT_S,
-    EventKind,
     Material,
     MaterialStatus,
     Observation,
@@ -46,6 +45,7 @@ from coordinator.pipeline.unload_geometry import (
     short_of,
 )
 from coordinator.pipeline.unload_planner import UnloadPath, UnloadPlanner
+from trial_record.events import EventKind
 
 _S = TransportState
 # The states each state may be followed by (`enter` checks it; pipeline_diagram draws it).

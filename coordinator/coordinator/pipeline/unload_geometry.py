@@ -8,11 +8,11 @@ from typing import List, Sequence, Tuple, cast
 
 import numpy as np
 
+from cell_layout.layout import PLATE_TOP_IN_BASE_M
+from cell_layout.world_layout import GRASP_STANDOFF_M
 from controllers.arrays import Vector
 from controllers.youbot_kinematics import YoubotKinematics
-from coordinator.layout import PLATE_TOP_IN_BASE_M
 from coordinator.pipeline.model import Points
-from coordinator.world_layout import GRASP_STANDOFF_M
 
 # The youBot's arm upright (the datasheet's candle pose) while the base drives home.
 YOUBOT_CARRY_Q = np.zeros(5)

@@ -10,9 +10,10 @@ from typing import List, Optional, Sequence, Tuple
 
 import numpy as np
 
+from cell_layout.layout import CellLayout, world_to_base
+from cell_layout.reach import YOUBOT_LOAD_MAX, youbot_hold_need
 from controllers.bezier import Pose2D
 from controllers.time_optimal import PlanError, Waypoint, timed_path
-from coordinator.layout import CellLayout, world_to_base
 from coordinator.pipeline.arm import YoubotArm
 from coordinator.pipeline.materials import MaterialBook
 from coordinator.pipeline.model import Material, Observation, Points, Settings
@@ -23,7 +24,6 @@ from coordinator.pipeline.unload_geometry import (
     grip_points,
     held_offset,
 )
-from coordinator.reach import YOUBOT_LOAD_MAX, youbot_hold_need
 
 
 @dataclass

@@ -27,13 +27,13 @@ from launch.actions import (
 from launch.event_handlers import OnProcessExit
 from launch.events import Shutdown
 from launch_ros.actions import Node
+
+from ros_common.dds import profile_environment
+from sim_bringup.state_publishers import state_publishers
 from studies.recorded import bag_metadata
 from studies.trial_graph import TIME_STEP, pipeline_graph
 from studies.trial_process import scenario
-
-from coordinator.trial_result import code_version
-from ros_common.dds import profile_environment
-from sim_bringup.state_publishers import state_publishers
+from trial_record.result import code_version
 from world_description import PIPELINE_CELL
 
 

@@ -10,9 +10,7 @@ from typing import Any, Dict, List, Optional, Sequence, Set, Tuple
 
 import numpy as np
 
-from controllers.bezier import Pose2D
-from controllers.youbot_arm import ARM_BASE_IN_BASE_LINK_M
-from coordinator.layout import (
+from cell_layout.layout import (
     PLATE_TOP_IN_BASE_M,
     POOL,
     CellLayout,
@@ -24,6 +22,8 @@ from coordinator.layout import (
     slot_grid,
     world_to_base,
 )
+from controllers.bezier import Pose2D
+from controllers.youbot_arm import ARM_BASE_IN_BASE_LINK_M
 
 
 def with_extra_materials(world: Any, extra: Sequence[str]) -> Any:
@@ -272,7 +272,7 @@ def _youbot_reaches_from(stand: UnloadStand, point: np.ndarray, base_z: float, m
     ``stand`` or slid along its line abeam the point: ``margin`` [m] further out from the arm's
     base too (the base stands a centimetre or two off its goal), and holding ``mass`` kg there
     at rest (within youbot_holds' share of each joint's effort)."""
-    from coordinator.reach import youbot_reaches
+    from cell_layout.reach import youbot_reaches
     up = np.array([0.0, 0.0, over])
     poses = [stand.pose]
     if stand.abeam(point) != tuple(stand.pose):
@@ -292,7 +292,7 @@ def _check_plate_load(layout: CellLayout, name: str, size: float, mass: float) -
     """A LayoutError unless the youBot's arm holds ``mass`` kg at rest (within youbot_holds'
     share of each joint's effort) over one of the plate's slots, where it lifts every carried
     material from: a load it cannot hold there it cannot unload anywhere."""
-    from coordinator.reach import YOUBOT_LOAD_MAX, youbot_least_need
+    from cell_layout.reach import YOUBOT_LOAD_MAX, youbot_least_need
     best: Optional[Tuple[str, float, float]] = None
     for slot in layout.plate_slots:
         top = np.array([slot[0], slot[1], PLATE_TOP_IN_BASE_M + size])
@@ -311,7 +311,7 @@ def _region(layout: CellLayout, obstacle: Any, name: str) -> Tuple[Region, str]:
     """A destination's region and its slots, each checked in reach of the robot that sets a
     material down there (a LayoutError if none is), and the stand the youBot unloads there from
     (a carried class's destination other than the pool: the nearer stand)."""
-    from coordinator.reach import zu12_reaches
+    from cell_layout.reach import zu12_reaches
     ox, oy, oz = obstacle.position
     if abs(math.sin(2 * obstacle.yaw)) > 1e-9:
         raise LayoutError(f'destination {name} is turned {math.degrees(obstacle.yaw):.0f} deg: '

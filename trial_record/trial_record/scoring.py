@@ -25,11 +25,11 @@ from typing import Any, Dict, FrozenSet, List, Mapping, Optional, Sequence, Tupl
 
 import numpy as np
 
+from cell_layout.layout import CellLayout
+from cell_layout.world_layout import layout_from_world
 from controllers.arrays import Vector
-from coordinator.layout import CellLayout
-from coordinator.pipeline import Event, EventKind, RunResult
-from coordinator.trial_result import MAX_DRIVEN_PAST, TrialResult
-from coordinator.world_layout import layout_from_world
+from trial_record.events import Event, EventKind, RunResult
+from trial_record.result import MAX_DRIVEN_PAST, TrialResult
 
 TruePose = Tuple[str, np.ndarray]            # (true colour, centre position)
 
@@ -294,7 +294,7 @@ class RunTrace:
     youbot_path: Sequence[Tuple[float, float]]
     events: Sequence[Event]
     odometry_age: Optional[Dict[str, float]] = None
-    # The joints the simulator found driven past their speed limits (coordinator.joint_speeds).
+    # The joints the simulator found driven past their speed limits (cell_layout.joint_speeds).
     driven_past: Sequence[Dict[str, Any]] = ()
 
 

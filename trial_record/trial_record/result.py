@@ -18,7 +18,7 @@ from dataclasses import asdict, dataclass, field, fields, replace
 from pathlib import Path
 from typing import Any, Dict, List, Mapping, Optional, Tuple
 
-from coordinator.records import (
+from trial_record.records import (
     MAX_COUNT,
     MAX_SIM_TIME_S,
     MAX_TEXT,

@@ -1,0 +1,1 @@
+"""The pipeline cell as its world file and robot models describe it (no ROS)."""

@@ -1,0 +1,1 @@
+"""A trial's record: its events, its score, its result file (no ROS)."""
