@@ -264,13 +264,13 @@ def test_the_cup_rises_straight_up_from_a_place_before_it_swings_away(monkeypatc
     there), and only then swings away: a joint motion from the release straight towards home
     swept two materials off their slots beside it. (The fake's joints are the cup's position,
     so the sweep itself shows only on the real arm: this holds the plan to the way up.)"""
-    from coordinator.pipeline import cup
+    from coordinator.pipeline import robots
     classes = copy.deepcopy(PAPER)
     classes['purple']['count'] = 3
     classes['orange']['count'] = 2
     layout = layout_from_world(world(classes))
     firsts = []
-    from_release = cup.CupPlace.from_release
+    from_release = robots.CupPlace.from_release
 
     def record(self, waypoints, edge=None):
         way, wait = from_release(self, waypoints, edge)
@@ -278,7 +278,7 @@ def test_the_cup_rises_straight_up_from_a_place_before_it_swings_away(monkeypatc
             firsts.append((way[0], self.above_q, self.above))
         return way, wait
 
-    monkeypatch.setattr(cup.CupPlace, 'from_release', record)
+    monkeypatch.setattr(robots.CupPlace, 'from_release', record)
     # (The last purple is the last material: from its place the arm goes home.)
     cell = FakeCell(layout, ['purple', 'orange', 'purple', 'blue', 'orange', 'purple'])
     r = run(cell).result
@@ -314,10 +314,10 @@ def test_a_pick_whose_joint_path_is_out_of_the_limits_meets_the_material_further
     joints' path there: the pick is planned to meet the material a little later, instead of
     giving it up (a 47 mm orange was, "joint 3 acceleration -320 is beyond its limit")."""
     from controllers.time_optimal import PlanError
-    from coordinator.pipeline import cup
+    from coordinator.pipeline import robots
     layout = layout_from_world(world(copy.deepcopy(PAPER)))
     refused = []
-    plan = cup.CupPlace.plan
+    plan = robots.CupPlace.plan
 
     def refuse_once(self, obs, waypoints, start=None, edge=None):
         if any(w.direct for w in waypoints) and not refused:       # (a pick's path)
@@ -325,7 +325,7 @@ def test_a_pick_whose_joint_path_is_out_of_the_limits_meets_the_material_further
             raise PlanError('waypoint 5: joint 3 acceleration -320.373 is beyond its limit')
         return plan(self, obs, waypoints, start, edge)
 
-    monkeypatch.setattr(cup.CupPlace, 'plan', refuse_once)
+    monkeypatch.setattr(robots.CupPlace, 'plan', refuse_once)
     cell = FakeCell(layout, ['orange', 'purple', 'orange', 'blue', 'orange', 'orange',
                              'orange', 'orange'])
     r = run(cell).result

@@ -197,3 +197,14 @@ def test_no_module_or_class_grows_past_the_houses_sizes():
     # (An exception that is gone, or has shrunk, is taken off the list or lowered.)
     assert all(modules.get(m, 0) == n for m, n in MODULES_STILL_OVER.items())
     assert all(classes.get(c, 0) == n for c, n in CLASSES_STILL_OVER.items())
+
+
+# The cell's controller holds only what runs during a trial (issue 49): the cell's model and a
+# trial's record are packages of their own below it, the studies one above it.
+CONTROLLER_MAX_LINES = 4000
+
+
+def test_the_controller_package_stays_under_its_size():
+    lines = sum(len(path.read_text().splitlines())
+                for path in (ROOT / 'coordinator').rglob('*.py'))
+    assert 0 < lines < CONTROLLER_MAX_LINES

@@ -6,7 +6,7 @@ from test_zu12_swing import _cell
 
 from controllers.pick_place import PickTiming
 from coordinator.pipeline import Material, pick_planner
-from coordinator.pipeline.belt import BeltModel
+from coordinator.pipeline.materials import BeltModel
 from coordinator.pipeline.model import QUEUE_LIFT_PAUSE_LEAD_S
 
 

@@ -8,11 +8,9 @@ import numpy as np
 
 from cell_layout.layout import CellLayout
 from controllers.arrays import Vector
-from coordinator.pipeline.arm import Arm, YoubotArm, youbot_limits, zu12_limits
-from coordinator.pipeline.belt import BeltModel
 from coordinator.pipeline.clock import Clock
 from coordinator.pipeline.loader import Loader
-from coordinator.pipeline.materials import MaterialBook
+from coordinator.pipeline.materials import BeltModel, MaterialBook
 from coordinator.pipeline.model import (
     QUEUE_MARGIN_M,
     LoaderState,
@@ -26,6 +24,7 @@ from coordinator.pipeline.model import (
     TransportState,
 )
 from coordinator.pipeline.record import EventLog
+from coordinator.pipeline.robots import Arm, YoubotArm, youbot_limits, zu12_limits
 from coordinator.pipeline.transport import Transport
 from trial_record.events import Event, EventKind, RunResult
 

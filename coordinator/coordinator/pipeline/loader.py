@@ -19,11 +19,8 @@ from controllers.time_optimal import (
     Waypoint,
     plan,
 )
-from coordinator.pipeline.arm import Arm
-from coordinator.pipeline.belt import BeltModel
-from coordinator.pipeline.cup import CupPlace
 from coordinator.pipeline.machine import Machine, transition_table
-from coordinator.pipeline.materials import MaterialBook
+from coordinator.pipeline.materials import BeltModel, MaterialBook
 from coordinator.pipeline.model import (
     FOLLOW_TOLERANCE,
     MAX_REPLANS,
@@ -40,6 +37,7 @@ from coordinator.pipeline.model import (
 )
 from coordinator.pipeline.pick_planner import LEAVE, Ahead, PickPlan, PickPlanner, PlaceWay
 from coordinator.pipeline.record import EventLog
+from coordinator.pipeline.robots import Arm, CupPlace
 from coordinator.pipeline.room import Room
 from trial_record.events import EventKind
 

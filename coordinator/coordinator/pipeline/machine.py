@@ -8,9 +8,9 @@ import os
 from enum import Enum
 from typing import Callable, ClassVar, Dict, FrozenSet, List, Mapping, Optional, Tuple
 
-from coordinator.pipeline.arm import Arm
 from coordinator.pipeline.model import Observation, Points, Settings
 from coordinator.pipeline.record import EventLog
+from coordinator.pipeline.robots import Arm
 from trial_record.events import EventKind
 
 # Set (to 1) in the test suite: a transition the table does not allow raises TransitionError.

@@ -1,15 +1,33 @@
-"""The material book (no ROS): every material the run has seen, and the only writer of each
-one's status and place (the slot kept for it on the youBot's plate or at its destination, the
-pool drop it went to). The machines ask it what is still to come and where a material may go,
-and tell it what became of one; the belt model carries the materials' positions."""
+"""The materials, as the coordinator believes them (no ROS).
+
+- ``MaterialBook``: every material the run has seen, and the only writer of each one's status
+  and place (the slot kept for it on the youBot's plate or at its destination, the pool drop it
+  went to). The machines ask it what is still to come and where a material may go, and tell it
+  what became of one.
+- ``BeltModel``: where each material the belt carries is, and will be. What the camera confirmed
+  rides on at the belt's speed while the belt runs, and queues at the end stop (or behind what
+  the stop holds). The model is carried forward to each observation, and to the moment a
+  material is lifted off. It acts on nothing: the run switches the belt and records when
+  (``switched``), the machines ask where a material will be (``track``) and when it reaches a
+  point (``reaches``).
+"""
 from __future__ import annotations
 
-from typing import Dict, List, Set
+import math
+from typing import Callable, Dict, List, Sequence, Set, Tuple, cast
 
 import numpy as np
 
 from cell_layout.layout import CellLayout
-from coordinator.pipeline.model import Detection, Material, MaterialStatus, Settings, Tally
+from controllers.conveyor import Item, advance, held
+from coordinator.pipeline.model import (
+    QUEUE_CLEARANCE_M,
+    Detection,
+    Material,
+    MaterialStatus,
+    Settings,
+    Tally,
+)
 from coordinator.pipeline.record import EventLog
 from trial_record.events import EventKind
 
@@ -98,3 +116,142 @@ class MaterialBook:
         """Every material of the batch at its destination, as far as the coordinator knows."""
         return (all(m.status.done for m in self.materials.values())
                 and len(self.materials) == self.layout.total)
+
+
+# Materials the belt still carries, as the coordinator believes: those a failed pick left there
+# too (they ride on, and queue at the stop).
+_ON_BELT = (MaterialStatus.SEEN, MaterialStatus.PICKING, MaterialStatus.FAILED)
+
+
+class BeltModel:
+    def __init__(self, layout: CellLayout, materials: Dict[int, Material], start_time: float,
+                 ran_before: bool) -> None:
+        self.layout = layout
+        self.materials = materials
+        self.running = False
+        # (time it took effect, running): the belt's history, for the travel between two times.
+        self.log: List[Tuple[float, bool]] = [
+            (-math.inf, True) if ran_before else (start_time, False)]
+        self._time = start_time           # the model's time (``advance``)
+        self.now = start_time             # the run's time: what ``track`` starts from
+
+    @property
+    def speed(self) -> float:
+        return self.layout.belt_speed if self.running else 0.0
+
+    def on_belt(self) -> List[Material]:
+        return [m for m in self.materials.values() if m.status in _ON_BELT and not m.picked]
+
+    def _items(self, mats: Sequence[Material]) -> List[Item]:
+        # Along the belt as world x (the belt runs along +x; only differences matter).
+        return [Item(m.position[0], m.position[1] - self.layout.belt_y, m.size, m.size)
+                for m in mats]
+
+    @property
+    def stop(self) -> float:
+        """The stop's face (world x; infinity without one)."""
+        return self.layout.belt_end_x if self.layout.end_stop else math.inf
+
+    def held(self, m: Material) -> bool:
+        """Whether the end stop (or what it holds) holds the material now."""
+        mats = self.on_belt()
+        return m in mats and held(self._items(mats), self.stop)[mats.index(m)]
+
+    def comes_to_rest(self, m: Material) -> float:
+        """When the material comes to rest at the end stop or behind what it holds, while the
+        belt runs as it does now (now if it is held already; infinity if it never will)."""
+        if self.held(m):
+            return self.now
+        if self.speed <= 0.0 or not math.isfinite(self.stop):
+            return math.inf
+        track, x = self.track(m), float(m.position[0])
+        rest = float(track(self.now + (self.stop - x) / self.speed + 1.0)[0])
+        return self.now + max(0.0, rest - x) / self.speed
+
+    def held_by(self, m: Material, t: float) -> bool:
+        """Whether the end stop (or what it holds) holds the material at ``t``."""
+        return self.comes_to_rest(m) <= t + 1e-9
+
+    def queue_tail(self) -> float:
+        """The upstream face of the queue the end stop holds (world x; infinity if none)."""
+        mats = self.on_belt()
+        flags = held(self._items(mats), self.stop) if mats else []
+        return min((m.position[0] - m.size / 2 for m, h in zip(mats, flags) if h),
+                   default=math.inf)
+
+    def track(self, m: Material) -> Callable[[float], np.ndarray]:
+        """Where the material's centre will be at a time, while the belt runs as it does now:
+        carried on, and held once it reaches the stop or what the stop holds."""
+        mats = self.on_belt()
+        items, k, now, speed = self._items(mats), mats.index(m), self.now, self.speed
+        y, z = float(m.position[1]), float(m.position[2])
+
+        def at(t: float) -> np.ndarray:
+            return np.array([advance(items, self.stop, speed * max(0.0, t - now))[k], y, z])
+        return at
+
+    def reaches(self, m: Material, x: float) -> float:
+        """When the material's centre reaches ``x`` (now if it is there already; infinity if it
+        never will: the belt is stopped, or the stop holds it upstream of ``x``)."""
+        if x > self.layout.belt_end_x - m.size / 2:
+            return math.inf                         # beyond the belt's end
+        if m.position[0] >= x:
+            return self.now
+        if self.speed <= 0.0 or self.held(m):
+            return math.inf
+        t = self.now + (x - m.position[0]) / self.speed
+        return t if self.track(m)(t)[0] >= x - 1e-6 else math.inf
+
+    def crowded(self, m: Material, t: float, behind: bool = False) -> bool:
+        """Whether another material on the belt will be next to ``m`` at ``t`` (less than
+        QUEUE_CLEARANCE_M between their faces along the belt, overlapping across it): a
+        material lifted from there drags against it if it moves sideways before it is clear of
+        its top. With ``behind``: only one upstream of it (pressed against it by the belt)."""
+        mats = self.on_belt()
+        if m not in mats:
+            return False
+        x = self.track(m)(t)[0]
+        for o in mats:
+            if o is m or (behind and self.track(o)(t)[0] >= x):
+                continue
+            reach = (m.size + o.size) / 2
+            if (abs(self.track(o)(t)[0] - x) < reach + QUEUE_CLEARANCE_M
+                    and abs(o.position[1] - m.position[1]) < reach):
+                return True
+        return False
+
+    def lifted(self, m: Material, now: float) -> None:
+        """The cup has lifted the material off the belt (what queued behind it moves on)."""
+        self.advance(now)
+        m.picked = True
+
+    def advance(self, now: float) -> None:
+        """Carry the model forward to ``now``."""
+        travel = self.layout.belt_speed * self.running_time(self._time, now)
+        self._time = max(self._time, now)
+        if travel <= 0.0:
+            return
+        mats = self.on_belt()
+        for m, x in zip(mats, advance(self._items(mats), self.stop, travel)):
+            m.position = np.array([x, m.position[1], m.position[2]])
+            m.stamp = now
+
+    def switched(self, now: float, running: bool, effective: float) -> None:
+        """The belt was switched at ``now``, taking effect at ``effective``."""
+        self.advance(now)
+        self.running = running
+        self.log.append((max(now, effective), running))
+
+    def running_time(self, t0: float, t1: float) -> float:
+        """How long the belt ran between two times [s]."""
+        total = 0.0
+        log = self.log + [(t1, self.running)]
+        for (start, running), (end, _) in zip(log, log[1:]):
+            if running:
+                total += max(0.0, min(end, t1) - max(start, t0))
+        return total
+
+    def seen_at(self, d: Detection, now: float) -> np.ndarray:
+        """A detection carried to ``now``: in the camera's view the belt carries it freely."""
+        travel = self.layout.belt_speed * self.running_time(d.stamp, now)
+        return cast(np.ndarray, np.asarray(d.position, float) + np.array([travel, 0.0, 0.0]))

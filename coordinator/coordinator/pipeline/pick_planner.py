@@ -21,10 +21,7 @@ from controllers.time_optimal import (
     plan,
     timed_path,
 )
-from coordinator.pipeline.arm import Arm
-from coordinator.pipeline.belt import BeltModel
-from coordinator.pipeline.cup import CupPlace
-from coordinator.pipeline.materials import MaterialBook
+from coordinator.pipeline.materials import BeltModel, MaterialBook
 from coordinator.pipeline.model import (
     DOWN,
     EDGE_CLEARANCE_M,
@@ -46,6 +43,7 @@ from coordinator.pipeline.pick_geometry import (
     over_the_belt,
     place_points,
 )
+from coordinator.pipeline.robots import Arm, CupPlace
 from coordinator.pipeline.room import Room
 
 # What the Zu 12 lifts out of the end stop's queue rises this far over the tallest material

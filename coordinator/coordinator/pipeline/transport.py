@@ -19,8 +19,6 @@ from controllers.time_optimal import (
     PlanError,
     Waypoint,
 )
-from coordinator.pipeline.arm import YoubotArm
-from coordinator.pipeline.base_drive import BaseDrive
 from coordinator.pipeline.machine import Machine, transition_table
 from coordinator.pipeline.materials import MaterialBook
 from coordinator.pipeline.model import (
@@ -37,6 +35,7 @@ from coordinator.pipeline.model import (
     known,
 )
 from coordinator.pipeline.record import EventLog
+from coordinator.pipeline.robots import BaseDrive, YoubotArm
 from coordinator.pipeline.room import Room
 from coordinator.pipeline.unload_geometry import (
     DROP_REACH_TOLERANCE_M,

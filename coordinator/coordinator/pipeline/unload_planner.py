@@ -14,9 +14,9 @@ from cell_layout.layout import CellLayout, world_to_base
 from cell_layout.reach import YOUBOT_LOAD_MAX, youbot_hold_need
 from controllers.bezier import Pose2D
 from controllers.time_optimal import PlanError, Waypoint, timed_path
-from coordinator.pipeline.arm import YoubotArm
 from coordinator.pipeline.materials import MaterialBook
 from coordinator.pipeline.model import Material, Observation, Points, Settings
+from coordinator.pipeline.robots import YoubotArm
 from coordinator.pipeline.room import Room
 from coordinator.pipeline.unload_geometry import (
     YOUBOT_GRASP_STANDOFF_M,

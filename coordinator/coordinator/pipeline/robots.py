@@ -1,19 +1,41 @@
-"""An arm of the cell, as the coordinator drives it (no ROS): its limits, its home, its plans
-and the motion it follows, its arrival, and its IK through the port. One object per robot arm,
-the only writer of its motion: a second arm of a kind is a second object."""
+"""The robots' parts, as the coordinator drives them (no ROS). Each is the only writer of its
+state, and there is one object per robot:
+- ``Arm``: an arm's limits, home, plans and the motion it follows, its arrival, its IK through
+  the port (``YoubotArm`` solves a path at one tool tilt). A second arm of a kind is a second
+  object.
+- ``CupPlace``: where the Zu 12's cup last let go (on the youBot's plate or a destination), and
+  the way up from there: the loader's next motion, whatever it is, first holds still while the
+  material falls free and rises straight up over the place.
+- ``BaseDrive``: the youBot's base on its way, a Bezier path from where it is through the
+  cell's way points to a stand or home, followed by a PD path follower (run by the port in real
+  time, from the ticks in lock-step), until it is there or out of time.
+"""
 from __future__ import annotations
 
 import math
-from typing import List, Optional, Sequence
+from typing import Any, List, Optional, Sequence, Tuple
 
 import numpy as np
 
+from cell_layout.layout import CellLayout
 from cell_layout.reach import youbot_holds, youbot_tool_quaternion
 from controllers import youbot_arm, zu12_arm
 from controllers.arrays import Vector
+from controllers.bezier import BezierPath, Pose2D, key_poses_between
+from controllers.path_follower import PathFollower, PDGains, TurnLimits
 from controllers.time_optimal import SAMPLE_PERIOD_S, JointLimits, Waypoint, plan
 from coordinator.pipeline.clock import Clock
-from coordinator.pipeline.model import DOWN, Motion, Observation, Points, Ports, Settings, known
+from coordinator.pipeline.model import (
+    DOWN,
+    RELEASE_HOLD_S,
+    Motion,
+    Observation,
+    Points,
+    Ports,
+    Settings,
+    known,
+)
+from coordinator.pipeline.pick_geometry import over_the_belt
 from coordinator.pipeline.record import EventLog
 from trial_record.events import EventKind
 
@@ -198,3 +220,132 @@ def youbot_limits(settings: Settings) -> JointLimits:
     return JointLimits(np.full(5, youbot_arm.JOINT_VELOCITY_LIMIT),
                        np.full(5, youbot_arm.JOINT_ACCELERATION_LIMIT),
                        np.full(5, youbot_arm.JOINT_JERK_LIMIT)).scaled(settings.youbot_scaling)
+
+
+class CupPlace:
+    def __init__(self, arm: Arm, layout: CellLayout, settings: Settings) -> None:
+        self.arm, self.layout, self.s = arm, layout, settings
+        self.then: Optional[np.ndarray] = None      # where the cup rises to from its place
+        self.above: Optional[np.ndarray] = None     # above the place (x, y, z), joints
+        self.above_q: Optional[np.ndarray] = None
+        self.onto_plate = False                     # the last place was on the youBot's plate
+        self.clear_point: Optional[np.ndarray] = None   # clear of the place once here (joints)
+        # The cup has just let go on the plate or the ground target: the next motion rises
+        # first (straight up, after the release hold), whatever it is.
+        self.at_release = False
+        self.clear_at = -math.inf                   # when the cup is clear of the place
+
+    def adopt(self, then: np.ndarray, above: np.ndarray, above_q: np.ndarray,
+              onto_plate: bool) -> None:
+        """The place the arm is on its way to: where the cup rises from it to."""
+        self.then, self.above, self.above_q, self.onto_plate = then, above, above_q, onto_plate
+
+    def released(self) -> None:
+        """The cup has just let go there."""
+        self.at_release = True
+
+    def clear(self, now: float) -> bool:
+        """Whether the cup is away from where it last let go (not about to rise from it)."""
+        return not self.at_release and now >= self.clear_at
+
+    def plan(self, obs: Observation, waypoints: List[Waypoint],
+             start: Optional[float] = None, edge: Optional[np.ndarray] = None) -> Points:
+        """From a release: the hold, then straight up to above the place and over the belt's
+        edge at ``edge`` (joints; towards a pick), or without it up to the carry height."""
+        waypoints, wait = self.from_release(waypoints, edge)
+        if self.at_release:
+            # Clear of the place once straight above it: the cup may be switched on there
+            # (what it let go is place_height below it), and the youBot may leave.
+            self.clear_point = self.above_q
+        return self.arm.plan(self.arm.q(obs), waypoints, wait, start)
+
+    def from_release(self, waypoints: List[Waypoint], edge: Optional[np.ndarray] = None
+                     ) -> Tuple[List[Waypoint], float]:
+        """``waypoints``, after the rise from a place the cup has just let go at (see plan),
+        and how long the motion waits first."""
+        if not self.at_release:
+            return list(waypoints), 0.0
+        rise = self.s.timing.place_descend
+        if edge is not None:
+            above = known(self.above_q, 'the point above the place')
+            # (Up over the place first where the swing from there to the edge would bulge out
+            # over the belt, low: see PickPlanner.place_way.)
+            then = known(self.then, 'the rise from the place')
+            over = ([Waypoint(then, stop=False)] if over_the_belt(self.layout, above, edge, 0.0)
+                     and float(np.max(np.abs(then - above))) > 1e-6 else [])
+            first = [Waypoint(above, stop=False, min_time=rise), *over,
+                     Waypoint(edge, stop=False)]
+        else:
+            # Straight up over the place first (over what else is there: a swing from the
+            # release towards home swept two materials off their slots beside it), then on.
+            above = known(self.above_q, 'the point above the place')
+            then = known(self.then, 'the rise from the place')
+            first = [Waypoint(above, stop=False, min_time=rise)]
+            if float(np.max(np.abs(then - above))) > 1e-6:
+                first.append(Waypoint(then, stop=not waypoints))
+            elif not waypoints:
+                first = [Waypoint(above, min_time=rise)]
+        return first + list(waypoints), RELEASE_HOLD_S
+
+    def after_send(self) -> None:
+        """A motion was sent: one from a release has left it (clear of it when it passes the
+        clear point)."""
+        if self.at_release:
+            self.at_release = False
+            self.clear_at = self.arm.arrival_time(known(self.clear_point, 'the clear point'))
+
+
+class BaseDrive:
+    def __init__(self, robot: str, ports: Ports, log: EventLog, settings: Settings) -> None:
+        self.robot, self.ports, self.log, self.s = robot, ports, log, settings
+        self._follower: Optional[PathFollower] = None   # while the base drives
+        self._followed = False                           # the port runs the follower
+        self.goal = ''                                   # the last drive's: a stand, or home
+        self.target: Optional[Pose2D] = None             # the drive's end pose
+        self.deadline = math.inf
+
+    @property
+    def driving(self) -> bool:
+        """Whether the base is on its way."""
+        return self._follower is not None
+
+    def steer(self, obs: Observation) -> None:
+        """The base along its path, with its follower, until it is there or out of time."""
+        follower = known(self._follower, 'the path follower')
+        status = follower.update(obs.now, obs.youbot_pose, obs.youbot_velocity[:2],
+                                 obs.youbot_velocity[2])
+        if not self._followed:
+            self.ports.drive(*status.command)
+        if not (status.finished or obs.now > self.deadline):
+            return
+        self._follower = None
+        self.ports.follow(None)
+        self.ports.drive(0.0, 0.0, 0.0)
+        if not status.finished:
+            self.log.event(obs.now, EventKind.DRIVE_STALLED, self.robot, detail=(
+                f'{status.position_error * 1000:.0f} mm from {self.goal}'))
+        self.log.event(obs.now, EventKind.ARRIVED, self.robot, detail=self.goal)
+
+    def follow(self, obs: Observation, target: Pose2D, via: Sequence[Any], goal: str) -> None:
+        """The base off along a path from where it is through ``via`` to ``target`` (at stand
+        or home ``goal``)."""
+        x, y, yaw = (float(v) for v in obs.youbot_pose)
+        path = BezierPath(key_poses_between((x, y, yaw), target, via))
+        # Mecanum: the heading turns on its own profile in time while the base travels the
+        # path, both over the same time (a short path with a large turn takes the turn's).
+        self._follower = PathFollower(
+            path, obs.now, self.s.drive_speed, self.s.drive_accel,
+            PDGains(max_speed=self.s.base_max_speed, max_turn=self.s.base_max_turn),
+            turn=TurnLimits(self.s.drive_turn, self.s.drive_turn_accel))
+        self._followed = self.ports.follow(self._follower)
+        self.goal, self.target = goal, target
+        self.log.event(obs.now, EventKind.DRIVING, self.robot,
+                       detail=f'to {goal}, {path.length:.2f} m')
+        self.deadline = (obs.now + self._follower.profile.duration
+                                + self.s.drive_margin)
+
+    def stand_pose(self, obs: Observation) -> Pose2D:
+        """Where the base stands for its unloads: its drive's end while it is on its way."""
+        if self.driving:
+            return known(self.target, 'the drive\'s end')
+        return obs.youbot_pose
