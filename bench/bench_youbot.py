@@ -44,7 +44,7 @@ def _world():
 
 
 def _pose(robot):
-    s = robot.base_state()
+    s = robot.sensors.base_state()
     return Pose2D(s.position[0], s.position[1], yaw_from_quaternion(s.orientation))
 
 
@@ -78,7 +78,7 @@ def base_fidelity():
                 start = _pose(robot)
             runner.advance(1, sink)
             if k >= settle:
-                s = robot.base_state()
+                s = robot.sensors.base_state()
                 twists.append((s.linear[0], s.linear[1], s.angular[2]))
         e = tracking_errors(command, 2.0, start, _pose(robot), tuple(np.mean(twists, 0)), K)
         rows[label] = {'command': command, 'twist_error': e.twist_error,

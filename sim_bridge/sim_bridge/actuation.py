@@ -17,6 +17,7 @@ from controllers.joint_trajectory import JointLimits, TrajectoryFollower
 from controllers.mecanum import MecanumGeometry
 from controllers.mecanum import wheel_speeds as mecanum_wheel_speeds
 from sim_bridge.errors import WorldError
+from sim_bridge.sensors import RobotSensors
 from world_description.joint_limits import JointLimitsError, load_acceleration_limits
 from world_description.resources import resolve_resource
 from world_description.world_config import (
@@ -36,20 +37,13 @@ class ActuatedBody(Protocol):
     config: RobotConfig
     client: BulletClient
     body: int
+    sensors: RobotSensors            # what its encoders report (sensors.py)
 
     def movable_joint(self, joint: str, what: str) -> int: ...
 
     def joint_limits(self, joint: str) -> Tuple[float, float, float, float]: ...
 
-    def scale_reported_angle(self, joint: int, scale: float) -> None: ...
-
     def links_moved_by(self, joints: Sequence[int]) -> FrozenSet[int]: ...
-
-    def joint_positions(self, joints: Sequence[str]) -> np.ndarray: ...
-
-    def joint_velocities(self, joints: Sequence[str]) -> np.ndarray: ...
-
-    def encoder_offset(self, joint: int) -> float: ...
 
     def link_name(self, link: int) -> str: ...
 
@@ -106,7 +100,7 @@ class MecanumDrive:
             # No friction along the spin axis (link y), which the spin leaves fixed in space.
             robot.client.changeDynamics(robot.body, joint, anisotropicFriction=(1.0, 0.0, 1.0),
                                     lateralFriction=1.0)
-            robot.scale_reported_angle(joint, OMNI_WHEEL_SCALE)
+            robot.sensors.scale_reported_angle(joint, OMNI_WHEEL_SCALE)
 
     def wheel_speeds(self, command: Tuple[float, ...]) -> Tuple[float, ...]:
         """The Mecanum wheels' speeds [rad/s] for a (vx, vy, wz) command."""
@@ -171,7 +165,7 @@ class JointGroup:
         return self._robot
 
     def hold_current(self) -> None:
-        self.follower.hold(self._robot.joint_positions(self.joint_names))
+        self.follower.hold(self._robot.sensors.joint_positions(self.joint_names))
         self.desired = self.follower.sample(0.0)
         self._motor_targets = None
 
@@ -194,11 +188,11 @@ class JointGroup:
         for i, joint in enumerate(self.joints):
             p.setJointMotorControl2(body, joint, pybullet.POSITION_CONTROL,
                                     targetPosition=targets[0][i]
-                                    + self._robot.encoder_offset(joint),
+                                    + self._robot.sensors.encoder_offset(joint),
                                     targetVelocity=targets[1][i],
                                     force=effort[i], maxVelocity=velocity[i],
                                     positionGain=c.position_gain, velocityGain=c.velocity_gain)
 
     def actual(self) -> Tuple[np.ndarray, np.ndarray]:
-        return (self._robot.joint_positions(self.joint_names),
-                self._robot.joint_velocities(self.joint_names))
+        return (self._robot.sensors.joint_positions(self.joint_names),
+                self._robot.sensors.joint_velocities(self.joint_names))

@@ -25,7 +25,8 @@ from sim_bridge.client import Client
 from sim_bridge.errors import WorldError
 from sim_bridge.free_bodies import Lost, base_problem, moving_within_reason
 from sim_bridge.joint_speed import Braked
-from sim_bridge.robot import URDF_FLAGS, BaseState, JointStates, SimRobot, Transform
+from sim_bridge.robot import URDF_FLAGS, SimRobot
+from sim_bridge.sensors import BaseState, JointStates, Transform
 from world_description.perturbations import PerturbationDraws
 from world_description.resources import resolve_resource
 from world_description.world_config import (
@@ -90,9 +91,11 @@ class SimWorld:
         for rc in config.robots:
             robot = SimRobot(p, rc, resolve_resource(rc.urdf, base_dir), base_dir, time_step)
             if config.perturbations.robots.active:
-                robot.set_perturbations(
-                    self.draws.joint_offsets(rc.name, [j for c in rc.controllers
-                                                       for j in c.joints if j in robot.revolute]),
+                offsets = self.draws.joint_offsets(
+                    rc.name, [j for c in rc.controllers for j in c.joints if j in robot.revolute])
+                robot.sensors.set_perturbations(
+                    {robot.movable_joint(j, 'perturbations'): v for j, v in offsets.items()
+                     if v != 0.0},
                     self.draws.odometry_scale(rc.name))
                 robot.reset()
             self.robots[rc.name] = robot

@@ -193,10 +193,10 @@ class Stage:
         for name, robot in self.world.robots.items():
             joints = Recording.at(recording.joints.get(name, []), time)
             if joints is not None:
-                robot.pose_as_reported(*joints)
+                robot.sensors.pose_as_reported(*joints)
             odom = Recording.at(recording.odometry.get(name, []), time)
             if odom is not None:
-                robot.place_as_reported(*odom)
+                robot.sensors.place_as_reported(*odom)
         shown = Recording.at(recording.materials, time) or []
         p = self.world.client
         for m in shown:

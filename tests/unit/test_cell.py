@@ -135,7 +135,7 @@ def _tcp_to(world, point):
     target[:3, :3] = quaternion_to_matrix((1, 0, 0, 0))
     target[:3, 3] = point
     robot = world.robots['zu12']
-    seed = robot.joint_positions(kin.joint_names)
+    seed = robot.sensors.joint_positions(kin.joint_names)
     q = kin.ik(target, seed).positions
     for name, value in zip(kin.joint_names, q):
         world._p.resetJointState(robot.body, robot.joint_index[name], value)

@@ -86,7 +86,7 @@ def test_moving_a_mobile_robot_and_a_material(cell):
     _run(world, runner, 0.2)
     assert entities.state('youbot').position[:2] == pytest.approx((1.2, -0.5), abs=5e-3)
     # Its odometry follows (ground truth in the odom frame of its start pose).
-    base = world.robots['youbot'].base_state()
+    base = world.robots['youbot'].sensors.base_state()
     assert math.hypot(*base.position[:2]) == pytest.approx(math.hypot(0.4, 0.55), abs=5e-3)
     # In another entity's frame: 1 m ahead of the youBot.
     entities.set_state('youbot', State((0.0, 0.0, 0.0815), UPRIGHT))

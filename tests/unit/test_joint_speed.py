@@ -30,7 +30,7 @@ class Brakes(NullSink):
 
 def _ratios(robot):
     """Each limited joint's speed over its URDF limit, as its joint states report it."""
-    states = robot.joint_states()
+    states = robot.sensors.joint_states()
     limits = [robot.joint_limits(n)[2] for n in states.names]
     return {n: abs(v) / lim for n, v, lim in zip(states.names, states.velocities, limits)
             if lim > 0.0}
@@ -71,13 +71,13 @@ def test_an_arm_that_cannot_hold_itself_sags_no_faster_than_its_joints_may_turn(
     group._effort = [e / 100.0 for e in group._effort]
     group._motor_targets = None
     sink = Brakes()
-    before = robot.joint_positions(ARM)
+    before = robot.sensors.joint_positions(ARM)
     worst = 0.0
     for _ in range(480):
         runner.advance(1, sink)
         worst = max(worst, max(_ratios(robot).values()))
     assert worst <= 1.0
-    assert np.abs(robot.joint_positions(ARM) - before).max() > 0.5       # it sagged
+    assert np.abs(robot.sensors.joint_positions(ARM) - before).max() > 0.5       # it sagged
     fast = [b for _, _, b in sink.braked if b.ratio > 1.0 + DRIVEN_PAST]
     assert fast and {b.joint for b in fast} <= set(ARM)
 

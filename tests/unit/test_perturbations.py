@@ -201,28 +201,29 @@ def test_the_arms_joints_sit_off_where_their_encoders_say(tmp_path):
     try:
         zu12, reference = a.robots['zu12'], ideal.robots['zu12']
         joints = [f'joint_{i}' for i in range(1, 7)]
+        ready = reference.sensors.joint_positions(joints)
         offsets = a.draws.joint_offsets('zu12', joints)
         assert all(0.0 < abs(v) < 0.1 for v in offsets.values())
         # The encoders read the ready pose; the joints are off it by their offsets ...
-        assert np.allclose(zu12.joint_positions(joints), reference.joint_positions(joints))
+        assert np.allclose(zu12.sensors.joint_positions(joints), ready)
         true = [s[0] for s in a.client.getJointStates(zu12.body, [zu12.joint_index[j]
                                                                   for j in joints])]
-        assert np.allclose(np.subtract(true, reference.joint_positions(joints)),
+        assert np.allclose(np.subtract(true, ready),
                            [offsets[j] for j in joints])
         # ... and stay there under the controller (it holds the encoders' reading).
         runner = SimRunner(a, DriveLimits(), 100.0)
         runner.advance(round(1.0 / a.time_step), NullSink())
-        assert np.allclose(zu12.joint_positions(joints), reference.joint_positions(joints),
-                           atol=2e-3)
+        assert np.allclose(zu12.sensors.joint_positions(joints),
+                           reference.sensors.joint_positions(joints), atol=2e-3)
         tcp, ideal_tcp = (w.robots['zu12'].link_world_pose('suction_tcp')[0] for w in (a, ideal))
         assert np.linalg.norm(tcp - ideal_tcp) > 0.005                  # the cup is elsewhere
-        reported = zu12.joint_states()
-        assert reported.positions[:6] == pytest.approx(list(reference.joint_positions(joints)),
-                                                       abs=2e-3)
+        reported = zu12.sensors.joint_states()
+        assert reported.positions[:6] == pytest.approx(
+            list(reference.sensors.joint_positions(joints)), abs=2e-3)
         assert a.draws.joint_offsets('zu12', joints) == b.draws.joint_offsets('zu12', joints)
         # The gripper's fingers (prismatic) are left alone.
         youbot = a.robots['youbot']
-        assert youbot.encoder_offset(youbot.joint_index['gripper_finger_joint_l']) == 0.0
+        assert youbot.sensors.encoder_offset(youbot.joint_index['gripper_finger_joint_l']) == 0.0
     finally:
         for w in (ideal, a, b):
             w.close()
@@ -249,7 +250,7 @@ def test_the_simulator_slows_the_arms_trajectories(tmp_path):
     try:
         runner = SimRunner(world, DriveLimits(), 100.0)
         group = world.robots['zu12'].controllers['arm_controller']
-        start = list(world.robots['zu12'].joint_positions(group.joint_names))
+        start = list(world.robots['zu12'].sensors.joint_positions(group.joint_names))
         target = tuple(q + 0.1 for q in start)
         result = runner.set_trajectory('zu12', 'arm_controller', TrajectoryRequest(
             tuple(group.joint_names), (TrajectoryPoint(1.0, target),)))
@@ -270,7 +271,8 @@ def test_odometry_drifts_by_its_scale(tmp_path):
             for _ in range(15):
                 runner.command('youbot', 0.2, 0.1, 0.3)
                 runner.advance(round(0.1 / w.time_step), NullSink())
-        true, drifted = ideal.robots['youbot'].base_state(), a.robots['youbot'].base_state()
+        true = ideal.robots['youbot'].sensors.base_state()
+        drifted = a.robots['youbot'].sensors.base_state()
         # (The same motion in both worlds: the physics is not perturbed.)
         assert np.allclose(ideal.robots['youbot'].base_link_world()[0],
                            a.robots['youbot'].base_link_world()[0], atol=1e-9)

@@ -103,9 +103,9 @@ def test_an_arm_held_then_freed_is_reported_both_times_without_taking_the_node_d
     try:
         reports = [[HoldReport('zu12/arm_controller', True, 'zu12 held back')],
                    [HoldReport('zu12/arm_controller', False, 'zu12 free again')]] * 2
-        node._hold_watch.update = lambda now: reports.pop(0) if reports else []
+        node._outputs.hold_watch.update = lambda now: reports.pop(0) if reports else []
         for k in range(4):
-            node.on_state('zu12', k * 1_000_000)
+            node._outputs.on_state('zu12', k * 1_000_000)
     finally:
         node.destroy_node()
 
@@ -123,17 +123,17 @@ def test_a_joint_driven_past_its_limit_is_told_in_the_form_a_trials_result_reads
         robot = node._world.robots['youbot']
         j = robot.joint_index['arm_joint_2']
         node._world.client.resetJointState(robot.body, j, 0.3, 5 * math.pi / 2)   # flung
-        node._runner.advance(1, node)
-        [status] = [s for s in node._brake_statuses() if s.hardware_id == 'youbot']
+        node._runner.advance(1, node._outputs)
+        [status] = [s for s in node._diagnostics.brake_statuses() if s.hardware_id == 'youbot']
         assert status.level == DiagnosticStatus.WARN
         assert status.name == 'sim_node: youbot joint speed limits'
         [record] = driven_past(DiagnosticArray(status=[status]))
         assert record['joint'] == 'arm_joint_2' and record['count'] == 1
         assert record['ratio'] > 4.0 and record['limit'] == pytest.approx(math.pi / 2)
         assert record['brake'] > 9.5 and record['time'] == pytest.approx(1 / 240, abs=1e-4)
-        assert abs(robot.joint_states().velocities[robot.joint_names.index('arm_joint_2')]) \
-            <= math.pi / 2
+        velocities = robot.sensors.joint_states().velocities
+        assert abs(velocities[robot.joint_names.index('arm_joint_2')]) <= math.pi / 2
         node._reset_world()
-        assert all(s.level == DiagnosticStatus.OK for s in node._brake_statuses())
+        assert all(s.level == DiagnosticStatus.OK for s in node._diagnostics.brake_statuses())
     finally:
         node.destroy_node()

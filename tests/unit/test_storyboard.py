@@ -95,7 +95,7 @@ def test_a_robot_is_shown_where_it_was_not_where_its_encoders_and_odometry_said(
     ran, shown = SimWorld(config, scenario_seed=3), SimWorld(config, scenario_seed=3)
     try:
         youbot = ran.robots['youbot']
-        assert youbot.odometry_scale != (1.0, 1.0, 1.0)
+        assert youbot.sensors.odometry_scale != (1.0, 1.0, 1.0)
         runner = SimRunner(ran, DriveLimits(), 100.0)
         for _ in range(12):
             runner.command('youbot', 0.2, -0.1, 0.4)
@@ -106,11 +106,11 @@ def test_a_robot_is_shown_where_it_was_not_where_its_encoders_and_odometry_said(
         for j in arm:
             ran.client.resetJointState(zu12.body, j, float(rng.uniform(-1.0, 1.0)))
         for name, robot in ran.robots.items():
-            states, odom = robot.joint_states(), robot.base_state()
+            states, odom = robot.sensors.joint_states(), robot.sensors.base_state()
             twin = shown.robots[name]
-            twin.pose_as_reported(states.names, states.positions)
+            twin.sensors.pose_as_reported(states.names, states.positions)
             if robot.drive is not None:
-                twin.place_as_reported(odom.position, odom.orientation)
+                twin.sensors.place_as_reported(odom.position, odom.orientation)
             truth = [s[0] for s in ran.client.getJointStates(robot.body, robot.movable)]
             posed = [s[0] for s in shown.client.getJointStates(twin.body, twin.movable)]
             assert posed == pytest.approx(truth, abs=1e-9), name
@@ -120,7 +120,7 @@ def test_a_robot_is_shown_where_it_was_not_where_its_encoders_and_odometry_said(
             assert pybullet.getEulerFromQuaternion(q2) == pytest.approx(
                 pybullet.getEulerFromQuaternion(q), abs=1e-6), name
         # The drift was real: the odometry alone puts the base elsewhere.
-        odom = youbot.base_state().position
+        odom = youbot.sensors.base_state().position
         start = youbot.start_pose[0]
         assert math.dist((odom[0] + start[0], odom[1] + start[1]),
                          youbot.base_link_world()[0][:2]) > 0.005
@@ -169,12 +169,12 @@ def test_a_state_that_is_not_finite_leaves_the_robot_where_it_was():
     try:
         youbot = world.robots['youbot']
         before = youbot.base_link_world()[0]
-        youbot.place_as_reported((math.nan, 0.0, 0.0), (0.0, 0.0, 0.0, 1.0))
+        youbot.sensors.place_as_reported((math.nan, 0.0, 0.0), (0.0, 0.0, 0.0, 1.0))
         assert youbot.base_link_world()[0] == before
         zu12 = world.robots['zu12']
         joints = [zu12.joint_index['joint_1']]
         was = zu12.client.getJointState(zu12.body, joints[0])[0]
-        zu12.pose_as_reported(['joint_1', 'no_such_joint'], [math.inf, 1.0])
+        zu12.sensors.pose_as_reported(['joint_1', 'no_such_joint'], [math.inf, 1.0])
         assert zu12.client.getJointState(zu12.body, joints[0])[0] == was
     finally:
         world.close()

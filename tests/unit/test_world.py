@@ -56,14 +56,14 @@ def test_drive_forward_by_wheel_contact(world):
     runner, sink = SimRunner(world, DriveLimits(), 100.0), Recorder()
     robot = world.robots['mini_robot']
     _settle(runner, sink)
-    x0 = robot.base_state().position[0]
+    x0 = robot.sensors.base_state().position[0]
     for _ in range(20):  # 2 s with a command every 0.1 s, inside the timeout
         runner.command('mini_robot', 0.1, 0.0, 0.0)
         runner.advance(24, sink)
-    state = robot.base_state()
+    state = robot.sensors.base_state()
     assert state.linear[0] == pytest.approx(0.1, rel=0.01)
     assert state.position[0] - x0 == pytest.approx(0.2, rel=0.03)
-    js = robot.joint_states()
+    js = robot.sensors.joint_states()
     left = js.velocities[js.names.index('left_wheel_joint')]
     assert left == pytest.approx(0.1 / 0.03, rel=0.01)
 
@@ -78,7 +78,7 @@ def test_turn_in_place(world):
         runner.advance(min(24, steps - i), sink)
     runner.command('mini_robot', 0.0, 0.0, 0.0)
     _settle(runner, sink)
-    state = robot.base_state()
+    state = robot.sensors.base_state()
     assert yaw_from_quaternion(state.orientation) == pytest.approx(math.pi / 2, rel=0.03)
     assert math.hypot(*state.position[:2]) < 0.005
 
@@ -88,23 +88,23 @@ def test_command_times_out_in_simulated_time(world):
     runner.command('mini_robot', 0.1, 0.0, 0.0)
     runner.advance(round(0.45 / world.time_step), sink)
     assert sink.timeouts == []
-    assert world.robots['mini_robot'].wheel_targets[0] > 0
+    assert world.robots['mini_robot'].drive.targets[0] > 0
     runner.advance(round(0.1 / world.time_step), sink)
     assert sink.timeouts == ['mini_robot']
     # Stopping ramps at the world's 1 m/s^2, as diff_drive_controller brakes: 0.1 s from 0.1.
     runner.advance(round(0.1 / world.time_step), sink)
-    assert world.robots['mini_robot'].wheel_targets == (0.0, 0.0)
+    assert world.robots['mini_robot'].drive.targets == (0.0, 0.0)
 
 
 def test_nan_command_stops_the_robot(world):
     runner, sink = SimRunner(world, DriveLimits(), 100.0), Recorder()
     runner.command('mini_robot', 0.1, 0.0, 0.0)
     runner.advance(1, sink)                    # a command takes effect at the next step
-    assert world.robots['mini_robot'].wheel_targets[0] > 0.0
+    assert world.robots['mini_robot'].drive.targets[0] > 0.0
     result = runner.command('mini_robot', math.nan, 0.0, 0.0)
     assert not result.accepted
     runner.advance(1, sink)
-    assert world.robots['mini_robot'].wheel_targets == (0.0, 0.0)
+    assert world.robots['mini_robot'].drive.targets == (0.0, 0.0)
     # Each change of the wheels' command is reported, stamped when it took effect.
     step = round(world.time_step * 1e9)
     assert sink.applied == [('mini_robot', 0), ('mini_robot', step)]
@@ -115,7 +115,7 @@ def test_clamped_command_drives_at_the_limit(world):
     result = runner.command('mini_robot', 5.0, 0.0, 0.0)
     assert result.clamped and result.command == (0.2, 0.0, 0.0)
     runner.advance(round(0.2 / world.time_step), sink)     # 0.2 s to 0.2 m/s at 1 m/s^2
-    assert world.robots['mini_robot'].wheel_targets == pytest.approx((0.2 / 0.03,) * 2)
+    assert world.robots['mini_robot'].drive.targets == pytest.approx((0.2 / 0.03,) * 2)
 
 
 @pytest.mark.parametrize('accel', [None, 1.0])
@@ -143,7 +143,7 @@ def test_reversals_do_not_kick_the_mini_robot_into_a_turn(accel):
                 runner.command('mini_robot', vx, 0.0, wz)
                 for _ in range(12):
                     runner.advance(1, sink)
-                    yaw_rates[kind].append(abs(world.robots['mini_robot'].base_state().angular[2]))
+                    yaw_rates[kind].append(abs(world.robots['mini_robot'].sensors.base_state().angular[2]))
         worst = {kind: max(rates) for kind, rates in yaw_rates.items()}
         if accel is None:                       # the failure the limits remove
             assert worst['flip'] > 0.4
@@ -187,16 +187,16 @@ def test_reset_returns_to_the_start_pose(world):
     for _ in range(10):
         runner.command('mini_robot', 0.2, 0.0, 0.2)
         runner.advance(24, sink)
-    assert math.hypot(*robot.base_state().position[:2]) > 0.1
+    assert math.hypot(*robot.sensors.base_state().position[:2]) > 0.1
     runner.reset()
-    state = robot.base_state()
+    state = robot.sensors.base_state()
     assert state.position == pytest.approx((0.0, 0.0, 0.0), abs=1e-9)
     assert yaw_from_quaternion(state.orientation) == pytest.approx(0.0, abs=1e-9)
-    assert robot.wheel_targets == (0.0, 0.0)
+    assert robot.drive.targets == (0.0, 0.0)
     t_before = world.sim_time
     _settle(runner, sink)
     assert world.sim_time > t_before  # time is not reset
-    assert math.hypot(*robot.base_state().position[:2]) < 0.002
+    assert math.hypot(*robot.sensors.base_state().position[:2]) < 0.002
 
 
 def test_start_pose_is_the_odom_origin(tmp_path):
@@ -207,7 +207,7 @@ def test_start_pose_is_the_odom_origin(tmp_path):
     try:
         pos, _ = w.robots['r'].base_link_world()
         assert pos == pytest.approx((1.0, -2.0, 0.0305), abs=1e-6)
-        assert w.robots['r'].base_state().position == pytest.approx((0, 0, 0), abs=1e-6)
+        assert w.robots['r'].sensors.base_state().position == pytest.approx((0, 0, 0), abs=1e-6)
     finally:
         w.close()
 

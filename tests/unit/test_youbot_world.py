@@ -46,7 +46,7 @@ def youbot(sim):
 
 
 def _pose(robot):
-    s = robot.base_state()
+    s = robot.sensors.base_state()
     return Pose2D(s.position[0], s.position[1], yaw_from_quaternion(s.orientation))
 
 
@@ -59,7 +59,7 @@ def _drive(robot, runner, command, seconds):
             runner.command('youbot', *command)
         runner.advance(1, Sink())
         if k >= int(0.5 * HZ) or seconds <= 0.5:
-            s = robot.base_state()
+            s = robot.sensors.base_state()
             twists.append((s.linear[0], s.linear[1], s.angular[2]))
     return tuple(np.mean(twists, axis=0))
 
@@ -83,7 +83,7 @@ def test_wheel_joint_states_show_the_kinematic_wheel_speeds(youbot):
     robot, runner = youbot
     command = (0.15, -0.1, 0.3)
     _drive(robot, runner, command, 1.0)
-    js = robot.joint_states()
+    js = robot.sensors.joint_states()
     names = ['wheel_joint_fl', 'wheel_joint_fr', 'wheel_joint_rr', 'wheel_joint_rl']
     speeds = [js.velocities[js.names.index(n)] for n in names]
     expected = wheel_speeds(*command, MecanumGeometry(0.0475, K))
@@ -91,7 +91,7 @@ def test_wheel_joint_states_show_the_kinematic_wheel_speeds(youbot):
     # Positions integrate the same speeds (the reported angle is sqrt(2) x the sphere's).
     before = [js.positions[js.names.index(n)] for n in names]
     _drive(robot, runner, command, 0.5)
-    js = robot.joint_states()
+    js = robot.sensors.joint_states()
     after = [js.positions[js.names.index(n)] for n in names]
     assert np.subtract(after, before) == pytest.approx(np.multiply(expected, 0.5), rel=0.02)
 
@@ -139,7 +139,7 @@ def test_a_step_to_full_speed_is_taken_at_the_acceleration_limits(youbot):
         if k % (HZ // 10) == 0:
             runner.command('youbot', 0.8, 0.0, 1.5)
         runner.advance(1, sink)
-        s = robot.base_state()
+        s = robot.sensors.base_state()
         speeds.append(np.hypot(*s.linear[:2]))
         worst_joint = max(worst_joint, float(np.abs(arm.actual()[1]).max()))
     dt = runner.world.time_step
@@ -161,14 +161,14 @@ def test_nan_stops_the_base_and_a_stale_command_times_out(youbot):
     result = runner.command('youbot', math.nan, 0.0, 0.0)
     assert not result.accepted and 'non-finite' in result.reason
     runner.advance(HZ, Sink())
-    assert np.abs(robot.base_state().linear[:2]).max() < 0.005
+    assert np.abs(robot.sensors.base_state().linear[:2]).max() < 0.005
     runner.command('youbot', 0.0, 0.2, 0.0)
     sink = Sink()
     runner.advance(int(0.8 * HZ), sink)     # timeout 0.5 s: stops, then coasts to rest
     assert sink.timeouts == ['youbot']
-    assert robot.wheel_targets == (0.0, 0.0, 0.0, 0.0)
+    assert robot.drive.targets == (0.0, 0.0, 0.0, 0.0)
     runner.advance(HZ // 2, Sink())
-    assert abs(robot.base_state().linear[1]) < 0.005
+    assert abs(robot.sensors.base_state().linear[1]) < 0.005
 
 
 def _run_until(runner, seconds):
@@ -316,7 +316,7 @@ def test_a_non_finite_physics_state_stops_the_robot_and_reset_restores_it():
         (name, reason), = faults
         assert name == 'youbot' and 'not finite' in reason and 'the floor' in reason
         assert not robot.state_problem()
-        assert robot.base_state().position == pytest.approx((0.0, 0.0, 0.0), abs=1e-3)
+        assert robot.sensors.base_state().position == pytest.approx((0.0, 0.0, 0.0), abs=1e-3)
         refused = runner.command('youbot', 0.3, 0.0, 0.0)
         assert not refused.accepted and 'reset the simulator' in refused.reason
         move = TrajectoryRequest(JOINT_NAMES, (TrajectoryPoint(1.0, (0.5, 0.3, 0.2, 0.1, 0.0)),))
@@ -327,7 +327,7 @@ def test_a_non_finite_physics_state_stops_the_robot_and_reset_restores_it():
         for _ in range(10):                                  # 1 s at 0.3 m/s
             assert runner.command('youbot', 0.3, 0.0, 0.0).accepted
             runner.advance(HZ // 10, Faults())
-        assert robot.base_state().position[0] > 0.2
+        assert robot.sensors.base_state().position[0] > 0.2
         assert runner.set_trajectory('youbot', 'arm_controller', move).accepted
         runner.advance(int(1.5 * HZ), Faults())
         arm = robot.controllers['arm_controller']            # (a new group after the reload)
@@ -353,6 +353,6 @@ def test_reset_reloads_a_body_whose_state_is_not_finite():
         for _ in range(10):
             runner.command('youbot', 0.3, 0.0, 0.0)
             runner.advance(HZ // 10, Sink())
-        assert robot.base_state().position[0] > 0.2
+        assert robot.sensors.base_state().position[0] > 0.2
     finally:
         world.close()
