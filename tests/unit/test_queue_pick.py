@@ -6,6 +6,7 @@ from test_zu12_swing import _cell
 
 from controllers.pick_place import PickTiming
 from coordinator.pipeline import Material, pick_planner
+from coordinator.pipeline.clock import Clock
 from coordinator.pipeline.materials import BeltModel
 from coordinator.pipeline.model import QUEUE_LIFT_PAUSE_LEAD_S
 
@@ -23,7 +24,7 @@ def test_a_material_about_to_come_to_rest_in_the_queue_is_met_at_rest_there():
                       size=0.042)
     blue = Material(2, 'blue', np.array([end - 0.12, layout.belt_y, 0.425]), 0.0, 3, size=0.05)
     run_.materials.update({1: purple, 2: blue})
-    belt = BeltModel(layout, run_.materials, 0.0, ran_before=True)
+    belt = BeltModel(layout, run_.materials, Clock(0.0), ran_before=True)
     run_.belt = zu12.belt = zu12.planner.belt = belt
     run_.belt.running = True
     belt, timing = run_.belt, PickTiming()
@@ -61,7 +62,7 @@ def _two_at_the_stop():
     behind = Material(2, 'orange', np.array([end - 0.078, layout.belt_y, 0.425]), 0.0, 3,
                       size=0.05)
     run_.materials.update({1: ahead, 2: behind})
-    belt = BeltModel(layout, run_.materials, 0.0, ran_before=True)
+    belt = BeltModel(layout, run_.materials, Clock(0.0), ran_before=True)
     run_.belt = zu12.belt = zu12.planner.belt = belt
     run_.belt.running = True
     return layout, run_, zu12, ahead, behind

@@ -44,7 +44,7 @@ class Pipeline:
         self.clock = Clock(start_time)
         self.log = EventLog(ports, ['zu12', 'youbot'])
         self.book = MaterialBook(layout, self.s, self.log)
-        self.belt = BeltModel(layout, self.book.materials, start_time, belt_ran_before)
+        self.belt = BeltModel(layout, self.book.materials, self.clock, belt_ran_before)
         self.belt_stops = 0               # the belt stopped while loading (its queue full)
         self.zu12 = Arm('zu12', zu12_limits(self.s), ports, self.s, self.clock, self.log)
         self.youbot = YoubotArm('youbot', youbot_limits(self.s), ports, self.s, self.clock,
@@ -78,7 +78,6 @@ class Pipeline:
         if self.finished:
             return
         self.clock.now = obs.now
-        self.belt.now = obs.now
         try:
             if self.loader.state is LoaderState.START:
                 self.zu12.started(obs)
@@ -149,9 +148,8 @@ class Pipeline:
                 m = self.book.confirm(d, self.belt.seen_at(d, obs.now), obs.now)
                 self.log.event(obs.now, EventKind.SEEN, 'vision', m,
                                f'at {np.round(m.position, 3).tolist()}')
-            elif m.status == MaterialStatus.SEEN:
-                m.position, m.stamp, m.hits = self.belt.seen_at(d, obs.now), obs.now, d.hits
-            m.last_seen = obs.now
+            else:
+                self.belt.sighted(m, d, obs.now)
         # Without an end stop, a material still on the belt past its end was not picked.
         for m in self.materials.values():
             if (m.status == MaterialStatus.SEEN and not self.layout.end_stop

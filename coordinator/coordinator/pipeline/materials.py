@@ -20,6 +20,7 @@ import numpy as np
 
 from cell_layout.layout import CellLayout
 from controllers.conveyor import Item, advance, held
+from coordinator.pipeline.clock import Clock
 from coordinator.pipeline.model import (
     QUEUE_CLEARANCE_M,
     Detection,
@@ -43,7 +44,7 @@ class MaterialBook:
     def confirm(self, d: Detection, position: np.ndarray, now: float) -> Material:
         """A material the vision confirmed on the belt, at ``position`` now."""
         m = self.materials[d.id] = Material(d.id, d.color, position, now, d.hits, detection=d,
-                                            size=self.layout.size_of(d.color))
+                                            size=self.layout.size_of(d.color), last_seen=now)
         return m
 
     def picking(self, m: Material) -> None:
@@ -124,16 +125,16 @@ _ON_BELT = (MaterialStatus.SEEN, MaterialStatus.PICKING, MaterialStatus.FAILED)
 
 
 class BeltModel:
-    def __init__(self, layout: CellLayout, materials: Dict[int, Material], start_time: float,
+    def __init__(self, layout: CellLayout, materials: Dict[int, Material], clock: Clock,
                  ran_before: bool) -> None:
         self.layout = layout
         self.materials = materials
+        self.clock = clock                # the run's time: what ``track`` starts from
         self.running = False
         # (time it took effect, running): the belt's history, for the travel between two times.
         self.log: List[Tuple[float, bool]] = [
-            (-math.inf, True) if ran_before else (start_time, False)]
-        self._time = start_time           # the model's time (``advance``)
-        self.now = start_time             # the run's time: what ``track`` starts from
+            (-math.inf, True) if ran_before else (clock.now, False)]
+        self._time = clock.now            # the model's time (``advance``)
 
     @property
     def speed(self) -> float:
@@ -161,12 +162,12 @@ class BeltModel:
         """When the material comes to rest at the end stop or behind what it holds, while the
         belt runs as it does now (now if it is held already; infinity if it never will)."""
         if self.held(m):
-            return self.now
+            return self.clock.now
         if self.speed <= 0.0 or not math.isfinite(self.stop):
             return math.inf
         track, x = self.track(m), float(m.position[0])
-        rest = float(track(self.now + (self.stop - x) / self.speed + 1.0)[0])
-        return self.now + max(0.0, rest - x) / self.speed
+        rest = float(track(self.clock.now + (self.stop - x) / self.speed + 1.0)[0])
+        return self.clock.now + max(0.0, rest - x) / self.speed
 
     def held_by(self, m: Material, t: float) -> bool:
         """Whether the end stop (or what it holds) holds the material at ``t``."""
@@ -183,7 +184,7 @@ class BeltModel:
         """Where the material's centre will be at a time, while the belt runs as it does now:
         carried on, and held once it reaches the stop or what the stop holds."""
         mats = self.on_belt()
-        items, k, now, speed = self._items(mats), mats.index(m), self.now, self.speed
+        items, k, now, speed = self._items(mats), mats.index(m), self.clock.now, self.speed
         y, z = float(m.position[1]), float(m.position[2])
 
         def at(t: float) -> np.ndarray:
@@ -196,10 +197,10 @@ class BeltModel:
         if x > self.layout.belt_end_x - m.size / 2:
             return math.inf                         # beyond the belt's end
         if m.position[0] >= x:
-            return self.now
+            return self.clock.now
         if self.speed <= 0.0 or self.held(m):
             return math.inf
-        t = self.now + (x - m.position[0]) / self.speed
+        t = self.clock.now + (x - m.position[0]) / self.speed
         return t if self.track(m)(t)[0] >= x - 1e-6 else math.inf
 
     def crowded(self, m: Material, t: float, behind: bool = False) -> bool:
@@ -250,6 +251,13 @@ class BeltModel:
             if running:
                 total += max(0.0, min(end, t1) - max(start, t0))
         return total
+
+    def sighted(self, m: Material, d: Detection, now: float) -> None:
+        """A frame showed ``m`` again at ``now``: one still waiting on the belt is placed where
+        the frame puts it (``seen_at``); any is noted as seen then."""
+        if m.status == MaterialStatus.SEEN:
+            m.position, m.stamp, m.hits = self.seen_at(d, now), now, d.hits
+        m.last_seen = now
 
     def seen_at(self, d: Detection, now: float) -> np.ndarray:
         """A detection carried to ``now``: in the camera's view the belt carries it freely."""
