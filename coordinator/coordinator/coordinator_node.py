@@ -213,7 +213,7 @@ class CoordinatorNode(Node):
         try:
             while not self.pipeline.finished and rclpy.ok():
                 self.pipeline.tick(obs)
-                self._path.append(obs.youbot_pose[:2])
+                self._path.append(obs.bases['youbot'].pose[:2])
                 ticks += 1
                 if ticks % max(1, round(self.rate)) == 0:
                     self._publish_state(obs.now)

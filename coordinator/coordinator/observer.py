@@ -29,7 +29,15 @@ from cell_layout.layout import CellLayout
 from controllers.lockstep import CommandCounter, DueGrid
 from controllers.path_follower import DriveLead, PathFollower
 from coordinator.cell_odometry import odometry_in_cell
-from coordinator.pipeline import Detection, Material, NodeTimeout, Observation, known
+from coordinator.pipeline import (
+    ArmReading,
+    BaseReading,
+    Detection,
+    Material,
+    NodeTimeout,
+    Observation,
+    known,
+)
 from coordinator.ros_ports import GRIP_SERVICES, Stopped, call_service
 from ros_common.geometry import yaw_of
 from ros_common.stamps import to_ns
@@ -400,13 +408,10 @@ class Observer:
             for f in [f for f in self.inputs.detections if f <= t_ns]:
                 del self.inputs.detections[f]
             odom = known(self.inputs.odom, 'odometry')
-            return Observation(
-                now=t_ns * 1e-9, zu12_q=self.inputs.joints['zu12'][1],
-                youbot_q=self.inputs.joints['youbot'][1], youbot_pose=odom[1],
-                youbot_velocity=odom[2], zu12_holding=self.inputs.grip['zu12'][1],
-                youbot_holding=self.inputs.grip['youbot'][1], detections=dets,
-                zu12_armed=self.inputs.grip['zu12'][2], youbot_armed=self.inputs.grip['youbot'][2],
-                zu12_dq=self.inputs.joints['zu12'][2], youbot_dq=self.inputs.joints['youbot'][2])
+            arms = {name: ArmReading(q, dq, *self.inputs.grip[name][1:])
+                    for name, (_, q, dq) in self.inputs.joints.items()}
+            return Observation(t_ns * 1e-9, arms, {'youbot': BaseReading(odom[1], odom[2])},
+                               dets)
 
     def final_truth(self, end: float) -> list:
         """The materials' true poses after the run (the score's ground truth)."""

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 import yaml
 from test_material_classes import PAPER_CLASSES as PAPER
-from test_pipeline import FakeCell, kinds, run
+from test_pipeline import FakeCell, kinds, observation, run
 
 from cell_layout.layout import SLOT_GAP_M, LayoutError
 from cell_layout.world_layout import layout_from_world
@@ -354,7 +354,7 @@ def test_a_pick_path_across_an_elbow_flip_is_solved_on_one_branch():
 
     from coordinator.pipeline import Settings
     arm = SimpleNamespace(name='zu12', solve_path=solve_path)
-    zu12 = pick_planner.PickPlanner(arm, None, None, None, None, Settings())
+    zu12 = pick_planner.PickPlanner(arm, None, None, None, None, Settings(), None)
     path = [(k * 0.05, np.array([-0.1 + 0.02 * k, 0.75, 0.45])) for k in range(10)]
     qs = zu12.solve_along(path, np.array([0.1, 0.75, 0.5]), np.array([0.0, 1.0, 0, 0, 0, 0]))
     assert qs is not None and len(qs) == 11
@@ -403,7 +403,7 @@ def test_after_a_release_the_youbot_waits_for_its_arm_to_come_to_rest():
     from where it is meanwhile started 0.11-0.16 rad off, the controller refused it and the
     next unload failed. The next motion waits until the arm is still (up to
     SPRING_BACK_WAIT_S)."""
-    from coordinator.pipeline import Material, Observation, Pipeline, Settings
+    from coordinator.pipeline import Material, Pipeline, Settings
     from coordinator.pipeline.model import RELEASE_HOLD_S, SPRING_BACK_WAIT_S, TransportState
     layout = layout_from_world(world(copy.deepcopy(PAPER)))
     run_ = Pipeline(layout, FakeCell(layout, []), Settings())
@@ -417,7 +417,7 @@ def test_after_a_release_the_youbot_waits_for_its_arm_to_come_to_rest():
         tr.state = TransportState.CARRY                 # (it has just let go at the drop)
         tr.enter(TransportState.RELEASE, 0.0, RELEASE_HOLD_S)
         went_on.clear()
-        tr._release(Observation(now, np.zeros(6), np.zeros(5), pose,
+        tr._release(observation(now, np.zeros(6), np.zeros(5), pose,
                                 youbot_dq=np.full(5, speed)))
         return bool(went_on)
 
@@ -434,7 +434,7 @@ def test_an_unload_that_stalled_short_of_its_drop_is_a_failure_not_a_delivery():
     slot; stalled near its drop (a sagging shoulder, 2 cm off over the pool), a delivery."""
     from test_pipeline import _YoubotIK
 
-    from coordinator.pipeline import Material, Observation, Pipeline, Settings
+    from coordinator.pipeline import Material, Pipeline, Settings
     from coordinator.pipeline.model import MaterialStatus, TransportState
     from coordinator.pipeline.unload_geometry import DROP_REACH_TOLERANCE_M, short_of
     class Ports(_YoubotIK):
@@ -455,7 +455,7 @@ def test_an_unload_that_stalled_short_of_its_drop_is_a_failure_not_a_delivery():
         tr._carry, tr.queue, tr._drop_pending = path, [m], False
         tr.state = TransportState.CARRY                     # (carrying it to its drop)
         q = path.contact if where == 'slot' else path.drop
-        obs = Observation(10.0, np.zeros(6), q, stand.pose, youbot_holding=True)
+        obs = observation(10.0, np.zeros(6), q, stand.pose, youbot_holding=True)
         assert (short_of(q, path.drop) > DROP_REACH_TOLERANCE_M) is not delivered
         tr._carry_to_drop(obs)
         assert (m.status is MaterialStatus.DELIVERED) is delivered, m
@@ -470,7 +470,7 @@ def test_an_unload_stalled_under_a_load_the_arm_cannot_hold_names_the_joint_and_
     from test_pipeline import _YoubotIK
 
     from cell_layout.reach import youbot_hold_need
-    from coordinator.pipeline import Material, Observation, Pipeline, Settings
+    from coordinator.pipeline import Material, Pipeline, Settings
 
     class Ports(_YoubotIK):
         def grip(self, arm, on):
@@ -492,7 +492,7 @@ def test_an_unload_stalled_under_a_load_the_arm_cannot_hold_names_the_joint_and_
     q = np.array([0.0, 1.5, 0.0, 0.0, 0.0])
     joint, torque, effort = youbot_hold_need(q, 0.5)
     assert torque > 0.95 * effort
-    tr._carry_to_drop(Observation(10.0, np.zeros(6), q, stand.pose, youbot_holding=True))
+    tr._carry_to_drop(observation(10.0, np.zeros(6), q, stand.pose, youbot_holding=True))
     assert m.left_on_plate
     assert (f'; holding 0.5 kg there, {joint} needs {torque:.2f} N m at rest (its motor: '
             f'{effort:g} N m)') in m.failure

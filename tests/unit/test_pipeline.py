@@ -13,6 +13,8 @@ from controllers.conveyor import Item, advance
 from controllers.time_optimal import Waypoint
 from coordinator.pipeline import (
     YOUBOT_CARRY_Q,
+    ArmReading,
+    BaseReading,
     Detection,
     LoaderState,
     NodeTimeout,
@@ -260,12 +262,11 @@ class FakeCell:
                 dets.append(Detection(100 + held, self.materials[held][2],
                                       np.array([tool[0], tool[1], 0.425]), self.now,
                                       self.hits[100 + held]))
-        return Observation(self.now, self.q['zu12'].copy(), self.q['youbot'].copy(),
-                           tuple(self.pose), world_v, self.holding['zu12'],
-                           self.holding['youbot'], dets, zu12_armed=self.armed['zu12'],
-                           youbot_armed=self.armed['youbot'],
-                           zu12_dq=np.full(6, 0.5 if self.moving['zu12'] else 0.0),
-                           youbot_dq=np.full(5, 0.5 if self.moving['youbot'] else 0.0))
+        arms = {arm: ArmReading(self.q[arm].copy(), np.full(len(self.q[arm]),
+                                                            0.5 if self.moving[arm] else 0.0),
+                                self.holding[arm], self.armed[arm]) for arm in self.q}
+        return Observation(self.now, arms, {'youbot': BaseReading(tuple(self.pose), world_v)},
+                           dets)
 
     def _under_the_cup(self):
         tool = self.q['zu12'][:3]
@@ -302,6 +303,13 @@ def run(cell: FakeCell, settings: Optional[Settings] = None, limit: float = 600.
             cell.busy -= DT
         obs = cell.step()
     return pipeline
+
+
+def observation(now, zu12_q, youbot_q, pose, youbot_dq=None, youbot_holding=False):
+    """An observation of the paper's cell, by hand."""
+    return Observation(now, {'zu12': ArmReading(zu12_q),
+                             'youbot': ArmReading(youbot_q, youbot_dq, youbot_holding)},
+                       {'youbot': BaseReading(tuple(pose))})
 
 
 def kinds(cell: FakeCell, kind: str):
@@ -1008,7 +1016,7 @@ def test_the_youbot_lifts_a_material_straight_off_its_plate_until_clear_of_its_n
         path = transport.planner.unload_path(m, layout.stand_for(color, slot).pose, YOUBOT_CARRY_Q)
         assert path is not None
         transport._carry = path
-        obs = Observation(0.0, np.zeros(6), path.contact.copy(), (0.0, 0.0, 0.0))
+        obs = observation(0.0, np.zeros(6), path.contact.copy(), (0.0, 0.0, 0.0))
         if color == 'blue':
             motion = transport._lift(obs, m, [Waypoint(path.over, stop=False),
                                               Waypoint(path.drop)])

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 from test_cell_rules import world
 from test_material_classes import PAPER_CLASSES as PAPER
-from test_pipeline import _YoubotIK
+from test_pipeline import _YoubotIK, observation
 
 from cell_layout.reach import youbot_holds
 from cell_layout.world_layout import (
@@ -19,7 +19,7 @@ from cell_layout.world_layout import (
     stand_slide,
 )
 from controllers.youbot_arm import ARM_BASE_IN_BASE_LINK_M
-from coordinator.pipeline import Material, Observation, Pipeline, Settings
+from coordinator.pipeline import Material, Pipeline, Settings
 from coordinator.pipeline.model import TransportState
 from coordinator.pipeline.unload_geometry import YOUBOT_CARRY_Q
 from coordinator.pipeline.unload_planner import SLIDE_MIN_M
@@ -134,7 +134,7 @@ def test_an_unload_from_elsewhere_on_the_stand_s_line_drives_there_as_the_arm_go
     far = max(range(len(stand.drops)), key=lambda d: np.linalg.norm(
         np.asarray(stand.abeam(stand.drops[d])[:2]) - stand.pose[:2]))
     run_.book._dropped = {stand.name: set(range(len(stand.drops))) - {far}}
-    tr._plan_unload(Observation(0.0, np.zeros(6), YOUBOT_CARRY_Q, stand.pose), m)
+    tr._plan_unload(observation(0.0, np.zeros(6), YOUBOT_CARRY_Q, stand.pose), m)
     assert tr.state is TransportState.GRASP and tr.driving
     assert tr.base.goal == stand.name and tr._carry.place == far
     assert tr.base.target == tr._carry.pose == stand.abeam(stand.drops[far])

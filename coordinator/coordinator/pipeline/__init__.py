@@ -18,6 +18,8 @@ from cell_layout.reach import youbot_tool_quaternion
 from coordinator.pipeline.core import Pipeline
 from coordinator.pipeline.loader import Loader
 from coordinator.pipeline.model import (
+    ArmReading,
+    BaseReading,
     Detection,
     LoaderState,
     Material,
@@ -40,8 +42,8 @@ from coordinator.pipeline.unload_geometry import (
 )
 from trial_record.events import Event, EventKind, RunResult
 
-__all__ = ['Detection', 'Event', 'EventKind', 'Loader', 'LoaderState', 'Material',
-           'MaterialStatus', 'Motion', 'NodeTimeout', 'Observation', 'Pipeline', 'Points',
-           'Ports', 'RunResult', 'Settings',
-           'Tally', 'Transport', 'TransportState', 'YOUBOT_CARRY_Q', 'YOUBOT_GRASP_STANDOFF_M',
-           'clear_of_the_plate', 'known', 'youbot_tool_quaternion']
+__all__ = ['ArmReading', 'BaseReading', 'Detection', 'Event', 'EventKind', 'Loader',
+           'LoaderState', 'Material', 'MaterialStatus', 'Motion', 'NodeTimeout', 'Observation',
+           'Pipeline', 'Points', 'Ports', 'RunResult', 'Settings', 'Tally', 'Transport',
+           'TransportState', 'YOUBOT_CARRY_Q', 'YOUBOT_GRASP_STANDOFF_M', 'clear_of_the_plate',
+           'known', 'youbot_tool_quaternion']

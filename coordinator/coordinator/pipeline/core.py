@@ -50,7 +50,8 @@ class Pipeline:
         self.youbot = YoubotArm('youbot', youbot_limits(self.s), ports, self.s, self.clock,
                                 self.log)
         self.loader = Loader(self.zu12, self.book, self.belt, self.log, layout, self.s, ports,
-                             youbot_loading=lambda: self.transport.loading)
+                             youbot_loading=lambda: self.transport.loading,
+                             plate_pose=lambda obs: obs.bases[self.youbot.name].pose)
         self.transport = Transport(self.youbot, self.book, self.log, layout, self.s, ports,
                                    loader_done=lambda: self.loader.state is LoaderState.DONE,
                                    zu12_clear=self.loader.clear_of_the_plate)

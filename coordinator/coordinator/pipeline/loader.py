@@ -14,6 +14,7 @@ from typing import (
 import numpy as np
 
 from cell_layout.layout import CellLayout
+from controllers.bezier import Pose2D
 from controllers.pick_place import PickTiming
 from controllers.time_optimal import (
     Waypoint,
@@ -72,9 +73,10 @@ class Loader(Machine):
 
     def __init__(self, arm: Arm, book: MaterialBook, belt: BeltModel, log: EventLog,
                  layout: CellLayout, settings: Settings, ports: Ports,
-                 youbot_loading: Callable[[], bool]) -> None:
-        """``youbot_loading``: the one question the Zu 12 asks of the youBot, whether it
-        waits at home for its load."""
+                 youbot_loading: Callable[[], bool],
+                 plate_pose: Callable[[Observation], Pose2D]) -> None:
+        """``youbot_loading`` and ``plate_pose``: the questions the Zu 12 asks of the youBot,
+        whether it waits at home for its load, and where it stands."""
         super().__init__(arm, log, settings, LoaderState.START)
         self.book, self.belt, self.layout, self.ports = book, belt, layout, ports
         self.room = Room(book, layout, settings)          # (a view: questions on the book)
@@ -82,7 +84,7 @@ class Loader(Machine):
         self.lag = 0.0                    # the longest a pick's plan has taken (real time) [s]
         self.current: Optional[Material] = None     # the material being picked or placed
         self.cup = CupPlace(arm, layout, settings)
-        self.planner = PickPlanner(arm, book, belt, self.cup, layout, settings)
+        self.planner = PickPlanner(arm, book, belt, self.cup, layout, settings, plate_pose)
         self._leave = math.inf                      # when the cup lifts the material
         self._ahead: Optional[Ahead] = None         # the pick's motion goes on to the place
         self._replans = 0                           # pick plans the port started late
@@ -331,7 +333,7 @@ class Loader(Machine):
         above it, in one motion; the release and the rise follow once the arm is there. (A
         pick's motion goes on to the place by itself: this is for a material held only once the
         arm was at the lift point.)"""
-        way = self.planner.place_way(m, self.planner.lift_point, obs.youbot_pose,
+        way = self.planner.place_way(m, self.planner.lift_point, self.planner.plate_pose(obs),
                                      self.arm.motion.goal)
         if isinstance(way, str):
             return self._place_failed(obs, m, way)

@@ -7,6 +7,7 @@ from dataclasses import dataclass
 from enum import Enum
 from typing import (
     List,
+    Mapping,
     Optional,
     Protocol,
     Sequence,
@@ -94,20 +95,30 @@ class Detection:
     hits: int
 
 
+@dataclass(frozen=True)
+class ArmReading:
+    """An arm as its sensors last told."""
+    q: np.ndarray                               # joint positions
+    dq: Optional[np.ndarray] = None             # measured joint velocities, if known
+    holding: bool = False                       # its grip tool holds something
+    armed: bool = False                         # its grip tool is switched on (as published)
+
+
+@dataclass(frozen=True)
+class BaseReading:
+    """A mobile base as its odometry last told, in the world frame."""
+    pose: Pose2D
+    velocity: Tuple[float, float, float] = (0.0, 0.0, 0.0)   # world vx, vy, wz
+
+
 @dataclass
 class Observation:
+    """What the cell's sensors told at ``now``: each arm and each mobile base by its robot's
+    name, and the vision's detections."""
     now: float
-    zu12_q: np.ndarray
-    youbot_q: np.ndarray
-    youbot_pose: Pose2D
-    youbot_velocity: Tuple[float, float, float] = (0.0, 0.0, 0.0)   # world vx, vy, wz
-    zu12_holding: bool = False
-    youbot_holding: bool = False
+    arms: Mapping[str, ArmReading]
+    bases: Mapping[str, BaseReading]
     detections: Sequence[Detection] = ()
-    zu12_armed: bool = False      # the grip tool is switched on (its state, as last published)
-    youbot_armed: bool = False
-    zu12_dq: Optional[np.ndarray] = None       # measured joint velocities, if known
-    youbot_dq: Optional[np.ndarray] = None
 
 
 class Ports(Protocol):

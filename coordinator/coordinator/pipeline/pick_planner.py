@@ -97,8 +97,11 @@ class PickPlanner:
     """Plans the Zu 12's picks and places; keeps the last pick's lift point."""
 
     def __init__(self, arm: Arm, book: MaterialBook, belt: BeltModel, cup: CupPlace,
-                 layout: CellLayout, settings: Settings) -> None:
+                 layout: CellLayout, settings: Settings,
+                 plate_pose: Callable[[Observation], Pose2D]) -> None:
+        """``plate_pose``: where the youBot being loaded stands, by an observation."""
         self.arm, self.book, self.belt, self.cup = arm, book, belt, cup
+        self.plate_pose = plate_pose
         self.room = Room(book, layout, settings)
         self.layout, self.s = layout, settings
         self.lift_point: Optional[np.ndarray] = None     # the last pick's lift point (x, y, z)
@@ -243,7 +246,7 @@ class PickPlanner:
         the lift point and a plan after it. (A missed grasp stops the arm at the lift point
         instead: see _pick.)"""
         m = pick.m
-        place_way = self.place_way(m, self.lift_point, obs.youbot_pose, pick.q_lift)
+        place_way = self.place_way(m, self.lift_point, self.plate_pose(obs), pick.q_lift)
         if isinstance(place_way, str):
             return None                 # (the place is planned, or its failure told, later)
         # Lifted out of a queue (at the end stop), it comes to rest at the lift point, clear

@@ -53,19 +53,19 @@ class Arm:
     # --- where it is ----------------------------------------------------------------------------
     def q(self, obs: Observation) -> np.ndarray:
         """Its joint positions as observed."""
-        return obs.zu12_q if self.name == 'zu12' else obs.youbot_q
+        return obs.arms[self.name].q
 
     def dq(self, obs: Observation) -> Optional[np.ndarray]:
         """Its measured joint velocities, if known."""
-        return obs.zu12_dq if self.name == 'zu12' else obs.youbot_dq
+        return obs.arms[self.name].dq
 
     def holding(self, obs: Observation) -> bool:
         """Whether its gripping tool holds something, as last published."""
-        return obs.zu12_holding if self.name == 'zu12' else obs.youbot_holding
+        return obs.arms[self.name].holding
 
     def armed(self, obs: Observation) -> bool:
         """Whether its gripping tool is switched on (closed), as last published."""
-        return obs.zu12_armed if self.name == 'zu12' else obs.youbot_armed
+        return obs.arms[self.name].armed
 
     @property
     def home(self) -> np.ndarray:
@@ -312,8 +312,8 @@ class BaseDrive:
     def steer(self, obs: Observation) -> None:
         """The base along its path, with its follower, until it is there or out of time."""
         follower = known(self._follower, 'the path follower')
-        status = follower.update(obs.now, obs.youbot_pose, obs.youbot_velocity[:2],
-                                 obs.youbot_velocity[2])
+        base = obs.bases[self.robot]
+        status = follower.update(obs.now, base.pose, base.velocity[:2], base.velocity[2])
         if not self._followed:
             self.ports.drive(*status.command)
         if not (status.finished or obs.now > self.deadline):
@@ -329,7 +329,7 @@ class BaseDrive:
     def follow(self, obs: Observation, target: Pose2D, via: Sequence[Any], goal: str) -> None:
         """The base off along a path from where it is through ``via`` to ``target`` (at stand
         or home ``goal``)."""
-        x, y, yaw = (float(v) for v in obs.youbot_pose)
+        x, y, yaw = (float(v) for v in obs.bases[self.robot].pose)
         path = BezierPath(key_poses_between((x, y, yaw), target, via))
         # Mecanum: the heading turns on its own profile in time while the base travels the
         # path, both over the same time (a short path with a large turn takes the turn's).
@@ -348,4 +348,4 @@ class BaseDrive:
         """Where the base stands for its unloads: its drive's end while it is on its way."""
         if self.driving:
             return known(self.target, 'the drive\'s end')
-        return obs.youbot_pose
+        return obs.bases[self.robot].pose

@@ -351,7 +351,7 @@ class Transport(Machine):
                 self.log.event(now, EventKind.ARM_STALLED, self.arm.name, m,
                                'the lift off the plate not completed')
             # Over to its drop as the base stands now (the drive ends a little off its goal).
-            path = (self.planner.unload_path(m, obs.youbot_pose, self.arm.q(obs))
+            path = (self.planner.unload_path(m, obs.bases[self.base.robot].pose, self.arm.q(obs))
                     or known(self._carry, 'the unload path'))
             self._carry = path
             self.book.keep_place(m, path.place)
