@@ -65,11 +65,6 @@ from world_description.resources import resolve_resource
 from world_description.world_config import WorldConfig, load_world
 
 ARMS = {'zu12': ZU12_JOINTS, 'youbot': YOUBOT_JOINTS}
-CAMERA_TOPIC = '/belt_camera/image_raw'
-RESEND_S = 1.0            # wall seconds before an unanswered idempotent request is sent again
-STARTUP_GRACE_S = 1.0      # simulated seconds in which a lost camera frame is tolerated
-STOP_CHECK_S = 0.2         # wall seconds between looks at a stop while waiting
-GRIP_SERVICES = {'zu12': '/zu12/suction', 'youbot': '/youbot/gripper/grasp'}
 
 
 PARAMS = (
