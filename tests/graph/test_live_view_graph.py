@@ -90,8 +90,11 @@ def test_a_client_sees_the_robot_drive_and_its_camera_live(start_node, probe):
     import websockets
 
     sim = start_node('sim_node', '-p', 'real_time_factor:=1.0')
+    # (The SDK's queue behind the gate at its default: the SDK drops a client whose control
+    # queue, of the same size, fills with advertisements while the gate is starved of CPU;
+    # what this test holds, the drops and the reports, is the gate's own outboxes'.)
     bridge = start_node('live_view', '-p', 'port:=0', '-p', 'use_sim_time:=true', '-p',
-                        'message_backlog_size:=4', '-p', 'report_period:=0.5')
+                        'report_period:=0.5')
     wait_for(lambda: _url(bridge) or not bridge.alive(), 30.0, what='the bridge to serve')
     url = _url(bridge)
     assert url, bridge.output()
