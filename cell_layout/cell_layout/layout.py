@@ -14,6 +14,7 @@ from typing import Any, Dict, FrozenSet, List, Optional, Set, Tuple
 
 import numpy as np
 
+from controllers import youbot_arm, zu12_arm
 from controllers.arrays import Vector
 from controllers.bezier import Pose2D
 from controllers.youbot_arm import ARM_BASE_IN_BASE_LINK_M
@@ -128,6 +129,29 @@ class UnloadStand:
 
 
 @dataclass(frozen=True)
+class CellRobot:
+    """A robot of the cell as the controller talks to it: its name in the world, the
+    namespace of its topics and services, its arm controller's joints in order, and its grip
+    tool's service."""
+    name: str
+    namespace: str
+    joints: Tuple[str, ...]
+    grip: str                           # absolute, e.g. /zu12/suction
+
+    def topic(self, name: str) -> str:
+        """One of its topics or services, absolute."""
+        return f'/{self.namespace}/{name}' if self.namespace else f'/{name}'
+
+
+# The controller that moves a robot's arm (the simulator's joint group of that name).
+ARM_CONTROLLER = 'arm_controller'
+# The paper's robots, as a layout made by hand has them (layout_from_world names the world's).
+PAPER_LOADER = CellRobot('zu12', 'zu12', tuple(zu12_arm.JOINT_NAMES), '/zu12/suction')
+PAPER_TRANSPORT = CellRobot('youbot', 'youbot', tuple(youbot_arm.JOINT_NAMES),
+                            '/youbot/gripper/grasp')
+
+
+@dataclass(frozen=True)
 class CellLayout:
     belt_y: float                       # the belt's centre line (world y) [m]
     belt_top: float                     # its top surface (world z) [m]
@@ -148,6 +172,14 @@ class CellLayout:
     via_out: Tuple[Tuple[float, ...], ...] = ()
     via_turn: Tuple[Tuple[float, ...], ...] = ()
     via_back: Tuple[Tuple[float, ...], ...] = ()
+    # Who does what: the arm that loads from the belt, and the robot that carries.
+    loader: CellRobot = PAPER_LOADER
+    transport: CellRobot = PAPER_TRANSPORT
+
+    @property
+    def robots(self) -> Dict[str, CellRobot]:
+        """The cell's robots with an arm, by name: the loader, then the transport."""
+        return {r.name: r for r in (self.loader, self.transport)}
     end_stop: bool = False              # materials accumulate at the end instead of falling off
     # The youBot plate's slots for the largest carried class (plate_grid).
     plate_slots: Tuple[Tuple[float, float], ...] = PLATE_SLOTS_IN_BASE_M

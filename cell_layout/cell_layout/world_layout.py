@@ -11,9 +11,11 @@ from typing import Any, Dict, List, Optional, Sequence, Set, Tuple
 import numpy as np
 
 from cell_layout.layout import (
+    ARM_CONTROLLER,
     PLATE_TOP_IN_BASE_M,
     POOL,
     CellLayout,
+    CellRobot,
     LayoutError,
     Region,
     Rule,
@@ -22,6 +24,7 @@ from cell_layout.layout import (
     slot_grid,
     world_to_base,
 )
+from controllers import youbot_arm, zu12_arm
 from controllers.bezier import Pose2D
 from controllers.youbot_arm import ARM_BASE_IN_BASE_LINK_M
 
@@ -43,23 +46,50 @@ def with_extra_materials(world: Any, extra: Sequence[str]) -> Any:
     return replace(world, materials=replace(world.materials, classes=classes))
 
 
+def _robots(world: Any) -> Tuple[CellRobot, CellRobot]:
+    """The loader and the transport, as the world's roles name them (the paper's robots
+    without a ``cell`` section); a LayoutError (one line) for robots this controller cannot
+    drive: it knows the Zu 12's and the youBot's arms, and drives one transport robot."""
+    roles = world.roles
+    names = sorted(r.name for r in world.robots)
+    if roles.loader not in names or roles.transports[0] not in names:
+        raise LayoutError(f'the cell needs its loader {roles.loader} and transport '
+                          f'{roles.transports[0]} (the world\'s cell section names them), the '
+                          f'world has {names}')
+    if len(roles.transports) > 1:
+        raise LayoutError(f'the coordinator drives one transport robot; cell.transports names '
+                          f'{len(roles.transports)}: {list(roles.transports)}')
+    out = []
+    for name, kinematics in ((roles.loader, zu12_arm), (roles.transports[0], youbot_arm)):
+        robot = world.robot(name)
+        arm = next((c for c in robot.controllers if c.name == ARM_CONTROLLER), None)
+        if arm is None or tuple(arm.joints) != tuple(kinematics.JOINT_NAMES):
+            raise LayoutError(f'robot {name}: its {ARM_CONTROLLER} must drive '
+                              f'{list(kinematics.JOINT_NAMES)} (the arm the coordinator knows)')
+        if robot.suction is None:
+            raise LayoutError(f'robot {name}: it has no grip tool (suction)')
+        ns = robot.namespace
+        out.append(CellRobot(name, ns, tuple(arm.joints),
+                             f'/{ns}/{robot.suction.service}' if ns
+                             else f'/{robot.suction.service}'))
+    return out[0], out[1]
+
+
 def layout_from_world(world: Any) -> CellLayout:
     """The layout of a loaded WorldConfig (world_description.world_config) of the pipeline
     cell; a LayoutError (one line) for a cell whose rules cannot work."""
     if world.conveyor is None or world.materials is None:
         raise LayoutError('the world has no conveyor with materials')
     named = {o.name: o for o in world.obstacles if o.name}
-    names = {r.name for r in world.robots}
-    if not {'zu12', 'youbot'} <= names:
-        raise LayoutError(f'the cell needs robots zu12 and youbot, the world has {sorted(names)}')
+    loader, transport = _robots(world)
     if POOL not in named:
         raise LayoutError(f'the world has no obstacle named {POOL}: the youBot unloads from '
                           'stands beside the pool')
     conv = world.conveyor
     if abs(math.sin(conv.yaw)) > 1e-9 or math.cos(conv.yaw) < 0.0:
         raise LayoutError('the coordinator expects the belt to carry along +x (yaw 0)')
-    yb = world.robot('youbot').pose
-    zu = world.robot('zu12').pose
+    yb = world.robot(transport.name).pose
+    zu = world.robot(loader.name).pose
     mats = world.materials
     rules = {c.name: Rule(c.name, c.destination, c.route, c.size, c.mass) for c in mats.classes}
     stands = tuple(replace(st, slide=stand_slide(st.pose, world.obstacles, world.floor_size))
@@ -89,7 +119,8 @@ def layout_from_world(world: Any) -> CellLayout:
         # about base_link); back home it turns round on the way.
         via_out=((side_x - 0.15, py + 0.55, -math.pi / 2),),
         via_turn=((side_x - 0.3, py - 0.12, 0.0),),
-        via_back=((0.5 * (home[0] + side_x), 0.5 * (home[1] + right.pose[1]), 0.0),))
+        via_back=((0.5 * (home[0] + side_x), 0.5 * (home[1] + right.pose[1]), 0.0),),
+        loader=loader, transport=transport)
     regions: Dict[str, Region] = {}
     served: Dict[str, Set[str]] = {}
     for dest in sorted({r.destination for r in rules.values()}):

@@ -38,8 +38,6 @@ from cell_layout.joint_speeds import speed_limits
 from cell_layout.layout import CellLayout, LayoutError
 from cell_layout.world_layout import layout_from_world, with_extra_materials
 from controllers.lockstep import CommandCounter
-from controllers.youbot_arm import JOINT_NAMES as YOUBOT_JOINTS
-from controllers.zu12_arm import JOINT_NAMES as ZU12_JOINTS
 from coordinator.observer import Observer
 from coordinator.pipeline import (
     Event,
@@ -63,9 +61,6 @@ from trial_record.scoring import (
 from world_description import PIPELINE_CELL
 from world_description.resources import resolve_resource
 from world_description.world_config import WorldConfig, load_world
-
-ARMS = {'zu12': ZU12_JOINTS, 'youbot': YOUBOT_JOINTS}
-
 
 PARAMS = (
     Param('world', PIPELINE_CELL, 'World file of the cell (layout, manifest, belt)'),
@@ -163,13 +158,14 @@ class CoordinatorNode(Node):
         # may lag it.
         commands = CommandCounter()
         sim = p['sim_node'].rstrip('/')
+        arms = {name: robot.joints for name, robot in layout.robots.items()}
         self.observer = Observer(
-            self, layout, ARMS, sim, self.synchronous, self.rate, dt_ns, state_period,
+            self, layout, arms, sim, self.synchronous, self.rate, dt_ns, state_period,
             round(1e9 / cams[0].rate) if cams else None, self.service_timeout,
             float(p['drive_lead']), commands,
-            {arm: speed_limits(self.world, arm) for arm in ARMS},
+            {arm: speed_limits(self.world, arm) for arm in arms},
             drive=lambda vx, vy, wz: self.ports.drive(vx, vy, wz))
-        self.ports = RosPorts(self, ARMS, sim, self.settings, self.synchronous,
+        self.ports = RosPorts(self, layout, sim, self.settings, self.synchronous,
                               self.service_timeout, commands, now=self.observer.now,
                               set_follower=self.observer.inputs.set_follower,
                               on_event=self._on_event)
@@ -208,7 +204,7 @@ class CoordinatorNode(Node):
         try:
             while not self.pipeline.finished and rclpy.ok():
                 self.pipeline.tick(obs)
-                self._path.append(obs.bases['youbot'].pose[:2])
+                self._path.append(obs.bases[self.layout.transport.name].pose[:2])
                 ticks += 1
                 if ticks % max(1, round(self.rate)) == 0:
                     self._publish_state(obs.now)

@@ -38,7 +38,7 @@ from coordinator.pipeline import (
     Observation,
     known,
 )
-from coordinator.ros_ports import GRIP_SERVICES, Stopped, call_service
+from coordinator.ros_ports import Stopped, call_service
 from ros_common.geometry import yaw_of
 from ros_common.stamps import to_ns
 from trial_record.scoring import IdentificationCheck, PeakJointSpeed
@@ -84,13 +84,14 @@ class Inputs:
     def _subscribe(self, sim: str) -> None:
         node, qos = self.node, QoSProfile(depth=100)
         for arm, names in self.arms.items():
-            node.create_subscription(JointState, f'/{arm}/joint_states',
+            robot = self.layout.robots[arm]
+            node.create_subscription(JointState, robot.topic('joint_states'),
                                      functools.partial(self._on_joints, arm, names), qos)
-            node.create_subscription(GripState, f'{GRIP_SERVICES[arm]}/state',
+            node.create_subscription(GripState, f'{robot.grip}/state',
                                      functools.partial(self._on_grip, arm), qos)
         # Real time: the drive acts on the newest odometry only (one the executor could not
         # take in time is stale); lock-step waits for the stamp of every state.
-        node.create_subscription(Odometry, '/youbot/odom', self._on_odom,
+        node.create_subscription(Odometry, self.layout.transport.topic('odom'), self._on_odom,
                                  qos if self.synchronous else QoSProfile(depth=1))
         self._detections_sub: Optional[Subscription] = node.create_subscription(
             MaterialDetectionArray, '/detections', self._on_detections, qos)
@@ -410,8 +411,8 @@ class Observer:
             odom = known(self.inputs.odom, 'odometry')
             arms = {name: ArmReading(q, dq, *self.inputs.grip[name][1:])
                     for name, (_, q, dq) in self.inputs.joints.items()}
-            return Observation(t_ns * 1e-9, arms, {'youbot': BaseReading(odom[1], odom[2])},
-                               dets)
+            bases = {self.layout.transport.name: BaseReading(odom[1], odom[2])}
+            return Observation(t_ns * 1e-9, arms, bases, dets)
 
     def final_truth(self, end: float) -> list:
         """The materials' true poses after the run (the score's ground truth)."""

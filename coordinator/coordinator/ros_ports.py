@@ -5,7 +5,7 @@ here (``call_service``): a node that does not answer ends the run as a node time
 (Ctrl-C, SIGTERM) while waiting ends it as interrupted (``Stopped``)."""
 from __future__ import annotations
 
-from typing import Callable, Mapping, Optional, Sequence
+from typing import Callable, Optional
 
 import numpy as np
 import rclpy
@@ -18,6 +18,7 @@ from sim_interfaces.srv import SolveIK
 from std_srvs.srv import SetBool
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
+from cell_layout.layout import ARM_CONTROLLER, CellLayout
 from controllers.lockstep import CommandCounter
 from controllers.path_follower import PathFollower
 from coordinator.pipeline import Event, EventKind, NodeTimeout, Points, Settings
@@ -26,7 +27,6 @@ from ros_common.stamps import duration_from_ns, set_stamp, stamp_from_ns
 from ros_common.twist_out import TwistOut
 
 RESEND_S = 1.0            # wall seconds before an unanswered idempotent request is sent again
-GRIP_SERVICES = {'zu12': '/zu12/suction', 'youbot': '/youbot/gripper/grasp'}
 
 
 class Stopped(Exception):
@@ -58,22 +58,27 @@ class RosPorts:
     follower to the observer, which runs it on every odometry message in real time;
     ``on_event`` is told of each event after it is published."""
 
-    def __init__(self, node: Node, arms: Mapping[str, Sequence[str]], sim: str, settings: Settings,
+    def __init__(self, node: Node, layout: CellLayout, sim: str, settings: Settings,
                  synchronous: bool, service_timeout: float, commands: CommandCounter,
                  now: Callable[[], float],
                  set_follower: Callable[[Optional[PathFollower]], bool],
                  on_event: Callable[[Event], None]) -> None:
-        self.node, self.arms, self.settings = node, arms, settings
+        robots = layout.robots
+        self.node, self.settings = node, settings
+        self.arms = {name: robot.joints for name, robot in robots.items()}
         self.synchronous, self.service_timeout = synchronous, service_timeout
         self._commands, self.now = commands, now
         self._set_follower, self._on_event = set_follower, on_event
         reliable = QoSProfile(depth=10)
         self.traj_pubs = {arm: node.create_publisher(
-            JointTrajectory, f'/{arm}/arm_controller/joint_trajectory', reliable) for arm in arms}
-        self._cmd_out = TwistOut(node, '/youbot/cmd_vel', stamped=False)
+            JointTrajectory, robot.topic(f'{ARM_CONTROLLER}/joint_trajectory'), reliable)
+            for arm, robot in robots.items()}
+        self._cmd_out = TwistOut(node, layout.transport.topic('cmd_vel'), stamped=False)
         self.event_pub = node.create_publisher(PipelineEvent, '~/events', QoSProfile(depth=100))
-        self.ik = {arm: node.create_client(SolveIK, f'/{arm}/solve_ik') for arm in arms}
-        self.grips = {arm: node.create_client(SetBool, srv) for arm, srv in GRIP_SERVICES.items()}
+        self.ik = {arm: node.create_client(SolveIK, robot.topic('solve_ik'))
+                   for arm, robot in robots.items()}
+        self.grips = {arm: node.create_client(SetBool, robot.grip)
+                      for arm, robot in robots.items()}
         self.param_client = node.create_client(SetParameters, f'{sim}/set_parameters')
 
     def _call(self, client, request, what: str, idempotent: bool = True):

@@ -40,9 +40,10 @@ def summary_rows(trials: Sequence[TrialResult]) -> Dict[str, float]:
         'p90_completion_time': float(np.percentile(times, 90)),
         **rates,
         # The largest over all trials: the limits hold only if they hold in every run.
-        **{f'peak_joint_speed_{arm}': max(
-            (t.peak_joint_speed.get(arm, {}).get('fraction_of_limit', 0.0) for t in trials),
-            default=0.0) for arm in ('zu12', 'youbot')},
+        # (Per robot, by the name its world gives it.)
+        **{f'peak_joint_speed_{robot}': max(
+            (t.peak_joint_speed.get(robot, {}).get('fraction_of_limit', 0.0) for t in trials),
+            default=0.0) for robot in sorted({r for t in trials for r in t.peak_joint_speed})},
         # Trials in which the world drove a joint past its speed limit (the simulator braked it
         # back), and the worst such joint's ratio.
         'trials_joints_driven_past': sum(1 for t in trials if t.joints_driven_past),
@@ -348,10 +349,11 @@ def _table(s: Dict[str, float]) -> List[str]:
     return lines + [
         '', f'Completed runs (every material at its destination): {s["completed"]:.0f} of '
         f'{s["trials"]:.0f}.', '',
-        f'Peak joint speed in the joint states the simulator published (all trials, as a '
-        f'fraction of each joint\'s published limit): Zu 12 {s["peak_joint_speed_zu12"]:.3f}, '
-        f'youBot {s["peak_joint_speed_youbot"]:.3f}; every joint with a limit, arms, fingers '
-        f'and wheels' + (
+        'Peak joint speed in the joint states the simulator published (all trials, as a '
+        'fraction of each joint\'s published limit): '
+        + ', '.join(f'{k[len("peak_joint_speed_"):]} {v:.3f}' for k, v in s.items()
+                    if k.startswith('peak_joint_speed_'))
+        + '; every joint with a limit, arms, fingers and wheels' + (
             f'. The world drove a joint past its limit (braked back to it) in '
             f'{s["trials_joints_driven_past"]:.0f} trials, at worst '
             f'{s["worst_driven_past"]:.2f} times its limit (each trial\'s '

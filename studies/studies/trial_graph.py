@@ -129,8 +129,11 @@ def pipeline_graph(seed: int, belt_speed: float, synchronous: bool = True,
     if progress_file is not None:
         coordinator['progress_file'] = str(progress_file)
     # The IK servers name their frames as the simulator does (the world's frame prefixes).
-    prefixes = {robot.name: robot.frame_prefix
-                for robot in load_world(resolve_resource(world)).robots}
+    loaded = load_world(resolve_resource(world))
+    roles = loaded.roles
+    prefixes = {robot.name: robot.frame_prefix for robot in loaded.robots}
+    spaces = {robot.name: robot.namespace for robot in loaded.robots}
+    loader, transport = roles.loader, roles.transports[0]
     nodes = []
     if record_dir is not None:
         recorder: Dict[str, ParameterValue] = {
@@ -154,11 +157,14 @@ def pipeline_graph(seed: int, belt_speed: float, synchronous: bool = True,
                               ('camera_info', '/belt_camera/camera_info'))),
         # (The coordinator seeds every IK request with the arm's state and executes none: the
         # IK servers need no joint_states, 30 messages a second each.)
-        GraphNode('zu12_kinematics', 'arm_kinematics', 'kinematics_node', namespace='zu12',
-                  parameters={'arm': 'zu12', 'frame_prefix': prefixes.get('zu12', ''),
+        # (One IK server per arm, in its robot's namespace; ``arm`` is its kinematics.)
+        GraphNode(f'{loader}_kinematics', 'arm_kinematics', 'kinematics_node',
+                  namespace=spaces.get(loader, loader),
+                  parameters={'arm': 'zu12', 'frame_prefix': prefixes.get(loader, ''),
                               'track_joint_states': False}),
-        GraphNode('youbot_kinematics', 'arm_kinematics', 'kinematics_node', namespace='youbot',
-                  parameters={'arm': 'youbot', 'frame_prefix': prefixes.get('youbot', ''),
+        GraphNode(f'{transport}_kinematics', 'arm_kinematics', 'kinematics_node',
+                  namespace=spaces.get(transport, transport),
+                  parameters={'arm': 'youbot', 'frame_prefix': prefixes.get(transport, ''),
                               'track_joint_states': False}),
         GraphNode('coordinator_node', 'coordinator', 'coordinator_node',
                   parameters=coordinator),

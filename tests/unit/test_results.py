@@ -119,6 +119,13 @@ def test_summary_and_report(tmp_path):
                        'materials': [{'id': 3, 'color': 'blue', 'status': 'failed',
                                       'failure': 'not held after 2 attempts'}]
                        if handling < 1.0 else [], 'wall_time': 80.0})
+    # (Robots as a world names them: the summary has a peak for each name any trial has.)
+    trials[0]['peak_joint_speed'] = {'arm': {'fraction_of_limit': 0.9, 'joint': 'joint_1',
+                                             'time': 3.0}}
+    trials[1]['peak_joint_speed'] = {'arm': {'fraction_of_limit': 0.97, 'joint': 'joint_2',
+                                             'time': 4.0},
+                                     'carrier': {'fraction_of_limit': 1.0,
+                                                 'joint': 'arm_joint_1', 'time': 9.0}}
     trials[2]['joints_driven_past'] = [{'robot': 'youbot', 'joint': 'arm_joint_4',
                                         'ratio': 1.31, 'speed': 2.06, 'limit': 1.5708,
                                         'brake': 2.7, 'time': 40.0, 'count': 1}]
@@ -131,6 +138,8 @@ def test_summary_and_report(tmp_path):
     assert '| paper, trials 100-110 | | 61 | 99 | 99 | 10 |' in report
     assert 'trial 1 (seed 11, belt 0.120): incomplete' in report and 'blue 3' in report
     assert s['trials_joints_driven_past'] == 1 and s['worst_driven_past'] == 1.31
+    assert (s['peak_joint_speed_arm'], s['peak_joint_speed_carrier']) == (0.97, 1.0)
+    assert 'fraction of each joint\'s published limit): arm 0.970, carrier 1.000;' in report
     assert ('The world drove a joint past its limit (braked back to it) in 1 trials, at worst '
             '1.31 times its limit') in report
     for png in ('completion_times.png', 'success_rates.png', 'youbot_paths.png'):

@@ -20,6 +20,7 @@ from world_description.world_schema import (
     TURN_RAD,
     WORLD_EXTENT_M,
     CameraConfig,
+    CellRoles,
     ControllerConfig,
     ConveyorConfig,
     DiffDriveConfig,
@@ -37,6 +38,7 @@ from world_description.world_sections import parse_world
 
 __all__ = [
     'CameraConfig',
+    'CellRoles',
     'ControllerConfig',
     'ConveyorConfig',
     'DiffDriveConfig',

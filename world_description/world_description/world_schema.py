@@ -184,6 +184,15 @@ class MaterialsConfig:
 
 
 @dataclass(frozen=True)
+class CellRoles:
+    """What each robot does in a pipeline cell (the world's ``cell`` section): the arm that
+    picks from the belt, and the mobile robots that carry. A world without the section has
+    the paper's: ``zu12`` loads and ``youbot`` carries."""
+    loader: str = 'zu12'
+    transports: Tuple[str, ...] = ('youbot',)
+
+
+@dataclass(frozen=True)
 class WorldConfig:
     source: str
     gravity: float = -9.81
@@ -196,6 +205,12 @@ class WorldConfig:
     materials: Optional[MaterialsConfig] = None
     # Realistic sources of failure, all off unless the world turns them on (perturbations.py).
     perturbations: Perturbations = field(default_factory=Perturbations)
+    cell: Optional[CellRoles] = None    # as the world names them (None: the paper's)
+
+    @property
+    def roles(self) -> CellRoles:
+        """The cell's roles: the world's, or the paper's."""
+        return self.cell or CellRoles()
 
     def robot(self, name: str) -> RobotConfig:
         for robot in self.robots:

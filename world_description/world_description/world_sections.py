@@ -30,6 +30,7 @@ from world_description.world_schema import (
     TURN_RAD,
     WORLD_EXTENT_M,
     CameraConfig,
+    CellRoles,
     ControllerConfig,
     ConveyorConfig,
     DiffDriveConfig,
@@ -50,7 +51,7 @@ def parse_world(data: Any, source: str = '<memory>') -> WorldConfig:
     if not isinstance(data, dict):
         raise WorldConfigError(f'{source}: the top level must be a mapping')
     r.only(data, 'world', {'gravity', 'floor_size', 'robots', 'obstacles', 'cameras',
-                           'conveyor', 'materials', 'perturbations'})
+                           'conveyor', 'materials', 'perturbations', 'cell'})
     robots = [_robot(r, item, i) for i, item in enumerate(r.list(data, 'robots', 'world'))]
     names = [rb.name for rb in robots]
     if len(set(names)) != len(names):
@@ -75,7 +76,38 @@ def parse_world(data: Any, source: str = '<memory>') -> WorldConfig:
                                            hi=2 * WORLD_EXTENT_M),
                        robots=robots, obstacles=obstacles, cameras=cameras, conveyor=conveyor,
                        materials=materials,
-                       perturbations=_perturbations(r, data.get('perturbations') or {}))
+                       perturbations=_perturbations(r, data.get('perturbations') or {}),
+                       cell=_cell(r, data['cell'], robots) if data.get('cell') is not None
+                       else None)
+
+
+def _cell(r: Reader, item: Any, robots: List[RobotConfig]) -> CellRoles:
+    """The cell's roles: the loader a fixed arm with a suction cup, each transport a mobile
+    robot with a drive and a gripper, no robot in two roles."""
+    where = 'cell'
+    r.only(item, where, {'loader', 'transports'})
+    by_name = {rb.name: rb for rb in robots}
+    loader = r.name(item, 'loader', where)
+    arm = by_name.get(loader)
+    if arm is None:
+        raise r.fail(where, 'loader', f'{loader!r} is not a robot of this world '
+                                      f'(robots: {sorted(by_name)})')
+    if not arm.fixed_base or arm.suction is None:
+        raise r.fail(where, 'loader', f'{loader!r} must be a fixed arm with a suction cup')
+    names = item.get('transports')
+    if not isinstance(names, list) or not names or not all(isinstance(n, str) for n in names):
+        raise r.fail(where, 'transports', f'must be a list of robot names, got {names!r}')
+    for name in names:
+        robot = by_name.get(name)
+        if robot is None:
+            raise r.fail(where, 'transports', f'{name!r} is not a robot of this world '
+                                              f'(robots: {sorted(by_name)})')
+        if robot.fixed_base or robot.drive is None or robot.suction is None:
+            raise r.fail(where, 'transports', f'{name!r} must be a mobile robot with a drive '
+                                              'and a gripper')
+    if len(set(names)) != len(names) or loader in names:
+        raise r.fail(where, 'transports', f'names each robot once, and not the loader: {names}')
+    return CellRoles(loader, tuple(names))
 
 
 def _robot(r: Reader, item: Any, i: int) -> RobotConfig:

@@ -42,13 +42,14 @@ class Pipeline:
         self.start_time = start_time
         self.result: Optional[RunResult] = None
         self.clock = Clock(start_time)
-        self.log = EventLog(ports, ['zu12', 'youbot'])
+        self.log = EventLog(ports, list(layout.robots))
         self.book = MaterialBook(layout, self.s, self.log)
         self.belt = BeltModel(layout, self.book.materials, self.clock, belt_ran_before)
         self.belt_stops = 0               # the belt stopped while loading (its queue full)
-        self.zu12 = Arm('zu12', zu12_limits(self.s), ports, self.s, self.clock, self.log)
-        self.youbot = YoubotArm('youbot', youbot_limits(self.s), ports, self.s, self.clock,
-                                self.log)
+        self.zu12 = Arm(layout.loader.name, zu12_limits(self.s), ports, self.s, self.clock,
+                        self.log)
+        self.youbot = YoubotArm(layout.transport.name, youbot_limits(self.s), ports, self.s,
+                                self.clock, self.log)
         self.loader = Loader(self.zu12, self.book, self.belt, self.log, layout, self.s, ports,
                              youbot_loading=lambda: self.transport.loading,
                              plate_pose=lambda obs: obs.bases[self.youbot.name].pose)
@@ -180,10 +181,10 @@ class Pipeline:
             status=status, completion_time=now - self.start_time, total=tally.total,
             identified=tally.identified, picked=tally.picked, delivered=tally.delivered,
             grasp_attempts=self.log.grasp_attempts, grasp_successes=self.log.grasp_successes,
-            zu12_grasp_attempts=self.log.grasps['zu12'][0],
-            zu12_grasp_successes=self.log.grasps['zu12'][1],
-            youbot_grasp_attempts=self.log.grasps['youbot'][0],
-            youbot_grasp_successes=self.log.grasps['youbot'][1], loaded=self.book.loaded,
+            zu12_grasp_attempts=self.log.grasps[self.zu12.name][0],
+            zu12_grasp_successes=self.log.grasps[self.zu12.name][1],
+            youbot_grasp_attempts=self.log.grasps[self.youbot.name][0],
+            youbot_grasp_successes=self.log.grasps[self.youbot.name][1], loaded=self.book.loaded,
             trips=self.transport.trips, belt_stops=self.belt_stops,
             missed=tally.missed, failed=tally.failed, message=message,
             materials=[{'id': m.id, 'color': m.color, 'status': m.status.value,
