@@ -1,0 +1,100 @@
+"""The geometry of the youBot's unloads (no ROS, no state): the straight lift off its plate and
+the points of a grip, where a held material is from the tool, how far the gripper is from a
+drop, and whether a motion keeps what is held clear of the plate's other materials. The
+coordinator's transport plans with these; tests/unit/test_unload_geometry.py tests each."""
+from __future__ import annotations
+
+from typing import List, Sequence, Tuple, cast
+
+import numpy as np
+
+from cell_layout.layout import PLATE_TOP_IN_BASE_M
+from cell_layout.world_layout import GRASP_STANDOFF_M
+from controllers.arrays import Vector
+from controllers.youbot_kinematics import YoubotKinematics
+
+# A motion's samples: (absolute time [s], joint positions, velocities, accelerations).
+Points = List[Tuple[float, np.ndarray, np.ndarray, np.ndarray]]
+# The youBot's arm upright (the datasheet's candle pose) while the base drives home.
+YOUBOT_CARRY_Q = np.zeros(5)
+# The youBot's fingertips reach 10.4 mm beyond gripper_tcp: it grasps a material's top face with
+# the TCP this far above it, so that the fingertips do not push the material away.
+YOUBOT_GRASP_STANDOFF_M = GRASP_STANDOFF_M
+
+
+# What the youBot holds passes this far over the tops of the plate's other materials [m].
+PLATE_CLEARANCE_M = 0.01
+YOUBOT_FK = YoubotKinematics('gripper_tcp')
+# An unload whose arm stalled with the gripper further than this from its drop, across, is a
+# failure, not a delivery [m] (a shoulder that sagged 0.24 rad under 0.38 kg left it 2 cm off
+# across, still over the pool).
+DROP_REACH_TOLERANCE_M = 0.05
+
+
+def clear_of_the_plate(points: Points, others: Sequence[Tuple[float, float, float]],
+                       size: float, offset: Vector = (0.0, 0.0), steps: int = 8) -> bool:
+    """Whether a youBot motion (samples of time, positions, velocities, accelerations) keeps
+    the material of edge ``size`` it holds (gripped by its top face, its centre ``offset``
+    from the tool in x and y) ``PLATE_CLEARANCE_M`` over each of the plate's ``others`` (slot
+    x, y and edge) wherever it passes over one: along the path the controller follows between
+    the samples (cubic in position and velocity)."""
+    if not others:
+        return True
+    shift = np.asarray(offset, float)
+    for (t0, q0, v0, _), (t1, q1, v1, _) in zip(points, points[1:]):
+        h = t1 - t0
+        for x in np.linspace(0.0, 1.0, steps, endpoint=False):
+            q = ((2 * x**3 - 3 * x**2 + 1) * q0 + (x**3 - 2 * x**2 + x) * h * v0
+                 + (-2 * x**3 + 3 * x**2) * q1 + (x**3 - x**2) * h * v1)
+            tool = YOUBOT_FK.fk(q)[:3, 3]
+            px, py = tool[:2] + shift
+            bottom = tool[2] - YOUBOT_GRASP_STANDOFF_M - size
+            for sx, sy, other in others:
+                # Over it: the two nearer than their half edges and 5 mm, centre to centre.
+                reach = (size + other) / 2 + 0.005
+                if (bottom < PLATE_TOP_IN_BASE_M + other + PLATE_CLEARANCE_M
+                        and abs(px - sx) < reach and abs(py - sy) < reach):
+                    return False
+    return True
+
+
+# The youBot's lift off the plate: heights over the grip [m], the last clear of the neighbours
+# (of the paper's 5 cm materials; taller neighbours take it higher, 1 cm at a time).
+UNLOAD_LIFT_STEPS_M = (0.01, 0.02, 0.03, 0.04, 0.05, 0.06)
+# A second grip of a material presses this much further down [m].
+REGRIP_PRESS_M = 0.004
+
+
+def lift_steps(tallest: float) -> Tuple[float, ...]:
+    """Heights over the grip that the straight lift passes through: up until what it holds
+    clears the tallest other material on the plate (``tallest``, 0: none) by PLATE_CLEARANCE_M
+    (its bottom rises as far as the grip does)."""
+    steps = list(UNLOAD_LIFT_STEPS_M)
+    while steps[-1] < tallest + PLATE_CLEARANCE_M - 1e-9:
+        steps.append(round(steps[-1] + 0.01, 6))
+    return tuple(steps)
+
+
+def grip_points(slot: Vector, size: float, attempts: int, high: bool, tallest: float
+                ) -> Tuple[np.ndarray, np.ndarray, List[np.ndarray]]:
+    """The tool's points (base_link) for a grip of a material of edge ``size`` on the plate
+    slot ``slot`` (x, y): on it (its fingertips round its top face; pressed further down at
+    each attempt after the first: ``attempts`` made so far), over it (5 cm with ``high``, else
+    3), and up its straight lift."""
+    contact = np.array([slot[0], slot[1], PLATE_TOP_IN_BASE_M + size
+                        + YOUBOT_GRASP_STANDOFF_M - REGRIP_PRESS_M * attempts])
+    hover = contact + np.array([0.0, 0.0, 0.05 if high else 0.03])
+    return contact, hover, [contact + np.array([0.0, 0.0, h]) for h in lift_steps(tallest)]
+
+
+def held_offset(q: np.ndarray, slot: Vector) -> np.ndarray:
+    """Where a material gripped over its plate ``slot`` is from the tool at joints ``q`` (x, y
+    in base_link): the grip is a few millimetres off the slot's centre, the material with
+    it."""
+    tool = YOUBOT_FK.fk(q)[:2, 3]
+    return cast(np.ndarray, np.asarray(slot, float) - tool)
+
+
+def short_of(q: np.ndarray, goal: np.ndarray) -> float:
+    """How far the gripper at joints ``q`` is from where it is at ``goal``, across [m]."""
+    return float(np.linalg.norm(YOUBOT_FK.fk(q)[:2, 3] - YOUBOT_FK.fk(goal)[:2, 3]))
