@@ -20,7 +20,6 @@ setup(
     entry_points={
         'console_scripts': [
             'coordinator_node = coordinator:coordinator_node_main',
-            'pipeline_diagram = coordinator.pipeline.diagram:main',
         ],
     },
 )

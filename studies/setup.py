@@ -22,6 +22,7 @@ setup(
             'run_trials = studies.run_trials:main',
             'compare_runs = studies.compare:main',
             'storyboard = studies.storyboard:main',
+            'pipeline_diagram = studies.pipeline_diagram:main',
         ],
     },
 )

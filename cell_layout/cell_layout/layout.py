@@ -160,7 +160,7 @@ class CellLayout:
     belt_width: float                   # [m]
     material_size: float                # the largest class's cube edge [m]
     manifest: Dict[str, int]            # materials per class in the batch
-    youbot_home: Pose2D                 # the youBot's start (and loading) pose
+    youbot_home: Pose2D                 # where a youBot is loaded (the first one's start pose)
     youbot_base_z: float                # its base_link above the floor, on its wheels [m]
     zu12_base: Tuple[float, float, float, float]   # x, y, z, yaw
     rules: Dict[str, Rule] = field(default_factory=dict)        # per class
@@ -172,14 +172,37 @@ class CellLayout:
     via_out: Tuple[Tuple[float, ...], ...] = ()
     via_turn: Tuple[Tuple[float, ...], ...] = ()
     via_back: Tuple[Tuple[float, ...], ...] = ()
-    # Who does what: the arm that loads from the belt, and the robot that carries.
+    # Who does what: the arm that loads from the belt, and the robots that carry (a fleet of
+    # youBots), each with its start pose, where it waits while another is loaded (``parks``,
+    # in order; none for a fleet of one: it starts where it is loaded).
     loader: CellRobot = PAPER_LOADER
-    transport: CellRobot = PAPER_TRANSPORT
+    transports: Tuple[CellRobot, ...] = (PAPER_TRANSPORT,)
+    parks: Tuple[Pose2D, ...] = ()
+    # Two bases never come nearer than this, footprint to footprint [m]; a youBot sets off
+    # with at most ``trip_load`` materials (0: as many as its plate holds).
+    clearance: float = 0.1
+    trip_load: int = 0
+
+    @property
+    def transport(self) -> CellRobot:
+        """The first transport robot (the only one of the paper's cell)."""
+        return self.transports[0]
+
+    @property
+    def fleet(self) -> bool:
+        """Whether more than one youBot carries (they share the loading pose and the pool)."""
+        return len(self.transports) > 1
 
     @property
     def robots(self) -> Dict[str, CellRobot]:
-        """The cell's robots with an arm, by name: the loader, then the transport."""
-        return {r.name: r for r in (self.loader, self.transport)}
+        """The cell's robots with an arm, by name: the loader, then the transports."""
+        return {r.name: r for r in (self.loader, *self.transports)}
+
+    def park(self, robot: str) -> Pose2D:
+        """Where transport ``robot`` starts, and waits while another is loaded."""
+        if not self.parks:
+            return self.youbot_home
+        return self.parks[[r.name for r in self.transports].index(robot)]
     end_stop: bool = False              # materials accumulate at the end instead of falling off
     # The youBot plate's slots for the largest carried class (plate_grid).
     plate_slots: Tuple[Tuple[float, float], ...] = PLATE_SLOTS_IN_BASE_M

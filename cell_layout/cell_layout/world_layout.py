@@ -10,6 +10,14 @@ from typing import Any, Dict, List, Optional, Sequence, Set, Tuple
 
 import numpy as np
 
+from cell_layout.fleet_routes import (
+    OBSTACLE_LOW_M,
+    YOUBOT_HALF_LENGTH_M,
+    YOUBOT_HALF_WIDTH_M,
+    check_fleet,
+    obstacle_height,
+    way_back,
+)
 from cell_layout.layout import (
     ARM_CONTROLLER,
     PLATE_TOP_IN_BASE_M,
@@ -46,21 +54,20 @@ def with_extra_materials(world: Any, extra: Sequence[str]) -> Any:
     return replace(world, materials=replace(world.materials, classes=classes))
 
 
-def _robots(world: Any) -> Tuple[CellRobot, CellRobot]:
-    """The loader and the transport, as the world's roles name them (the paper's robots
+def _robots(world: Any) -> Tuple[CellRobot, Tuple[CellRobot, ...]]:
+    """The loader and the transports, as the world's roles name them (the paper's robots
     without a ``cell`` section); a LayoutError (one line) for robots this controller cannot
-    drive: it knows the Zu 12's and the youBot's arms, and drives one transport robot."""
+    drive: it knows the Zu 12's and the youBot's arms."""
     roles = world.roles
     names = sorted(r.name for r in world.robots)
-    if roles.loader not in names or roles.transports[0] not in names:
-        raise LayoutError(f'the cell needs its loader {roles.loader} and transport '
-                          f'{roles.transports[0]} (the world\'s cell section names them), the '
-                          f'world has {names}')
-    if len(roles.transports) > 1:
-        raise LayoutError(f'the coordinator drives one transport robot; cell.transports names '
-                          f'{len(roles.transports)}: {list(roles.transports)}')
+    missing = [n for n in (roles.loader, *roles.transports) if n not in names]
+    if missing:
+        raise LayoutError(f'the cell needs its loader {roles.loader} and transports '
+                          f'{list(roles.transports)} (the world\'s cell section names them), '
+                          f'the world has {names}')
     out = []
-    for name, kinematics in ((roles.loader, zu12_arm), (roles.transports[0], youbot_arm)):
+    for name, kinematics in ((roles.loader, zu12_arm),
+                             *((t, youbot_arm) for t in roles.transports)):
         robot = world.robot(name)
         arm = next((c for c in robot.controllers if c.name == ARM_CONTROLLER), None)
         if arm is None or tuple(arm.joints) != tuple(kinematics.JOINT_NAMES):
@@ -72,7 +79,12 @@ def _robots(world: Any) -> Tuple[CellRobot, CellRobot]:
         out.append(CellRobot(name, ns, tuple(arm.joints),
                              f'/{ns}/{robot.suction.service}' if ns
                              else f'/{robot.suction.service}'))
-    return out[0], out[1]
+    first = world.robot(roles.transports[0]).pose.z
+    for name in roles.transports:
+        if abs(world.robot(name).pose.z - first) > 1e-3:
+            raise LayoutError(f'robot {name}: it stands {world.robot(name).pose.z:g} m high, '
+                              f'the first youBot {first:g} m: the fleet\'s youBots are alike')
+    return out[0], tuple(out[1:])
 
 
 def layout_from_world(world: Any) -> CellLayout:
@@ -81,14 +93,14 @@ def layout_from_world(world: Any) -> CellLayout:
     if world.conveyor is None or world.materials is None:
         raise LayoutError('the world has no conveyor with materials')
     named = {o.name: o for o in world.obstacles if o.name}
-    loader, transport = _robots(world)
+    loader, transports = _robots(world)
     if POOL not in named:
         raise LayoutError(f'the world has no obstacle named {POOL}: the youBot unloads from '
                           'stands beside the pool')
     conv = world.conveyor
     if abs(math.sin(conv.yaw)) > 1e-9 or math.cos(conv.yaw) < 0.0:
         raise LayoutError('the coordinator expects the belt to carry along +x (yaw 0)')
-    yb = world.robot(transport.name).pose
+    yb = world.robot(transports[0].name).pose
     zu = world.robot(loader.name).pose
     mats = world.materials
     rules = {c.name: Rule(c.name, c.destination, c.route, c.size, c.mass) for c in mats.classes}
@@ -98,8 +110,8 @@ def layout_from_world(world: Any) -> CellLayout:
     # (A spare spot per stand: one the arm cannot reach as the base stands is swapped for it.)
     heaviest = max((c.mass for c in mats.classes if c.destination == POOL), default=0.0)
     stands = _pool_drops(stands, named[POOL], yb.z, into_pool + len(stands), heaviest)
-    home = (yb.x, yb.y, yb.yaw)
-    right = next(st for st in stands if st.row == -1)
+    roles = world.roles
+    home = roles.loading if roles.loading is not None else (yb.x, yb.y, yb.yaw)
     side_x, py = stands[0].pose[0], named[POOL].position[1]
     layout = CellLayout(
         belt_y=conv.position[1], belt_top=conv.position[2],
@@ -119,8 +131,11 @@ def layout_from_world(world: Any) -> CellLayout:
         # about base_link); back home it turns round on the way.
         via_out=((side_x - 0.15, py + 0.55, -math.pi / 2),),
         via_turn=((side_x - 0.3, py - 0.12, 0.0),),
-        via_back=((0.5 * (home[0] + side_x), 0.5 * (home[1] + right.pose[1]), 0.0),),
-        loader=loader, transport=transport)
+        via_back=way_back(stands, home),
+        loader=loader, transports=transports, clearance=roles.clearance,
+        trip_load=roles.trip_load,
+        parks=(tuple((r.pose.x, r.pose.y, r.pose.yaw) for r in map(world.robot, (
+            t.name for t in transports))) if len(transports) > 1 else ()))
     regions: Dict[str, Region] = {}
     served: Dict[str, Set[str]] = {}
     for dest in sorted({r.destination for r in rules.values()}):
@@ -130,6 +145,7 @@ def layout_from_world(world: Any) -> CellLayout:
     layout = replace(layout, regions=regions, stands=tuple(
         replace(st, serves=st.serves | frozenset(served.get(st.name, ()))) for st in stands))
     _check_capacity(layout)
+    check_fleet(layout, world.obstacles, roles.loading is not None)
     return layout
 
 
@@ -156,16 +172,12 @@ def _stands(pool: Any, rules: Dict[str, Rule]) -> Tuple[UnloadStand, ...]:
     return (left, right)
 
 
-# The youBot's footprint: half its length and half its width over the wheels, about
-# base_link [m] (its box 0.57 x 0.36, the wheels' outer faces 0.209 from base_link).
-YOUBOT_HALF_LENGTH_M, YOUBOT_HALF_WIDTH_M = 0.29, 0.21
 # A stand's base slides along its heading at most this far either way [m], keeping this far
 # from any obstacle ahead or behind, and this far to its sides (a stand beside the pool's wall
-# has 3.1 cm there) [m]; an obstacle this low is driven over (a marked area on the floor) [m].
+# has 3.1 cm there) [m].
 STAND_SLIDE_MAX_M = 0.5
 STAND_SLIDE_STEP_M = 0.01
 STAND_CLEAR_AHEAD_M, STAND_CLEAR_SIDE_M = 0.05, 0.01
-OBSTACLE_LOW_M = 0.01
 
 
 def stand_slide(pose: Pose2D, obstacles: Sequence[Any], floor_size: float
@@ -178,7 +190,7 @@ def stand_slide(pose: Pose2D, obstacles: Sequence[Any], floor_size: float
     c, s = math.cos(yaw), math.sin(yaw)
     half = (YOUBOT_HALF_LENGTH_M + STAND_CLEAR_AHEAD_M, YOUBOT_HALF_WIDTH_M + STAND_CLEAR_SIDE_M)
     boxes = [_footprint(o) for o in obstacles
-             if o.collision and o.position[2] + _height(o) / 2 > OBSTACLE_LOW_M]
+             if o.collision and o.position[2] + obstacle_height(o) / 2 > OBSTACLE_LOW_M]
 
     def clear(along: float) -> bool:
         at = (x + along * c, y + along * s)
@@ -195,11 +207,6 @@ def stand_slide(pose: Pose2D, obstacles: Sequence[Any], floor_size: float
             along = round(along + STAND_SLIDE_STEP_M, 6)
         ends.append(sign * along)
     return (ends[0], ends[1])
-
-
-def _height(o: Any) -> float:
-    return float(o.size[2] if o.shape == 'box' else o.size[-1] if o.shape == 'cylinder'
-                 else 2 * o.size[0])
 
 
 def _footprint(o: Any) -> Tuple[Tuple[float, float], float, Tuple[float, float]]:

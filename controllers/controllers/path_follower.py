@@ -77,6 +77,13 @@ class PathFollower:
     def end_time(self) -> float:
         return self.start_time + self.profile.duration
 
+    def poses(self, since: float, period: float = 0.1) -> np.ndarray:
+        """The dummy's poses (x, y, yaw rows) every ``period`` from ``since`` (or the drive's
+        start) to its end: what the base sweeps over on the rest of its drive."""
+        times = np.append(np.arange(max(since, self.start_time), self.end_time, period),
+                          self.end_time)
+        return np.array([self.dummy(float(t))[0] for t in times])
+
     def dummy(self, t: float) -> Tuple[Tuple[float, float, float], np.ndarray, float]:
         """The dummy's pose, world velocity (vx, vy) and yaw rate at time ``t``."""
         s, speed = self.profile.at(t - self.start_time)

@@ -164,7 +164,7 @@ class CoordinatorNode(Node):
             round(1e9 / cams[0].rate) if cams else None, self.service_timeout,
             float(p['drive_lead']), commands,
             {arm: speed_limits(self.world, arm) for arm in arms},
-            drive=lambda vx, vy, wz: self.ports.drive(vx, vy, wz))
+            drive=lambda base, vx, vy, wz: self.ports.drive(base, vx, vy, wz))
         self.ports = RosPorts(self, layout, sim, self.settings, self.synchronous,
                               self.service_timeout, commands, now=self.observer.now,
                               set_follower=self.observer.inputs.set_follower,
@@ -236,7 +236,8 @@ class CoordinatorNode(Node):
                 driven_past=list(seen.driven_past), youbot_path=list(self._path),
                 events=list(self.pipeline.events),
                 # How old the odometry was when the drive acted on it [s] (simulated time).
-                odometry_age=None if self.synchronous else seen.drive_lead.summary())
+                odometry_age=None if self.synchronous else seen.drive_lead.summary(),
+                closest_bases=seen.closest_bases if self.layout.fleet else None)
         out = build_result(result, truth, identified, self.regions, trace).with_run(
             code=code_version(), wall_time=round(time.monotonic() - self._started, 2),
             # (Its own CPU time: a trial runner measures the other nodes', which run on.)
@@ -258,7 +259,8 @@ class CoordinatorNode(Node):
         p = self.pipeline
         tally = p.tally()
         msg = PipelineState(loader_state=p.loader.state.value,
-                            transport_state=p.transport.state.value,
+                            # (Each youBot's, in the cell's order.)
+                            transport_state=','.join(t.state.value for t in p.transports),
                             status=p.result.status if p.result else 'running',
                             total=tally.total, identified=tally.identified, picked=tally.picked,
                             delivered=tally.delivered, missed=tally.missed, failed=tally.failed,
@@ -285,8 +287,9 @@ def _run(node: CoordinatorNode) -> int:
 
 def _stop_the_robots(node: CoordinatorNode) -> None:
     try:
-        node.ports.follow(None)
-        node.ports.drive(0.0, 0.0, 0.0)
+        for base in node.layout.transports:
+            node.ports.follow(base.name, None)
+            node.ports.drive(base.name, 0.0, 0.0, 0.0)
     except Exception:
         pass
 

@@ -26,9 +26,9 @@ from visualization_msgs.msg import MarkerArray
 
 from cell_layout.joint_speeds import driven_past
 from cell_layout.layout import CellLayout
+from controllers.cell_odometry import odometry_in_cell
 from controllers.lockstep import CommandCounter, DueGrid
 from controllers.path_follower import DriveLead, PathFollower
-from coordinator.cell_odometry import odometry_in_cell
 from coordinator.pipeline import (
     ArmReading,
     BaseReading,
@@ -36,7 +36,6 @@ from coordinator.pipeline import (
     Material,
     NodeTimeout,
     Observation,
-    known,
 )
 from coordinator.ros_ports import Stopped, call_service
 from ros_common.geometry import yaw_of
@@ -58,17 +57,17 @@ class Inputs:
     def __init__(self, node: Node, layout: CellLayout, arms: Mapping[str, Sequence[str]],
                  sim: str, synchronous: bool, drive_lead: float,
                  speed_joints: Dict[str, Dict[str, float]], now: Callable[[], float],
-                 drive: Callable[[float, float, float], None]) -> None:
+                 drive: Callable[[str, float, float, float], None]) -> None:
         self.node, self.layout, self.arms, self.synchronous = node, layout, arms, synchronous
         self.now, self.drive = now, drive
         self.lock = threading.Condition()
         # arm: (stamp [ns], positions, velocities if the message has them)
         self.joints: Dict[str, Tuple[int, np.ndarray, Optional[np.ndarray]]] = {}
         self.grip: Dict[str, Tuple[int, bool, bool]] = {}      # arm: (stamp, holding, armed)
-        # (stamp, the base's pose in the cell (x, y, yaw), its velocity (vx, vy in the cell, wz))
-        self.odom: Optional[Tuple[int, Tuple[float, float, float],
-                                  Tuple[float, float, float]]] = None
-        self._follower: Optional[PathFollower] = None      # real time: the base's drive
+        # Each base's (stamp, pose in the cell (x, y, yaw), velocity (vx, vy in the cell, wz)).
+        self.odom: Dict[str, Tuple[int, Tuple[float, float, float],
+                                   Tuple[float, float, float]]] = {}
+        self._follower: Dict[str, PathFollower] = {}        # real time: each base's drive
         self.drive_lead = DriveLead(drive_lead)
         self.detections: Dict[int, List[Detection]] = {}   # by camera frame stamp [ns]
         self.markers: List[Tuple[int, list]] = []           # the ground truth, newest last
@@ -79,6 +78,7 @@ class Inputs:
         self.peak = {arm: PeakJointSpeed(list(limits.values()))
                      for arm, limits in speed_joints.items()}
         self.driven_past: List[Dict[str, Any]] = []
+        self.closest_bases: Optional[Dict[str, Any]] = None    # (the simulator's, latched)
         self._subscribe(sim)
 
     def _subscribe(self, sim: str) -> None:
@@ -91,14 +91,18 @@ class Inputs:
                                      functools.partial(self._on_grip, arm), qos)
         # Real time: the drive acts on the newest odometry only (one the executor could not
         # take in time is stale); lock-step waits for the stamp of every state.
-        node.create_subscription(Odometry, self.layout.transport.topic('odom'), self._on_odom,
-                                 qos if self.synchronous else QoSProfile(depth=1))
+        for base in self.layout.transports:
+            node.create_subscription(Odometry, base.topic('odom'),
+                                     functools.partial(self._on_odom, base.name),
+                                     qos if self.synchronous else QoSProfile(depth=1))
         self._detections_sub: Optional[Subscription] = node.create_subscription(
             MaterialDetectionArray, '/detections', self._on_detections, qos)
         node.create_subscription(MarkerArray, '/cell/materials', self._on_markers, qos)
-        node.create_subscription(
-            DiagnosticArray, f'{sim}/joint_limits', self._on_joint_limits,
-            QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL))
+        latched = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL)
+        node.create_subscription(DiagnosticArray, f'{sim}/joint_limits', self._on_joint_limits,
+                                 latched)
+        node.create_subscription(DiagnosticArray, f'{sim}/base_clearance',
+                                 self._on_base_clearance, latched)
 
     # --- inputs -------------------------------------------------------------------------------
     def _on_joints(self, arm: str, names: Sequence[str], msg: JointState) -> None:
@@ -124,27 +128,38 @@ class Inputs:
         with self.lock:
             self.driven_past = driven
 
+    def _on_base_clearance(self, msg: DiagnosticArray) -> None:
+        values = {kv.key: kv.value for s in msg.status for kv in s.values}
+        try:
+            closest = {'distance': float(values['distance']), 'time': float(values['time']),
+                       'robots': values['robots'].split(',')}
+        except (KeyError, ValueError):
+            return
+        with self.lock:
+            self.closest_bases = closest
+
     def _on_grip(self, arm: str, msg: GripState) -> None:
         with self.lock:
             self.grip[arm] = (to_ns(msg.header.stamp), bool(msg.holding), bool(msg.armed))
             self.lock.notify_all()
 
-    def _on_odom(self, msg: Odometry) -> None:
+    def _on_odom(self, base: str, msg: Odometry) -> None:
         p, q, v = msg.pose.pose.position, msg.pose.pose.orientation, msg.twist.twist
-        pose, world = odometry_in_cell(self.layout.youbot_home, p.x, p.y, yaw_of(q),
+        pose, world = odometry_in_cell(self.layout.park(base), p.x, p.y, yaw_of(q),
                                        v.linear.x, v.linear.y, v.angular.z)
         stamp = to_ns(msg.header.stamp) * 1e-9
         with self.lock:
-            self.odom = (to_ns(msg.header.stamp), pose, world)
+            self.odom[base] = (to_ns(msg.header.stamp), pose, world)
             self.lock.notify_all()
-            if self._follower is not None:
+            follower = self._follower.get(base)
+            if follower is not None:
                 # Real time: the base controller, on every odometry message. A decision held
                 # up by IK calls must not leave the base running on its last command. The
                 # command takes effect after the odometry's trip here and its own back: the
                 # follower predicts the pose that far ahead.
-                status = self._follower.update(stamp, pose, world[:2], world[2],
-                                               lead=self.drive_lead.lead(self.now() - stamp))
-                self.drive(*status.command)
+                status = follower.update(stamp, pose, world[:2], world[2],
+                                         lead=self.drive_lead.lead(self.now() - stamp))
+                self.drive(base, *status.command)
 
     def _on_detections(self, msg: MaterialDetectionArray) -> None:
         stamp = to_ns(msg.header.stamp)
@@ -165,11 +180,15 @@ class Inputs:
             self.identifications.truth(self.markers[-1][0], truth)
             self.lock.notify_all()
 
-    def set_follower(self, follower: Optional[PathFollower]) -> bool:
-        """Real time: run ``follower`` on every odometry message (None: no more)."""
+    def set_follower(self, base: str, follower: Optional[PathFollower]) -> bool:
+        """Real time: run ``follower`` on every odometry message of ``base`` (None: no
+        more)."""
         with self.lock:
-            self._follower = follower
-            return self._follower is not None
+            if follower is None:
+                self._follower.pop(base, None)
+            else:
+                self._follower[base] = follower
+            return follower is not None
 
     def drop_detections(self) -> None:
         """No more detections: the reader goes."""
@@ -190,8 +209,11 @@ class Inputs:
                 self.identifications.seen(round(d.stamp * 1e9), d.position, d.color, m.id)
 
     def have_states(self) -> bool:
-        """Both arms' joints and grips and the base's odometry have come (under the lock)."""
-        return len(self.joints) == 2 and len(self.grip) == 2 and self.odom is not None
+        """Every arm's joints and grip and every base's odometry have come (under the
+        lock)."""
+        arms = len(self.layout.robots)
+        return (len(self.joints) == arms and len(self.grip) == arms
+                and len(self.odom) == len(self.layout.transports))
 
 
 class Observer:
@@ -203,7 +225,7 @@ class Observer:
                  sim: str, synchronous: bool, rate: float, dt_ns: int, state_period_ns: int,
                  camera_period_ns: Optional[int], service_timeout: float, drive_lead: float,
                  commands: CommandCounter, speed_joints: Dict[str, Dict[str, float]],
-                 drive: Callable[[float, float, float], None]) -> None:
+                 drive: Callable[[str, float, float, float], None]) -> None:
         self.node, self.layout = node, layout
         self.synchronous, self.rate, self.dt_ns = synchronous, rate, dt_ns
         self.service_timeout, self._commands = service_timeout, commands
@@ -373,8 +395,8 @@ class Observer:
 
         def ready() -> bool:
             stamps = [j[0] for j in heard.joints.values()] + [g[0] for g in heard.grip.values()]
-            stamps += [heard.odom[0]] if heard.odom else []
-            if len(stamps) < 5:
+            stamps += [o[0] for o in heard.odom.values()]
+            if len(stamps) < 2 * len(self.layout.robots) + len(self.layout.transports):
                 return False
             return all(s >= stamp_ns for s in stamps) if first else \
                 all(s == stamp_ns for s in stamps)
@@ -382,7 +404,7 @@ class Observer:
             if not self._wait(ready, self.service_timeout):
                 have = {**{f'{a} joints': j[0] for a, j in self.inputs.joints.items()},
                         **{f'{a} grip': g[0] for a, g in self.inputs.grip.items()},
-                        'odom': self.inputs.odom[0] if self.inputs.odom else None}
+                        **{f'{b} odom': o[0] for b, o in self.inputs.odom.items()}}
                 raise NodeTimeout(f'no states from the simulator for t = {stamp_ns * 1e-9:.3f} s'
                                   f' (latest stamps [ns]: {have})')
 
@@ -408,10 +430,10 @@ class Observer:
             dets = [d for f in frames for d in self.inputs.detections.pop(f, [])]
             for f in [f for f in self.inputs.detections if f <= t_ns]:
                 del self.inputs.detections[f]
-            odom = known(self.inputs.odom, 'odometry')
             arms = {name: ArmReading(q, dq, *self.inputs.grip[name][1:])
                     for name, (_, q, dq) in self.inputs.joints.items()}
-            bases = {self.layout.transport.name: BaseReading(odom[1], odom[2])}
+            bases = {name: BaseReading(odom[1], odom[2])
+                     for name, odom in self.inputs.odom.items()}
             return Observation(t_ns * 1e-9, arms, bases, dets)
 
     def final_truth(self, end: float) -> list:

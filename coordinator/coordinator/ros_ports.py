@@ -61,7 +61,7 @@ class RosPorts:
     def __init__(self, node: Node, layout: CellLayout, sim: str, settings: Settings,
                  synchronous: bool, service_timeout: float, commands: CommandCounter,
                  now: Callable[[], float],
-                 set_follower: Callable[[Optional[PathFollower]], bool],
+                 set_follower: Callable[[str, Optional[PathFollower]], bool],
                  on_event: Callable[[Event], None]) -> None:
         robots = layout.robots
         self.node, self.settings = node, settings
@@ -73,7 +73,8 @@ class RosPorts:
         self.traj_pubs = {arm: node.create_publisher(
             JointTrajectory, robot.topic(f'{ARM_CONTROLLER}/joint_trajectory'), reliable)
             for arm, robot in robots.items()}
-        self._cmd_out = TwistOut(node, layout.transport.topic('cmd_vel'), stamped=False)
+        self._cmd_out = {base.name: TwistOut(node, base.topic('cmd_vel'), stamped=False)
+                         for base in layout.transports}
         self.event_pub = node.create_publisher(PipelineEvent, '~/events', QoSProfile(depth=100))
         self.ik = {arm: node.create_client(SolveIK, robot.topic('solve_ik'))
                    for arm, robot in robots.items()}
@@ -139,14 +140,15 @@ class RosPorts:
         # the reply bounds when the change took effect (within a /clock hop).
         return None if self.synchronous else self.now()
 
-    def drive(self, vx: float, vy: float, wz: float) -> None:
-        self._cmd_out.publish(vx, vy, wz)
+    def drive(self, robot: str, vx: float, vy: float, wz: float) -> None:
+        self._cmd_out[robot].publish(vx, vy, wz)
         self._commands.sent()
 
-    def follow(self, follower: Optional[PathFollower]) -> bool:
-        """Real time: run ``follower`` on every odometry message (the drive's decisions only
-        judge it). Lock-step: no; every decision sees every state, and sends the commands."""
-        return self._set_follower(None if self.synchronous else follower)
+    def follow(self, robot: str, follower: Optional[PathFollower]) -> bool:
+        """Real time: run ``follower`` on every odometry message of ``robot`` (the drive's
+        decisions only judge it). Lock-step: no; every decision sees every state, and sends
+        the commands."""
+        return self._set_follower(robot, None if self.synchronous else follower)
 
     def event(self, e: Event) -> None:
         msg = PipelineEvent(kind=e.kind, robot=e.robot, material_id=e.material, color=e.color,

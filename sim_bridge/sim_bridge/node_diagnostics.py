@@ -2,7 +2,8 @@
 aborted command as a log line (at most one a second per robot, topic and kind, counting those
 held back) and counted per input on /diagnostics once a second (wall time); each joint braked
 back to its speed limit (joint_speed.py), latched on ``~/joint_limits`` since the start or the
-last reset (a trial's result takes them)."""
+last reset (a trial's result takes them); the mobile bases' closest approach, latched on
+``~/base_clearance`` (base_clearance.py)."""
 from __future__ import annotations
 
 import time
@@ -16,6 +17,7 @@ from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from ros_common.input_report import InputReport
 from ros_common.log_limit import KeyedLimiter
 from ros_common.stamps import stamp_from_ns
+from sim_bridge.base_clearance import Closest
 from sim_bridge.joint_speed import BrakeBook, Braked
 
 # Latched, as robot_state_publisher and tf2's static broadcaster offer their topics.
@@ -31,6 +33,8 @@ class NodeDiagnostics:
         self._brakes = BrakeBook()
         self._diagnostics_pub = node.create_publisher(DiagnosticArray, '/diagnostics', 10)
         self._brakes_pub = node.create_publisher(DiagnosticArray, '~/joint_limits', LATCHED)
+        self._clearance_pub = node.create_publisher(DiagnosticArray, '~/base_clearance',
+                                                    LATCHED)
         node.create_timer(1.0, self._publish_input_report,
                           clock=Clock(clock_type=ClockType.STEADY_TIME))
 
@@ -59,6 +63,19 @@ class NodeDiagnostics:
                 self._node.get_logger().warning(text)
         if lines:
             self.publish_brakes()
+
+    def bases_closest(self, closest: Closest) -> None:
+        """The bases' closest approach so far (by the ground truth), latched."""
+        a, b = closest.robots
+        status = DiagnosticStatus(
+            level=DiagnosticStatus.OK, name=f'{self._node.get_name()}: base clearance',
+            message=f'{a} and {b} came within {closest.distance:.3f} m at {closest.time:.3f} s',
+            values=[KeyValue(key='distance', value=f'{closest.distance:.4f}'),
+                    KeyValue(key='time', value=f'{closest.time:.4f}'),
+                    KeyValue(key='robots', value=f'{a},{b}')])
+        msg = DiagnosticArray(status=[status])
+        msg.header.stamp = stamp_from_ns(self._now_ns())
+        self._clearance_pub.publish(msg)
 
     def clear_brakes(self) -> None:
         """The world was reset: no joint has been driven past its limit since."""

@@ -11,6 +11,7 @@ import numpy as np
 from controllers.cmd_guard import CommandGuard, GuardResult, non_finite_fields, rate_limited
 from controllers.joint_trajectory import TrajectoryRequest, TrajectoryResult, slowed
 from controllers.lockstep import next_on_grid
+from sim_bridge.base_clearance import BaseClearance, Closest
 from sim_bridge.joint_speed import Braked
 from sim_bridge.world import SimWorld
 
@@ -69,6 +70,9 @@ class StepSink(Protocol):
         were braked back to them (joint_speed.py): each with the speed it had and the brake
         torque it took."""
 
+    def on_bases_closest(self, closest: Closest) -> None:
+        """The mobile bases came nearer each other than told so far (base_clearance.py)."""
+
 
 class NullSink:
     """A StepSink that wants nothing: subclass it and override what you need."""
@@ -104,6 +108,9 @@ class NullSink:
     def on_joints_braked(self, robot: str, time_ns: int, braked: Sequence[Braked]) -> None:
         pass
 
+    def on_bases_closest(self, closest: Closest) -> None:
+        pass
+
 
 @dataclass(frozen=True)
 class DriveLimits:
@@ -137,6 +144,7 @@ class SimRunner:
         if not (clock_rate >= 0.0 and math.isfinite(clock_rate)):
             raise ValueError(f'clock_rate must be >= 0, got {clock_rate}')
         self.world = world
+        self.clearance = BaseClearance(world.robots)        # (the bases' closest approach)
         dt_ns = round(world.time_step * 1e9)
         self.clock_period_ns = max(dt_ns, round(1e9 / clock_rate)) if clock_rate else dt_ns
         self._clock_next_ns = 0
@@ -332,6 +340,9 @@ class SimRunner:
             t_ns = world.sim_time_ns
             for name, _, braked in world.take_braked():
                 sink.on_joints_braked(name, t_ns, braked)
+            closest = self.clearance.update(t_ns * 1e-9)
+            if closest is not None:
+                sink.on_bases_closest(closest)
             if t_ns >= self._clock_next_ns:
                 self._clock_next_ns = next_on_grid(t_ns, self.clock_period_ns)
                 self.tick_clock(sink)
@@ -380,6 +391,7 @@ class SimRunner:
         self.world.repair_static()
         self.world.reset()
         self.faults.clear()
+        self.clearance.reset()
         for name, guard in self.guards.items():
             guard.stop()
             self._applied[name] = ZERO

@@ -25,6 +25,7 @@ from visualization_msgs.msg import MarkerArray
 from robot_description import with_frame_prefix
 from ros_common.stamps import stamp_from_ns
 from sim_bridge import messages
+from sim_bridge.base_clearance import Closest
 from sim_bridge.camera import ImageBuffer
 from sim_bridge.frames import WorldFrames
 from sim_bridge.hold_watch import HoldWatch
@@ -181,6 +182,9 @@ class StepOutputs:
 
     def on_joints_braked(self, robot: str, time_ns: int, braked: Sequence[Braked]) -> None:
         self._diagnostics.joints_braked(robot, time_ns, braked)
+
+    def on_bases_closest(self, closest: Closest) -> None:
+        self._diagnostics.bases_closest(closest)
 
     def on_state(self, robot: str, time_ns: int) -> None:
         # A state nobody reads is not built or sent (as the cameras): each costs about a

@@ -133,7 +133,7 @@ def pipeline_graph(seed: int, belt_speed: float, synchronous: bool = True,
     roles = loaded.roles
     prefixes = {robot.name: robot.frame_prefix for robot in loaded.robots}
     spaces = {robot.name: robot.namespace for robot in loaded.robots}
-    loader, transport = roles.loader, roles.transports[0]
+    loader = roles.loader
     nodes = []
     if record_dir is not None:
         recorder: Dict[str, ParameterValue] = {
@@ -162,10 +162,11 @@ def pipeline_graph(seed: int, belt_speed: float, synchronous: bool = True,
                   namespace=spaces.get(loader, loader),
                   parameters={'arm': 'zu12', 'frame_prefix': prefixes.get(loader, ''),
                               'track_joint_states': False}),
-        GraphNode(f'{transport}_kinematics', 'arm_kinematics', 'kinematics_node',
-                  namespace=spaces.get(transport, transport),
-                  parameters={'arm': 'youbot', 'frame_prefix': prefixes.get(transport, ''),
-                              'track_joint_states': False}),
+        *(GraphNode(f'{transport}_kinematics', 'arm_kinematics', 'kinematics_node',
+                    namespace=spaces.get(transport, transport),
+                    parameters={'arm': 'youbot', 'frame_prefix': prefixes.get(transport, ''),
+                                'track_joint_states': False})
+          for transport in roles.transports),
         GraphNode('coordinator_node', 'coordinator', 'coordinator_node',
                   parameters=coordinator),
     ]

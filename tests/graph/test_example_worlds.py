@@ -17,8 +17,8 @@ WORLDS = sorted(p.name for p in Path(resolve_resource('package://world_descripti
 
 
 def test_there_are_example_cells():
-    assert {'cell_four_classes.yaml', 'cell_mixed_sizes.yaml',
-            'cell_two_trips.yaml'} <= set(WORLDS)
+    assert {'cell_four_classes.yaml', 'cell_mixed_sizes.yaml', 'cell_two_trips.yaml',
+            'cell_two_youbots.yaml'} <= set(WORLDS)
 
 
 @pytest.mark.parametrize('name', WORLDS)
@@ -31,7 +31,8 @@ def test_an_example_cell_completes_with_every_material_at_its_destination(name, 
     result = json.loads((out / 'trial_000' / 'result.json').read_text())
     assert result['status'] == 'completed', (result['message'], result['not_at_destination'])
     assert run.returncode == 0, run.stdout[-2000:] + run.stderr[-2000:]
-    materials = load_world(resolve_resource(world)).materials
+    loaded = load_world(resolve_resource(world))
+    materials = loaded.materials
     # Every material of every class, each where its class's rule puts it.
     assert Counter(m['color'] for m in result['final_materials']) == dict(materials.counts)
     assert all(m['at_destination'] for m in result['final_materials'])
@@ -40,5 +41,15 @@ def test_an_example_cell_completes_with_every_material_at_its_destination(name, 
     slots = [e[5] for e in result['events'] if e[1] in ('placed', 'delivered')
              and 'slot' in e[5]]
     assert len(slots) == len(set(slots))
+    roles = loaded.roles
+    if len(roles.transports) > 1:
+        # A fleet: every youBot carried, and no two bases ever came nearer than the cell's
+        # clearance, by the simulator's ground truth at every physics step.
+        assert {e[2] for e in result['events'] if e[1] == 'departing'} == set(roles.transports)
+        closest = result['closest_bases']
+        assert closest is not None and set(closest['robots']) <= set(roles.transports)
+        assert closest['distance'] >= roles.clearance, closest
+    else:
+        assert 'closest_bases' not in result
     report = (out / 'report.md').read_text()
     assert f'Scenario: `{world}`: {materials.total} materials' in report

@@ -50,7 +50,8 @@ def test_the_controller_talks_to_the_robots_the_world_names():
     assert layout.transport.topic('odom') == '/cell_carrier/odom'
     assert layout.transport.grip == '/cell_carrier/gripper/grasp'
     # The whole run, against the fake cell, under the world's names.
-    cell = Renamed(FakeCell(layout, PAPER), {'arm': 'zu12', 'carrier': 'youbot'})
+    # (The fake knows the youBots by the layout's names, and its arm as zu12.)
+    cell = Renamed(FakeCell(layout, PAPER), {'arm': 'zu12', 'carrier': 'carrier'})
     p = run(cell)
     assert p.result.status == 'completed' and p.result.delivered == 8
     robots = {e.robot for e in cell.events}
@@ -59,8 +60,8 @@ def test_the_controller_talks_to_the_robots_the_world_names():
 
 
 class Renamed:
-    """The fake cell (which knows its robots as zu12 and youbot), seen by the pipeline under
-    other names: each port call's arm and each observation's keys translated."""
+    """The fake cell (which knows its arm as zu12), seen by the pipeline under other names:
+    each port call's arm and each observation's keys translated."""
 
     def __init__(self, cell, names):
         object.__setattr__(self, '_cell', cell)
@@ -117,16 +118,16 @@ def test_roles_that_cannot_be_are_refused_in_one_line(cell, why):
 
 def test_what_the_controller_cannot_drive_is_refused_at_start_up_in_one_line():
     # The paper's names gone, and no cell section naming the new ones.
-    with pytest.raises(LayoutError, match=r'needs its loader zu12 and transport youbot'):
+    with pytest.raises(LayoutError, match=r"needs its loader zu12 and transports \['youbot'\]"):
         layout_from_world(parse_world(renamed(cell=False)))
-    # A second transport robot (the coordinator drives one).
+    # A second transport robot, and no loading pose apart from their start poses.
     data = renamed()
     data['robots'].append(copy.deepcopy(data['robots'][1]))
     data['robots'][-1].update(name='carrier2', namespace='cell_carrier2',
                               frame_prefix='cell_carrier2/')
     data['robots'][-1]['pose']['y'] += 1.0
     data['cell']['transports'].append('carrier2')
-    with pytest.raises(LayoutError, match='drives one transport robot'):
+    with pytest.raises(LayoutError, match='gives the loading pose'):
         layout_from_world(parse_world(data))
     # An arm controller that drives other joints than the arm it knows.
     data = renamed()

@@ -296,14 +296,15 @@ def test_a_plate_slot_whose_material_the_youbot_failed_to_unload_is_not_used_aga
     from coordinator.pipeline import Material, Pipeline, Settings
     layout = layout_from_world(world(copy.deepcopy(PAPER)))
     run_ = Pipeline(layout, FakeCell(layout, []), Settings())
-    stuck = Material(1, 'orange', np.zeros(3), 0.0, 3, status='failed', slot=0,
+    stuck = Material(1, 'orange', np.zeros(3), 0.0, 3, status='failed', slot=0, plate='youbot',
                      failure='unload: no motion off the plate', left_on_plate=True)
     gone = Material(2, 'orange', np.zeros(3), 0.0, 3, status='failed', slot=2,
                     failure='dropped on the way to its place')
-    new = Material(3, 'orange', np.zeros(3), 0.0, 3)
+    new = Material(3, 'orange', np.zeros(3), 0.0, 3, plate='youbot')
     run_.materials.update({1: stuck, 2: gone, 3: new})
-    assert 0 in run_.loader.room.plate_taken() and 2 not in run_.loader.room.plate_taken()
-    assert 0 not in run_.loader.room.plate_slots(new) and 2 in run_.loader.room.plate_slots(new)
+    room = run_.loader.room
+    assert 0 in room.plate_taken('youbot') and 2 not in room.plate_taken('youbot')
+    assert 0 not in room.plate_slots(new, 'youbot') and 2 in room.plate_slots(new, 'youbot')
     # And the youBot's lifts keep clear of it.
     assert (*layout.plate_slots[0], 0.05) in run_.transport.planner.others(new)
 
@@ -434,9 +435,9 @@ def test_an_unload_that_stalled_short_of_its_drop_is_a_failure_not_a_delivery():
     slot; stalled near its drop (a sagging shoulder, 2 cm off over the pool), a delivery."""
     from test_pipeline import _YoubotIK
 
+    from cell_layout.unload_geometry import DROP_REACH_TOLERANCE_M, short_of
     from coordinator.pipeline import Material, Pipeline, Settings
     from coordinator.pipeline.model import MaterialStatus, TransportState
-    from coordinator.pipeline.unload_geometry import DROP_REACH_TOLERANCE_M, short_of
     class Ports(_YoubotIK):
         def grip(self, arm, on):
             return True, ''

@@ -10,11 +10,11 @@ from test_cell_rules import PAPER, FakeCell, run, world
 
 from cell_layout.world_layout import layout_from_world
 from coordinator.pipeline import LoaderState, Pipeline, Settings, TransportState
-from coordinator.pipeline.diagram import diagrams, in_file, main
 from coordinator.pipeline.loader import LOADER_TRANSITIONS
 from coordinator.pipeline.machine import STRICT_ENV, TransitionError, transition_table
 from coordinator.pipeline.transport import TRANSPORT_TRANSITIONS
 from helpers import ROOT
+from studies.pipeline_diagram import diagrams, in_file, main
 from trial_record.events import EventKind
 
 

@@ -56,15 +56,20 @@ class FakeCell:
         self.materials = {i + 1: [-1.15 - i * gap, layout.belt_y, c, True]
                           for i, c in enumerate(colors)}
         self.hits: Dict[int, int] = {}
-        self.q = {'zu12': np.zeros(6), 'youbot': np.zeros(5)}
-        self.goal = {'zu12': (0.0, np.zeros(6)), 'youbot': (0.0, np.zeros(5))}
-        self.plans = {'zu12': None, 'youbot': None}     # (times, positions) as followed
-        self.armed = {'zu12': False, 'youbot': False}
-        self.sealed = {'zu12': False, 'youbot': False}     # a seal was tried since arming
-        self.holding = {'zu12': False, 'youbot': False}
-        self.pose = np.array(layout.youbot_home, float)
-        self.path: List[np.ndarray] = []          # the youBot's pose at every step
-        self.twist = np.zeros(3)
+        # The arms: the Zu 12 (its name in the fake) and each youBot, by the layout's names.
+        self.bases = [r.name for r in layout.transports]
+        arms = {'zu12': 6, **{b: 5 for b in self.bases}}
+        self.q = {a: np.zeros(n) for a, n in arms.items()}
+        self.goal = {a: (0.0, np.zeros(n)) for a, n in arms.items()}
+        self.plans = {a: None for a in arms}            # (times, positions) as followed
+        self.armed = {a: False for a in arms}
+        self.sealed = {a: False for a in arms}          # a seal was tried since arming
+        self.holding = {a: False for a in arms}
+        # Each base where it starts (its park in a fleet), and its pose at every step.
+        self.poses = {b: np.array(layout.park(b), float) for b in self.bases}
+        self.paths: Dict[str, List[np.ndarray]] = {b: [] for b in self.bases}
+        self.twists = {b: np.zeros(3) for b in self.bases}
+        self.followers = {b: None for b in self.bases}
         self.grasp_failures = dict(grasp_failures or {})
         self.unreachable, self.stall, self.blind = unreachable, stall, blind
         self.timeout_on, self.drop_on_transfer = timeout_on, drop_on_transfer
@@ -85,12 +90,11 @@ class FakeCell:
         # The real-time port's base controller: it runs the drive's follower on every step,
         # held-up decisions or not. Without it the base runs on the last tick's command.
         self.base_loop = base_loop
-        self.follower = None
         self.drive_errors: List[float] = []       # the base's distance from its path's dummy
         # The simulator took each motion in this late: at the end the port reported, the arm is
         # near its goal but still moving, for this long.
         self.taken_late = taken_late
-        self.moving = {'zu12': False, 'youbot': False}
+        self.moving = {a: False for a in arms}
         self.held_in_view = held_in_view
         self.grips_while_moving: List[tuple] = []
         self.let_go_at = np.full(3, np.inf)           # where the Zu 12's cup last let go
@@ -103,6 +107,15 @@ class FakeCell:
         self.drive_calls: List[tuple] = []
         self.continuations: List[tuple] = []
         self.pipeline: Pipeline = None
+
+    @property
+    def pose(self) -> np.ndarray:
+        """The first youBot's pose (the paper's only one)."""
+        return self.poses[self.bases[0]]
+
+    @property
+    def path(self) -> List[np.ndarray]:
+        return self.paths[self.bases[0]]
 
     # --- ports ---
     def solve(self, arm, position, orientation, frame, seed):
@@ -171,12 +184,12 @@ class FakeCell:
         else:
             self.belt_speed = speed
 
-    def drive(self, vx, vy, wz):
+    def drive(self, robot, vx, vy, wz):
         self.drive_calls.append((vx, vy, wz))
-        self.twist = np.array([vx, vy, wz]) if self.drive_works else np.zeros(3)
+        self.twists[robot] = np.array([vx, vy, wz]) if self.drive_works else np.zeros(3)
 
-    def follow(self, follower):
-        self.follower = follower
+    def follow(self, robot, follower):
+        self.followers[robot] = follower
         return follower is not None and self.base_loop
 
     def event(self, e):
@@ -194,7 +207,7 @@ class FakeCell:
         items = [Item(m[0], m[1] - self.layout.belt_y, size, size) for m in on]
         for m, x in zip(on, advance(items, stop, self.belt_speed * DT)):
             m[0] = x
-        for arm in ('zu12', 'youbot'):
+        for arm in self.q:
             t_end, goal = self.goal[arm]
             if arm == 'zu12' and self.plans[arm] is not None and not self.stall:
                 # The Zu 12 follows its trajectory (from where it was when it got it).
@@ -234,18 +247,7 @@ class FakeCell:
         if (self.drop_on_transfer >= 0 and held is not None
                 and held.id == self.drop_on_transfer and p.loader.state is LoaderState.PLACE):
             self.holding['zu12'] = False
-        c, s = math.cos(self.pose[2]), math.sin(self.pose[2])
-        vx, vy, wz = self.twist
-        world_v = (c * vx - s * vy, s * vx + c * vy, wz)
-        if self.follower is not None:
-            status = self.follower.update(self.now, tuple(self.pose), world_v[:2], wz)
-            self.drive_errors.append(status.position_error)
-            if self.base_loop:
-                self.drive(*status.command)
-                vx, vy, wz = self.twist
-                world_v = (c * vx - s * vy, s * vx + c * vy, wz)
-        self.pose += np.array(world_v) * DT
-        self.path.append(self.pose.copy())
+        velocities = {b: self._move_base(b) for b in self.bases}
         dets = []
         if not self.blind:
             for i, (x, y, color, on_belt) in self.materials.items():
@@ -265,8 +267,26 @@ class FakeCell:
         arms = {arm: ArmReading(self.q[arm].copy(), np.full(len(self.q[arm]),
                                                             0.5 if self.moving[arm] else 0.0),
                                 self.holding[arm], self.armed[arm]) for arm in self.q}
-        return Observation(self.now, arms, {'youbot': BaseReading(tuple(self.pose), world_v)},
-                           dets)
+        return Observation(self.now, arms, {b: BaseReading(tuple(self.poses[b]), velocities[b])
+                                            for b in self.bases}, dets)
+
+    def _move_base(self, base):
+        """One step of a base on its twist (the follower's, with ``base_loop``)."""
+        pose = self.poses[base]
+        c, s = math.cos(pose[2]), math.sin(pose[2])
+        vx, vy, wz = self.twists[base]
+        world_v = (c * vx - s * vy, s * vx + c * vy, wz)
+        follower = self.followers[base]
+        if follower is not None:
+            status = follower.update(self.now, tuple(pose), world_v[:2], wz)
+            self.drive_errors.append(status.position_error)
+            if self.base_loop:
+                self.drive(base, *status.command)
+                vx, vy, wz = self.twists[base]
+                world_v = (c * vx - s * vy, s * vx + c * vy, wz)
+        pose += np.array(world_v) * DT
+        self.paths[base].append(pose.copy())
+        return world_v
 
     def _under_the_cup(self):
         tool = self.q['zu12'][:3]
@@ -279,7 +299,8 @@ class FakeCell:
 
     def _material_for(self, arm):
         p = self.pipeline
-        current = p.loader.current if arm == 'zu12' else p.transport.current
+        current = (p.loader.current if arm == 'zu12' else
+                   next(t for t in p.transports if t.robot == arm).current)
         return current.id if current else -1
 
 
@@ -1059,8 +1080,8 @@ def test_a_material_held_over_the_plate_clears_each_neighbour_by_its_own_height(
     held 2.5 cm over the top of a 40 mm neighbour clears it, but not a 60 mm one."""
     from cell_layout.layout import PLATE_SLOTS_IN_BASE_M, PLATE_TOP_IN_BASE_M
     from cell_layout.reach import youbot_tool_quaternion
+    from cell_layout.unload_geometry import PLATE_CLEARANCE_M
     from coordinator.pipeline import YOUBOT_GRASP_STANDOFF_M, clear_of_the_plate
-    from coordinator.pipeline.unload_geometry import PLATE_CLEARANCE_M
     ports = _YoubotIK()
     sx, sy = PLATE_SLOTS_IN_BASE_M[2]
     bottom = PLATE_TOP_IN_BASE_M + 0.04 + 0.025           # the held material's bottom
@@ -1081,7 +1102,7 @@ def test_odometry_is_turned_into_the_cells_frame_from_the_bases_start_pose():
     the coordinator's path follower steers by)."""
     import math
 
-    from coordinator.cell_odometry import odometry_in_cell
+    from controllers.cell_odometry import odometry_in_cell
     home = (1.0, -0.5, math.pi / 2)
     pose, velocity = odometry_in_cell(home, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
     assert pose == pytest.approx(home)

@@ -1,12 +1,11 @@
-"""The youBot's unload geometry (coordinator/pipeline/unload_geometry.py), each function on its
+"""The youBot's unload geometry (cell_layout/unload_geometry.py), each function on its
 own: the lift's steps, a grip's points, where a held material is, how far from a drop, and the
 check that a motion keeps it clear of the plate's other materials."""
 import numpy as np
 import pytest
 
 from cell_layout.layout import PLATE_SLOTS_IN_BASE_M, PLATE_TOP_IN_BASE_M
-from controllers.youbot_kinematics import YoubotKinematics
-from coordinator.pipeline.unload_geometry import (
+from cell_layout.unload_geometry import (
     PLATE_CLEARANCE_M,
     REGRIP_PRESS_M,
     UNLOAD_LIFT_STEPS_M,
@@ -17,6 +16,7 @@ from coordinator.pipeline.unload_geometry import (
     lift_steps,
     short_of,
 )
+from controllers.youbot_kinematics import YoubotKinematics
 
 KIN = YoubotKinematics('gripper_tcp')
 

@@ -12,6 +12,7 @@ from test_material_classes import PAPER_CLASSES as PAPER
 from test_pipeline import _YoubotIK, observation
 
 from cell_layout.reach import youbot_holds
+from cell_layout.unload_geometry import YOUBOT_CARRY_Q
 from cell_layout.world_layout import (
     STAND_SLIDE_MAX_M,
     YOUBOT_HALF_LENGTH_M,
@@ -21,7 +22,6 @@ from cell_layout.world_layout import (
 from controllers.youbot_arm import ARM_BASE_IN_BASE_LINK_M
 from coordinator.pipeline import Material, Pipeline, Settings
 from coordinator.pipeline.model import TransportState
-from coordinator.pipeline.unload_geometry import YOUBOT_CARRY_Q
 from coordinator.pipeline.unload_planner import SLIDE_MIN_M
 
 
@@ -110,11 +110,11 @@ def test_an_unload_from_elsewhere_on_the_stand_s_line_drives_there_as_the_arm_go
     class Ports(_YoubotIK):
         followed = None
 
-        def follow(self, follower):
+        def follow(self, robot, follower):
             Ports.followed = follower
             return True
 
-        def drive(self, *twist):
+        def drive(self, robot, *twist):
             pass
 
         def trajectory(self, arm, points, start, continuing=False):
@@ -135,7 +135,7 @@ def test_an_unload_from_elsewhere_on_the_stand_s_line_drives_there_as_the_arm_go
         np.asarray(stand.abeam(stand.drops[d])[:2]) - stand.pose[:2]))
     run_.book._dropped = {stand.name: set(range(len(stand.drops))) - {far}}
     tr._plan_unload(observation(0.0, np.zeros(6), YOUBOT_CARRY_Q, stand.pose), m)
-    assert tr.state is TransportState.GRASP and tr.driving
+    assert tr.state is TransportState.GRASP and tr.base.driving
     assert tr.base.goal == stand.name and tr._carry.place == far
     assert tr.base.target == tr._carry.pose == stand.abeam(stand.drops[far])
     end = Ports.followed.path.key_poses[-1]

@@ -133,6 +133,9 @@ class TrialResult:
     # them past (each its worst: robot, joint, ratio, speed, limit, brake, time, count).
     joints_driven_past: List[Dict[str, Any]] = field(default_factory=list)
     odometry_age: Optional[Dict[str, float]] = None      # real-time runs only
+    # A cell with several mobile bases: how near two of them came, footprint to footprint, by
+    # the simulator's ground truth: {distance [m], time [s], robots: [a, b]}.
+    closest_bases: Optional[Dict[str, Any]] = None
     youbot_path: List[List[float]] = field(default_factory=list)
     events: List[List[Any]] = field(default_factory=list)
     states: List[List[Any]] = field(default_factory=list)
@@ -174,8 +177,9 @@ class TrialResult:
 
     def to_dict(self) -> Dict[str, Any]:
         out = asdict(self)
-        if out['odometry_age'] is None:
-            del out['odometry_age']
+        for key in ('odometry_age', 'closest_bases'):
+            if out[key] is None:
+                del out[key]
         return out
 
     def to_json(self) -> str:
@@ -250,6 +254,16 @@ def _outcome(f: Fields) -> Dict[str, Any]:
     out.update({key: f.number(key, 0.0, 1.0, math.nan, nan=True) for key in RATES})
     if f.has('odometry_age') and f.data['odometry_age'] is not None:
         out['odometry_age'] = f.numbers('odometry_age', -MAX_SIM_TIME_S, MAX_SIM_TIME_S)
+    if f.has('closest_bases') and f.data['closest_bases'] is not None:
+        c = Fields(f.data['closest_bases'], f'{f.what}: closest_bases')
+        c.only(('distance', 'time', 'robots'))
+        robots = c.items('robots', limit=2)
+        if len(robots) != 2 or not all(isinstance(r, str) and 0 < len(r) <= 256
+                                       for r in robots):
+            raise c.fail('robots', 'is not two robots\' names')
+        out['closest_bases'] = {'distance': c.number('distance', 0.0, MAX_PATH_XY_M),
+                                'time': c.number('time', -MAX_SIM_TIME_S, MAX_SIM_TIME_S),
+                                'robots': list(robots)}
     return out
 
 

@@ -294,6 +294,8 @@ class RunTrace:
     youbot_path: Sequence[Tuple[float, float]]
     events: Sequence[Event]
     odometry_age: Optional[Dict[str, float]] = None
+    # Several mobile bases: their closest approach (distance, time, robots), by the ground truth.
+    closest_bases: Optional[Dict[str, Any]] = None
     # The joints the simulator found driven past their speed limits (cell_layout.joint_speeds).
     driven_past: Sequence[Dict[str, Any]] = ()
 
@@ -326,6 +328,8 @@ def build_result(result: RunResult, final_truth: Sequence[TruePose],
     return replace(
         out, materials=materials, identifications=list(trace.identification_details),
         final_materials=final, peak_joint_speed=peaks, odometry_age=trace.odometry_age,
+        closest_bases=None if trace.closest_bases is None else {
+            **trace.closest_bases, 'time': round(trace.closest_bases['time'] - start, 4)},
         joints_driven_past=[{**d, 'time': round(float(d['time']) - start, 4)}
                             for d in trace.driven_past][:MAX_DRIVEN_PAST],
         scenario_seed=trace.seed, belt_speed=trace.belt_speed, mode=trace.mode,

@@ -187,9 +187,15 @@ class MaterialsConfig:
 class CellRoles:
     """What each robot does in a pipeline cell (the world's ``cell`` section): the arm that
     picks from the belt, and the mobile robots that carry. A world without the section has
-    the paper's: ``zu12`` loads and ``youbot`` carries."""
+    the paper's: ``zu12`` loads and ``youbot`` carries. With several transports: where the
+    loader loads them (``loading``: x, y, yaw; one at a time; each waits for it at its start
+    pose), how near two bases may come (``clearance``, between their footprints [m]), and how
+    many materials a transport sets off with at most (``trip_load``; 0: a full plate)."""
     loader: str = 'zu12'
     transports: Tuple[str, ...] = ('youbot',)
+    loading: Optional[Tuple[float, float, float]] = None    # None: the first transport's start
+    clearance: float = 0.1
+    trip_load: int = 0
 
 
 @dataclass(frozen=True)

@@ -85,7 +85,7 @@ def _cell(r: Reader, item: Any, robots: List[RobotConfig]) -> CellRoles:
     """The cell's roles: the loader a fixed arm with a suction cup, each transport a mobile
     robot with a drive and a gripper, no robot in two roles."""
     where = 'cell'
-    r.only(item, where, {'loader', 'transports'})
+    r.only(item, where, {'loader', 'transports', 'loading', 'clearance', 'trip_load'})
     by_name = {rb.name: rb for rb in robots}
     loader = r.name(item, 'loader', where)
     arm = by_name.get(loader)
@@ -107,7 +107,17 @@ def _cell(r: Reader, item: Any, robots: List[RobotConfig]) -> CellRoles:
                                               'and a gripper')
     if len(set(names)) != len(names) or loader in names:
         raise r.fail(where, 'transports', f'names each robot once, and not the loader: {names}')
-    return CellRoles(loader, tuple(names))
+    loading: Optional[Tuple[float, float, float]] = None
+    if item.get('loading') is not None:
+        r.only(item['loading'], where + '.loading', {'x', 'y', 'yaw'})
+        x, y, yaw = (r.number(item['loading'], k, where + '.loading',
+                              lo=-TURN_RAD if k == 'yaw' else -WORLD_EXTENT_M,
+                              hi=TURN_RAD if k == 'yaw' else WORLD_EXTENT_M)
+                     for k in ('x', 'y', 'yaw'))
+        loading = (x, y, yaw)
+    clearance = r.number(item, 'clearance', where, default=0.1, lo=0.0, hi=1.0)
+    trip_load = int(r.number(item, 'trip_load', where, default=0, lo=0, hi=100, integer=True))
+    return CellRoles(loader, tuple(names), loading, clearance, trip_load)
 
 
 def _robot(r: Reader, item: Any, i: int) -> RobotConfig:

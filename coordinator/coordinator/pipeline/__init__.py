@@ -15,6 +15,11 @@ the belt end is reported; a port that stops answering (``NodeTimeout``) ends the
 always ends with a ``RunResult``.
 """
 from cell_layout.reach import youbot_tool_quaternion
+from cell_layout.unload_geometry import (
+    YOUBOT_CARRY_Q,
+    YOUBOT_GRASP_STANDOFF_M,
+    clear_of_the_plate,
+)
 from coordinator.pipeline.core import Pipeline
 from coordinator.pipeline.loader import Loader
 from coordinator.pipeline.model import (
@@ -35,11 +40,6 @@ from coordinator.pipeline.model import (
     known,
 )
 from coordinator.pipeline.transport import Transport
-from coordinator.pipeline.unload_geometry import (
-    YOUBOT_CARRY_Q,
-    YOUBOT_GRASP_STANDOFF_M,
-    clear_of_the_plate,
-)
 from trial_record.events import Event, EventKind, RunResult
 
 __all__ = ['ArmReading', 'BaseReading', 'Detection', 'Event', 'EventKind', 'Loader',

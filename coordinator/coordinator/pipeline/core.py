@@ -24,7 +24,8 @@ from coordinator.pipeline.model import (
     TransportState,
 )
 from coordinator.pipeline.record import EventLog
-from coordinator.pipeline.robots import Arm, YoubotArm, youbot_limits, zu12_limits
+from coordinator.pipeline.robots import Arm, BaseDrive, YoubotArm, youbot_limits, zu12_limits
+from coordinator.pipeline.traffic import Traffic
 from coordinator.pipeline.transport import Transport
 from trial_record.events import Event, EventKind, RunResult
 
@@ -48,14 +49,21 @@ class Pipeline:
         self.belt_stops = 0               # the belt stopped while loading (its queue full)
         self.zu12 = Arm(layout.loader.name, zu12_limits(self.s), ports, self.s, self.clock,
                         self.log)
-        self.youbot = YoubotArm(layout.transport.name, youbot_limits(self.s), ports, self.s,
-                                self.clock, self.log)
         self.loader = Loader(self.zu12, self.book, self.belt, self.log, layout, self.s, ports,
-                             youbot_loading=lambda: self.transport.loading,
-                             plate_pose=lambda obs: obs.bases[self.youbot.name].pose)
-        self.transport = Transport(self.youbot, self.book, self.log, layout, self.s, ports,
-                                   loader_done=lambda: self.loader.state is LoaderState.DONE,
-                                   zu12_clear=self.loader.clear_of_the_plate)
+                             loading=lambda: next((t.robot for t in self.transports
+                                                   if t.loading), None))
+        # One youBot object per transport robot, each with its arm and its base; the traffic
+        # rules between them.
+        bases = {r.name: BaseDrive(r.name, ports, self.log, self.s) for r in layout.transports}
+        self.traffic = Traffic(layout, bases)
+        self.transports = [Transport(
+            YoubotArm(r.name, youbot_limits(self.s), ports, self.s, self.clock, self.log),
+            self.book, self.log, layout, self.s, ports,
+            loader_done=lambda: self.loader.state is LoaderState.DONE,
+            zu12_clear=self.loader.clear_of_the_plate, base=bases[r.name],
+            traffic=self.traffic) for r in layout.transports]
+        self.transport = self.transports[0]
+        self.youbot = self.transport.arm
 
     # --- what the node and the tests read -------------------------------------------------------
     @property
@@ -83,16 +91,18 @@ class Pipeline:
         try:
             if self.loader.state is LoaderState.START:
                 self.zu12.started(obs)
-                self.youbot.started(obs)
+                for t in self.transports:
+                    t.arm.started(obs)
                 self.loader.start(obs)
             self._see(obs)
             self.loader.tick(obs)
             self._belt(obs.now, self._belt_wanted(obs.now))
-            self.transport.tick(obs)
+            for t in self.transports:
+                t.tick(obs)
             if obs.now - self.start_time > self.s.run_timeout:
                 self._finish(obs.now, 'timeout', f'the run took over {self.s.run_timeout} s')
             elif (self.loader.state is LoaderState.DONE
-                  and self.transport.state is TransportState.DONE):
+                  and all(t.state is TransportState.DONE for t in self.transports)):
                 self._finish(obs.now, 'completed' if self.book.all_done() else 'incomplete', '')
         except NodeTimeout as exc:
             self._finish(obs.now, 'node_timeout', str(exc))
@@ -169,12 +179,13 @@ class Pipeline:
     # --- the end ------------------------------------------------------------------------------
     def _finish(self, now: float, status: str, message: str) -> None:
         # Leave nothing moving.
-        for call in (lambda: self.ports.follow(None), lambda: self.ports.drive(0.0, 0.0, 0.0),
-                     lambda: self.ports.belt(0.0)):
-            try:
-                call()
-            except NodeTimeout:
-                pass
+        for base in self.layout.transports:
+            self.ports.follow(base.name, None)
+            self.ports.drive(base.name, 0.0, 0.0, 0.0)
+        try:
+            self.ports.belt(0.0)
+        except NodeTimeout:
+            pass
         mats = list(self.materials.values())
         tally = self.tally()
         self.result = RunResult(
@@ -183,9 +194,11 @@ class Pipeline:
             grasp_attempts=self.log.grasp_attempts, grasp_successes=self.log.grasp_successes,
             zu12_grasp_attempts=self.log.grasps[self.zu12.name][0],
             zu12_grasp_successes=self.log.grasps[self.zu12.name][1],
-            youbot_grasp_attempts=self.log.grasps[self.youbot.name][0],
-            youbot_grasp_successes=self.log.grasps[self.youbot.name][1], loaded=self.book.loaded,
-            trips=self.transport.trips, belt_stops=self.belt_stops,
+            # (The paper's youBot: every transport robot's, together.)
+            youbot_grasp_attempts=sum(self.log.grasps[t.robot][0] for t in self.transports),
+            youbot_grasp_successes=sum(self.log.grasps[t.robot][1] for t in self.transports),
+            loaded=self.book.loaded, trips=sum(t.trips for t in self.transports),
+            belt_stops=self.belt_stops,
             missed=tally.missed, failed=tally.failed, message=message,
             materials=[{'id': m.id, 'color': m.color, 'status': m.status.value,
                         'attempts': m.attempts, 'unload_attempts': m.unload_attempts,

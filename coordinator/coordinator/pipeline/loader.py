@@ -14,7 +14,6 @@ from typing import (
 import numpy as np
 
 from cell_layout.layout import CellLayout
-from controllers.bezier import Pose2D
 from controllers.pick_place import PickTiming
 from controllers.time_optimal import (
     Waypoint,
@@ -73,18 +72,17 @@ class Loader(Machine):
 
     def __init__(self, arm: Arm, book: MaterialBook, belt: BeltModel, log: EventLog,
                  layout: CellLayout, settings: Settings, ports: Ports,
-                 youbot_loading: Callable[[], bool],
-                 plate_pose: Callable[[Observation], Pose2D]) -> None:
-        """``youbot_loading`` and ``plate_pose``: the questions the Zu 12 asks of the youBot,
-        whether it waits at home for its load, and where it stands."""
+                 loading: Callable[[], Optional[str]]) -> None:
+        """``loading``: the question the Zu 12 asks of the youBots, which of them waits at
+        the loading pose for its load (None: none)."""
         super().__init__(arm, log, settings, LoaderState.START)
         self.book, self.belt, self.layout, self.ports = book, belt, layout, ports
         self.room = Room(book, layout, settings)          # (a view: questions on the book)
-        self.youbot_loading = youbot_loading
+        self.loading = loading
         self.lag = 0.0                    # the longest a pick's plan has taken (real time) [s]
         self.current: Optional[Material] = None     # the material being picked or placed
         self.cup = CupPlace(arm, layout, settings)
-        self.planner = PickPlanner(arm, book, belt, self.cup, layout, settings, plate_pose)
+        self.planner = PickPlanner(arm, book, belt, self.cup, layout, settings, loading)
         self._leave = math.inf                      # when the cup lifts the material
         self._ahead: Optional[Ahead] = None         # the pick's motion goes on to the place
         self._replans = 0                           # pick plans the port started late
@@ -138,7 +136,8 @@ class Loader(Machine):
     def loadable(self, m: Material) -> bool:
         """Whether the Zu 12 may put ``m`` onto the youBot's plate now: it waits at home, and
         has a slot for it."""
-        return self.youbot_loading() and bool(self.room.plate_slots(m))
+        robot = self.loading()
+        return robot is not None and bool(self.room.plate_slots(m, robot))
 
     def _next(self, waiting: Sequence[Material]) -> Optional[Material]:
         """The next material to pick: the most downstream one bound for the youBot's plate (the

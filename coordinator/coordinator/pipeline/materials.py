@@ -73,9 +73,9 @@ class MaterialBook:
         """Its slot at its destination (or the pool drop it goes to)."""
         m.place = place
 
-    def keep_slot(self, m: Material, slot: int) -> None:
-        """Its slot on the youBot's plate."""
-        m.slot = slot
+    def keep_slot(self, m: Material, slot: int, plate: str) -> None:
+        """Its slot on the plate of youBot ``plate``."""
+        m.slot, m.plate = slot, plate
 
     def placed(self, m: Material) -> None:
         """Set down on its destination by the Zu 12."""

@@ -142,11 +142,12 @@ class Ports(Protocol):
         """Set the belt speed; returns the (simulated) time it took effect if that is later
         than the decision (real time), or None (lock-step: at once). Raises NodeTimeout."""
 
-    def drive(self, vx: float, vy: float, wz: float) -> None: ...
+    def drive(self, robot: str, vx: float, vy: float, wz: float) -> None:
+        """A twist for mobile robot ``robot``'s base (in its base_link)."""
 
-    def follow(self, follower: Optional[PathFollower]) -> bool:
-        """Have the base controller run ``follower`` on every odometry message (None: stop
-        that). True if the port does so (real time: a decision held up by IK calls for the
+    def follow(self, robot: str, follower: Optional[PathFollower]) -> bool:
+        """Have ``robot``'s base controller run ``follower`` on every odometry message (None:
+        stop that). True if the port does so (real time: a decision held up by IK calls for the
         other arm must not leave the base running on a stale command), and the pipeline's
         ticks only judge the drive; False if the ticks send its commands (lock-step, where a
         decision sees every state)."""
@@ -226,11 +227,16 @@ class Material:
     place: int = -1               # its slot at its destination, once one is kept for it
     # Its unload failed: it may still stand on its plate slot, which is never used again.
     left_on_plate: bool = False
+    plate: str = ''               # the youBot whose plate slot it has (or is kept for it)
 
     @property
     def on_the_plate(self) -> bool:
         """On the youBot's plate: loaded and not unloaded yet, or left there."""
         return self.status == MaterialStatus.ON_PLATE or self.left_on_plate
+
+    def on_plate_of(self, robot: str) -> bool:
+        """On the plate of youBot ``robot`` (``on_the_plate``)."""
+        return self.on_the_plate and self.plate == robot
 
 
 @dataclass(frozen=True)
@@ -295,11 +301,15 @@ class TransportState(Enum):
     carry it over its destination, let go; then drive home (the arm rising to its carry pose
     as the base sets off), fold. The base's drive goes on whatever the arm does: on the way to
     a stand the arm takes the first material it unloads there (it rides on the base's plate),
-    and holds it up until the base stands."""
+    and holds it up until the base stands. In a fleet, a youBot waits at its park for the
+    loading pose (WAIT_BAY), and after its last unload until its drive off the pool is clear
+    (LEAVE)."""
     WAIT_LOAD = 'wait_load'
     DRIVE = 'drive'
     GRASP = 'grasp'
     CARRY = 'carry'
     RELEASE = 'release'
+    LEAVE = 'leave'
+    WAIT_BAY = 'wait_bay'
     FOLD = 'fold'
     DONE = 'done'

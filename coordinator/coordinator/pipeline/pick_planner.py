@@ -98,13 +98,18 @@ class PickPlanner:
 
     def __init__(self, arm: Arm, book: MaterialBook, belt: BeltModel, cup: CupPlace,
                  layout: CellLayout, settings: Settings,
-                 plate_pose: Callable[[Observation], Pose2D]) -> None:
-        """``plate_pose``: where the youBot being loaded stands, by an observation."""
+                 loading: Callable[[], Optional[str]]) -> None:
+        """``loading``: the youBot being loaded (None: none waits to be)."""
         self.arm, self.book, self.belt, self.cup = arm, book, belt, cup
-        self.plate_pose = plate_pose
+        self.loading = loading
         self.room = Room(book, layout, settings)
         self.layout, self.s = layout, settings
         self.lift_point: Optional[np.ndarray] = None     # the last pick's lift point (x, y, z)
+
+    def plate_pose(self, obs: Observation) -> Optional[Pose2D]:
+        """Where the youBot being loaded stands (None: none waits to be)."""
+        robot = self.loading()
+        return None if robot is None else obs.bases[robot].pose
 
     def approach(self, obs: Observation, pick: 'PickPlan') -> str:
         """The joints over the material at a first guess of the contact time, and over the
@@ -265,7 +270,7 @@ class PickPlanner:
         pick.points = whole
         return ahead
 
-    def place_way(self, m: Material, lift: Optional[np.ndarray], youbot_pose: Pose2D,
+    def place_way(self, m: Material, lift: Optional[np.ndarray], youbot_pose: Optional[Pose2D],
                    seed: np.ndarray) -> Union['PlaceWay', str]:
         """The way from the lift point ``lift`` (x, y, z; None: from above the place) onto
         ``m``'s place, or why there is none: over the belt's edge, to ``place_height`` above
@@ -280,17 +285,20 @@ class PickPlanner:
             self.book.keep_place(m, free[0])
             target = region.slots[m.place]
         else:
-            free = self.room.plate_slots(m)
+            plate = self.loading()
+            if plate is None or youbot_pose is None:
+                return 'no youBot waits to be loaded'
+            free = self.room.plate_slots(m, plate)
             if not free:
-                return 'the youBot plate is full'
-            self.book.keep_slot(m, free[0])
+                return f'{plate}\'s plate is full'
+            self.book.keep_slot(m, free[0], plate)
             target = slot_in_world(youbot_pose, self.layout.plate_slots[m.slot],
                                    self.layout.youbot_base_z, size)
         t = self.s.timing
         # Down onto it from over the materials there already.
         release, above, transfer = place_points(
             target, size, t, self.room.set_down_rise(
-                None if onto_plate else lay.destination(m.color)), lay.belt_top)
+                None if onto_plate else lay.destination(m.color), m.plate), lay.belt_top)
         # Over the belt's near edge (rather than up to the carry height over the place and down
         # again), what the cup holds 5 cm over what can ride on the belt: onto the plate round
         # the arc (the way crosses the edge near the plate; before that it lies over the

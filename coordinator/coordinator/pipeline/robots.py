@@ -13,7 +13,7 @@ state, and there is one object per robot:
 from __future__ import annotations
 
 import math
-from typing import Any, List, Optional, Sequence, Tuple
+from typing import Any, Callable, List, Optional, Sequence, Tuple
 
 import numpy as np
 
@@ -309,40 +309,54 @@ class BaseDrive:
         """Whether the base is on its way."""
         return self._follower is not None
 
+    @property
+    def follower(self) -> Optional[PathFollower]:
+        """The drive's follower, while the base is on its way."""
+        return self._follower
+
     def steer(self, obs: Observation) -> None:
         """The base along its path, with its follower, until it is there or out of time."""
         follower = known(self._follower, 'the path follower')
         base = obs.bases[self.robot]
         status = follower.update(obs.now, base.pose, base.velocity[:2], base.velocity[2])
         if not self._followed:
-            self.ports.drive(*status.command)
+            self.ports.drive(self.robot, *status.command)
         if not (status.finished or obs.now > self.deadline):
             return
         self._follower = None
-        self.ports.follow(None)
-        self.ports.drive(0.0, 0.0, 0.0)
+        self.ports.follow(self.robot, None)
+        self.ports.drive(self.robot, 0.0, 0.0, 0.0)
         if not status.finished:
             self.log.event(obs.now, EventKind.DRIVE_STALLED, self.robot, detail=(
                 f'{status.position_error * 1000:.0f} mm from {self.goal}'))
         self.log.event(obs.now, EventKind.ARRIVED, self.robot, detail=self.goal)
 
-    def follow(self, obs: Observation, target: Pose2D, via: Sequence[Any], goal: str) -> None:
+    def follow(self, obs: Observation, target: Pose2D, via: Sequence[Any], goal: str,
+               clear: Callable[[PathFollower], bool] = lambda follower: True) -> bool:
         """The base off along a path from where it is through ``via`` to ``target`` (at stand
-        or home ``goal``)."""
+        or home ``goal``), if the drive is ``clear`` (the fleet's rule); whether it set off."""
+        follower = self.path_to(obs, target, via)
+        path = follower.path
+        if not clear(follower):
+            return False
+        self._follower = follower
+        self._followed = self.ports.follow(self.robot, follower)
+        self.goal, self.target = goal, target
+        self.log.event(obs.now, EventKind.DRIVING, self.robot,
+                       detail=f'to {goal}, {path.length:.2f} m')
+        self.deadline = (obs.now + follower.profile.duration + self.s.drive_margin)
+        return True
+
+    def path_to(self, obs: Observation, target: Pose2D, via: Sequence[Any]) -> PathFollower:
+        """The follower of a drive from where the base is through ``via`` to ``target``."""
         x, y, yaw = (float(v) for v in obs.bases[self.robot].pose)
         path = BezierPath(key_poses_between((x, y, yaw), target, via))
         # Mecanum: the heading turns on its own profile in time while the base travels the
         # path, both over the same time (a short path with a large turn takes the turn's).
-        self._follower = PathFollower(
+        return PathFollower(
             path, obs.now, self.s.drive_speed, self.s.drive_accel,
             PDGains(max_speed=self.s.base_max_speed, max_turn=self.s.base_max_turn),
             turn=TurnLimits(self.s.drive_turn, self.s.drive_turn_accel))
-        self._followed = self.ports.follow(self._follower)
-        self.goal, self.target = goal, target
-        self.log.event(obs.now, EventKind.DRIVING, self.robot,
-                       detail=f'to {goal}, {path.length:.2f} m')
-        self.deadline = (obs.now + self._follower.profile.duration
-                                + self.s.drive_margin)
 
     def stand_pose(self, obs: Observation) -> Pose2D:
         """Where the base stands for its unloads: its drive's end while it is on its way."""

@@ -35,30 +35,69 @@ class Room:
         return {c: self.to_come(c) for c in self.layout.manifest}
 
     def carried_to_come(self) -> int:
-        """Carried materials the youBot has still to take (not on its plate yet)."""
+        """Carried materials the youBots have still to take (not on a plate yet)."""
         return sum(self.to_come(c) for c in self.layout.manifest if self.layout.carried(c))
 
-    def plate_taken(self, but: Optional[Material] = None) -> Dict[int, str]:
-        """The plate's slots that a material is on, or kept for one being picked, or where one
-        the youBot failed to unload may still stand."""
-        return {x.slot: x.color for x in self.book.materials.values()
+    def plate_taken(self, plate: str, but: Optional[Material] = None) -> Dict[int, str]:
+        """The slots of youBot ``plate``'s plate that a material is on, or kept for one being
+        picked, or where one it failed to unload may still stand."""
+        return {x.slot: x.color for x in self._on_plates(but) if x.plate == plate}
+
+    def _on_plates(self, but: Optional[Material] = None) -> List[Material]:
+        """The materials on any plate (or being picked for one, or left on one)."""
+        return [x for x in self.book.materials.values()
                 if x.slot >= 0 and x is not but
                 and (x.status in (MaterialStatus.PICKING, MaterialStatus.ON_PLATE)
-                     or x.left_on_plate)}
+                     or x.left_on_plate)]
 
-    def plate_slots(self, m: Material) -> List[int]:
-        """The plate slots free for ``m`` now, in the order they are filled: for a pool
-        material, only in a row whose stand has a drop spot left for it."""
-        taken = self.plate_taken(m)
+    def has_room(self, plate: str, on_plates: Optional[List[Material]] = None) -> bool:
+        """Whether the trip's load (the cell's ``trip_load``) leaves room on ``plate``
+        (``on_plates``: the materials on any plate, if known)."""
+        if not self.layout.trip_load:
+            return True
+        on = self._on_plates() if on_plates is None else on_plates
+        return sum(1 for x in on if x.plate == plate
+                   and not x.left_on_plate) < self.layout.trip_load
+
+    def plate_slots(self, m: Material, plate: str) -> List[int]:
+        """The slots of youBot ``plate``'s plate free for ``m`` now, in the order they are
+        filled (none once it has its trip's load): for a pool material, only in a row whose
+        stand has a drop spot left for it (those the materials on every plate will take
+        counted)."""
+        on_plates = self._on_plates(m)
+        if not self.has_room(plate, on_plates):
+            return []
+        taken = {x.slot: x.color for x in on_plates if x.plate == plate}
         free = self.layout.free_slots(m.color, taken, self.to_come_counts())
         if not self.layout.region_of(m.color).drop:
             return free
         room = {}
+        bound = [self.layout.slot_row(x.slot) for x in on_plates
+                 if self.layout.region_of(x.color).drop]
         for st in self.layout.stands:
-            bound = sum(1 for k, c in taken.items() if self.layout.slot_row(k) == st.row
-                        and self.layout.region_of(c).drop)
-            room[st.row] = len(st.drops) - len(self.book.dropped(st.name)) - bound
+            room[st.row] = (len(st.drops) - len(self.book.dropped(st.name))
+                            - bound.count(st.row))
         return [k for k in free if room.get(self.layout.slot_row(k), 0) > 0]
+
+    def load_complete(self, plate: str, loaded: bool) -> bool:
+        """Whether the load of youBot ``plate`` is complete (``loaded``: anything is on it):
+        every carried material the batch still brings is on it, or it has no room for the next
+        one waiting on the belt (that one goes on the next trip), or it has its trip's load. It
+        waits while a carried material on its way to it could still have a place."""
+        mats = self.book.materials.values()
+        if any(m.status == MaterialStatus.PICKING and self.layout.carried(m.color)
+               and m.plate in ('', plate) for m in mats):
+            return False
+        waiting = [m for m in mats
+                   if m.status == MaterialStatus.SEEN and self.layout.carried(m.color)]
+        if any(self.plate_slots(m, plate) for m in waiting):
+            return False
+        if waiting:
+            return loaded                   # (full for what waits: off to make room)
+        coming = [c for c in self.layout.manifest if self.layout.carried(c) and self.to_come(c)]
+        return loaded and (not self.has_room(plate) or not any(
+            self.layout.free_slots(c, self.plate_taken(plate), self.to_come_counts())
+            for c in coming))
 
     def free_places(self, region: str, m: Material) -> List[int]:
         """The slots of a destination (its Region's, in order) that no other material has or
@@ -70,12 +109,12 @@ class Room:
         slots = self.layout.regions[region].slots
         return [k for k in range(len(slots)) if k not in taken]
 
-    def set_down_rise(self, destination: Optional[str]) -> float:
+    def set_down_rise(self, destination: Optional[str], plate: str = '') -> float:
         """How far over its release point a held material must swing in to a set-down on
-        ``destination`` (None: the youBot's plate) to clear the materials there already by
+        ``destination`` (None: youBot ``plate``'s plate) to clear the materials there already by
         SET_DOWN_CLEARANCE_M (0: none there)."""
         there = [x.size for x in self.book.materials.values()
-                 if (x.on_the_plate if destination is None else
+                 if (x.on_plate_of(plate) if destination is None else
                      x.status in (MaterialStatus.PLACED, MaterialStatus.DELIVERED)
                      and self.layout.destination(x.color) == destination)]
         if not there:

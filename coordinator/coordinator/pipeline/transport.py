@@ -11,10 +11,18 @@ from typing import (
 
 import numpy as np
 
+from cell_layout.fleet_routes import way_back
 from cell_layout.layout import (
     POOL,
     CellLayout,
 )
+from cell_layout.unload_geometry import (
+    DROP_REACH_TOLERANCE_M,
+    YOUBOT_CARRY_Q,
+    clear_of_the_plate,
+    short_of,
+)
+from controllers.path_follower import PathFollower
 from controllers.time_optimal import (
     PlanError,
     Waypoint,
@@ -37,12 +45,7 @@ from coordinator.pipeline.model import (
 from coordinator.pipeline.record import EventLog
 from coordinator.pipeline.robots import BaseDrive, YoubotArm
 from coordinator.pipeline.room import Room
-from coordinator.pipeline.unload_geometry import (
-    DROP_REACH_TOLERANCE_M,
-    YOUBOT_CARRY_Q,
-    clear_of_the_plate,
-    short_of,
-)
+from coordinator.pipeline.traffic import LOADING, STANDS, Traffic
 from coordinator.pipeline.unload_planner import UnloadPath, UnloadPlanner
 from trial_record.events import EventKind
 
@@ -51,13 +54,16 @@ _S = TransportState
 TRANSPORT_TRANSITIONS = transition_table({
     _S.WAIT_LOAD: (_S.DRIVE, _S.DONE),
     # On to the next stand (or the slide along a stand's line); the arm down onto the first
-    # material there as the base drives; home: wait for the next load, or fold.
-    _S.DRIVE: (_S.DRIVE, _S.GRASP, _S.WAIT_LOAD, _S.FOLD),
+    # material there as the base drives; home: wait for the next load, or fold; at its park:
+    # wait for the loading pose, or fold.
+    _S.DRIVE: (_S.DRIVE, _S.GRASP, _S.WAIT_LOAD, _S.WAIT_BAY, _S.FOLD),
     # A missed grasp tried again; off the plate; the unload given up, on to the next (at
-    # another stand, or home).
-    _S.GRASP: (_S.GRASP, _S.CARRY, _S.DRIVE),
-    _S.CARRY: (_S.CARRY, _S.RELEASE, _S.GRASP, _S.DRIVE),
-    _S.RELEASE: (_S.GRASP, _S.DRIVE),
+    # another stand, or home; or waiting to drive off the pool).
+    _S.GRASP: (_S.GRASP, _S.CARRY, _S.DRIVE, _S.LEAVE),
+    _S.CARRY: (_S.CARRY, _S.RELEASE, _S.GRASP, _S.DRIVE, _S.LEAVE),
+    _S.RELEASE: (_S.GRASP, _S.DRIVE, _S.LEAVE),
+    _S.LEAVE: (_S.DRIVE,),
+    _S.WAIT_BAY: (_S.DRIVE, _S.FOLD),
     _S.FOLD: (_S.DONE,),
     _S.DONE: (),
 })
@@ -75,17 +81,23 @@ class Transport(Machine):
 
     def __init__(self, arm: YoubotArm, book: MaterialBook, log: EventLog, layout: CellLayout,
                  settings: Settings, ports: Ports, loader_done: Callable[[], bool],
-                 zu12_clear: Callable[[float], bool]) -> None:
+                 zu12_clear: Callable[[float], bool], base: BaseDrive,
+                 traffic: Traffic) -> None:
         """``loader_done`` and ``zu12_clear`` are the questions the youBot asks of the Zu 12:
         whether it has nothing more to load, and whether its cup is clear of the plate at a
-        time (the base may move)."""
-        super().__init__(arm, log, settings, TransportState.WAIT_LOAD)
+        time (the base may move). ``traffic``: the fleet's rules (a fleet of one: it starts
+        at the loading pose, and nothing holds it back); ``base`` drives its base."""
+        super().__init__(arm, log, settings, TransportState.WAIT_BAY if layout.fleet
+                         else TransportState.WAIT_LOAD)
         self.arm: YoubotArm = arm
         self.book, self.layout, self.ports = book, layout, ports
         self.room = Room(book, layout, settings)          # (a view: questions on the book)
         self.loader_done, self.zu12_clear = loader_done, zu12_clear
         self.queue: List[Material] = []              # still to unload, the current one first
-        self.base = BaseDrive(arm.name, ports, log, settings)
+        self.base, self.traffic = base, traffic
+        self.robot = arm.name
+        if layout.fleet:
+            self.name = arm.name                # (its states' lane: one per youBot)
         self.planner = UnloadPlanner(arm, book, layout, settings)
         self._carry: Optional[UnloadPath] = None     # the unload's joint positions
         self._armed = False
@@ -96,15 +108,12 @@ class Transport(Machine):
         self.handlers = {S.WAIT_LOAD: self._wait_load, S.DRIVE: self._drive,
                          S.GRASP: self._grasp, S.CARRY: self._carry_to_drop,
                          S.RELEASE: self._release, S.FOLD: self._fold,
+                         S.LEAVE: self._off_the_pool, S.WAIT_BAY: self._wait_bay,
                          S.DONE: lambda obs: None}
 
     @property
     def current(self) -> Optional[Material]:
         return self.queue[0] if self.queue else None
-
-    @property
-    def driving(self) -> bool:
-        return self.base.driving
 
     def tick(self, obs: Observation) -> None:
         if self.base.driving:
@@ -114,72 +123,105 @@ class Transport(Machine):
     @property
     def loading(self) -> bool:
         """Whether the youBot waits at home for its load (the Zu 12 may load its plate)."""
-        return self.state is TransportState.WAIT_LOAD and not self.driving
-
-    def _load_complete(self, on_plate: Sequence[Material]) -> bool:
-        """Whether this trip's load is on the plate: every carried material the batch brings
-        (or the Zu 12 is done); or the plate has no room for the next one waiting on the belt
-        (it goes on the next trip). It waits while a carried material on its way could still
-        have a place."""
-        if self.loader_done():
-            return True
-        if any(m.status == MaterialStatus.PICKING and self.layout.carried(m.color)
-               for m in self.book.materials.values()):
-            return False
-        waiting = [m for m in self.book.materials.values()
-                   if m.status == MaterialStatus.SEEN and self.layout.carried(m.color)]
-        if any(self.room.plate_slots(m) for m in waiting):
-            return False
-        if waiting:
-            return bool(on_plate)           # (full for what waits: off to make room)
-        coming = [c for c in self.layout.manifest
-                  if self.layout.carried(c) and self.room.to_come(c)]
-        return bool(on_plate) and not any(
-            self.layout.free_slots(c, self.room.plate_taken(), self.room.to_come_counts())
-            for c in coming)
+        return self.state is TransportState.WAIT_LOAD and not self.base.driving
 
     def _wait_load(self, obs: Observation) -> None:
-        on_plate = self.book.with_status(MaterialStatus.ON_PLATE)
-        if not self._load_complete(on_plate) or not self.zu12_clear(obs.now):
+        on_plate = [m for m in self.book.with_status(MaterialStatus.ON_PLATE)
+                    if m.plate == self.robot]
+        if (not (self.loader_done() or self.room.load_complete(self.robot, bool(on_plate)))
+                or not self.zu12_clear(obs.now)):
             return      # (nor while the Zu 12's cup is over the plate, or swinging home from it)
         order = [st.name for st in self.layout.stands]
-        self.queue = sorted(on_plate, key=lambda m: (
+        queue = sorted(on_plate, key=lambda m: (
             order.index(self.planner.stand_for(m)), self.layout.destination(m.color) != POOL,
             m.slot))
-        if not self.queue:
+        if not queue:
+            self.traffic.leave(self.robot, LOADING)
             self.enter(TransportState.DONE, obs.now, math.inf)
             return
-        self.trips += 1
-        self.log.event(obs.now, EventKind.DEPARTING, self.arm.name,
-                       detail=f'{len(self.queue)} materials, trip {self.trips}')
+        if not self.traffic.ask(self.robot, STANDS):
+            return                                  # (another youBot unloads there)
+        self.queue = queue
+
+        def departing() -> None:
+            self.trips += 1
+            self.log.event(obs.now, EventKind.DEPARTING, self.arm.name,
+                           detail=f'{len(self.queue)} materials, trip {self.trips}')
         # The arm rises to its carry pose while the base drives: folded, it reaches down in
         # front of the base, and its fingers would scrape the floor as the base pitches.
-        self._drive_to(obs, self.planner.stand_for(self.queue[0]))
+        if self._drive_to(obs, self.planner.stand_for(self.queue[0]), departing):
+            self.traffic.leave(self.robot, LOADING)
 
-    def _drive_to(self, obs: Observation, goal: str) -> None:
-        """Home, or to a stand: where it stands for the first material it unloads there (the
-        stand's pose, or slid along its line for a heavy one, _unload_path), the arm readied
-        for that material on the way."""
+    def _wait_bay(self, obs: Observation) -> None:
+        """At its park: to the loading pose once it is its turn there, or folded once nothing
+        more is to come."""
+        if not self.room.carried_to_come() or self.loader_done():
+            self.traffic.leave(self.robot, LOADING)
+            self.arm.go_home(obs)
+            return self.enter(TransportState.FOLD, obs.now, self.arm.motion.end
+                              - obs.now + self.s.settle_margin)
+        if self.traffic.ask(self.robot, LOADING):
+            # (Its arm to the carry pose on the way, as on every drive to the loading pose.)
+            self._drive_to(obs, 'home', lambda: self.arm.send(self.arm.plan(
+                self.arm.q(obs), [Waypoint(YOUBOT_CARRY_Q.copy())])))
+
+    def _off_the_pool(self, obs: Observation) -> None:
+        """Unloaded: to the loading pose if it is free for this youBot, else to its park; the
+        pool is free once it sets off (LEAVE while the drive is held back)."""
+        goal = 'home' if self.traffic.ask(self.robot, LOADING) else 'park'
+        if self._drive_to(obs, goal):
+            self.traffic.leave(self.robot, STANDS)
+        elif self.state is not TransportState.LEAVE:
+            self.enter(TransportState.LEAVE, obs.now, math.inf)
+
+    def _drive_to(self, obs: Observation, goal: str,
+                  departing: Callable[[], object] = lambda: None) -> bool:
+        """Home (the loading pose), to its park, or to a stand: where it stands for the first
+        material it unloads there (the stand's pose, or slid along its line for a heavy one,
+        _unload_path), the arm readied for that material on the way. Whether it set off (the
+        fleet's rule may hold it back: Traffic.clear); ``departing`` is told first."""
         lay = self.layout
         plan = None
-        if goal == 'home':
-            target, via = lay.youbot_home, lay.via_back
+        if goal == 'park':
+            target = lay.park(self.robot)
+            via = way_back(lay.stands, target)
+        elif goal == 'home':
+            target = lay.youbot_home
+            via = () if self.base.goal in ('', 'park') else lay.via_back
         else:
             target = lay.stand(goal).pose
+            via = (lay.way_out(goal) if self.base.goal in ('', 'home')
+                   else lay.via_turn if self.base.goal != goal else ())
+            if lay.fleet and not self.traffic.clear(
+                    self.robot, self.base.path_to(obs, target, via), obs):
+                return False            # (held back: the unload is planned once it may go)
+            departing()
             if self.queue:
                 plan = self.planner.unload_path(self.queue[0], target, YOUBOT_CARRY_Q, high=True,
                                          slide=True)
                 target = plan.pose if plan is not None and plan.pose is not None else target
-            via = (lay.way_out(goal) if self.base.goal in ('', 'home')
-                   else lay.via_turn if self.base.goal != goal else ())
-        self.base.follow(obs, target, via, goal)
+
+        def clear(follower: PathFollower) -> bool:
+            if goal not in ('home', 'park'):
+                return True     # (cleared above: the slide along the stand's line is the pool's)
+            if not self.traffic.clear(self.robot, follower, obs):
+                return False
+            departing()
+            return True
+        if not self.base.follow(obs, target, via, goal, clear):
+            return False
         self.enter(TransportState.DRIVE, obs.now, self.base.deadline - obs.now)
-        if goal != 'home' and self.queue:
+        if goal not in ('home', 'park') and self.queue:
             self._ready_arm(obs, plan)
+        return True
 
     def _drive(self, obs: Observation) -> None:
+        if self.base.goal == 'park':
+            if not self.base.driving and self.motion_over(obs, 'carry pose'):
+                self.enter(TransportState.WAIT_BAY, obs.now, math.inf)
+            return
         if self.base.goal == 'home':
-            if self.driving:
+            if self.base.driving:
                 return
             # Back to its start pose only at home, from the carry pose (a folded arm reaches
             # down in front of the base, and its fingers would catch the floor as the base
@@ -198,7 +240,7 @@ class Transport(Machine):
         # here (_ready_arm): from the carry pose, the unload is planned (or its failure told).
         if self.queue and not self.motion_over(obs, 'carry pose'):
             return
-        if self.queue or not self.driving:
+        if self.queue or not self.base.driving:
             self._next_unload(obs)
 
     def _next_unload(self, obs: Observation) -> None:
@@ -207,10 +249,12 @@ class Transport(Machine):
             # upright carry pose as the base sets off (slowly: in the first 0.3 s it moves 3 cm,
             # the fingers rise further).
             self.arm.send(self.arm.plan(self.arm.q(obs), [Waypoint(YOUBOT_CARRY_Q.copy())]))
-            return self._drive_to(obs, 'home')
+            return self._off_the_pool(obs)
         m = self.queue[0]
         if self.planner.stand_for(m) != self.base.goal:
-            return self._drive_to(obs, self.planner.stand_for(m))
+            # (Between the stands, the pool its own: nothing holds the drive back.)
+            self._drive_to(obs, self.planner.stand_for(m))
+            return
         self._plan_unload(obs, m)
 
     def _ready_arm(self, obs: Observation, path: Optional['UnloadPath']) -> None:
@@ -234,7 +278,7 @@ class Transport(Machine):
         out to its drop only from elsewhere on it (the arm on its way down meanwhile)."""
         now = obs.now
         here = self.base.stand_pose(obs)
-        plan = self.planner.unload_path(m, here, self.arm.q(obs), slide=not self.driving)
+        plan = self.planner.unload_path(m, here, self.arm.q(obs), slide=not self.base.driving)
         if plan is None:
             self.queue.pop(0)
             self.book.give_up(now, m, EventKind.GRASP_FAILED, 'unload: no IK solution',
@@ -286,7 +330,7 @@ class Transport(Machine):
         self.log.count_grasp(self.arm.name, success=True)
         self.log.event(now, EventKind.UNLOAD_GRASPED, self.arm.name, m,
                        f'attempt {m.unload_attempts}')
-        if self.driving:
+        if self.base.driving:
             # Up clear of its neighbours, and held there until the base stands.
             self._drop_pending = True
             try:
@@ -345,7 +389,7 @@ class Transport(Machine):
         if arrived is None:
             return
         if self._drop_pending:
-            if self.driving:
+            if self.base.driving:
                 return              # (held up over the plate until the base stands)
             if not arrived:
                 self.log.event(now, EventKind.ARM_STALLED, self.arm.name, m,
@@ -388,6 +432,7 @@ class Transport(Machine):
 
     def _fold(self, obs: Observation) -> None:
         if self.motion_over(obs, 'home pose'):
+            self.traffic.leave(self.robot, LOADING)
             self.enter(TransportState.DONE, obs.now, math.inf)
 
     def _lift(self, obs: Observation, m: Material, then: Sequence[Waypoint] = (),

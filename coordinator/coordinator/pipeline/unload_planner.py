@@ -12,18 +12,18 @@ import numpy as np
 
 from cell_layout.layout import CellLayout, world_to_base
 from cell_layout.reach import YOUBOT_LOAD_MAX, youbot_hold_need
+from cell_layout.unload_geometry import (
+    YOUBOT_GRASP_STANDOFF_M,
+    clear_of_the_plate,
+    grip_points,
+    held_offset,
+)
 from controllers.bezier import Pose2D
 from controllers.time_optimal import PlanError, Waypoint, timed_path
 from coordinator.pipeline.materials import MaterialBook
 from coordinator.pipeline.model import Material, Observation, Points, Settings
 from coordinator.pipeline.robots import YoubotArm
 from coordinator.pipeline.room import Room
-from coordinator.pipeline.unload_geometry import (
-    YOUBOT_GRASP_STANDOFF_M,
-    clear_of_the_plate,
-    grip_points,
-    held_offset,
-)
 
 
 @dataclass
@@ -189,7 +189,7 @@ class UnloadPlanner:
     def tallest_other(self, m: Material) -> float:
         """The tallest material on the plate but ``m`` (0: none)."""
         return max((o.size for o in self.book.materials.values()
-                    if o.on_the_plate and o is not m), default=0.0)
+                    if o.on_plate_of(m.plate) and o is not m), default=0.0)
 
     def held_offset(self, obs: Observation, m: Material) -> np.ndarray:
         """Where ``m``, gripped over its plate slot, is from the tool (held_offset)."""
@@ -199,7 +199,7 @@ class UnloadPlanner:
         """The materials on the plate but ``m``: their slots (x, y) and sizes."""
         return [(*self.layout.plate_slots[o.slot], o.size)
                 for o in self.book.materials.values()
-                if o.on_the_plate and o.slot >= 0 and o.id != m.id]
+                if o.on_plate_of(m.plate) and o.slot >= 0 and o.id != m.id]
 
     def held_beyond(self, obs: Observation, m: Material) -> str:
         """Where the arm, as it stands, holds ``m`` beyond what it may (YOUBOT_LOAD_MAX of a

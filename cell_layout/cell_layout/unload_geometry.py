@@ -1,7 +1,7 @@
 """The geometry of the youBot's unloads (no ROS, no state): the straight lift off its plate and
 the points of a grip, where a held material is from the tool, how far the gripper is from a
 drop, and whether a motion keeps what is held clear of the plate's other materials. The
-transport (transport.py) plans with these; tests/unit/test_unload_geometry.py tests each."""
+coordinator's transport plans with these; tests/unit/test_unload_geometry.py tests each."""
 from __future__ import annotations
 
 from typing import List, Sequence, Tuple, cast
@@ -12,8 +12,9 @@ from cell_layout.layout import PLATE_TOP_IN_BASE_M
 from cell_layout.world_layout import GRASP_STANDOFF_M
 from controllers.arrays import Vector
 from controllers.youbot_kinematics import YoubotKinematics
-from coordinator.pipeline.model import Points
 
+# A motion's samples: (absolute time [s], joint positions, velocities, accelerations).
+Points = List[Tuple[float, np.ndarray, np.ndarray, np.ndarray]]
 # The youBot's arm upright (the datasheet's candle pose) while the base drives home.
 YOUBOT_CARRY_Q = np.zeros(5)
 # The youBot's fingertips reach 10.4 mm beyond gripper_tcp: it grasps a material's top face with

@@ -1,4 +1,4 @@
-"""The youBot's odometry in the cell's frame (no ROS). Its odom frame is its start pose in the
+"""A mobile base's odometry in the cell's frame (no ROS). Its odom frame is its start pose in the
 cell (REP-105; no tf2 here): a pose there is turned into the cell's frame, and its twist, which
 odometry gives in the child (base) frame, into the cell's axes (what the path follower wants)."""
 from __future__ import annotations

@@ -1,0 +1,225 @@
+"""Several youBots in one cell: footprints and their clearance, the start-up checks of the
+fleet's places and ways (one line naming the robot), and the traffic rules' two shared places
+(given in the order asked) and their rule for every drive."""
+import copy
+import math
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+
+from cell_layout.fleet_routes import (
+    TRACKING_MARGIN_M,
+    YOUBOT_FOOTPRINT,
+    keeps_clear,
+    route_poses,
+    way_back,
+)
+from cell_layout.layout import LayoutError
+from cell_layout.world_layout import layout_from_world
+from controllers.bezier import BezierPath
+from controllers.footprint import Footprint, clearance, polygon_distance
+from controllers.path_follower import PathFollower
+from coordinator.pipeline.model import BaseReading, Observation
+from coordinator.pipeline.traffic import LOADING, STANDS, Traffic
+from world_description.resources import resolve_resource
+from world_description.world_config import load_world, parse_world
+
+TWO = resolve_resource('package://world_description/worlds/cell_two_youbots.yaml')
+PAPER = resolve_resource('package://world_description/worlds/pipeline_cell.yaml')
+
+
+def two_youbots():
+    """The two-youBot example as one mapping (its base merged in)."""
+    from world_description.world_loading import world_data
+    return world_data(TWO)
+
+
+# --- footprints ---------------------------------------------------------------------------------
+def test_footprints_measure_the_gap_between_their_nearest_edges():
+    box = Footprint(0.5, 0.25)
+    a = box.corners((0.0, 0.0, 0.0))
+    assert polygon_distance(a, box.corners((1.3, 0.0, 0.0))) == pytest.approx(0.3)
+    # Turned a quarter: its half width now lies along x.
+    assert polygon_distance(a, box.corners((1.3, 0.0, math.pi / 2))) == pytest.approx(0.55)
+    assert polygon_distance(a, box.corners((0.9, 0.1, 0.3))) == 0.0          # overlapping
+    # Corner to corner, diagonally apart.
+    d = polygon_distance(a, box.corners((1.3, 0.8, 0.0)))
+    assert d == pytest.approx(math.hypot(0.3, 0.3))
+
+
+def test_the_clearance_of_two_sweeps_is_their_nearest_pair():
+    fp = Footprint(0.29, 0.21)
+    line = np.array([[x, 0.0, 0.0] for x in np.linspace(0.0, 2.0, 41)])
+    parked = np.array([[1.0, 0.9, 0.0]])
+    assert clearance(line, fp, parked, fp) == pytest.approx(0.9 - 0.42)
+    assert clearance(line, fp, np.zeros((0, 3)), fp) == math.inf
+    # The bounding circles skip no nearer pair: the same as measuring every pair.
+    rng = np.random.default_rng(3)
+    a = rng.uniform(-2, 2, (30, 3))
+    b = rng.uniform(-2, 2, (25, 3)) + (3.0, 0.0, 0.0)
+    every = min(polygon_distance(fp.corners(p), fp.corners(q)) for p in a for q in b)
+    assert clearance(a, fp, b, fp) == pytest.approx(every)
+
+
+# --- the start-up checks ------------------------------------------------------------------------
+def test_the_example_fleet_is_laid_out_and_a_fleet_of_one_is_the_papers():
+    layout = layout_from_world(load_world(TWO))
+    assert [r.name for r in layout.transports] == ['youbot', 'youbot2'] and layout.fleet
+    assert layout.youbot_home == pytest.approx((0.8, 0.05, -math.pi / 2))
+    assert layout.park('youbot2') == pytest.approx((0.0, -0.8, 0.0))
+    assert layout.trip_load == 0 and layout.clearance == 0.1
+    paper = layout_from_world(load_world(PAPER))
+    assert not paper.fleet and paper.park('youbot') == paper.youbot_home
+    # The way back home is the one the paper's youBot always drove.
+    assert paper.via_back == way_back(paper.stands, paper.youbot_home)
+
+
+def _without(data, key):
+    data = copy.deepcopy(data)
+    del data['cell'][key]
+    return data
+
+
+def _moved(data, robot, **pose):
+    data = copy.deepcopy(data)
+    next(r for r in data['robots'] if r['name'] == robot)['pose'].update(pose)
+    return data
+
+
+@pytest.mark.parametrize('change, why', [
+    (lambda d: _without(d, 'loading'), 'has 2 youBots: its cell section gives the loading '
+                                         'pose'),
+    (lambda d: _moved(d, 'youbot2', x=0.7, y=-0.45), r'robot youbot2: its start pose is within '
+                                                      r'0.1 m of the loading pose'),
+    (lambda d: _moved(d, 'youbot', x=1.6, y=-0.45), r'robot youbot2?: its way from .* passes '
+                                                    r'0\.\d\d m from youbot2?\'s start pose'),
+    (lambda d: _moved(d, 'youbot2', x=1.6, y=0.6, yaw=0.0), r'robot youbot2?: its start pose is '
+                                                             r'within 0.1 m of youbot2?\'s'),
+    (lambda d: _moved(d, 'youbot2', x=2.1, y=-1.85), 'robot youbot2: its start pose overlaps '
+                                                     'obstacle pool_platform'),
+    (lambda d: _moved(d, 'youbot2', z=0.2), 'robot youbot2: it stands 0.2 m high'),
+])
+def test_a_fleet_that_cannot_share_the_floor_is_refused_in_one_line(change, why):
+    data = two_youbots()
+    data = change(data)
+    with pytest.raises(LayoutError, match=why) as err:
+        layout_from_world(parse_world(data))
+    assert '\n' not in str(err.value)
+
+
+def test_the_clearance_and_the_trip_load_are_checked_like_every_number():
+    from world_description.world_config import WorldConfigError
+    for key, value in (('clearance', -0.1), ('clearance', 2.0), ('trip_load', 2.5),
+                       ('trip_load', -1)):
+        data = two_youbots()
+        data['cell'][key] = value
+        with pytest.raises(WorldConfigError, match=f'cell.{key}'):
+            parse_world(data)
+
+
+def test_every_way_of_the_example_keeps_clear_of_the_other_parks():
+    layout = layout_from_world(load_world(TWO))
+    keep = layout.clearance + TRACKING_MARGIN_M
+    park1, park2 = (np.array([layout.park(n)]) for n in ('youbot', 'youbot2'))
+    for st in layout.stands:
+        way = route_poses(st.pose, layout.park('youbot'), way_back(layout.stands,
+                                                                   layout.park('youbot')))
+        assert clearance(way, YOUBOT_FOOTPRINT, park2, YOUBOT_FOOTPRINT) >= keep
+        way = route_poses(layout.youbot_home, st.pose, layout.way_out(st.name))
+        assert keeps_clear(layout, way, [park1, park2])
+
+
+# --- the traffic rules -------------------------------------------------------------------------
+def _traffic(layout, drives=None):
+    bases = {r.name: SimpleNamespace(follower=(drives or {}).get(r.name))
+             for r in layout.transports}
+    return Traffic(layout, bases)
+
+
+def _obs(layout, **poses):
+    bases = {r.name: BaseReading(tuple(poses.get(r.name, layout.park(r.name))))
+             for r in layout.transports}
+    return Observation(0.0, {}, bases)
+
+
+def test_the_shared_places_are_given_in_the_order_asked():
+    layout = layout_from_world(load_world(TWO))
+    t = _traffic(layout)
+    assert t.ask('youbot', LOADING) and t.ask('youbot', LOADING)     # (held: still its)
+    assert not t.ask('youbot2', LOADING)                              # (queued)
+    assert t.ask('youbot2', STANDS)
+    t.leave('youbot', LOADING)
+    assert t.holder[LOADING] is None
+    assert t.ask('youbot2', LOADING) and t.queue[LOADING] == []
+    # A third asking before the first in the queue comes back: the first is served first.
+    t.leave('youbot2', LOADING)
+    assert not t.ask('youbot', STANDS)
+    t.leave('youbot2', STANDS)
+    assert t.ask('youbot', STANDS)
+
+
+def test_a_fleet_of_one_holds_both_places_and_nothing_holds_its_drives_back():
+    layout = layout_from_world(load_world(PAPER))
+    t = _traffic(layout)
+    assert t.ask('youbot', LOADING) and t.ask('youbot', STANDS)
+    t.leave('youbot', LOADING)
+    assert t.holder[LOADING] == 'youbot'
+
+
+def _follower(start, goal, t0=0.0):
+    return PathFollower(BezierPath([start, goal]), t0, 0.5, 0.5)
+
+
+def test_a_drive_starts_only_if_it_keeps_clear_of_the_others_where_they_stand_and_drive():
+    layout = layout_from_world(load_world(TWO))
+    t = _traffic(layout)
+    bay = layout.youbot_home
+    # youbot2 to the loading pose while youbot stands at its park: clear.
+    assert t.clear('youbot2', _follower(layout.park('youbot2'), bay), _obs(layout))
+    # ... while youbot stands at the loading pose: not.
+    assert not t.clear('youbot2', _follower(layout.park('youbot2'), bay),
+                       _obs(layout, youbot=bay))
+    # youbot drives across youbot2's way: held back until youbot's drive has passed.
+    crossing = _follower((0.2, 0.6, 0.0), (0.2, -1.9, 0.0))
+    t = _traffic(layout, {'youbot': crossing})
+    assert not t.clear('youbot2', _follower((-1.0, -1.8, 0.0), (1.2, -1.8, 0.0)),
+                       _obs(layout, youbot=(0.2, 0.6, 0.0)))
+    ahead = Observation(crossing.end_time + 2.0, {}, {
+        'youbot': BaseReading((0.2, -1.9, 0.0)), 'youbot2': BaseReading((-1.0, -1.8, 0.0))})
+    far = _follower((-1.0, -1.8, 0.0), (1.2, -1.8, 0.0), ahead.now)
+    assert not t.clear('youbot2', far, ahead)       # (it stands on the way now)
+    clear_of_it = _follower((-1.0, -1.0, 0.0), (1.2, -1.0, 0.0), ahead.now)
+    assert t.clear('youbot2', clear_of_it, ahead)   # (its drive over: only where it stands)
+
+
+# --- a whole run ------------------------------------------------------------------------------
+def test_two_youbots_share_the_carrying_and_their_bases_keep_the_clearance_at_every_step():
+    """The fake cell (test_pipeline) with the example's two youBots: every material delivered,
+    both carry, the loading pose and the pool held by one at a time, and the bases' footprints
+    never nearer than the clearance at any step (the fake's kinematic ground truth)."""
+    from test_pipeline import FakeCell, run
+    layout = layout_from_world(load_world(TWO))
+    colors = ['orange'] * 6 + ['purple'] + ['orange'] * 3 + ['blue'] + ['orange'] * 4 + ['blue']
+    cell = FakeCell(layout, colors, base_loop=True)
+    p = run(cell, limit=400.0)
+    assert p.result.status == 'completed', p.result
+    assert p.result.delivered == 16 and p.result.trips >= 2
+    departed = [e.robot for e in cell.events if e.kind == 'departing']
+    assert set(departed) == {'youbot', 'youbot2'}
+    # One youBot at a time at the loading pose: each load is put on the plate of the youBot
+    # that stands there.
+    bay = np.array(layout.youbot_home[:2])
+    for e in (e for e in cell.events if e.kind == 'loaded'):
+        k = round(e.time / 0.0333333) - 1
+        at_bay = [b for b in cell.bases
+                  if np.linalg.norm(cell.paths[b][min(k, len(cell.paths[b]) - 1)][:2] - bay)
+                  < 0.05]
+        assert len(at_bay) == 1, (e, at_bay)
+    a, b = (np.array(cell.paths[n]) for n in ('youbot', 'youbot2'))
+    gaps = [polygon_distance(YOUBOT_FOOTPRINT.corners(pa), YOUBOT_FOOTPRINT.corners(pb))
+            for pa, pb in zip(a[::3], b[::3])]
+    assert min(gaps) >= layout.clearance, min(gaps)
+    # Each youBot's arm ends folded, the run's states name each youBot's machine.
+    machines = {e.robot for e in cell.events if e.kind == 'state'}
+    assert {'loader', 'youbot', 'youbot2'} <= machines
