@@ -223,3 +223,63 @@ def test_two_youbots_share_the_carrying_and_their_bases_keep_the_clearance_at_ev
     # Each youBot's arm ends folded, the run's states name each youBot's machine.
     machines = {e.robot for e in cell.events if e.kind == 'state'}
     assert {'loader', 'youbot', 'youbot2'} <= machines
+
+
+def test_each_youbots_share_of_the_run_is_in_its_result_and_reads_back():
+    """The result of a fleet's run says what each youBot did (trips, materials carried and
+    delivered, distance driven by its path, time busy and waiting by its states), and the
+    shares add up to the run's; the record reads back checked."""
+    from test_pipeline import FakeCell, run
+
+    from trial_record.result import ResultError, TrialResult
+    from trial_record.scoring import RunTrace, build_result, destinations
+    layout = layout_from_world(load_world(TWO))
+    colors = ['orange'] * 6 + ['purple'] + ['orange'] * 3 + ['blue'] + ['orange'] * 4 + ['blue']
+    cell = FakeCell(layout, colors, base_loop=True)
+    p = run(cell, limit=400.0)
+    paths = {n: [tuple(q[:2]) for q in cell.paths[n]] for n in ('youbot', 'youbot2')}
+    trace = RunTrace(seed=7, belt_speed=layout.belt_speed, mode='lock-step', start=p.start_time,
+                     identification_details=[], peaks={}, joint_names={},
+                     youbot_path=paths['youbot'], events=p.events, paths=paths)
+    out = build_result(p.result, [], [], destinations(layout), trace)
+    shares = out.transports
+    assert set(shares) == {'youbot', 'youbot2'}
+    assert sum(s['trips'] for s in shares.values()) == out.trips
+    assert all(s['trips'] >= 1 and s['delivered'] <= s['carried'] for s in shares.values())
+    assert sum(s['carried'] for s in shares.values()) == out.loaded
+    carried = sum(1 for c in colors if layout.carried(c))
+    assert sum(s['delivered'] for s in shares.values()) == carried
+    for name, s in shares.items():
+        xy = np.array(paths[name])
+        assert s['distance'] == pytest.approx(np.linalg.norm(np.diff(xy, axis=0), axis=1).sum(),
+                                              abs=1e-3)
+        assert s['distance'] > 2.0
+        assert s['busy'] > 0 and s['waiting'] > 0
+        first = min(t for t, who, _ in out.states if who == name)
+        assert s['busy'] + s['waiting'] <= out.completion_time - first + 2e-3   # (rounding)
+        assert len(s['path']) == len(paths[name][::3])
+    record = out.to_dict()
+    assert TrialResult.from_dict(record).transports == shares
+    bad = copy.deepcopy(record)
+    bad['transports']['youbot2']['delivered'] = 99
+    with pytest.raises(ResultError, match='youbot2: delivered'):
+        TrialResult.from_dict(bad)
+    bad = copy.deepcopy(record)
+    bad['transports']['youbot']['busy'] = -1.0
+    with pytest.raises(ResultError, match='transports: youbot: busy'):
+        TrialResult.from_dict(bad)
+    # One youBot's record has no shares: it stays as it was.
+    one = layout_from_world(load_world(PAPER))
+    assert not one.fleet
+    assert 'transports' not in TrialResult(status='completed').to_dict()
+
+
+def test_the_published_state_names_each_youbot_of_a_fleet():
+    from coordinator.coordinator_node import transport_states
+    from coordinator.pipeline.model import TransportState
+
+    def youbot(name, state):
+        return SimpleNamespace(robot=name, state=state)
+    assert transport_states([youbot('youbot', TransportState.DRIVE)]) == 'drive'
+    assert transport_states([youbot('a', TransportState.DRIVE),
+                             youbot('b', TransportState.WAIT_BAY)]) == 'a: drive, b: wait_bay'
