@@ -13,7 +13,7 @@ from ros_common.outputs import staged_dir
 from studies.recorded import trial_bag
 from studies.sweep_report import sweep_lines
 from trial_record.result import TrialResult
-from trial_record.scoring import FAILURE_CAUSES
+from trial_record.scoring import FAILURE_CAUSES, FIRST_STATE
 from world_description.footprint import footprints
 from world_description.resources import ResourceError, resolve_resource
 from world_description.world_config import WorldConfigError, load_world, parse_world
@@ -147,6 +147,8 @@ def activity(trial: TrialResult) -> Dict[str, List[Tuple[float, float, str]]]:
     for label, machine in lanes_of(trial)[1:]:
         changes = [(float(t), state) for t, who, state in trial.states
                    if who == machine]
+        if machine in (trial.transports or {}) and (not changes or changes[0][0] > 0.0):
+            changes.insert(0, (0.0, FIRST_STATE))      # (a fleet's youBot waits at its park)
         lanes[label] = [(t0, t1, state) for (t0, state), (t1, _) in
                         zip(changes, changes[1:] + [(end, '')]) if t1 > t0 and state != 'done']
     belt = [float(e[0]) for e in trial.events if e[1] == 'belt_started']

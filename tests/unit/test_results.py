@@ -204,6 +204,9 @@ def test_a_fleets_report_has_a_lane_a_path_and_a_row_per_youbot(tmp_path):
     lanes = activity(trials[0])
     assert set(lanes) == {'belt', 'Zu 12', 'alpha', 'beta'}
     assert lanes['beta'] == [(0.0, 20.0, 'wait_bay'), (20.0, 50.0, 'drive')]
+    # Before its first change of state a youBot waits at its park.
+    trials[1].states[1:3] = [[5.0, 'alpha', 'wait_load'], [10.0, 'alpha', 'drive']]
+    assert activity(trials[1])['alpha'][0] == (0.0, 5.0, 'wait_bay')
     assert list(youbot_paths(trials)) == ['trial 0 alpha', 'trial 0 beta', 'trial 1 alpha',
                                           'trial 1 beta', 'trial 2 alpha', 'trial 2 beta']
     assert len(youbot_paths(trials, most=5)) == 4          # (a trial's robots all or none)

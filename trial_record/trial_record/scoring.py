@@ -347,6 +347,7 @@ def build_result(result: RunResult, final_truth: Sequence[TruePose],
 # A youBot's states in which it waits for another robot (to be loaded, for the loading pose, to
 # leave the pool); in the others it drives or unloads.
 WAITING_STATES = frozenset(('wait_load', 'wait_bay', 'leave'))
+FIRST_STATE = 'wait_bay'            # a fleet's youBot's state before its first change
 
 
 def fleet_shares(counts: Mapping[str, Mapping[str, int]], states: Sequence[Sequence[Any]],
@@ -360,6 +361,8 @@ def fleet_shares(counts: Mapping[str, Mapping[str, int]], states: Sequence[Seque
     out = {}
     for robot, c in counts.items():
         changes = [(float(t), state) for t, who, state in states if who == robot]
+        if not changes or changes[0][0] > 0.0:
+            changes.insert(0, (0.0, FIRST_STATE))      # (it starts waiting at its park)
         busy = waiting = 0.0
         for (t0, state), t1 in zip(changes, [t for t, _ in changes[1:]] + [end]):
             span = max(0.0, min(t1, end) - t0) if math.isfinite(end) else max(0.0, t1 - t0)
