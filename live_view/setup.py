@@ -20,6 +20,7 @@ setup(
     entry_points={
         'console_scripts': [
             'live_view = live_view:live_view_main',
+            'live_view_layout = live_view.layout:main',
         ],
     },
 )

@@ -190,8 +190,10 @@ class CellLayout:
 
     @property
     def fleet(self) -> bool:
-        """Whether more than one youBot carries (they share the loading pose and the pool)."""
-        return len(self.transports) > 1
+        """Whether the youBots wait at parks of their own, apart from the loading pose, and
+        share it and the pool by the fleet's rules: several youBots, or one that starts away
+        from the loading pose (a fleet of one, as a sweep of the fleet's size makes)."""
+        return bool(self.parks)
 
     @property
     def robots(self) -> Dict[str, CellRobot]:

@@ -87,6 +87,16 @@ def _robots(world: Any) -> Tuple[CellRobot, Tuple[CellRobot, ...]]:
     return out[0], tuple(out[1:])
 
 
+def _parks_apart(loading: Any, start: Any, transports: Sequence[Any]) -> bool:
+    """Whether the youBots wait at parks apart from the loading pose: several of them, or one
+    that starts away from the loading pose the world gives (a fleet of one)."""
+    if len(transports) > 1:
+        return True
+    return loading is not None and (
+        math.hypot(loading[0] - start.x, loading[1] - start.y) > 1e-3
+        or abs(math.remainder(loading[2] - start.yaw, math.tau)) > 1e-3)
+
+
 def layout_from_world(world: Any) -> CellLayout:
     """The layout of a loaded WorldConfig (world_description.world_config) of the pipeline
     cell; a LayoutError (one line) for a cell whose rules cannot work."""
@@ -134,8 +144,9 @@ def layout_from_world(world: Any) -> CellLayout:
         via_back=way_back(stands, home),
         loader=loader, transports=transports, clearance=roles.clearance,
         trip_load=roles.trip_load,
-        parks=(tuple((r.pose.x, r.pose.y, r.pose.yaw) for r in map(world.robot, (
-            t.name for t in transports))) if len(transports) > 1 else ()))
+        parks=tuple((r.pose.x, r.pose.y, r.pose.yaw) for r in map(world.robot, (
+            t.name for t in transports))) if _parks_apart(roles.loading, yb, transports)
+        else ())
     regions: Dict[str, Region] = {}
     served: Dict[str, Set[str]] = {}
     for dest in sorted({r.destination for r in rules.values()}):

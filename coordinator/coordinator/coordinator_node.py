@@ -26,7 +26,7 @@ import json
 import sys
 import time
 from pathlib import Path
-from typing import Dict, List, Tuple
+from typing import Any, Dict, List, Sequence, Tuple
 
 import rclpy
 from rclpy.node import Node
@@ -117,6 +117,14 @@ def _layout(world: WorldConfig, p: Dict) -> CellLayout:
     return layout
 
 
+def transport_states(transports: Sequence[Any]) -> str:
+    """The published ``transport_state``: the youBot's state; a fleet's, each youBot's by
+    its name, in the cell's order ('youbot: drive, youbot2: wait_bay')."""
+    if len(transports) == 1:
+        return str(transports[0].state.value)
+    return ', '.join(f'{t.robot}: {t.state.value}' for t in transports)
+
+
 def _settings(p: Dict) -> Settings:
     latency = float(p['plan_latency'])
     if latency < 0.0:
@@ -152,7 +160,10 @@ class CoordinatorNode(Node):
         self.seed = int(p['scenario_seed'])
         self.regions = destinations(layout)
         self._started = time.monotonic()
-        self._path: List[Tuple[float, float]] = []
+        # Each youBot's path, as its odometry saw it at every decision (the first's is the
+        # result's youbot_path).
+        self._paths: Dict[str, List[Tuple[float, float]]] = {
+            r.name: [] for r in layout.transports}
         # Lock-step: the commands of each decision are announced with the next step request,
         # and stamped with the decision's own step time (the plan's), not with a /clock that
         # may lag it.
@@ -204,7 +215,8 @@ class CoordinatorNode(Node):
         try:
             while not self.pipeline.finished and rclpy.ok():
                 self.pipeline.tick(obs)
-                self._path.append(obs.bases[self.layout.transport.name].pose[:2])
+                for base, path in self._paths.items():
+                    path.append(obs.bases[base].pose[:2])
                 ticks += 1
                 if ticks % max(1, round(self.rate)) == 0:
                     self._publish_state(obs.now)
@@ -233,11 +245,13 @@ class CoordinatorNode(Node):
                 identification_details=list(seen.identifications.details),
                 peaks=dict(seen.peak),
                 joint_names={arm: list(limits) for arm, limits in seen.speed_joints.items()},
-                driven_past=list(seen.driven_past), youbot_path=list(self._path),
+                driven_past=list(seen.driven_past),
+                youbot_path=list(self._paths[self.layout.transport.name]),
                 events=list(self.pipeline.events),
                 # How old the odometry was when the drive acted on it [s] (simulated time).
                 odometry_age=None if self.synchronous else seen.drive_lead.summary(),
-                closest_bases=seen.closest_bases if self.layout.fleet else None)
+                closest_bases=seen.closest_bases if self.layout.fleet else None,
+                paths=self._paths if self.layout.fleet else {})
         out = build_result(result, truth, identified, self.regions, trace).with_run(
             code=code_version(), wall_time=round(time.monotonic() - self._started, 2),
             # (Its own CPU time: a trial runner measures the other nodes', which run on.)
@@ -259,8 +273,7 @@ class CoordinatorNode(Node):
         p = self.pipeline
         tally = p.tally()
         msg = PipelineState(loader_state=p.loader.state.value,
-                            # (Each youBot's, in the cell's order.)
-                            transport_state=','.join(t.state.value for t in p.transports),
+                            transport_state=transport_states(p.transports),
                             status=p.result.status if p.result else 'running',
                             total=tally.total, identified=tally.identified, picked=tally.picked,
                             delivered=tally.delivered, missed=tally.missed, failed=tally.failed,

@@ -13,7 +13,7 @@ from ros_common.outputs import staged_dir
 from studies.recorded import trial_bag
 from studies.sweep_report import sweep_lines
 from trial_record.result import TrialResult
-from trial_record.scoring import FAILURE_CAUSES
+from trial_record.scoring import FAILURE_CAUSES, FIRST_STATE
 from world_description.footprint import footprints
 from world_description.resources import ResourceError, resolve_resource
 from world_description.world_config import WorldConfigError, load_world, parse_world
@@ -117,25 +117,38 @@ def bars(rows: Sequence[Tuple[str, float, float]], out: Path, title: str) -> Non
 # TransportState), and the belt's.
 STATE_COLORS = {
     'start': (220, 220, 220), 'wait': (200, 200, 200), 'wait_load': (200, 200, 200),
+    'wait_bay': (200, 200, 200), 'leave': (200, 200, 200),
     'pick': (14, 127, 255), 'grasp': (14, 127, 255),
     'place': (180, 119, 31), 'carry': (180, 119, 31),
     'rise': (232, 199, 174), 'release': (232, 199, 174),
     'retreat': (40, 39, 214), 'drive': (44, 160, 44),
     'home': (189, 103, 148), 'fold': (189, 103, 148), 'running': (120, 120, 120)}
-TIMELINE_LANES = (('belt', 'belt'), ('Zu 12', 'loader'), ('youBot', 'transport'))
+# The loader's machine and, with one youBot, the transport's; a fleet's youBots each have a
+# machine of their own, by their robot names.
+LOADER, TRANSPORT = 'loader', 'transport'
+
+
+def lanes_of(trial: TrialResult) -> List[Tuple[str, str]]:
+    """The timeline's lanes, (label, machine): the belt, the Zu 12, and each youBot (one lane
+    per robot of a fleet, named as the world names it)."""
+    youbots = list(trial.transports or {}) or [TRANSPORT]
+    return ([('belt', 'belt'), ('Zu 12', LOADER)]
+            + [('youBot' if m == TRANSPORT else m, m) for m in youbots])
 
 
 def activity(trial: TrialResult) -> Dict[str, List[Tuple[float, float, str]]]:
-    """Per lane of the timeline (the belt, the Zu 12, the youBot): (start, end, state) from a
+    """Per lane of the timeline (the belt, the Zu 12, each youBot): (start, end, state) from a
     trial's state changes and belt events, up to its completion time."""
     end = float(trial.completion_time)
     if not math.isfinite(end):             # (a run that did not end: up to its last record)
         end = max([float(s[0]) for s in trial.states] + [float(e[0]) for e in trial.events]
                   + [0.0])
     lanes: Dict[str, List[Tuple[float, float, str]]] = {}
-    for label, machine in TIMELINE_LANES[1:]:
+    for label, machine in lanes_of(trial)[1:]:
         changes = [(float(t), state) for t, who, state in trial.states
                    if who == machine]
+        if machine in (trial.transports or {}) and (not changes or changes[0][0] > 0.0):
+            changes.insert(0, (0.0, FIRST_STATE))      # (a fleet's youBot waits at its park)
         lanes[label] = [(t0, t1, state) for (t0, state), (t1, _) in
                         zip(changes, changes[1:] + [(end, '')]) if t1 > t0 and state != 'done']
     belt = [float(e[0]) for e in trial.events if e[1] == 'belt_started']
@@ -155,21 +168,22 @@ def timeline_image(trial: TrialResult, end: Optional[float] = None,
     axis), else at the run's completion."""
     img = _canvas(title or (f'Activity over trial {trial.trial} (seed {trial.scenario_seed}, '
                             f'belt {trial.belt_speed:.3f} m/s): completed in '
-                            f'{trial.completion_time:.1f} s'), (900, 330))
+                            f'{trial.completion_time:.1f} s'),
+                  (900, 150 + 60 * len(lanes_of(trial))))
     left, top, w, lane_h = 90, 50, 780, 50
     if end is None:
         end = trial.completion_time if math.isfinite(trial.completion_time) else 1.0
     end = max(1.0, float(end))
     lanes = activity(trial)
-    for i, (label, _) in enumerate(TIMELINE_LANES):
+    for i, (label, _) in enumerate(lanes_of(trial)):
         y0 = top + i * (lane_h + 10)
-        cv2.putText(img, label, (10, y0 + 30), FONT, 0.5, (0, 0, 0), 1)
+        cv2.putText(img, label[:11], (10, y0 + 30), FONT, 0.5, (0, 0, 0), 1)
         for t0, t1, state in lanes[label]:
             x0, x1 = (int(left + w * t / end) for t in (t0, t1))
             cv2.rectangle(img, (x0, y0), (max(x0, x1 - 1), y0 + lane_h),
                           STATE_COLORS.get(state, (0, 0, 0)), -1)
         cv2.rectangle(img, (left, y0), (left + w, y0 + lane_h), (0, 0, 0), 1)
-    axis = top + len(TIMELINE_LANES) * (lane_h + 10)
+    axis = top + len(lanes_of(trial)) * (lane_h + 10)
     for t in range(0, int(end) + 1, 10):
         x = int(left + w * t / end)
         cv2.line(img, (x, axis - 5), (x, axis), (0, 0, 0), 1)
@@ -240,6 +254,7 @@ def _write_report(trials: Sequence[TrialResult], out_dir: Path, stage: Path,
         ' (the trials were run by different code)' if len(codes) > 1 else '') + '.']
     if s:
         lines += _table(s)
+    lines += fleet_lines(ok)
     lines += sweep_lines(ok, stage, float(setup.get('break_below') or 0.9))
     bad = [t for t in trials if t.status != 'completed']
     lines += _causes(ok)
@@ -256,6 +271,34 @@ def _write_report(trials: Sequence[TrialResult], out_dir: Path, stage: Path,
         lines += ['The trial of median completion time, each robot\'s activity over it:', '',
                   '![timeline](timeline.png)', ''] + _storyboard(shown, out_dir, stage)
     (stage / 'report.md').write_text('\n'.join(lines))
+
+
+def fleet_lines(trials: Sequence[TrialResult]) -> List[str]:
+    """Each youBot's share over the trials of a fleet (none for one youBot): means per trial
+    of its trips, materials carried and delivered, distance driven, and time busy and
+    waiting; and how near the bases came."""
+    fleet = [t for t in trials if t.transports]
+    if not fleet:
+        return []
+    robots = list(dict.fromkeys(r for t in fleet for r in t.transports or {}))
+    lines = ['## Each youBot\'s share', '',
+             f'Means per trial over the {len(fleet)} trials with several youBots.', '',
+             '| youBot | trips | carried | delivered | distance (m) | busy (s) | waiting (s) |',
+             '|---|---|---|---|---|---|---|']
+    for robot in robots:
+        shares = [(t.transports or {})[robot] for t in fleet if robot in (t.transports or {})]
+        mean = {k: float(np.mean([sh[k] for sh in shares]))
+                for k in ('trips', 'carried', 'delivered', 'distance', 'busy', 'waiting')}
+        lines.append(f'| {robot} | {mean["trips"]:.1f} | {mean["carried"]:.1f} | '
+                     f'{mean["delivered"]:.1f} | {mean["distance"]:.1f} | {mean["busy"]:.1f} | '
+                     f'{mean["waiting"]:.1f} |')
+    near = [t.closest_bases['distance'] for t in fleet if t.closest_bases]
+    if near:
+        lines += ['', f'The bases came no nearer than {min(near):.3f} m, footprint to footprint '
+                  '(the simulator\'s ground truth, `closest_bases`).']
+    return lines + ['', 'Busy: driving, unloading and folding; waiting: to be loaded, for '
+                    'the loading pose, or to leave the pool (docs/writing-a-cell.md, "Several '
+                    'youBots").', '']
 
 
 def _causes(trials: Sequence[TrialResult]) -> List[str]:
@@ -302,10 +345,10 @@ def _plots(ok: Sequence[TrialResult], s: Dict[str, float], out_dir: Path,
               ('grasp', 100 * s['grasp_success_rate'], 99.0),
               ('handling', 100 * s['handling_success_rate'], 100.0)],
              out_dir / 'success_rates.png', 'Success rates [%]')
-    paths = {f'trial {t.trial}': np.asarray(t.youbot_path or np.zeros((0, 2)))
-             for t in sorted(ok, key=lambda t: t.trial or 0)[:5]}
+    paths = youbot_paths(sorted(ok, key=lambda t: t.trial or 0))
     if paths:
-        plot_paths(paths, out_dir / 'youbot_paths.png', "The youBot's paths over the cell",
+        plot_paths(paths, out_dir / 'youbot_paths.png', "The youBots' paths over the cell"
+                   if any(t.transports for t in ok) else "The youBot's paths over the cell",
                    shapes=cell_shapes(world))
     shown = sorted((t for t in ok if t.states), key=lambda t: t.completion_time)
     if not shown:
@@ -313,6 +356,21 @@ def _plots(ok: Sequence[TrialResult], s: Dict[str, float], out_dir: Path,
     median = shown[len(shown) // 2]       # the trial of median completion time
     timeline(median, out_dir / 'timeline.png')
     return median
+
+
+def youbot_paths(trials: Sequence[TrialResult], most: int = 6) -> Dict[str, np.ndarray]:
+    """The paths the paths map draws: each youBot's (every robot of a fleet) of the first
+    trials, at most ``most`` paths, a trial's robots all or none."""
+    out: Dict[str, np.ndarray] = {}
+    for t in trials:
+        robots = {f'trial {t.trial} {name}': share['path']
+                  for name, share in (t.transports or {}).items()} or {
+                      f'trial {t.trial}': t.youbot_path}
+        if out and len(out) + len(robots) > most:
+            break
+        out.update({k: np.asarray(p or np.zeros((0, 2)), float).reshape(-1, 2)
+                    for k, p in robots.items()})
+    return out
 
 
 def _storyboard(trial: TrialResult, out_dir: Path, stage: Path) -> List[str]:

@@ -37,7 +37,8 @@ class Axis:
 
 
 def parse_axis(spec: str) -> Axis:
-    """``name=start:stop:step`` (stop included) or ``name=v1,v2,...``."""
+    """``name=start:stop:step`` (stop included; ``start:stop`` steps by 1) or
+    ``name=v1,v2,...``."""
     name, sep, values = spec.partition('=')
     name = name.strip()
     if not sep or not _NAME.match(name):
@@ -46,7 +47,9 @@ def parse_axis(spec: str) -> Axis:
                          'perturbations.camera.pixel_noise)')
     try:
         if ':' in values:
-            start, stop, step = (float(v) for v in values.split(':'))
+            parts = values.split(':')
+            # (START:STOP counts in ones: a fleet's size, a count of materials.)
+            start, stop, step = (float(v) for v in (parts if len(parts) != 2 else parts + ['1']))
             if not (all(math.isfinite(v) for v in (start, stop, step)) and step > 0.0
                     and stop >= start):
                 raise ValueError

@@ -23,7 +23,7 @@ from controllers.path_follower import PathFollower
 from coordinator.pipeline.model import BaseReading, Observation
 from coordinator.pipeline.traffic import LOADING, STANDS, Traffic
 from world_description.resources import resolve_resource
-from world_description.world_config import load_world, parse_world
+from world_description.world_config import WorldConfigError, load_world, parse_world
 
 TWO = resolve_resource('package://world_description/worlds/cell_two_youbots.yaml')
 PAPER = resolve_resource('package://world_description/worlds/pipeline_cell.yaml')
@@ -223,3 +223,127 @@ def test_two_youbots_share_the_carrying_and_their_bases_keep_the_clearance_at_ev
     # Each youBot's arm ends folded, the run's states name each youBot's machine.
     machines = {e.robot for e in cell.events if e.kind == 'state'}
     assert {'loader', 'youbot', 'youbot2'} <= machines
+
+
+def test_each_youbots_share_of_the_run_is_in_its_result_and_reads_back():
+    """The result of a fleet's run says what each youBot did (trips, materials carried and
+    delivered, distance driven by its path, time busy and waiting by its states), and the
+    shares add up to the run's; the record reads back checked."""
+    from test_pipeline import FakeCell, run
+
+    from trial_record.result import ResultError, TrialResult
+    from trial_record.scoring import RunTrace, build_result, destinations
+    layout = layout_from_world(load_world(TWO))
+    colors = ['orange'] * 6 + ['purple'] + ['orange'] * 3 + ['blue'] + ['orange'] * 4 + ['blue']
+    cell = FakeCell(layout, colors, base_loop=True)
+    p = run(cell, limit=400.0)
+    paths = {n: [tuple(q[:2]) for q in cell.paths[n]] for n in ('youbot', 'youbot2')}
+    trace = RunTrace(seed=7, belt_speed=layout.belt_speed, mode='lock-step', start=p.start_time,
+                     identification_details=[], peaks={}, joint_names={},
+                     youbot_path=paths['youbot'], events=p.events, paths=paths)
+    out = build_result(p.result, [], [], destinations(layout), trace)
+    shares = out.transports
+    assert set(shares) == {'youbot', 'youbot2'}
+    assert sum(s['trips'] for s in shares.values()) == out.trips
+    assert all(s['trips'] >= 1 and s['delivered'] <= s['carried'] for s in shares.values())
+    assert sum(s['carried'] for s in shares.values()) == out.loaded
+    carried = sum(1 for c in colors if layout.carried(c))
+    assert sum(s['delivered'] for s in shares.values()) == carried
+    for name, s in shares.items():
+        xy = np.array(paths[name])
+        assert s['distance'] == pytest.approx(np.linalg.norm(np.diff(xy, axis=0), axis=1).sum(),
+                                              abs=1e-3)
+        assert s['distance'] > 2.0
+        assert s['busy'] > 0 and s['waiting'] > 0
+        # (From the start: a youBot waits at its park until its first change of state.)
+        done = min([t for t, who, state in out.states if who == name and state == 'done']
+                   + [out.completion_time])
+        assert s['busy'] + s['waiting'] == pytest.approx(done, abs=2e-3)
+        assert len(s['path']) == len(paths[name][::3])
+    record = out.to_dict()
+    assert TrialResult.from_dict(record).transports == shares
+    bad = copy.deepcopy(record)
+    bad['transports']['youbot2']['delivered'] = 99
+    with pytest.raises(ResultError, match='youbot2: delivered'):
+        TrialResult.from_dict(bad)
+    bad = copy.deepcopy(record)
+    bad['transports']['youbot']['busy'] = -1.0
+    with pytest.raises(ResultError, match='transports: youbot: busy'):
+        TrialResult.from_dict(bad)
+    # One youBot's record has no shares: it stays as it was.
+    one = layout_from_world(load_world(PAPER))
+    assert not one.fleet
+    assert 'transports' not in TrialResult(status='completed').to_dict()
+
+
+def test_the_published_state_names_each_youbot_of_a_fleet():
+    from coordinator.coordinator_node import transport_states
+    from coordinator.pipeline.model import TransportState
+
+    def youbot(name, state):
+        return SimpleNamespace(robot=name, state=state)
+    assert transport_states([youbot('youbot', TransportState.DRIVE)]) == 'drive'
+    assert transport_states([youbot('a', TransportState.DRIVE),
+                             youbot('b', TransportState.WAIT_BAY)]) == 'a: drive, b: wait_bay'
+
+
+# --- the fleet's size (cell.youbots) -------------------------------------------------------------
+def _sized(count, **cell):
+    data = two_youbots()
+    data['cell'].update(youbots=count, **cell)
+    return data
+
+
+def test_the_fleets_size_leaves_the_last_youbots_out_of_the_world():
+    """``cell.youbots`` keeps the first youBots of the list (a sweep's fleet size): the others
+    and the cameras they carry are left out; one youBot that starts away from the loading pose
+    is a fleet of one (it waits at its park and drives to be loaded)."""
+    data = _sized(1.0)                           # (as a sweep writes it)
+    data['cameras'].append({'name': 'rear', 'robot': 'youbot2', 'link': 'base_link',
+                            'width': 64, 'height': 48, 'rate': 5.0,
+                            'vertical_fov_deg': 60.0})
+    world = parse_world(data)
+    assert [r.name for r in world.robots] == ['zu12', 'youbot']
+    assert [c.name for c in world.cameras] == ['belt_camera']
+    assert world.roles.transports == ('youbot',) and world.roles.left_out == ('youbot2',)
+    layout = layout_from_world(world)
+    assert layout.fleet and layout.park('youbot') == pytest.approx((1.6, 0.6, -math.pi / 2))
+    assert layout.youbot_home == pytest.approx((0.8, 0.05, -math.pi / 2))
+    both = parse_world(_sized(2))
+    assert [r.name for r in both.robots] == ['zu12', 'youbot', 'youbot2']
+    # A loading pose at the one youBot's start pose is the paper's cell: no parks.
+    paper = layout_from_world(parse_world(_moved(_sized(1), 'youbot', x=0.8, y=0.05)))
+    assert not paper.fleet
+
+
+@pytest.mark.parametrize('count, why', [
+    (3, r'cell.youbots must be finite and within \[1, 2\], got 3'),
+    (0, r'within \[1, 2\], got 0'),
+    (1.5, 'must be an integer'),
+    ('two', 'must be a number'),
+])
+def test_a_fleet_size_out_of_its_range_is_refused_in_one_line(count, why):
+    with pytest.raises(WorldConfigError, match=why):
+        parse_world(_sized(count))
+
+
+def test_a_smaller_fleet_needs_its_loading_pose():
+    data = _without(_sized(1), 'loading')
+    with pytest.raises(WorldConfigError, match=r"cell.youbots leaves out \['youbot2'\]: .*"
+                                               'cell.loading'):
+        parse_world(data)
+
+
+def test_a_fleet_of_one_carries_everything_from_its_park():
+    """The example with one youBot: it drives from its park to be loaded, carries every load,
+    and the run completes (the fake cell of test_pipeline)."""
+    from test_pipeline import FakeCell, run
+    layout = layout_from_world(parse_world(_sized(1)))
+    colors = ['orange'] * 6 + ['purple'] + ['orange'] * 3 + ['blue'] + ['orange'] * 4 + ['blue']
+    cell = FakeCell(layout, colors, base_loop=True)
+    p = run(cell, limit=600.0)
+    assert p.result.status == 'completed', p.result
+    assert p.result.delivered == 16 and p.result.trips >= 2
+    assert {e.robot for e in cell.events if e.kind == 'departing'} == {'youbot'}
+    assert set(p.result.transports) == {'youbot'}
+    assert p.result.transports['youbot']['carried'] == 15

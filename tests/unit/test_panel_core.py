@@ -39,6 +39,11 @@ def test_the_robots_of_each_world():
     # The Zu 12 has no base: only the youBot is driven; it carries no camera, so the belt's.
     assert [r.namespace for r in cell] == ['/youbot']
     assert cell[0].camera == '/belt_camera/image_raw'
+    # A fleet: the page lists every youBot, each driven on its own topics.
+    fleet = robots_of_world(world('cell_two_youbots'), 0.8, 1.5)
+    assert [(r.name, r.cmd_vel, r.odom) for r in fleet] == [
+        ('youbot', '/youbot/cmd_vel', '/youbot/odom'),
+        ('youbot2', '/youbot2/cmd_vel', '/youbot2/odom')]
 
 
 @pytest.mark.parametrize('message, why', [

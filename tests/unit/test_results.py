@@ -185,6 +185,41 @@ def test_the_report_draws_each_robots_activity_over_the_median_trial(tmp_path):
     assert at(2, 67.0) == STATE_COLORS['drive']
 
 
+def test_a_fleets_report_has_a_lane_a_path_and_a_row_per_youbot(tmp_path):
+    """With several youBots the timeline has a lane per youBot (its machine is its robot's
+    name), the paths map draws every youBot's path, and a table gives each one's share."""
+    from studies.report import youbot_paths
+
+    def share(trips, path):
+        return {'trips': trips, 'carried': 4 * trips, 'delivered': 4 * trips, 'distance': 9.5,
+                'busy': 40.0, 'waiting': 20.0, 'path': path}
+    trials = [TrialResult.from_dict({
+        'trial': k, 'status': 'completed', 'completion_time': 60.0 + k, 'youbot_path': [],
+        'transports': {'alpha': share(1 + k, [[0.0, 0.0], [1.0, 0.0]]),
+                       'beta': share(2, [[0.0, 1.0], [1.0, 1.0]])},
+        'closest_bases': {'distance': 0.25 - 0.01 * k, 'time': 3.0, 'robots': ['alpha', 'beta']},
+        'states': [[0.0, 'loader', 'wait'], [0.0, 'alpha', 'wait_load'],
+                   [10.0, 'alpha', 'drive'], [0.0, 'beta', 'wait_bay'],
+                   [20.0, 'beta', 'drive'], [50.0, 'beta', 'done']]}) for k in range(3)]
+    lanes = activity(trials[0])
+    assert set(lanes) == {'belt', 'Zu 12', 'alpha', 'beta'}
+    assert lanes['beta'] == [(0.0, 20.0, 'wait_bay'), (20.0, 50.0, 'drive')]
+    # Before its first change of state a youBot waits at its park.
+    trials[1].states[1:3] = [[5.0, 'alpha', 'wait_load'], [10.0, 'alpha', 'drive']]
+    assert activity(trials[1])['alpha'][0] == (0.0, 5.0, 'wait_bay')
+    assert list(youbot_paths(trials)) == ['trial 0 alpha', 'trial 0 beta', 'trial 1 alpha',
+                                          'trial 1 beta', 'trial 2 alpha', 'trial 2 beta']
+    assert len(youbot_paths(trials, most=5)) == 4          # (a trial's robots all or none)
+    report = write_report(trials, tmp_path, {'note': 'a fleet'}).read_text()
+    assert '| alpha | 2.0 | 8.0 | 8.0 | 9.5 | 40.0 | 20.0 |' in report
+    assert '| beta | 2.0 | 8.0 |' in report
+    assert 'no nearer than 0.230 m' in report
+    img = cv2.imread(str(tmp_path / 'timeline.png'))
+    assert img.shape[0] == 150 + 60 * 4
+    y = 50 + 3 * 60 + 25                                      # beta's lane, trial 1 (61 s)
+    assert tuple(int(v) for v in img[y, int(90 + 780 * 30.0 / 61.0)]) == STATE_COLORS['drive']
+
+
 def test_a_trial_plan_is_reproducible_and_splits_over_machines():
     whole = trial_plan(10, 0, 2026, (0.1, 0.16))
     assert whole == trial_plan(10, 0, 2026, (0.1, 0.16))

@@ -30,8 +30,9 @@ def test_an_axis_is_a_range_or_a_list():
     assert parse_axis('perturbations.camera.pixel_noise=0,2.5,8') == Axis(
         'perturbations.camera.pixel_noise', (0.0, 2.5, 8.0))
     assert parse_axis('x=1:1:1') == Axis('x', (1.0,))
+    assert parse_axis('cell.youbots=1:3') == Axis('cell.youbots', (1.0, 2.0, 3.0))
     for bad in ('belt_speed', '=1,2', 'a..b=1', 'x=1:0:1', 'x=0:1:0', 'x=0:1:nan', 'x=1,two',
-                'x=0:1000:1', '9x=1'):
+                'x=0:1000:1', '9x=1', 'x=3:1', 'x=1:2:3:4', 'x=0:1000'):
         with pytest.raises(SweepError):
             parse_axis(bad)
 

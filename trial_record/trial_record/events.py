@@ -72,3 +72,6 @@ class RunResult:
     loaded: int = 0                    # materials the Zu 12 set down on the youBot's plate
     trips: int = 0                     # loads the youBot set off with
     belt_stops: int = 0                # times the belt stopped while loading (a full queue)
+    # Several youBots: per youBot, its trips, the materials it set off with (carried) and those
+    # of its plate it delivered ({} for one youBot: the run's own counts are its).
+    transports: Dict[str, Dict[str, int]] = field(default_factory=dict)

@@ -62,6 +62,7 @@ MAX_PARAMETERS = 16
 PARAMETER_NAME = re.compile(r'^[A-Za-z_][A-Za-z0-9_]*(\.[A-Za-z_][A-Za-z0-9_]*)*$')
 MAX_PATH_XY_M = 1e4                 # a path point's coordinates [m]
 MAX_DRIVEN_PAST = 64                # joints driven past their speed limits, kept per trial
+MAX_ROBOTS = 16                     # youBots a result tells apart
 
 
 class ResultError(RecordError):
@@ -136,6 +137,9 @@ class TrialResult:
     # A cell with several mobile bases: how near two of them came, footprint to footprint, by
     # the simulator's ground truth: {distance [m], time [s], robots: [a, b]}.
     closest_bases: Optional[Dict[str, Any]] = None
+    # A cell with several youBots: each one's share (scoring.fleet_shares): trips, carried,
+    # delivered, distance [m], busy and waiting [s], and its path (as youbot_path).
+    transports: Optional[Dict[str, Dict[str, Any]]] = None
     youbot_path: List[List[float]] = field(default_factory=list)
     events: List[List[Any]] = field(default_factory=list)
     states: List[List[Any]] = field(default_factory=list)
@@ -177,7 +181,7 @@ class TrialResult:
 
     def to_dict(self) -> Dict[str, Any]:
         out = asdict(self)
-        for key in ('odometry_age', 'closest_bases'):
+        for key in ('odometry_age', 'closest_bases', 'transports'):
             if out[key] is None:
                 del out[key]
         return out
@@ -264,6 +268,30 @@ def _outcome(f: Fields) -> Dict[str, Any]:
         out['closest_bases'] = {'distance': c.number('distance', 0.0, MAX_PATH_XY_M),
                                 'time': c.number('time', -MAX_SIM_TIME_S, MAX_SIM_TIME_S),
                                 'robots': list(robots)}
+    if f.has('transports') and f.data['transports'] is not None:
+        out['transports'] = _transports(f)
+    return out
+
+
+def _transports(f: Fields) -> Dict[str, Dict[str, Any]]:
+    shares = f.record('transports', {})
+    if not 0 < len(shares.data) <= MAX_ROBOTS:
+        raise f.fail('transports', f'are {len(shares.data)} youBots, not 1 to {MAX_ROBOTS}')
+    out = {}
+    for robot in shares.data:
+        if not isinstance(robot, str) or not 0 < len(robot) <= 256:
+            raise f.fail('transports', f'name {str(robot)[:40]!r}, which is no robot\'s name')
+        r = shares.record(robot)
+        r.only(('trips', 'carried', 'delivered', 'distance', 'busy', 'waiting', 'path'))
+        share: Dict[str, Any] = {key: r.integer(key, 0, MAX_COUNT)
+                                 for key in ('trips', 'carried', 'delivered')}
+        if share['delivered'] > share['carried']:
+            raise r.fail('delivered', f'is {share["delivered"]}, more than carried '
+                         f'({share["carried"]})')
+        share['distance'] = r.number('distance', 0.0, MAX_PATH_XY_M * 100)
+        share.update({key: r.number(key, 0.0, MAX_SIM_TIME_S) for key in ('busy', 'waiting')})
+        share['path'] = _path(r, 'path')
+        out[robot] = share
     return out
 
 
@@ -352,12 +380,12 @@ def _driven_past(f: Fields) -> List[Dict[str, Any]]:
     return out
 
 
-def _path(f: Fields) -> List[List[float]]:
-    points = f.items('youbot_path', [])
+def _path(f: Fields, key: str = 'youbot_path') -> List[List[float]]:
+    points = f.items(key, [])
     for k, point in enumerate(points):
         if not (isinstance(point, list) and len(point) == 2 and all(
                 is_number(v) and abs(v) <= MAX_PATH_XY_M for v in point)):
-            raise f.fail(f'youbot_path[{k}]', f'is not [x, y] within {MAX_PATH_XY_M:g} m')
+            raise f.fail(f'{key}[{k}]', f'is not [x, y] within {MAX_PATH_XY_M:g} m')
     return [[float(x), float(y)] for x, y in points]
 
 

@@ -20,7 +20,7 @@ Definitions (docs/pipeline.md repeats them):
 from __future__ import annotations
 
 import math
-from dataclasses import asdict, dataclass, replace
+from dataclasses import asdict, dataclass, field, replace
 from typing import Any, Dict, FrozenSet, List, Mapping, Optional, Sequence, Tuple
 
 import numpy as np
@@ -266,7 +266,8 @@ def score(result: RunResult, final_truth: Sequence[TruePose], identifications: S
         message = '; '.join(([message] if message else []) + told)
     plate_bound = sum(1 for color, p in final_truth
                       if color in regions.carried and at_destination(color, p, regions))
-    counts = {k: v for k, v in asdict(result).items() if k not in ('status', 'message')}
+    counts = {k: v for k, v in asdict(result).items()
+              if k not in ('status', 'message', 'transports')}
     return TrialResult(
         status=status, message=message, **counts, not_at_destination=missing,
         # The paper's split: the Zu 12's recognition and grasps, the youBot's transport.
@@ -293,6 +294,8 @@ class RunTrace:
     joint_names: Mapping[str, Sequence[str]]
     youbot_path: Sequence[Tuple[float, float]]
     events: Sequence[Event]
+    # Several youBots: each one's path as its odometry saw it, at every decision ({} for one).
+    paths: Mapping[str, Sequence[Tuple[float, float]]] = field(default_factory=dict)
     odometry_age: Optional[Dict[str, float]] = None
     # Several mobile bases: their closest approach (distance, time, robots), by the ground truth.
     closest_bases: Optional[Dict[str, Any]] = None
@@ -314,6 +317,9 @@ def build_result(result: RunResult, final_truth: Sequence[TruePose],
               'at_destination': at_destination(color, p, regions),
               'why': why_not_there(color, p, regions)} for k, (color, p) in enumerate(final_truth)]
     start = trace.start
+    # Each machine's state changes: the report's timeline.
+    states = [[round(e.time - start, 4), e.robot, e.detail]
+              for e in trace.events if e.kind is EventKind.STATE]
     events = [[round(e.time - start, 4), str(e.kind), e.robot, e.material, e.color, e.detail]
               for e in trace.events if e.kind is not EventKind.STATE]
     missing = []
@@ -334,10 +340,42 @@ def build_result(result: RunResult, final_truth: Sequence[TruePose],
                             for d in trace.driven_past][:MAX_DRIVEN_PAST],
         scenario_seed=trace.seed, belt_speed=trace.belt_speed, mode=trace.mode,
         youbot_path=[[round(x, 4), round(y, 4)] for x, y in trace.youbot_path[::3]],
-        events=events, not_at_destination=missing,
-        # Each machine's state changes: the report's timeline.
-        states=[[round(e.time - start, 4), e.robot, e.detail]
-                for e in trace.events if e.kind is EventKind.STATE])
+        events=events, not_at_destination=missing, states=states,
+        transports=fleet_shares(result.transports, states, trace.paths, out.completion_time))
+
+
+# A youBot's states in which it waits for another robot (to be loaded, for the loading pose, to
+# leave the pool); in the others it drives or unloads.
+WAITING_STATES = frozenset(('wait_load', 'wait_bay', 'leave'))
+FIRST_STATE = 'wait_bay'            # a fleet's youBot's state before its first change
+
+
+def fleet_shares(counts: Mapping[str, Mapping[str, int]], states: Sequence[Sequence[Any]],
+                 paths: Mapping[str, Sequence[Tuple[float, float]]], end: float
+                 ) -> Optional[Dict[str, Dict[str, Any]]]:
+    """Each youBot's share of a fleet's run (None for one youBot): its counts, the distance
+    it drove (its odometry's path) [m], and its time busy (driving, unloading, folding) and
+    waiting (``WAITING_STATES``) from the start to ``end`` [s], from its state changes."""
+    if not counts:
+        return None
+    out = {}
+    for robot, c in counts.items():
+        changes = [(float(t), state) for t, who, state in states if who == robot]
+        if not changes or changes[0][0] > 0.0:
+            changes.insert(0, (0.0, FIRST_STATE))      # (it starts waiting at its park)
+        busy = waiting = 0.0
+        for (t0, state), t1 in zip(changes, [t for t, _ in changes[1:]] + [end]):
+            span = max(0.0, min(t1, end) - t0) if math.isfinite(end) else max(0.0, t1 - t0)
+            if state in WAITING_STATES:
+                waiting += span
+            elif state != 'done':
+                busy += span
+        xy = np.asarray(paths.get(robot, ()), float).reshape(-1, 2)
+        distance = float(np.sum(np.linalg.norm(np.diff(xy, axis=0), axis=1))) if len(xy) else 0.0
+        out[robot] = {**c, 'distance': round(distance, 3), 'busy': round(busy, 3),
+                      'waiting': round(waiting, 3),
+                      'path': [[round(x, 4), round(y, 4)] for x, y in xy[::3].tolist()]}
+    return out
 
 
 class PeakJointSpeed:

@@ -190,12 +190,15 @@ class CellRoles:
     the paper's: ``zu12`` loads and ``youbot`` carries. With several transports: where the
     loader loads them (``loading``: x, y, yaw; one at a time; each waits for it at its start
     pose), how near two bases may come (``clearance``, between their footprints [m]), and how
-    many materials a transport sets off with at most (``trip_load``; 0: a full plate)."""
+    many materials a transport sets off with at most (``trip_load``; 0: a full plate).
+    ``youbots``: how many of the transports take part, the first ones (default all); the
+    others (``left_out``) are left out of the world, and the cameras they carry with them."""
     loader: str = 'zu12'
     transports: Tuple[str, ...] = ('youbot',)
     loading: Optional[Tuple[float, float, float]] = None    # None: the first transport's start
     clearance: float = 0.1
     trip_load: int = 0
+    left_out: Tuple[str, ...] = ()
 
 
 @dataclass(frozen=True)

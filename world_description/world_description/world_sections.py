@@ -59,10 +59,14 @@ def parse_world(data: Any, source: str = '<memory>') -> WorldConfig:
     namespaces = [rb.namespace for rb in robots]
     if len(set(namespaces)) != len(namespaces):
         raise WorldConfigError(f'{source}: robot namespaces must be unique, got {namespaces}')
+    cell = _cell(r, data['cell'], robots) if data.get('cell') is not None else None
+    left_out = set(cell.left_out) if cell is not None else set()
+    robots = [rb for rb in robots if rb.name not in left_out]
     obstacles = [_obstacle(r, item, i)
                  for i, item in enumerate(r.list(data, 'obstacles', 'world'))]
     cameras = [_camera(r, item, i, robots)
-               for i, item in enumerate(r.list(data, 'cameras', 'world'))]
+               for i, item in enumerate(r.list(data, 'cameras', 'world'))
+               if not (isinstance(item, dict) and item.get('robot') in left_out)]
     conveyor = _conveyor(r, data['conveyor']) if data.get('conveyor') is not None else None
     materials = None
     if data.get('materials') is not None:
@@ -77,15 +81,15 @@ def parse_world(data: Any, source: str = '<memory>') -> WorldConfig:
                        robots=robots, obstacles=obstacles, cameras=cameras, conveyor=conveyor,
                        materials=materials,
                        perturbations=_perturbations(r, data.get('perturbations') or {}),
-                       cell=_cell(r, data['cell'], robots) if data.get('cell') is not None
-                       else None)
+                       cell=cell)
 
 
 def _cell(r: Reader, item: Any, robots: List[RobotConfig]) -> CellRoles:
     """The cell's roles: the loader a fixed arm with a suction cup, each transport a mobile
     robot with a drive and a gripper, no robot in two roles."""
     where = 'cell'
-    r.only(item, where, {'loader', 'transports', 'loading', 'clearance', 'trip_load'})
+    r.only(item, where, {'loader', 'transports', 'loading', 'clearance', 'trip_load',
+                         'youbots'})
     by_name = {rb.name: rb for rb in robots}
     loader = r.name(item, 'loader', where)
     arm = by_name.get(loader)
@@ -117,7 +121,15 @@ def _cell(r: Reader, item: Any, robots: List[RobotConfig]) -> CellRoles:
         loading = (x, y, yaw)
     clearance = r.number(item, 'clearance', where, default=0.1, lo=0.0, hi=1.0)
     trip_load = int(r.number(item, 'trip_load', where, default=0, lo=0, hi=100, integer=True))
-    return CellRoles(loader, tuple(names), loading, clearance, trip_load)
+    # How many of them take part: the first ones (a sweep's fleet size); the others are left
+    # out of the world.
+    count = int(r.number(item, 'youbots', where, default=len(names), lo=1, hi=len(names),
+                         integer=True))
+    if count < len(names) and loading is None:
+        raise r.fail(where, 'youbots', f'leaves out {names[count:]}: a fleet smaller than its '
+                     'transports needs its loading pose (cell.loading)')
+    return CellRoles(loader, tuple(names[:count]), loading, clearance, trip_load,
+                     tuple(names[count:]))
 
 
 def _robot(r: Reader, item: Any, i: int) -> RobotConfig:

@@ -202,6 +202,10 @@ class Pipeline:
             missed=tally.missed, failed=tally.failed, message=message,
             materials=[{'id': m.id, 'color': m.color, 'status': m.status.value,
                         'attempts': m.attempts, 'unload_attempts': m.unload_attempts,
-                        'failure': m.failure} for m in mats])
+                        'failure': m.failure} for m in mats],
+            # A fleet: each youBot's share (one youBot's is the run's own).
+            transports={t.robot: {'trips': t.trips, 'carried': t.carried, 'delivered': sum(
+                1 for m in mats if m.plate == t.robot and m.status is MaterialStatus.DELIVERED)}
+                for t in self.transports} if self.layout.fleet else {})
         self.log.event(now, EventKind.FINISHED,
                        detail=f'{status}{": " + message if message else ""}')

@@ -104,6 +104,7 @@ class Transport(Machine):
         # The arm holds a material up, over the plate, until the base stands at its stand.
         self._drop_pending = False
         self.trips = 0                                  # loads it has set off with
+        self.carried = 0                                # materials it has set off with
         S = TransportState
         self.handlers = {S.WAIT_LOAD: self._wait_load, S.DRIVE: self._drive,
                          S.GRASP: self._grasp, S.CARRY: self._carry_to_drop,
@@ -145,6 +146,7 @@ class Transport(Machine):
 
         def departing() -> None:
             self.trips += 1
+            self.carried += len(self.queue)
             self.log.event(obs.now, EventKind.DEPARTING, self.arm.name,
                            detail=f'{len(self.queue)} materials, trip {self.trips}')
         # The arm rises to its carry pose while the base drives: folded, it reaches down in
