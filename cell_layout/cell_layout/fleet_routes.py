@@ -15,7 +15,7 @@ from typing import Any, Dict, List, Sequence, Tuple
 
 import numpy as np
 
-from cell_layout.layout import CellLayout, LayoutError, UnloadStand
+from cell_layout.layout import POOL, CellLayout, LayoutError, UnloadStand
 from controllers.bezier import BezierPath, Pose2D, key_poses_between
 from controllers.footprint import Footprint, clearance, polygon_distance
 
@@ -30,6 +30,10 @@ TRACKING_MARGIN_M = 0.05
 SWEEP_STEP_M = 0.05
 # An obstacle this low is driven over (a marked area on the floor) [m].
 OBSTACLE_LOW_M = 0.01
+# A youBot leaving a stand for its park backs this far sideways off the stand's line, away from
+# the pool, before it turns towards its park [m]: turning at once, on a way half way to a park
+# north-east of the pool, its footprint swept over the corner of the pool's north wall.
+STAND_BACK_OFF_M = 0.15
 
 
 def obstacle_height(o: Any) -> float:
@@ -43,6 +47,18 @@ def way_back(stands: Sequence[UnloadStand], to: Pose2D) -> Tuple[Tuple[float, ..
     half way between it and the right stand, where the base turns round on its way."""
     right = next(st for st in stands if st.row == -1)
     return ((0.5 * (to[0] + right.pose[0]), 0.5 * (to[1] + right.pose[1]), 0.0),)
+
+
+def way_to_park(layout: CellLayout, stand: UnloadStand,
+                park: Pose2D) -> Tuple[Tuple[float, ...], ...]:
+    """The via points of the drive from ``stand`` to ``park``: first STAND_BACK_OFF_M
+    sideways off the stand's line, away from the pool, then way_back's."""
+    x, y, yaw = stand.pose
+    side = np.array([-math.sin(yaw), math.cos(yaw)])
+    if side @ (np.asarray(layout.regions[POOL].center, float) - (x, y)) > 0.0:
+        side = -side
+    off = (x + STAND_BACK_OFF_M * side[0], y + STAND_BACK_OFF_M * side[1], 0.0)
+    return (off, *way_back(layout.stands, park))
 
 
 def route_poses(start: Pose2D, goal: Pose2D, via: Sequence[Sequence[float]] = (),
@@ -66,7 +82,7 @@ def _ways(layout: CellLayout, park: Pose2D) -> Dict[str, np.ndarray]:
     for st in layout.stands:
         ways[f'the loading pose to {st.name}'] = route_poses(bay, st.pose, layout.way_out(st.name))
         ways[f'{st.name} to the loading pose'] = route_poses(st.pose, bay, layout.via_back)
-        ways[f'{st.name} to its park'] = route_poses(st.pose, park, way_back(layout.stands, park))
+        ways[f'{st.name} to its park'] = route_poses(st.pose, park, way_to_park(layout, st, park))
         for other in layout.stands:
             if other is not st:
                 ways[f'{st.name} to {other.name}'] = route_poses(st.pose, other.pose,
@@ -78,9 +94,9 @@ def check_fleet(layout: CellLayout, obstacles: Sequence[Any],
                 loading_given: bool) -> None:
     """A LayoutError (one line, naming the robot) unless the fleet's youBots can share the
     floor: the loading pose given apart from the parks, each park clear of the obstacles, the
-    loading pose and the other parks, and each youBot's ways clear of the other youBots' parks,
-    its way to its park clear of the loading pose and its way to the loading pose clear of the
-    stands (with the cell's clearance)."""
+    loading pose and the other parks, each youBot's ways off the obstacles and clear of the
+    other youBots' parks, its way to its park clear of the loading pose and its way to the
+    loading pose clear of the stands (with the cell's clearance)."""
     if not layout.fleet:
         return
     if not loading_given:
@@ -103,8 +119,9 @@ def check_fleet(layout: CellLayout, obstacles: Sequence[Any],
                 raise LayoutError(f'robot {name}: its start pose is within {gap:g} m of '
                                   f'{other}\'s')
     stands = np.array([st.pose for st in layout.stands])
+    ways = {name: _ways(layout, layout.park(name)) for name in parks}
     for name in parks:
-        for way, poses in _ways(layout, layout.park(name)).items():
+        for way, poses in ways[name].items():
             keep: List[Tuple[str, np.ndarray]] = [
                 (f'{other}\'s start pose', there) for other, there in parks.items()
                 if other != name]
@@ -119,6 +136,20 @@ def check_fleet(layout: CellLayout, obstacles: Sequence[Any],
                         f'robot {name}: its way from {way} passes {max(d, 0.0):.2f} m from '
                         f'{what} (the cell keeps {gap:g} m, and {TRACKING_MARGIN_M:g} m more '
                         'for the drive\'s errors)')
+    # (Then the obstacles: a way that is in another's way is named for that first.)
+    _check_off_the_obstacles(ways, boxes)
+
+
+def _check_off_the_obstacles(ways: Dict[str, Dict[str, np.ndarray]],
+                             boxes: List[Tuple[str, np.ndarray]]) -> None:
+    """A LayoutError unless every youBot's every way (``ways``, by robot and way) keeps its
+    footprint off every obstacle's (``boxes``)."""
+    for name, theirs in ways.items():
+        for way, poses in theirs.items():
+            hit = next((o for o, box in boxes if _box_clearance(poses, box) <= 0.0), None)
+            if hit is not None:
+                raise LayoutError(f'robot {name}: its way from {way} runs over obstacle {hit} '
+                                  '(its footprint over the wheels)')
 
 
 def keeps_clear(layout: CellLayout, way: np.ndarray, others: Sequence[np.ndarray]) -> bool:

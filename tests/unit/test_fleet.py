@@ -81,6 +81,39 @@ def _without(data, key):
     return data
 
 
+def _with_crate(data, x, y):
+    data = copy.deepcopy(data)
+    data.setdefault('obstacles', []).append({'name': 'crate', 'shape': 'box',
+                                             'size': [0.2, 0.2, 0.3], 'position': [x, y, 0.15]})
+    return data
+
+
+def test_a_youbot_backs_off_its_stand_away_from_the_pool_before_it_turns_for_its_park():
+    """Turning at once, half way to the north-east park, the base's footprint swept over the
+    corner of the pool's north wall (0 cm by the footprint): it backs off first."""
+    from cell_layout.fleet_routes import (
+        STAND_BACK_OFF_M,
+        _box_clearance,
+        _obstacle_boxes,
+        route_poses,
+        way_to_park,
+    )
+    world = load_world(TWO)
+    layout = layout_from_world(world)
+    walls = [box for name, box in _obstacle_boxes(world.obstacles) if name.startswith('pool')]
+    park = layout.park('youbot')
+    for st in layout.stands:
+        off = way_to_park(layout, st, park)[0]
+        # Sideways off its line (the stands face along y), away from the pool (east of them).
+        assert off[0] == pytest.approx(st.pose[0] - STAND_BACK_OFF_M)
+        assert off[1] == pytest.approx(st.pose[1])
+        poses = route_poses(st.pose, park, way_to_park(layout, st, park))
+        assert min(_box_clearance(poses, box) for box in walls) > 0.02
+    right = next(st for st in layout.stands if st.row == -1)
+    straight = route_poses(right.pose, park, way_back(layout.stands, park))
+    assert min(_box_clearance(straight, box) for box in walls) == 0.0
+
+
 def _moved(data, robot, **pose):
     data = copy.deepcopy(data)
     next(r for r in data['robots'] if r['name'] == robot)['pose'].update(pose)
@@ -99,6 +132,8 @@ def _moved(data, robot, **pose):
     (lambda d: _moved(d, 'youbot2', x=2.1, y=-1.85), 'robot youbot2: its start pose overlaps '
                                                      'obstacle pool_platform'),
     (lambda d: _moved(d, 'youbot2', z=0.2), 'robot youbot2: it stands 0.2 m high'),
+    (lambda d: _with_crate(d, 0.4, -0.4), 'robot youbot2: its way from its park to the loading '
+                                          'pose runs over obstacle crate'),
 ])
 def test_a_fleet_that_cannot_share_the_floor_is_refused_in_one_line(change, why):
     data = two_youbots()

@@ -11,7 +11,7 @@ from typing import (
 
 import numpy as np
 
-from cell_layout.fleet_routes import way_back
+from cell_layout.fleet_routes import way_back, way_to_park
 from cell_layout.layout import (
     POOL,
     CellLayout,
@@ -186,7 +186,9 @@ class Transport(Machine):
         plan = None
         if goal == 'park':
             target = lay.park(self.robot)
-            via = way_back(lay.stands, target)
+            via = (way_to_park(lay, lay.stand(self.base.goal), target)
+                   if any(st.name == self.base.goal for st in lay.stands)
+                   else way_back(lay.stands, target))
         elif goal == 'home':
             target = lay.youbot_home
             via = () if self.base.goal in ('', 'park') else lay.via_back
