@@ -12,7 +12,7 @@ import rclpy
 from rcl_interfaces.msg import Parameter, ParameterType, ParameterValue
 from rcl_interfaces.srv import SetParameters
 from rclpy.node import Node
-from rclpy.qos import QoSProfile
+from rclpy.qos import DurabilityPolicy, QoSProfile
 from sim_interfaces.msg import PipelineEvent
 from sim_interfaces.srv import SolveIK
 from std_srvs.srv import SetBool
@@ -75,7 +75,11 @@ class RosPorts:
             for arm, robot in robots.items()}
         self._cmd_out = {base.name: TwistOut(node, base.topic('cmd_vel'), stamped=False)
                          for base in layout.transports}
-        self.event_pub = node.create_publisher(PipelineEvent, '~/events', QoSProfile(depth=100))
+        # (Kept for late joiners: a recorder that finds the topic a few seconds into a run, on a
+        # busy machine, still records the run's first events, the belt's start among them.)
+        self.event_pub = node.create_publisher(
+            PipelineEvent, '~/events',
+            QoSProfile(depth=100, durability=DurabilityPolicy.TRANSIENT_LOCAL))
         self.ik = {arm: node.create_client(SolveIK, robot.topic('solve_ik'))
                    for arm, robot in robots.items()}
         self.grips = {arm: node.create_client(SetBool, robot.grip)

@@ -89,8 +89,17 @@ def test_a_campaign_stopped_mid_trial_keeps_the_trials_bag_whole(tmp_path):
         except (OSError, ValueError, AttributeError):
             return 0.0
     try:
-        wait_for(lambda: sim_time() >= 3.0 or runner.poll() is not None, 180.0,
-                 what='the trial to run 3 s of simulated time')
+        # (And the recorder records the coordinator's events: on a busy machine it found their
+        # topic after 3 s of simulated time, and the bag stopped then had none.)
+        recorder_log = out / 'trial_000' / 'recorder.log'
+
+        def recording_events() -> bool:
+            try:
+                return 'recording /coordinator_node/events' in recorder_log.read_text()
+            except OSError:
+                return False
+        wait_for(lambda: (sim_time() >= 3.0 and recording_events()) or runner.poll() is not None,
+                 180.0, what='the trial to run 3 s of simulated time, its events recorded')
         assert runner.poll() is None
         runner.send_signal(signal.SIGTERM)
         output, _ = runner.communicate(timeout=60)
@@ -107,6 +116,13 @@ def test_a_campaign_stopped_mid_trial_keeps_the_trials_bag_whole(tmp_path):
     assert summary is not None and summary.statistics.message_count > 0
     topics = {channel.topic for channel in summary.channels.values()}
     assert {'/clock', '/cell/materials', '/coordinator_node/events'} <= topics, topics
+    # Its first events too (the belt started at 0.03 s), though the recorder found the topic
+    # later: the coordinator keeps them for late joiners.
+    from mcap_ros2.decoder import DecoderFactory
+    with open(trial / 'bag' / 'bag.mcap', 'rb') as f:
+        kinds = [m.kind for _, _, _, m in make_reader(f, decoder_factories=[DecoderFactory()])
+                 .iter_decoded_messages(topics=['/coordinator_node/events'])]
+    assert 'belt_started' in kinds, kinds[:5]
     # The bag alone says what ran: it reads as the interrupted trial, and is drawn.
     kept = result_from_bag(trial / 'bag')
     assert kept.status == 'interrupted' and kept.scenario['world_data']['robots'], kept.message
