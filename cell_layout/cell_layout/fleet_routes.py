@@ -15,7 +15,7 @@ from typing import Any, Dict, List, Sequence, Tuple
 
 import numpy as np
 
-from cell_layout.layout import POOL, CellLayout, LayoutError, UnloadStand
+from cell_layout.layout import POOL, CellLayout, LayoutError, UnloadStand, pool_sides
 from controllers.bezier import BezierPath, Pose2D, key_poses_between
 from controllers.footprint import Footprint, clearance, polygon_distance
 
@@ -58,9 +58,14 @@ def way_off(layout: CellLayout, stand: UnloadStand, to: Pose2D) -> Tuple[Tuple[f
     way_back's from its side of the pool; from a side with ``exit`` points, first
     STAND_BACK_OFF_M sideways off the stand's line (turning at once, a base at the east side's
     stand facing north swept its corners over the pool's wall)."""
-    side = layout.sides[stand.side]
+    side = pool_sides(layout)[stand.side]
     back = way_back([st for st in layout.stands if st.side == stand.side], to, side.exit)
     return (_backed_off(layout, stand), *back) if side.exit else back
+
+
+def way_between(layout: CellLayout, stand: UnloadStand) -> Tuple[Tuple[float, ...], ...]:
+    """The via points of the drive between ``stand`` and the other of its side of the pool."""
+    return pool_sides(layout)[stand.side].turn
 
 
 def _backed_off(layout: CellLayout, stand: UnloadStand) -> Tuple[float, float, float]:
@@ -77,7 +82,7 @@ def way_to_park(layout: CellLayout, stand: UnloadStand,
     """The via points of the drive from ``stand`` to ``park``: first STAND_BACK_OFF_M
     sideways off the stand's line, away from the pool, then way_back's (way_off)."""
     way = way_off(layout, stand, park)
-    return way if layout.sides[stand.side].exit else (_backed_off(layout, stand), *way)
+    return way if pool_sides(layout)[stand.side].exit else (_backed_off(layout, stand), *way)
 
 
 def route_poses(start: Pose2D, goal: Pose2D, via: Sequence[Sequence[float]] = (),
@@ -106,7 +111,7 @@ def _ways(layout: CellLayout, robot: str) -> Dict[str, np.ndarray]:
         for other in layout.stands_of(robot):
             if other is not st:
                 ways[f'{st.name} to {other.name}'] = route_poses(st.pose, other.pose,
-                                                                 layout.way_between(st.name))
+                                                                 way_between(layout, st))
     return ways
 
 

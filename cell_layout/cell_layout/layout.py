@@ -253,17 +253,12 @@ class CellLayout:
     def stand(self, name: str) -> UnloadStand:
         return next(st for st in self.stands if st.name == name)
 
-    @property
-    def sides(self) -> Tuple[PoolSide, ...]:
-        """The pool's sides with stands: the west (the paper's), then ``more_sides``."""
-        return (PoolSide(self.via_out, self.via_turn, self.via_turn), *self.more_sides)
-
     def side_of(self, robot: str) -> int:
-        """The side of the pool transport ``robot`` unloads at: the fleet's youBots take the
-        sides in turn, in the cell's order (the paper's youBot, and any one not a transport:
-        the west)."""
+        """The side of the pool transport ``robot`` unloads at (pool_sides): the fleet's youBots
+        take the sides in turn, in the cell's order (the paper's youBot, and any one not a
+        transport: the west)."""
         names = [r.name for r in self.transports]
-        return names.index(robot) % len(self.sides) if robot in names else 0
+        return names.index(robot) % (1 + len(self.more_sides)) if robot in names else 0
 
     def stands_of(self, robot: str) -> Tuple[UnloadStand, ...]:
         """The stands transport ``robot`` unloads from, in the order it visits them."""
@@ -277,25 +272,15 @@ class CellLayout:
         (``out_turn``; the west's ``via_turn``): turning past the corner, its corners swept
         2.7 cm into the pool's wall, and the plate's materials slid 6 cm."""
         st = self.stand(stand)
-        side = self.sides[st.side]
+        side = pool_sides(self)[st.side]
         turn = st.pose[2] - side.out[0][2]
         if abs(math.remainder(turn, 2 * math.pi)) < math.pi / 2:
             return side.out
         return side.out_turn
 
-    def way_between(self, stand: str) -> Tuple[Tuple[float, ...], ...]:
-        """The via points of the drive between ``stand`` and the other of its side."""
-        return self.sides[self.stand(stand).side].turn
-
     def serving(self, region: str) -> UnloadStand:
         """The stand a set-down destination is unloaded from (the pool: each stand, its row)."""
         return next(st for st in self.stands if region in st.serves)
-
-    def takes(self, name: str, robot: str) -> bool:
-        """Whether transport ``robot`` may carry class ``name`` (a carried one): into the pool
-        from any side, elsewhere only from the side of the stand that serves it."""
-        return (self.destination(name) == POOL
-                or self.serving(self.destination(name)).side == self.side_of(robot))
 
     def stand_for(self, name: str, slot: int, robot: str = '') -> UnloadStand:
         """Where a material on transport ``robot``'s plate slot ``slot`` is unloaded: the
@@ -326,7 +311,7 @@ class CellLayout:
         on the plate): with four oranges ahead of the blue, the blue went into the other row,
         and was unloaded there from the platform's stand, the arm going the long way round (a
         trial took 72.4 s against 65 s)."""
-        if robot and self.stands and not self.takes(name, robot):
+        if robot and self.stands and not carries(self, name, robot):
             return []
         free = [k for k in self.slot_order(name, robot) if k not in taken]
         if self.destination(name) != POOL or not self.stands:
@@ -347,6 +332,19 @@ class CellLayout:
     def slot_row(self, slot: int) -> int:
         """The plate row of a slot: +1 left (y > 0), -1 right."""
         return 1 if self.plate_slots[slot][1] > 0.0 else -1
+
+
+def pool_sides(layout: CellLayout) -> Tuple[PoolSide, ...]:
+    """The pool's sides with stands: the west (the paper's: ``via_out`` and ``via_turn``), then
+    ``more_sides``."""
+    return (PoolSide(layout.via_out, layout.via_turn, layout.via_turn), *layout.more_sides)
+
+
+def carries(layout: CellLayout, name: str, robot: str) -> bool:
+    """Whether transport ``robot`` may carry class ``name`` (a carried one): into the pool from
+    any side, elsewhere only from the side of the stand that serves it."""
+    return (layout.destination(name) == POOL
+            or layout.serving(layout.destination(name)).side == layout.side_of(robot))
 
 
 def slot_in_world(pose: Pose2D, slot: Tuple[float, float], base_z: float,

@@ -341,7 +341,8 @@ def test_a_pick_path_across_an_elbow_flip_is_solved_on_one_branch():
     the path is solved again from its end, on the branch the end is on."""
     from types import SimpleNamespace
 
-    from coordinator.pipeline import pick_geometry, pick_planner
+    from cell_layout import pick_geometry
+    from coordinator.pipeline import pick_planner
 
     def solve_path(points, seed):
         """Two branches: 'up' (joint 1 at +1) reaches x < 0 only; 'down' (-1) everywhere.

@@ -14,7 +14,7 @@ from cell_layout.fleet_routes import (
     route_poses,
     way_back,
 )
-from cell_layout.layout import LayoutError
+from cell_layout.layout import LayoutError, carries, pool_sides
 from cell_layout.world_layout import layout_from_world
 from controllers.bezier import BezierPath
 from controllers.footprint import Footprint, clearance, polygon_distance
@@ -237,15 +237,15 @@ def test_the_east_side_is_a_fleets_where_the_floor_is_free_and_unloads_into_the_
         for a, b in zip(st.drops, turned.drops):
             assert world_to_base(st.pose, a) == pytest.approx(world_to_base(turned.pose, b))
         assert turned.serves == frozenset({'pool_floor'})
-    assert layout.takes('orange', 'youbot2') and not layout.takes('blue', 'youbot2')
-    assert layout.takes('blue', 'youbot')
+    assert carries(layout, 'orange', 'youbot2') and not carries(layout, 'blue', 'youbot2')
+    assert carries(layout, 'blue', 'youbot')
     assert layout.free_slots('blue', {}, robot='youbot2') == []
     # Spots of the two sides never nearer than 7 cm (none on another).
     spots = [d[:2] for st in layout.stands for d in st.drops]
     assert min(np.linalg.norm(a - b) for i, a in enumerate(spots) for b in spots[i + 1:]) \
         >= 0.07 - 1e-9
     for one in (layout_from_world(load_world(PAPER)), layout_from_world(parse_world(_sized(1)))):
-        assert {st.side for st in one.stands} == {0} and len(one.sides) == 1
+        assert {st.side for st in one.stands} == {0} and len(pool_sides(one)) == 1
     crowded = layout_from_world(parse_world(_with_crate(two_youbots(), 2.75, -1.2)))
     assert {st.side for st in crowded.stands} == {0}
     assert crowded.side_of('youbot2') == 0 and crowded.stands_of('youbot2') == \
@@ -255,8 +255,9 @@ def test_the_east_side_is_a_fleets_where_the_floor_is_free_and_unloads_into_the_
 def test_a_youbot_whose_side_is_full_is_done_and_the_other_takes_the_rest():
     """Each side has its own drop spots: a youBot is loaded only with what its side has a
     place for, and one whose side has none left for anything to come takes nothing more."""
-    from coordinator.pipeline import Material, Pipeline, Settings
     from test_pipeline import FakeCell
+
+    from coordinator.pipeline import Material, Pipeline, Settings
     layout = layout_from_world(load_world(TWO))
     run_ = Pipeline(layout, FakeCell(layout, []), Settings())
     room = run_.transport.room

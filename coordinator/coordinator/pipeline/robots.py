@@ -18,6 +18,7 @@ from typing import Any, Callable, List, Optional, Sequence, Tuple
 import numpy as np
 
 from cell_layout.layout import CellLayout
+from cell_layout.pick_geometry import over_the_belt
 from cell_layout.reach import youbot_holds, youbot_tool_quaternion
 from controllers import youbot_arm, zu12_arm
 from controllers.arrays import Vector
@@ -35,7 +36,6 @@ from coordinator.pipeline.model import (
     Settings,
     known,
 )
-from coordinator.pipeline.pick_geometry import over_the_belt
 from coordinator.pipeline.record import EventLog
 from trial_record.events import EventKind
 

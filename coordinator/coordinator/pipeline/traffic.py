@@ -18,7 +18,7 @@ from typing import Dict, List, Mapping, Optional
 import numpy as np
 
 from cell_layout.fleet_routes import keeps_clear
-from cell_layout.layout import CellLayout
+from cell_layout.layout import CellLayout, pool_sides
 from controllers.path_follower import PathFollower
 from coordinator.pipeline.model import Observation
 from coordinator.pipeline.robots import BaseDrive
@@ -38,7 +38,7 @@ class Traffic:
     def __init__(self, layout: CellLayout, bases: Mapping[str, BaseDrive]) -> None:
         self.layout, self.bases = layout, bases
         first = None if layout.fleet else layout.transport.name
-        places = [LOADING, *(stands_place(k) for k in range(len(layout.sides)))]
+        places = [LOADING, *(stands_place(k) for k in range(len(pool_sides(layout))))]
         self.holder: Dict[str, Optional[str]] = {p: first for p in places}
         self.queue: Dict[str, List[str]] = {p: [] for p in places}
 

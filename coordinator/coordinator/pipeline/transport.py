@@ -11,7 +11,7 @@ from typing import (
 
 import numpy as np
 
-from cell_layout.fleet_routes import way_off, way_to_park
+from cell_layout.fleet_routes import way_between, way_off, way_to_park
 from cell_layout.layout import (
     POOL,
     CellLayout,
@@ -96,6 +96,7 @@ class Transport(Machine):
         self.queue: List[Material] = []              # still to unload, the current one first
         self.base, self.traffic = base, traffic
         self.robot = arm.name
+        self.pool = stands_place(layout.side_of(self.robot))   # (where it unloads: Traffic)
         if layout.fleet:
             self.name = arm.name                # (its states' lane: one per youBot)
         self.planner = UnloadPlanner(arm, book, layout, settings)
@@ -111,11 +112,6 @@ class Transport(Machine):
                          S.RELEASE: self._release, S.FOLD: self._fold,
                          S.LEAVE: self._off_the_pool, S.WAIT_BAY: self._wait_bay,
                          S.DONE: lambda obs: None}
-
-    @property
-    def pool(self) -> str:
-        """The place it unloads at: its side of the pool (Traffic)."""
-        return stands_place(self.layout.side_of(self.robot))
 
     @property
     def current(self) -> Optional[Material]:
@@ -216,7 +212,7 @@ class Transport(Machine):
         else:
             target = lay.stand(goal).pose
             via = (lay.way_out(goal) if self.base.goal in ('', 'home')
-                   else lay.way_between(goal) if self.base.goal != goal else ())
+                   else way_between(lay, lay.stand(goal)) if self.base.goal != goal else ())
             if lay.fleet and not self.traffic.clear(
                     self.robot, self.base.path_to(obs, target, via), obs):
                 return False            # (held back: the unload is planned once it may go)
