@@ -269,6 +269,53 @@ def test_a_youbot_whose_side_is_full_is_done_and_the_other_takes_the_rest():
     assert not room.can_take('youbot2') and room.can_take('youbot')
 
 
+def test_a_youbot_whose_side_fills_up_goes_to_its_park_and_the_other_carries_the_rest():
+    """The example with the east side's stands given one drop spot each (and 9 oranges, so
+    that the pool still has a spot for each): the second youBot carries two oranges at most,
+    then stands at the loading pose with nothing to take; it drives to its park and folds
+    there, and the first carries everything else (the fake cell)."""
+    from dataclasses import replace
+
+    from test_pipeline import FakeCell, run
+    layout = layout_from_world(load_world(TWO))
+    layout = replace(layout, manifest={'purple': 1, 'orange': 9, 'blue': 2},
+                     stands=tuple(replace(st, drops=st.drops[:1]) if st.side else st
+                                  for st in layout.stands))
+    assert sum(len(st.drops) for st in layout.stands) >= 9
+    colors = ['orange'] * 4 + ['purple'] + ['orange'] * 3 + ['blue'] + ['orange'] * 2 + ['blue']
+    cell = FakeCell(layout, colors, base_loop=True)
+    p = run(cell, limit=600.0)
+    assert p.result.status == 'completed', p.result
+    assert p.result.delivered == 12
+    shares = p.result.transports
+    assert 1 <= shares['youbot2']['carried'] <= 2
+    assert shares['youbot']['carried'] == 11 - shares['youbot2']['carried']
+    assert np.array(cell.paths['youbot2'][-1][:2]) == pytest.approx(
+        np.array(layout.park('youbot2')[:2]), abs=0.05)
+
+
+def test_a_youbot_at_the_loading_pose_with_nothing_left_for_it_makes_way():
+    """The last orange is given up by the Zu 12 (its grasp fails every time) while the east
+    side's youBot waits at the loading pose for it: only blues are left, which it does not
+    carry (the platform is the west side's). It drives to its park and folds, the other takes
+    the blues, and the run ends (without this it held the loading pose for ever: a timeout)."""
+    from dataclasses import replace
+
+    from test_pipeline import FakeCell, run
+    layout = replace(layout_from_world(load_world(TWO)),
+                     manifest={'purple': 1, 'orange': 7, 'blue': 2})
+    colors = ['orange'] * 6 + ['purple', 'orange', 'blue', 'blue']
+    cell = FakeCell(layout, colors, base_loop=True, grasp_failures={8: 99})
+    p = run(cell, limit=400.0)
+    assert p.result.status == 'incomplete' and p.result.failed == 1, p.result
+    blues = [e.robot for e in cell.events if e.kind == 'delivered' and e.color == 'blue']
+    assert blues == ['youbot', 'youbot']
+    assert any(e.kind == 'driving' and e.robot == 'youbot2' and e.detail.startswith('to park')
+               for e in cell.events)
+    assert np.array(cell.paths['youbot2'][-1][:2]) == pytest.approx(
+        np.array(layout.park('youbot2')[:2]), abs=0.05)
+
+
 def test_a_fleet_of_one_holds_both_places_and_nothing_holds_its_drives_back():
     layout = layout_from_world(load_world(PAPER))
     t = _traffic(layout)

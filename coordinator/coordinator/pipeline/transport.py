@@ -132,7 +132,8 @@ class Transport(Machine):
                     if m.plate == self.robot]
         # (Nothing on its plate nor on its way there, and nothing to come has a place on it:
         # its side of the pool is full.)
-        idle = not (self.room.plate_taken(self.robot) or self.room.can_take(self.robot))
+        idle = not (on_plate or self.room.can_take(self.robot) or any(
+            m.plate == self.robot for m in self.book.with_status(MaterialStatus.PICKING)))
         if (not (self.loader_done() or self.room.load_complete(self.robot, bool(on_plate))
                  or idle)
                 or not self.zu12_clear(obs.now)):
