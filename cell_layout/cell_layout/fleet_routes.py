@@ -15,7 +15,7 @@ from typing import Any, Dict, List, Sequence, Tuple
 
 import numpy as np
 
-from cell_layout.layout import POOL, CellLayout, LayoutError, UnloadStand
+from cell_layout.layout import POOL, CellLayout, LayoutError, UnloadStand, pool_sides
 from controllers.bezier import BezierPath, Pose2D, key_poses_between
 from controllers.footprint import Footprint, clearance, polygon_distance
 
@@ -42,23 +42,47 @@ def obstacle_height(o: Any) -> float:
                  else 2 * o.size[0])
 
 
-def way_back(stands: Sequence[UnloadStand], to: Pose2D) -> Tuple[Tuple[float, ...], ...]:
-    """The via point of the drive from the stands to ``to`` (the loading pose, or a park):
-    half way between it and the right stand, where the base turns round on its way."""
+def way_back(stands: Sequence[UnloadStand], to: Pose2D,
+             exit: Sequence[Sequence[float]] = ()) -> Tuple[Tuple[float, ...], ...]:
+    """The via points of the drive from the stands to ``to`` (the loading pose, or a park):
+    half way between it and the right stand, where the base turns round on its way; from a
+    side with ``exit`` points (past the pool's corner; the west has none), those instead."""
+    if exit:
+        return tuple(tuple(p) for p in exit)
     right = next(st for st in stands if st.row == -1)
     return ((0.5 * (to[0] + right.pose[0]), 0.5 * (to[1] + right.pose[1]), 0.0),)
+
+
+def way_off(layout: CellLayout, stand: UnloadStand, to: Pose2D) -> Tuple[Tuple[float, ...], ...]:
+    """The via points of the drive from ``stand`` to ``to`` (the loading pose, or a park):
+    way_back's from its side of the pool; from a side with ``exit`` points, first
+    STAND_BACK_OFF_M sideways off the stand's line (turning at once, a base at the east side's
+    stand facing north swept its corners over the pool's wall)."""
+    side = pool_sides(layout)[stand.side]
+    back = way_back([st for st in layout.stands if st.side == stand.side], to, side.exit)
+    return (_backed_off(layout, stand), *back) if side.exit else back
+
+
+def way_between(layout: CellLayout, stand: UnloadStand) -> Tuple[Tuple[float, ...], ...]:
+    """The via points of the drive between ``stand`` and the other of its side of the pool."""
+    return pool_sides(layout)[stand.side].turn
+
+
+def _backed_off(layout: CellLayout, stand: UnloadStand) -> Tuple[float, float, float]:
+    """The point STAND_BACK_OFF_M sideways off ``stand``'s line, away from the pool."""
+    x, y, yaw = stand.pose
+    side = np.array([-math.sin(yaw), math.cos(yaw)])
+    if side @ (np.asarray(layout.regions[POOL].center, float) - (x, y)) > 0.0:
+        side = -side
+    return (x + STAND_BACK_OFF_M * side[0], y + STAND_BACK_OFF_M * side[1], 0.0)
 
 
 def way_to_park(layout: CellLayout, stand: UnloadStand,
                 park: Pose2D) -> Tuple[Tuple[float, ...], ...]:
     """The via points of the drive from ``stand`` to ``park``: first STAND_BACK_OFF_M
-    sideways off the stand's line, away from the pool, then way_back's."""
-    x, y, yaw = stand.pose
-    side = np.array([-math.sin(yaw), math.cos(yaw)])
-    if side @ (np.asarray(layout.regions[POOL].center, float) - (x, y)) > 0.0:
-        side = -side
-    off = (x + STAND_BACK_OFF_M * side[0], y + STAND_BACK_OFF_M * side[1], 0.0)
-    return (off, *way_back(layout.stands, park))
+    sideways off the stand's line, away from the pool, then way_back's (way_off)."""
+    way = way_off(layout, stand, park)
+    return way if pool_sides(layout)[stand.side].exit else (_backed_off(layout, stand), *way)
 
 
 def route_poses(start: Pose2D, goal: Pose2D, via: Sequence[Sequence[float]] = (),
@@ -74,19 +98,20 @@ def route_poses(start: Pose2D, goal: Pose2D, via: Sequence[Sequence[float]] = ()
     return np.column_stack([xy, yaw])
 
 
-def _ways(layout: CellLayout, park: Pose2D) -> Dict[str, np.ndarray]:
-    """A youBot's ways, by name: from its park to the loading pose, out to each stand, between
-    the stands, and back to the loading pose and to its park."""
-    bay = layout.youbot_home
+def _ways(layout: CellLayout, robot: str) -> Dict[str, np.ndarray]:
+    """A youBot's ways, by name: from its park to the loading pose, out to each stand of its
+    side of the pool, between them, and back to the loading pose and to its park."""
+    bay, park = layout.youbot_home, layout.park(robot)
     ways = {'its park to the loading pose': route_poses(park, bay)}
-    for st in layout.stands:
+    for st in layout.stands_of(robot):
         ways[f'the loading pose to {st.name}'] = route_poses(bay, st.pose, layout.way_out(st.name))
-        ways[f'{st.name} to the loading pose'] = route_poses(st.pose, bay, layout.via_back)
+        ways[f'{st.name} to the loading pose'] = route_poses(st.pose, bay,
+                                                             way_off(layout, st, bay))
         ways[f'{st.name} to its park'] = route_poses(st.pose, park, way_to_park(layout, st, park))
-        for other in layout.stands:
+        for other in layout.stands_of(robot):
             if other is not st:
                 ways[f'{st.name} to {other.name}'] = route_poses(st.pose, other.pose,
-                                                                 layout.via_turn)
+                                                                 way_between(layout, st))
     return ways
 
 
@@ -119,7 +144,7 @@ def check_fleet(layout: CellLayout, obstacles: Sequence[Any],
                 raise LayoutError(f'robot {name}: its start pose is within {gap:g} m of '
                                   f'{other}\'s')
     stands = np.array([st.pose for st in layout.stands])
-    ways = {name: _ways(layout, layout.park(name)) for name in parks}
+    ways = {name: _ways(layout, name) for name in parks}
     for name in parks:
         for way, poses in ways[name].items():
             keep: List[Tuple[str, np.ndarray]] = [

@@ -114,6 +114,8 @@ class UnloadStand:
     # How far the base may stand from ``pose`` along its heading, back and forth [m]: its
     # footprint stays clear of the world's obstacles (stand_slide).
     slide: Tuple[float, float] = (0.0, 0.0)
+    side: int = 0                       # the pool's side it stands at (PoolSide): 0 the west
+
 
     def abeam(self, point: Vector) -> Pose2D:
         """The stand's pose slid along its heading (within ``slide``) to bring the arm's base
@@ -126,6 +128,18 @@ class UnloadStand:
         along = (point[0] - arm_x) * c + (point[1] - arm_y) * s
         along = min(max(along, self.slide[0]), self.slide[1])
         return (x + along * c, y + along * s, yaw)
+
+
+@dataclass(frozen=True)
+class PoolSide:
+    """The ways to and from the stands of one side of the pool: the via points out from the
+    loading pose to the side's first stand (``out``) and to its other stand (``out_turn``),
+    between its stands (``turn``), and the first ones of every way off it (``exit``: past the
+    pool's corner), before the turn round on the way back (fleet_routes.way_back)."""
+    out: Tuple[Tuple[float, ...], ...]
+    out_turn: Tuple[Tuple[float, ...], ...]
+    turn: Tuple[Tuple[float, ...], ...]
+    exit: Tuple[Tuple[float, ...], ...] = ()
 
 
 @dataclass(frozen=True)
@@ -182,6 +196,9 @@ class CellLayout:
     # with at most ``trip_load`` materials (0: as many as its plate holds).
     clearance: float = 0.1
     trip_load: int = 0
+    # The pool's other sides a fleet unloads at (the first, the west, is via_out and via_turn's):
+    # each youBot of a fleet has a side (side_of), so two youBots unload at once.
+    more_sides: Tuple[PoolSide, ...] = ()
 
     @property
     def transport(self) -> CellRobot:
@@ -236,39 +253,57 @@ class CellLayout:
     def stand(self, name: str) -> UnloadStand:
         return next(st for st in self.stands if st.name == name)
 
+    def side_of(self, robot: str) -> int:
+        """The side of the pool transport ``robot`` unloads at (pool_sides): the fleet's youBots
+        take the sides in turn, in the cell's order (the paper's youBot, and any one not a
+        transport: the west)."""
+        names = [r.name for r in self.transports]
+        return names.index(robot) % (1 + len(self.more_sides)) if robot in names else 0
+
+    def stands_of(self, robot: str) -> Tuple[UnloadStand, ...]:
+        """The stands transport ``robot`` unloads from, in the order it visits them."""
+        side = self.side_of(robot)
+        return tuple(st for st in self.stands if st.side == side)
+
     def way_out(self, stand: str) -> Tuple[Tuple[float, ...], ...]:
-        """The via points of the drive from home to ``stand``: past the pool's north-west corner
-        facing the way the first stand faces (``via_out``); to a stand facing the other way,
-        through the point the base turns about between the stands (``via_turn``): turning past
-        the corner, its corners swept 2.7 cm into the pool's wall, and the plate's materials
-        slid 6 cm."""
-        turn = self.stand(stand).pose[2] - self.via_out[0][2]
+        """The via points of the drive from home to ``stand``: past the pool's corner facing
+        the way its side's first stand faces (``out``; the west's ``via_out``); to a stand
+        facing the other way, through the point the base turns about between the stands
+        (``out_turn``; the west's ``via_turn``): turning past the corner, its corners swept
+        2.7 cm into the pool's wall, and the plate's materials slid 6 cm."""
+        st = self.stand(stand)
+        side = pool_sides(self)[st.side]
+        turn = st.pose[2] - side.out[0][2]
         if abs(math.remainder(turn, 2 * math.pi)) < math.pi / 2:
-            return self.via_out
-        return self.via_turn
+            return side.out
+        return side.out_turn
 
     def serving(self, region: str) -> UnloadStand:
         """The stand a set-down destination is unloaded from (the pool: each stand, its row)."""
         return next(st for st in self.stands if region in st.serves)
 
-    def stand_for(self, name: str, slot: int) -> UnloadStand:
-        """Where a material on plate slot ``slot`` is unloaded: the pool's from the stand of the
-        slot's row, any other destination's from the stand that reaches it."""
+    def stand_for(self, name: str, slot: int, robot: str = '') -> UnloadStand:
+        """Where a material on transport ``robot``'s plate slot ``slot`` is unloaded: the
+        pool's from the stand of the slot's row on the robot's side, any other destination's
+        from the stand that reaches it."""
         if self.destination(name) != POOL:
             return self.serving(self.destination(name))
-        return next(st for st in self.stands if st.row == self.slot_row(slot))
+        side = self.side_of(robot)
+        return next(st for st in self.stands if st.row == self.slot_row(slot)
+                    and st.side == side)
 
-    def slot_order(self, name: str) -> List[int]:
-        """The plate slots in the order the Zu 12 fills them for a material of class ``name``:
-        the row unloaded where it goes first (the first stand's row for the pool, the serving
-        stand's row for another destination), the near slots first."""
-        first = (self.stands[0].row if self.destination(name) == POOL
+    def slot_order(self, name: str, robot: str = '') -> List[int]:
+        """The plate slots in the order the Zu 12 fills them for a material of class ``name``
+        (on transport ``robot``'s plate): the row unloaded where it goes first (its side's first
+        stand's row for the pool, the serving stand's row for another destination), the near
+        slots first."""
+        first = (self.stands_of(robot)[0].row if self.destination(name) == POOL
                  else self.serving(self.destination(name)).row)
         return sorted(range(len(self.plate_slots)),
                       key=lambda k: (self.slot_row(k) != first, k))
 
     def free_slots(self, name: str, taken: Dict[int, str],
-                   to_come: Optional[Dict[str, int]] = None) -> List[int]:
+                   to_come: Optional[Dict[str, int]] = None, robot: str = '') -> List[int]:
         """The free plate slots for a material of class ``name``, in the order they are filled
         (``slot_order``), with the slots ``taken`` (slot: class of what is on it). A pool
         material leaves the last free slots of a set-down destination's row to the materials
@@ -276,11 +311,14 @@ class CellLayout:
         on the plate): with four oranges ahead of the blue, the blue went into the other row,
         and was unloaded there from the platform's stand, the arm going the long way round (a
         trial took 72.4 s against 65 s)."""
-        free = [k for k in self.slot_order(name) if k not in taken]
+        if robot and self.stands and not carries(self, name, robot):
+            return []
+        free = [k for k in self.slot_order(name, robot) if k not in taken]
         if self.destination(name) != POOL or not self.stands:
             return free
         kept: Set[Any] = set()
-        for row in {st.row for st in self.stands if st.serves - {POOL}}:
+        side = self.side_of(robot)
+        for row in {st.row for st in self.stands if st.serves - {POOL} and st.side == side}:
             bound = [c for c in self.manifest if self.carried(c) and self.destination(c) != POOL
                      and self.serving(self.destination(c)).row == row]
             coming = (sum(to_come[c] for c in bound) if to_come is not None else
@@ -294,6 +332,19 @@ class CellLayout:
     def slot_row(self, slot: int) -> int:
         """The plate row of a slot: +1 left (y > 0), -1 right."""
         return 1 if self.plate_slots[slot][1] > 0.0 else -1
+
+
+def pool_sides(layout: CellLayout) -> Tuple[PoolSide, ...]:
+    """The pool's sides with stands: the west (the paper's: ``via_out`` and ``via_turn``), then
+    ``more_sides``."""
+    return (PoolSide(layout.via_out, layout.via_turn, layout.via_turn), *layout.more_sides)
+
+
+def carries(layout: CellLayout, name: str, robot: str) -> bool:
+    """Whether transport ``robot`` may carry class ``name`` (a carried one): into the pool from
+    any side, elsewhere only from the side of the stand that serves it."""
+    return (layout.destination(name) == POOL
+            or layout.serving(layout.destination(name)).side == layout.side_of(robot))
 
 
 def slot_in_world(pose: Pose2D, slot: Tuple[float, float], base_z: float,

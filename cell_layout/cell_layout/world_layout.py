@@ -25,6 +25,7 @@ from cell_layout.layout import (
     CellLayout,
     CellRobot,
     LayoutError,
+    PoolSide,
     Region,
     Rule,
     UnloadStand,
@@ -116,6 +117,14 @@ def layout_from_world(world: Any) -> CellLayout:
     rules = {c.name: Rule(c.name, c.destination, c.route, c.size, c.mass) for c in mats.classes}
     stands = tuple(replace(st, slide=stand_slide(st.pose, world.obstacles, world.floor_size))
                    for st in _stands(named[POOL], rules))
+    more_sides: Tuple[PoolSide, ...] = ()
+    if len(transports) > 1:
+        # A fleet unloads at the pool's east side too, where the floor there is free.
+        east, ways = _east_side(named[POOL], stands)
+        if all(stand_clear(st.pose, world.obstacles, world.floor_size) for st in east):
+            stands += tuple(replace(st, slide=stand_slide(st.pose, world.obstacles,
+                                                          world.floor_size)) for st in east)
+            more_sides = (ways,)
     into_pool = sum(c.count for c in mats.classes if c.destination == POOL)
     # (A spare spot per stand: one the arm cannot reach as the base stands is swapped for it.)
     heaviest = max((c.mass for c in mats.classes if c.destination == POOL), default=0.0)
@@ -143,7 +152,7 @@ def layout_from_world(world: Any) -> CellLayout:
         via_turn=((side_x - 0.3, py - 0.12, 0.0),),
         via_back=way_back(stands, home),
         loader=loader, transports=transports, clearance=roles.clearance,
-        trip_load=roles.trip_load,
+        trip_load=roles.trip_load, more_sides=more_sides,
         parks=tuple((r.pose.x, r.pose.y, r.pose.yaw) for r in map(world.robot, (
             t.name for t in transports))) if _parks_apart(roles.loading, yb, transports)
         else ())
@@ -183,6 +192,45 @@ def _stands(pool: Any, rules: Dict[str, Rule]) -> Tuple[UnloadStand, ...]:
     return (left, right)
 
 
+# The ways to and from the pool's east side pass this far north of its wall (base_link), from
+# over its west wall to 15 cm east of the east side's stands [m]: over its centre instead, the
+# way out came within 0.13 m of the example's park north-east of the loading pose, and the way
+# back from the stand facing north swept a corner over the pool's north-east corner.
+EAST_NORTH_M = 0.45
+
+
+def _east_side(pool: Any, west: Tuple[UnloadStand, ...]
+               ) -> Tuple[Tuple[UnloadStand, ...], PoolSide]:
+    """The pool's east side, where a fleet's second youBot unloads while the first unloads
+    at the west: the west's stands and their drop spots turned half round about the pool's
+    centre (so the arm's every reach from them is the same), the one facing south first (it is
+    reached from the north, past the pool's north-east corner: out over the pool's north wall
+    (EAST_NORTH_M) to a point 15 cm east of the stands' line, as the west's way out; back the
+    same way, backed off the stand first: fleet_routes.way_off). They unload into the pool
+    only."""
+    px, py = pool.position[0], pool.position[1]
+
+    def turned(x: float, y: float) -> Tuple[float, float]:
+        return 2 * px - x, 2 * py - y
+
+    stands = []
+    for st in sorted(west, key=lambda st: st.row):          # (the right row's first)
+        x, y = turned(st.pose[0], st.pose[1])
+        stands.append(UnloadStand(
+            st.name.replace('pool_', 'pool_east_'), (x, y, math.remainder(st.pose[2] + math.pi,
+                                                                           2 * math.pi)),
+            st.row, tuple(np.array([*turned(d[0], d[1]), d[2]]) for d in st.drops),
+            frozenset({POOL}), side=1))
+    east_x = stands[0].pose[0]
+    west_turn = (west[0].pose[0] - 0.3, py - 0.12)
+    half = min(pool.size[0], pool.size[1]) / 2
+    north = py + half + EAST_NORTH_M
+    out = ((px - half, north, -math.pi / 2), (east_x + 0.15, north, -math.pi / 2))
+    turn = ((*turned(*west_turn), math.pi),)
+    return tuple(stands), PoolSide(out=out, out_turn=(*out, *turn), turn=turn,
+                                   exit=out[::-1])
+
+
 # A stand's base slides along its heading at most this far either way [m], keeping this far
 # from any obstacle ahead or behind, and this far to its sides (a stand beside the pool's wall
 # has 3.1 cm there) [m].
@@ -191,23 +239,28 @@ STAND_SLIDE_STEP_M = 0.01
 STAND_CLEAR_AHEAD_M, STAND_CLEAR_SIDE_M = 0.05, 0.01
 
 
+def stand_clear(pose: Pose2D, obstacles: Sequence[Any], floor_size: float,
+                along: float = 0.0) -> bool:
+    """Whether a base standing at ``pose`` slid ``along`` its heading is on the floor and its
+    footprint (with its clearances) clear of every obstacle that stands higher than
+    OBSTACLE_LOW_M."""
+    x, y, yaw = pose
+    half = (YOUBOT_HALF_LENGTH_M + STAND_CLEAR_AHEAD_M, YOUBOT_HALF_WIDTH_M + STAND_CLEAR_SIDE_M)
+    at = (x + along * math.cos(yaw), y + along * math.sin(yaw))
+    if max(abs(at[0]), abs(at[1])) + math.hypot(*half) > floor_size / 2:
+        return False
+    return not any(_overlap((at, yaw, half), _footprint(o)) for o in obstacles
+                   if o.collision and o.position[2] + obstacle_height(o) / 2 > OBSTACLE_LOW_M)
+
+
 def stand_slide(pose: Pose2D, obstacles: Sequence[Any], floor_size: float
                 ) -> Tuple[float, float]:
     """How far a base standing at ``pose`` may slide along its heading, back (negative) and
     forth, in STAND_SLIDE_STEP_M steps up to STAND_SLIDE_MAX_M, its footprint (with its
     clearances) clear of every obstacle that stands higher than OBSTACLE_LOW_M and on the
     floor; (0, 0) if it is not clear where it stands."""
-    x, y, yaw = pose
-    c, s = math.cos(yaw), math.sin(yaw)
-    half = (YOUBOT_HALF_LENGTH_M + STAND_CLEAR_AHEAD_M, YOUBOT_HALF_WIDTH_M + STAND_CLEAR_SIDE_M)
-    boxes = [_footprint(o) for o in obstacles
-             if o.collision and o.position[2] + obstacle_height(o) / 2 > OBSTACLE_LOW_M]
-
     def clear(along: float) -> bool:
-        at = (x + along * c, y + along * s)
-        if max(abs(at[0]), abs(at[1])) + math.hypot(*half) > floor_size / 2:
-            return False
-        return not any(_overlap((at, yaw, half), box) for box in boxes)
+        return stand_clear(pose, obstacles, floor_size, along)
 
     if not clear(0.0):
         return (0.0, 0.0)
@@ -392,7 +445,8 @@ def _region(layout: CellLayout, obstacle: Any, name: str) -> Tuple[Region, str]:
             raise LayoutError(f'destination {name} is out of the Zu 12\'s reach (its base at '
                               f'{layout.zu12_base[:2]})')
         return Region(name, (ox, oy), (hx, hy), top, slots), ''
-    stand = min(layout.stands, key=lambda st: math.hypot(st.pose[0] - ox, st.pose[1] - oy))
+    stand = min((st for st in layout.stands if st.side == 0),
+                key=lambda st: math.hypot(st.pose[0] - ox, st.pose[1] - oy))
     slots = slot_grid((ox, oy), (hx, hy), top, size, stand.pose[:2])
     # Each slot the arm sets the heaviest of its classes down on, holding it at rest (from the
     # stand, or from the base slid along its line abeam the slot).

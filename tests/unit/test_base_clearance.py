@@ -49,10 +49,10 @@ def test_the_closest_approach_is_watched_at_every_step_and_told_as_it_falls(flee
     # The parks are 1.6 m and 0.8 m apart in x and y: well apart, told once.
     assert 0.5 < parked < 1.5 and len(sink.told) == 1
     assert set(sink.told[0].robots) == {'youbot', 'youbot2'}
-    # youbot2 drives towards youbot's park: the closest falls, and is told as it falls by
+    # youbot drives towards youbot2's park: the closest falls, and is told as it falls by
     # TELL_DROP_M or more.
     for _ in range(40):
-        runner.command('youbot2', 0.5, 0.4, 0.0)
+        runner.command('youbot', 0.5, 0.4, 0.0)
         runner.advance(6, sink)
     closest = runner.clearance.closest
     assert closest.distance < parked - 0.3 and closest.time > 0.0

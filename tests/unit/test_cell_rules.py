@@ -341,7 +341,8 @@ def test_a_pick_path_across_an_elbow_flip_is_solved_on_one_branch():
     the path is solved again from its end, on the branch the end is on."""
     from types import SimpleNamespace
 
-    from coordinator.pipeline import pick_geometry, pick_planner
+    from cell_layout import pick_geometry
+    from coordinator.pipeline import pick_planner
 
     def solve_path(points, seed):
         """Two branches: 'up' (joint 1 at +1) reaches x < 0 only; 'down' (-1) everywhere.
@@ -372,8 +373,12 @@ def test_every_pool_drop_is_reached_from_every_slot_of_its_stands_row(size):
     """The drops the layout gives each stand are the ones the transport's planner reaches: a
     drop is used by whichever material of the stand's row unloads next, so from each slot of
     that row, the others full of materials as tall, the way to each drop is found (with the
-    real youBot IK). The layout checked its drops more loosely than the planner went: 13
-    oranges of 52 mm found no way to the stand's last drops."""
+    real youBot IK), and its lift off the plate (the timed joint motion, as the arm lifts it
+    while the base drives) keeps the material clear of its neighbours. The layout checked its
+    drops more loosely than the planner went: 13 oranges of 52 mm found no way to the stand's
+    last drops. And the lift to a drop reached at another tilt rose its last 6 cm in one joint
+    step, which swung a cube 2 cm sideways: from slot 2 of the left row, between two others, no
+    lift to the stand's third drop kept clear of them, and the orange was left on the plate."""
     from test_pipeline import _YoubotIK
 
     from coordinator.pipeline import Material, Pipeline, Settings
@@ -397,6 +402,7 @@ def test_every_pool_drop_is_reached_from_every_slot_of_its_stands_row(size):
                 # (Standing, the planner may slide the base along the stand's line.)
                 path = tr.planner.unload_path(m, stand.pose, np.zeros(5), slide=True)
                 assert path is not None and path.place == d, (stand.name, k, d)
+                tr.planner.lift_from(path.contact, m, path)       # (a PlanError if not clear)
 
 
 def test_after_a_release_the_youbot_waits_for_its_arm_to_come_to_rest():

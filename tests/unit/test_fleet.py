@@ -9,13 +9,12 @@ import numpy as np
 import pytest
 
 from cell_layout.fleet_routes import (
-    TRACKING_MARGIN_M,
     YOUBOT_FOOTPRINT,
     keeps_clear,
     route_poses,
     way_back,
 )
-from cell_layout.layout import LayoutError
+from cell_layout.layout import LayoutError, carries, pool_sides
 from cell_layout.world_layout import layout_from_world
 from controllers.bezier import BezierPath
 from controllers.footprint import Footprint, clearance, polygon_distance
@@ -67,8 +66,14 @@ def test_the_example_fleet_is_laid_out_and_a_fleet_of_one_is_the_papers():
     layout = layout_from_world(load_world(TWO))
     assert [r.name for r in layout.transports] == ['youbot', 'youbot2'] and layout.fleet
     assert layout.youbot_home == pytest.approx((0.8, 0.05, -math.pi / 2))
-    assert layout.park('youbot2') == pytest.approx((0.0, -0.8, 0.0))
-    assert layout.trip_load == 0 and layout.clearance == 0.1
+    assert layout.park('youbot') == pytest.approx((0.0, -0.8, 0.0))
+    assert layout.park('youbot2') == pytest.approx((1.6, 0.6, -math.pi / 2))
+    assert layout.trip_load == 6 and layout.clearance == 0.1
+    # Each unloads at a side of the pool of its own: the first at the west (the paper's), the
+    # second at the east.
+    assert [st.name for st in layout.stands_of('youbot')] == ['pool_left', 'pool_right']
+    assert [st.name for st in layout.stands_of('youbot2')] == ['pool_east_right',
+                                                               'pool_east_left']
     paper = layout_from_world(load_world(PAPER))
     assert not paper.fleet and paper.park('youbot') == paper.youbot_home
     # The way back home is the one the paper's youBot always drove.
@@ -90,27 +95,33 @@ def _with_crate(data, x, y):
 
 def test_a_youbot_backs_off_its_stand_away_from_the_pool_before_it_turns_for_its_park():
     """Turning at once, half way to the north-east park, the base's footprint swept over the
-    corner of the pool's north wall (0 cm by the footprint): it backs off first."""
+    corner of the pool's north wall (0 cm by the footprint): it backs off first, sideways off its
+    stand's line away from the pool, at either side of the pool."""
     from cell_layout.fleet_routes import (
         STAND_BACK_OFF_M,
         _box_clearance,
         _obstacle_boxes,
-        route_poses,
         way_to_park,
     )
     world = load_world(TWO)
     layout = layout_from_world(world)
     walls = [box for name, box in _obstacle_boxes(world.obstacles) if name.startswith('pool')]
-    park = layout.park('youbot')
-    for st in layout.stands:
-        off = way_to_park(layout, st, park)[0]
-        # Sideways off its line (the stands face along y), away from the pool (east of them).
-        assert off[0] == pytest.approx(st.pose[0] - STAND_BACK_OFF_M)
-        assert off[1] == pytest.approx(st.pose[1])
-        poses = route_poses(st.pose, park, way_to_park(layout, st, park))
-        assert min(_box_clearance(poses, box) for box in walls) > 0.02
-    right = next(st for st in layout.stands if st.row == -1)
-    straight = route_poses(right.pose, park, way_back(layout.stands, park))
+    pool_x = layout.regions['pool_floor'].center[0]
+    for robot in ('youbot', 'youbot2'):
+        park = layout.park(robot)
+        for st in layout.stands_of(robot):
+            off = way_to_park(layout, st, park)[0]
+            # Sideways off its line (the stands face along y), away from the pool.
+            away = math.copysign(1.0, st.pose[0] - pool_x)
+            assert off[0] == pytest.approx(st.pose[0] + away * STAND_BACK_OFF_M)
+            assert off[1] == pytest.approx(st.pose[1])
+            poses = route_poses(st.pose, park, way_to_park(layout, st, park))
+            assert min(_box_clearance(poses, box) for box in walls) > 0.02
+    # The west's old way to the north-east park: straight from the stand, over the wall.
+    west = layout.stands_of('youbot')
+    right = next(st for st in west if st.row == -1)
+    park = layout.park('youbot2')
+    straight = route_poses(right.pose, park, way_back(west, park))
     assert min(_box_clearance(straight, box) for box in walls) == 0.0
 
 
@@ -127,12 +138,12 @@ def _moved(data, robot, **pose):
                                                       r'0.1 m of the loading pose'),
     (lambda d: _moved(d, 'youbot', x=1.6, y=-0.45), r'robot youbot2?: its way from .* passes '
                                                     r'0\.\d\d m from youbot2?\'s start pose'),
-    (lambda d: _moved(d, 'youbot2', x=1.6, y=0.6, yaw=0.0), r'robot youbot2?: its start pose is '
-                                                             r'within 0.1 m of youbot2?\'s'),
-    (lambda d: _moved(d, 'youbot2', x=2.1, y=-1.85), 'robot youbot2: its start pose overlaps '
-                                                     'obstacle pool_platform'),
+    (lambda d: _moved(d, 'youbot2', x=0.2, y=-0.8, yaw=0.0), r'robot youbot2?: its start pose is '
+                                                              r'within 0.1 m of youbot2?\'s'),
+    (lambda d: _moved(d, 'youbot2', x=2.1, y=-1.9, yaw=0.0), 'robot youbot2: its start pose '
+                                                             'overlaps obstacle pool_platform'),
     (lambda d: _moved(d, 'youbot2', z=0.2), 'robot youbot2: it stands 0.2 m high'),
-    (lambda d: _with_crate(d, 0.4, -0.4), 'robot youbot2: its way from its park to the loading '
+    (lambda d: _with_crate(d, 0.4, -0.4), 'robot youbot: its way from its park to the loading '
                                           'pose runs over obstacle crate'),
 ])
 def test_a_fleet_that_cannot_share_the_floor_is_refused_in_one_line(change, why):
@@ -154,15 +165,16 @@ def test_the_clearance_and_the_trip_load_are_checked_like_every_number():
 
 
 def test_every_way_of_the_example_keeps_clear_of_the_other_parks():
+    from cell_layout.fleet_routes import _ways
     layout = layout_from_world(load_world(TWO))
-    keep = layout.clearance + TRACKING_MARGIN_M
-    park1, park2 = (np.array([layout.park(n)]) for n in ('youbot', 'youbot2'))
-    for st in layout.stands:
-        way = route_poses(st.pose, layout.park('youbot'), way_back(layout.stands,
-                                                                   layout.park('youbot')))
-        assert clearance(way, YOUBOT_FOOTPRINT, park2, YOUBOT_FOOTPRINT) >= keep
-        way = route_poses(layout.youbot_home, st.pose, layout.way_out(st.name))
-        assert keeps_clear(layout, way, [park1, park2])
+    parks = {n: np.array([layout.park(n)]) for n in ('youbot', 'youbot2')}
+    for robot, other in (('youbot', 'youbot2'), ('youbot2', 'youbot')):
+        ways = _ways(layout, robot)
+        # Out to each stand of its side, back, to its park and between its stands.
+        assert len(ways) == 1 + 4 * len(layout.stands_of(robot))
+        for way in ways.values():
+            assert keeps_clear(layout, way, [parks[other]])
+        assert not keeps_clear(layout, ways['its park to the loading pose'], [parks[robot]])
 
 
 # --- the traffic rules -------------------------------------------------------------------------
@@ -192,6 +204,116 @@ def test_the_shared_places_are_given_in_the_order_asked():
     assert not t.ask('youbot', STANDS)
     t.leave('youbot2', STANDS)
     assert t.ask('youbot', STANDS)
+
+
+def test_each_side_of_the_pool_is_a_place_of_its_own():
+    """The example's youBots unload at once, each at its own side; a youBot that unloads at a
+    side waits for it (a third youBot would share the west with the first)."""
+    from coordinator.pipeline.traffic import stands_place
+    layout = layout_from_world(load_world(TWO))
+    t = _traffic(layout)
+    west, east = (stands_place(layout.side_of(n)) for n in ('youbot', 'youbot2'))
+    assert (west, east) == (STANDS, 'pool side 1')
+    assert t.ask('youbot', west) and t.ask('youbot2', east)
+    assert not t.ask('youbot2', west)                     # (held by youbot: queued)
+    t.leave('youbot', west)
+    assert t.ask('youbot2', west)
+
+
+def test_the_east_side_is_a_fleets_where_the_floor_is_free_and_unloads_into_the_pool_only():
+    """The east side's stands are the west's turned half round about the pool's centre (the
+    arm's every reach from them the same); one youBot (the paper's, or a fleet of one) unloads
+    at the west only, as does a fleet whose floor east of the pool is taken; the east side's
+    youBot is never loaded with a class unloaded elsewhere (the platform's blue)."""
+    from cell_layout.layout import world_to_base
+    layout = layout_from_world(load_world(TWO))
+    center = np.array(layout.regions['pool_floor'].center)
+    west, east = layout.stands_of('youbot'), layout.stands_of('youbot2')
+    for st in west:
+        turned = next(e for e in east if e.row == st.row)
+        assert np.array(turned.pose[:2]) == pytest.approx(2 * center - st.pose[:2])
+        assert math.remainder(turned.pose[2] - st.pose[2] - math.pi, 2 * math.pi) == \
+            pytest.approx(0.0, abs=1e-9)
+        for a, b in zip(st.drops, turned.drops):
+            assert world_to_base(st.pose, a) == pytest.approx(world_to_base(turned.pose, b))
+        assert turned.serves == frozenset({'pool_floor'})
+    assert carries(layout, 'orange', 'youbot2') and not carries(layout, 'blue', 'youbot2')
+    assert carries(layout, 'blue', 'youbot')
+    assert layout.free_slots('blue', {}, robot='youbot2') == []
+    # Spots of the two sides never nearer than 7 cm (none on another).
+    spots = [d[:2] for st in layout.stands for d in st.drops]
+    assert min(np.linalg.norm(a - b) for i, a in enumerate(spots) for b in spots[i + 1:]) \
+        >= 0.07 - 1e-9
+    for one in (layout_from_world(load_world(PAPER)), layout_from_world(parse_world(_sized(1)))):
+        assert {st.side for st in one.stands} == {0} and len(pool_sides(one)) == 1
+    crowded = layout_from_world(parse_world(_with_crate(two_youbots(), 2.75, -1.2)))
+    assert {st.side for st in crowded.stands} == {0}
+    assert crowded.side_of('youbot2') == 0 and crowded.stands_of('youbot2') == \
+        crowded.stands_of('youbot')
+
+
+def test_a_youbot_whose_side_is_full_is_done_and_the_other_takes_the_rest():
+    """Each side has its own drop spots: a youBot is loaded only with what its side has a
+    place for, and one whose side has none left for anything to come takes nothing more."""
+    from test_pipeline import FakeCell
+
+    from coordinator.pipeline import Material, Pipeline, Settings
+    layout = layout_from_world(load_world(TWO))
+    run_ = Pipeline(layout, FakeCell(layout, []), Settings())
+    room = run_.transport.room
+    orange = Material(1, 'orange', np.zeros(3), 0.0, 3, size=0.05)
+    assert room.can_take('youbot') and room.can_take('youbot2')
+    assert room.plate_slots(orange, 'youbot2')
+    run_.book._dropped = {st.name: set(range(len(st.drops))) for st in layout.stands_of('youbot2')}
+    assert not room.plate_slots(orange, 'youbot2') and room.plate_slots(orange, 'youbot')
+    assert not room.can_take('youbot2') and room.can_take('youbot')
+
+
+def test_a_youbot_whose_side_fills_up_goes_to_its_park_and_the_other_carries_the_rest():
+    """The example with the east side's stands given one drop spot each (and 9 oranges, so
+    that the pool still has a spot for each): the second youBot carries two oranges at most,
+    then stands at the loading pose with nothing to take; it drives to its park and folds
+    there, and the first carries everything else (the fake cell)."""
+    from dataclasses import replace
+
+    from test_pipeline import FakeCell, run
+    layout = layout_from_world(load_world(TWO))
+    layout = replace(layout, manifest={'purple': 1, 'orange': 9, 'blue': 2},
+                     stands=tuple(replace(st, drops=st.drops[:1]) if st.side else st
+                                  for st in layout.stands))
+    assert sum(len(st.drops) for st in layout.stands) >= 9
+    colors = ['orange'] * 4 + ['purple'] + ['orange'] * 3 + ['blue'] + ['orange'] * 2 + ['blue']
+    cell = FakeCell(layout, colors, base_loop=True)
+    p = run(cell, limit=600.0)
+    assert p.result.status == 'completed', p.result
+    assert p.result.delivered == 12
+    shares = p.result.transports
+    assert 1 <= shares['youbot2']['carried'] <= 2
+    assert shares['youbot']['carried'] == 11 - shares['youbot2']['carried']
+    assert np.array(cell.paths['youbot2'][-1][:2]) == pytest.approx(
+        np.array(layout.park('youbot2')[:2]), abs=0.05)
+
+
+def test_a_youbot_at_the_loading_pose_with_nothing_left_for_it_makes_way():
+    """The last orange is given up by the Zu 12 (its grasp fails every time) while the east
+    side's youBot waits at the loading pose for it: only blues are left, which it does not
+    carry (the platform is the west side's). It drives to its park and folds, the other takes
+    the blues, and the run ends (without this it held the loading pose for ever: a timeout)."""
+    from dataclasses import replace
+
+    from test_pipeline import FakeCell, run
+    layout = replace(layout_from_world(load_world(TWO)),
+                     manifest={'purple': 1, 'orange': 7, 'blue': 2})
+    colors = ['orange'] * 6 + ['purple', 'orange', 'blue', 'blue']
+    cell = FakeCell(layout, colors, base_loop=True, grasp_failures={8: 99})
+    p = run(cell, limit=400.0)
+    assert p.result.status == 'incomplete' and p.result.failed == 1, p.result
+    blues = [e.robot for e in cell.events if e.kind == 'delivered' and e.color == 'blue']
+    assert blues == ['youbot', 'youbot']
+    assert any(e.kind == 'driving' and e.robot == 'youbot2' and e.detail.startswith('to park')
+               for e in cell.events)
+    assert np.array(cell.paths['youbot2'][-1][:2]) == pytest.approx(
+        np.array(layout.park('youbot2')[:2]), abs=0.05)
 
 
 def test_a_fleet_of_one_holds_both_places_and_nothing_holds_its_drives_back():
@@ -258,6 +380,21 @@ def test_two_youbots_share_the_carrying_and_their_bases_keep_the_clearance_at_ev
     # Each youBot's arm ends folded, the run's states name each youBot's machine.
     machines = {e.robot for e in cell.events if e.kind == 'state'}
     assert {'loader', 'youbot', 'youbot2'} <= machines
+    # Each unloads at its own side of the pool (the east side, the second's); each ends at its
+    # park, out of the other's way.
+    stands = {r: {e.detail.split(' from ')[1] for e in cell.events
+                  if e.kind == 'delivered' and e.robot == r and ' from ' in e.detail}
+              for r in ('youbot', 'youbot2')}
+    assert stands['youbot'] and stands['youbot'] <= {'pool_left', 'pool_right'}
+    assert stands['youbot2'] and stands['youbot2'] <= {'pool_east_left', 'pool_east_right'}
+    # (One set off for the pool while the other still unloaded there: with one side, it
+    # waited at the loading pose until the other had left the pool.)
+    unloading = [e.time for e in cell.events if e.kind == 'delivered' and e.robot == 'youbot2']
+    assert any(min(unloading) < e.time < max(unloading) for e in cell.events
+               if e.kind == 'departing' and e.robot == 'youbot')
+    for name in ('youbot', 'youbot2'):
+        assert np.array(cell.paths[name][-1][:2]) == pytest.approx(
+            np.array(layout.park(name)[:2]), abs=0.05)
 
 
 def test_each_youbots_share_of_the_run_is_in_its_result_and_reads_back():
@@ -342,12 +479,13 @@ def test_the_fleets_size_leaves_the_last_youbots_out_of_the_world():
     assert [c.name for c in world.cameras] == ['belt_camera']
     assert world.roles.transports == ('youbot',) and world.roles.left_out == ('youbot2',)
     layout = layout_from_world(world)
-    assert layout.fleet and layout.park('youbot') == pytest.approx((1.6, 0.6, -math.pi / 2))
+    assert layout.fleet and layout.park('youbot') == pytest.approx((0.0, -0.8, 0.0))
     assert layout.youbot_home == pytest.approx((0.8, 0.05, -math.pi / 2))
     both = parse_world(_sized(2))
     assert [r.name for r in both.robots] == ['zu12', 'youbot', 'youbot2']
     # A loading pose at the one youBot's start pose is the paper's cell: no parks.
-    paper = layout_from_world(parse_world(_moved(_sized(1), 'youbot', x=0.8, y=0.05)))
+    paper = layout_from_world(parse_world(_moved(_sized(1), 'youbot', x=0.8, y=0.05,
+                                                 yaw=-math.pi / 2)))
     assert not paper.fleet
 
 

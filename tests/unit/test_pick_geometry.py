@@ -8,9 +8,8 @@ import pytest
 from test_pipeline import Zu12IK, cell_layout
 from test_zu12_swing import READY
 
-from controllers.pick_place import PickTiming
-from coordinator.pipeline.model import DOWN, EDGE_CLEARANCE_M
-from coordinator.pipeline.pick_geometry import (
+from cell_layout.pick_geometry import (
+    EDGE_CLEARANCE_M,
     IK_JUMP_RAD,
     LIFT_LINE_STEP_M,
     continuous,
@@ -21,6 +20,8 @@ from coordinator.pipeline.pick_geometry import (
     place_points,
     polar,
 )
+from controllers.pick_place import PickTiming
+from coordinator.pipeline.model import DOWN
 
 
 def test_crossing_finds_the_first_sign_change_or_the_nearer_end():

@@ -12,10 +12,11 @@ from test_cell_rules import world
 from test_material_classes import PAPER_CLASSES as PAPER
 from test_pipeline import Zu12IK
 
+from cell_layout import pick_geometry
+from cell_layout.pick_geometry import edge_point, over_the_belt
 from cell_layout.world_layout import layout_from_world
 from controllers.time_optimal import Waypoint
-from coordinator.pipeline import Material, Pipeline, Settings, model, pick_geometry
-from coordinator.pipeline.pick_geometry import edge_point, over_the_belt
+from coordinator.pipeline import Material, Pipeline, Settings, model
 
 READY = np.array([1.201, 1.436, -1.222, 1.357, 1.571, -0.37])      # (the world's)
 
@@ -71,7 +72,7 @@ def test_the_way_back_from_a_low_place_rises_over_it_before_it_swings_to_the_bel
     zu12._adopt(way)
     zu12.cup.released()
     hover = np.array([0.6, layout.belt_y, layout.belt_top + 0.1])
-    crossing = edge_point(layout, hover, zu12.cup.above, model.EDGE_CLEARANCE_M)
+    crossing = edge_point(layout, hover, zu12.cup.above, pick_geometry.EDGE_CLEARANCE_M)
     edge = run_.zu12.solve(crossing, model.DOWN, 'world', zu12.cup.above_q)
     assert over_the_belt(layout, zu12.cup.above_q, edge, 0.0)
     waypoints, _ = zu12.cup.from_release([Waypoint(edge)], edge)

@@ -27,9 +27,6 @@ DOWN = (1.0, 0.0, 0.0, 0.0)                  # tool z pointing down (x, y, z, w)
 # A pick's contact is planned at least this long after the arm could be over the material, and
 # moved this much later while the arm cannot make it [s].
 PICK_LEAD_S = 0.1
-# The Zu 12 crosses the belt's near edge this far outside it, with what it carries (or its
-# empty cup) at least this far above the belt's top [m].
-EDGE_CLEARANCE_M = 0.05
 # An arm swings in over the materials already at a set-down's destination (or on the plate)
 # with what it holds at least this far above the tallest of them [m].
 SET_DOWN_CLEARANCE_M = 0.02

@@ -11,6 +11,14 @@ from typing import Any, Callable, List, Optional, Union
 import numpy as np
 
 from cell_layout.layout import CellLayout, slot_in_world
+from cell_layout.pick_geometry import (
+    EDGE_CLEARANCE_M,
+    continuous,
+    edge_point,
+    lift_line,
+    over_the_belt,
+    place_points,
+)
 from controllers.bezier import Pose2D
 from controllers.pick_place import PickTiming, follow_pick
 from controllers.time_optimal import (
@@ -24,7 +32,6 @@ from controllers.time_optimal import (
 from coordinator.pipeline.materials import BeltModel, MaterialBook
 from coordinator.pipeline.model import (
     DOWN,
-    EDGE_CLEARANCE_M,
     PICK_LEAD_S,
     PICK_REPLAN_STEP_S,
     PICK_TRIES,
@@ -35,13 +42,6 @@ from coordinator.pipeline.model import (
     Points,
     Settings,
     known,
-)
-from coordinator.pipeline.pick_geometry import (
-    continuous,
-    edge_point,
-    lift_line,
-    over_the_belt,
-    place_points,
 )
 from coordinator.pipeline.robots import Arm, CupPlace
 from coordinator.pipeline.room import Room

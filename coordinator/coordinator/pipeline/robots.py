@@ -18,6 +18,7 @@ from typing import Any, Callable, List, Optional, Sequence, Tuple
 import numpy as np
 
 from cell_layout.layout import CellLayout
+from cell_layout.pick_geometry import over_the_belt
 from cell_layout.reach import youbot_holds, youbot_tool_quaternion
 from controllers import youbot_arm, zu12_arm
 from controllers.arrays import Vector
@@ -35,7 +36,6 @@ from coordinator.pipeline.model import (
     Settings,
     known,
 )
-from coordinator.pipeline.pick_geometry import over_the_belt
 from coordinator.pipeline.record import EventLog
 from trial_record.events import EventKind
 
@@ -180,14 +180,20 @@ class YoubotArm(Arm):
     """The youBot's arm: it reaches the plate's far slots only leaning outwards, so its paths
     are solved at one tool tilt, and it holds a load only in some poses."""
 
+    # The tool tilt [deg] of the last path solve_tilted found.
+    tilt_deg = 0
+
     def solve_tilted(self, points: Sequence[np.ndarray], seed: np.ndarray,
-                     payload: float = 0.0, held_from: int = 0) -> Optional[List[np.ndarray]]:
+                     payload: float = 0.0, held_from: int = 0,
+                     tilts: Sequence[int] = tuple(range(0, 90, 10))
+                     ) -> Optional[List[np.ndarray]]:
         """Joint positions for a path whose every point has the same tool tilt: a material
         held at one tilt stays level only if it is set down at the same tilt. From point
         ``held_from`` on the arm holds ``payload`` kg: a tilt whose poses there its joints
-        cannot hold at rest (youbot_holds) is not taken."""
+        cannot hold at rest (youbot_holds) is not taken. The first of ``tilts`` [deg] that
+        works is taken (and kept in ``tilt_deg``)."""
         heavy = False
-        for tilt_deg in range(0, 90, 10):
+        for tilt_deg in tilts:
             plan: List[np.ndarray] = []
             q = seed
             for p in points:
@@ -199,6 +205,7 @@ class YoubotArm(Arm):
                 plan.append(q)
             if len(plan) == len(points):
                 if youbot_holds(plan[held_from:], payload):
+                    self.tilt_deg = tilt_deg
                     return plan
                 heavy = True
         why = (f'not held at rest with {payload} kg' if heavy else 'at any one tilt up to 80 deg')

@@ -5,6 +5,8 @@ from __future__ import annotations
 
 from typing import Dict, List, Optional
 
+import numpy as np
+
 from cell_layout.layout import CellLayout
 from coordinator.pipeline.materials import MaterialBook
 from coordinator.pipeline.model import (
@@ -68,16 +70,27 @@ class Room:
         if not self.has_room(plate, on_plates):
             return []
         taken = {x.slot: x.color for x in on_plates if x.plate == plate}
-        free = self.layout.free_slots(m.color, taken, self.to_come_counts())
+        free = self.layout.free_slots(m.color, taken, self.to_come_counts(), plate)
         if not self.layout.region_of(m.color).drop:
             return free
         room = {}
+        # (The drop spots of the plate's side of the pool, less those taken and those the
+        # materials on the plates of the youBots unloading there will take.)
+        side = self.layout.side_of(plate)
         bound = [self.layout.slot_row(x.slot) for x in on_plates
-                 if self.layout.region_of(x.color).drop]
-        for st in self.layout.stands:
+                 if self.layout.region_of(x.color).drop and self.layout.side_of(x.plate) == side]
+        for st in self.layout.stands_of(plate):
             room[st.row] = (len(st.drops) - len(self.book.dropped(st.name))
                             - bound.count(st.row))
         return [k for k in free if room.get(self.layout.slot_row(k), 0) > 0]
+
+    def can_take(self, plate: str) -> bool:
+        """Whether youBot ``plate`` has a place (a plate slot, and a drop spot or slot at its
+        destination from its side of the pool) for any carried material still to come: a
+        youBot whose side of the pool is full is done."""
+        return any(self.plate_slots(Material(-1, c, np.zeros(3), 0.0, 0,
+                                             size=self.layout.size_of(c)), plate)
+                   for c in self.layout.manifest if self.layout.carried(c) and self.to_come(c))
 
     def load_complete(self, plate: str, loaded: bool) -> bool:
         """Whether the load of youBot ``plate`` is complete (``loaded``: anything is on it):
@@ -96,7 +109,7 @@ class Room:
             return loaded                   # (full for what waits: off to make room)
         coming = [c for c in self.layout.manifest if self.layout.carried(c) and self.to_come(c)]
         return loaded and (not self.has_room(plate) or not any(
-            self.layout.free_slots(c, self.plate_taken(plate), self.to_come_counts())
+            self.layout.free_slots(c, self.plate_taken(plate), self.to_come_counts(), plate)
             for c in coming))
 
     def free_places(self, region: str, m: Material) -> List[int]:

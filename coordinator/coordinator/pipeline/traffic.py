@@ -1,8 +1,9 @@
 """The fleet's traffic rules (no ROS): the two places its youBots share, and the one rule for
 every drive (docs/writing-a-cell.md, "Several youBots").
 
-- The loading pose and the pool (its unload stands) are each held by one youBot at a time, given
-  in the order the youBots asked for them.
+- The loading pose and each side of the pool (its unload stands) are each held by one youBot at
+  a time, given in the order the youBots asked for them. Each youBot unloads at its own side
+  (CellLayout.side_of): with two sides, two youBots unload at once.
 - A drive starts only if the base's footprint, all along its path, keeps the cell's clearance
   (and TRACKING_MARGIN_M for the drives' errors) from every other youBot: from where it stands,
   or from the rest of its drive. Nobody waits on a drive already under way, and every drive ends,
@@ -17,12 +18,17 @@ from typing import Dict, List, Mapping, Optional
 import numpy as np
 
 from cell_layout.fleet_routes import keeps_clear
-from cell_layout.layout import CellLayout
+from cell_layout.layout import CellLayout, pool_sides
 from controllers.path_follower import PathFollower
 from coordinator.pipeline.model import Observation
 from coordinator.pipeline.robots import BaseDrive
 
 LOADING, STANDS = 'loading', 'pool'
+
+
+def stands_place(side: int) -> str:
+    """The place that is the stands of the pool's side ``side`` (0: the west)."""
+    return STANDS if side == 0 else f'{STANDS} side {side}'
 # A base may lag its path's dummy by this much: the rest of its drive is taken from this long
 # before now [s].
 DRIVE_LAG_S = 1.0
@@ -32,8 +38,9 @@ class Traffic:
     def __init__(self, layout: CellLayout, bases: Mapping[str, BaseDrive]) -> None:
         self.layout, self.bases = layout, bases
         first = None if layout.fleet else layout.transport.name
-        self.holder: Dict[str, Optional[str]] = {LOADING: first, STANDS: first}
-        self.queue: Dict[str, List[str]] = {LOADING: [], STANDS: []}
+        places = [LOADING, *(stands_place(k) for k in range(len(pool_sides(layout))))]
+        self.holder: Dict[str, Optional[str]] = {p: first for p in places}
+        self.queue: Dict[str, List[str]] = {p: [] for p in places}
 
     def ask(self, robot: str, place: str) -> bool:
         """Whether ``robot`` holds ``place`` (given it if it is free and ``robot`` is the first

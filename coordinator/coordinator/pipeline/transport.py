@@ -11,7 +11,7 @@ from typing import (
 
 import numpy as np
 
-from cell_layout.fleet_routes import way_back, way_to_park
+from cell_layout.fleet_routes import way_between, way_off, way_to_park
 from cell_layout.layout import (
     POOL,
     CellLayout,
@@ -45,7 +45,7 @@ from coordinator.pipeline.model import (
 from coordinator.pipeline.record import EventLog
 from coordinator.pipeline.robots import BaseDrive, YoubotArm
 from coordinator.pipeline.room import Room
-from coordinator.pipeline.traffic import LOADING, STANDS, Traffic
+from coordinator.pipeline.traffic import LOADING, Traffic, stands_place
 from coordinator.pipeline.unload_planner import UnloadPath, UnloadPlanner
 from trial_record.events import EventKind
 
@@ -96,6 +96,7 @@ class Transport(Machine):
         self.queue: List[Material] = []              # still to unload, the current one first
         self.base, self.traffic = base, traffic
         self.robot = arm.name
+        self.pool = stands_place(layout.side_of(self.robot))   # (where it unloads: Traffic)
         if layout.fleet:
             self.name = arm.name                # (its states' lane: one per youBot)
         self.planner = UnloadPlanner(arm, book, layout, settings)
@@ -129,18 +130,28 @@ class Transport(Machine):
     def _wait_load(self, obs: Observation) -> None:
         on_plate = [m for m in self.book.with_status(MaterialStatus.ON_PLATE)
                     if m.plate == self.robot]
-        if (not (self.loader_done() or self.room.load_complete(self.robot, bool(on_plate)))
+        # (Nothing on its plate nor on its way there, and nothing to come has a place on it:
+        # its side of the pool is full.)
+        idle = not (on_plate or self.room.can_take(self.robot) or any(
+            m.plate == self.robot for m in self.book.with_status(MaterialStatus.PICKING)))
+        if (not (self.loader_done() or self.room.load_complete(self.robot, bool(on_plate))
+                 or idle)
                 or not self.zu12_clear(obs.now)):
             return      # (nor while the Zu 12's cup is over the plate, or swinging home from it)
         order = [st.name for st in self.layout.stands]
         queue = sorted(on_plate, key=lambda m: (
             order.index(self.planner.stand_for(m)), self.layout.destination(m.color) != POOL,
             m.slot))
+        if not queue and not self.loader_done() and self.layout.fleet:
+            # Nothing for it to come (its side of the pool full): off to its park, to fold.
+            if self._drive_to(obs, 'park'):
+                self.traffic.leave(self.robot, LOADING)
+            return
         if not queue:
             self.traffic.leave(self.robot, LOADING)
             self.enter(TransportState.DONE, obs.now, math.inf)
             return
-        if not self.traffic.ask(self.robot, STANDS):
+        if not self.traffic.ask(self.robot, self.pool):
             return                                  # (another youBot unloads there)
         self.queue = queue
 
@@ -157,7 +168,8 @@ class Transport(Machine):
     def _wait_bay(self, obs: Observation) -> None:
         """At its park: to the loading pose once it is its turn there, or folded once nothing
         more is to come."""
-        if not self.room.carried_to_come() or self.loader_done():
+        if (not self.room.carried_to_come() or self.loader_done()
+                or not self.room.can_take(self.robot)):
             self.traffic.leave(self.robot, LOADING)
             self.arm.go_home(obs)
             return self.enter(TransportState.FOLD, obs.now, self.arm.motion.end
@@ -168,11 +180,16 @@ class Transport(Machine):
                 self.arm.q(obs), [Waypoint(YOUBOT_CARRY_Q.copy())])))
 
     def _off_the_pool(self, obs: Observation) -> None:
-        """Unloaded: to the loading pose if it is free for this youBot, else to its park; the
-        pool is free once it sets off (LEAVE while the drive is held back)."""
-        goal = 'home' if self.traffic.ask(self.robot, LOADING) else 'park'
+        """Unloaded: to the loading pose if it is free for this youBot and it has more to
+        carry, else to its park; the pool is free once it sets off (LEAVE while the drive is
+        held back). (A fleet's youBot done at the loading pose stood in the way of another
+        coming back from the pool, for ever.)"""
+        more = self.room.carried_to_come() and not self.loader_done() and self.room.can_take(
+            self.robot)
+        goal = ('home' if (more or not self.layout.fleet) and self.traffic.ask(self.robot, LOADING)
+                else 'park')
         if self._drive_to(obs, goal):
-            self.traffic.leave(self.robot, STANDS)
+            self.traffic.leave(self.robot, self.pool)
         elif self.state is not TransportState.LEAVE:
             self.enter(TransportState.LEAVE, obs.now, math.inf)
 
@@ -186,16 +203,17 @@ class Transport(Machine):
         plan = None
         if goal == 'park':
             target = lay.park(self.robot)
+            # (From the loading pose: its way there from its park, the other way round.)
             via = (way_to_park(lay, lay.stand(self.base.goal), target)
-                   if any(st.name == self.base.goal for st in lay.stands)
-                   else way_back(lay.stands, target))
+                   if any(st.name == self.base.goal for st in lay.stands) else ())
         elif goal == 'home':
             target = lay.youbot_home
-            via = () if self.base.goal in ('', 'park') else lay.via_back
+            via = (() if self.base.goal in ('', 'park', 'home')
+                   else way_off(lay, lay.stand(self.base.goal), target))
         else:
             target = lay.stand(goal).pose
             via = (lay.way_out(goal) if self.base.goal in ('', 'home')
-                   else lay.via_turn if self.base.goal != goal else ())
+                   else way_between(lay, lay.stand(goal)) if self.base.goal != goal else ())
             if lay.fleet and not self.traffic.clear(
                     self.robot, self.base.path_to(obs, target, via), obs):
                 return False            # (held back: the unload is planned once it may go)

@@ -41,6 +41,8 @@ class UnloadPath:
 # A youBot unload whose drop is reached at another tool tilt than its grip rises this much more
 # before the wrist turns [m].
 TILT_CHANGE_RISE_M = 0.06
+# ... through a point this far apart [m].
+RISE_STEP_M = 0.01
 # A heavy material's unload slides the base along its stand's line only this far or further
 # (nearer, it is unloaded from where the base stands) [m].
 SLIDE_MIN_M = 0.03
@@ -59,7 +61,7 @@ class UnloadPlanner:
 
     def stand_for(self, m: Material) -> str:
         """The stand the base unloads ``m`` from."""
-        return self.layout.stand_for(m.color, m.slot).name
+        return self.layout.stand_for(m.color, m.slot, m.plate).name
 
     def unload_path(self, m: Material, pose: Pose2D, seed: np.ndarray,
                      high: bool = False, slide: bool = False) -> Optional['UnloadPath']:
@@ -144,10 +146,18 @@ class UnloadPlanner:
                 # A drop spot further in is reached leaning another way: the material, let go
                 # over the pool, need not stay level (one it is set down must). It rises
                 # TILT_CHANGE_RISE_M more first, still level, so that what it holds clears the
-                # others on the plate as the wrist turns.
+                # others on the plate as the wrist turns: straight up, through a point every
+                # centimetre at the grip's tilt (in one joint step it swung 2 cm sideways, into
+                # the plate's next material).
                 rise = np.array(lift[-1], float) + np.array([0.0, 0.0, TILT_CHANGE_RISE_M])
                 grip = self.arm.solve_tilted([hover, contact, *lift, rise], np.array(seed, float),
                                              load, held_from=1)
+                if grip is not None:
+                    steps = [np.array(lift[-1], float) + np.array([0.0, 0.0, h]) for h in
+                             np.arange(RISE_STEP_M, TILT_CHANGE_RISE_M - 1e-9, RISE_STEP_M)]
+                    between = self.arm.solve_tilted(steps, grip[-2], load,
+                                                    tilts=(self.arm.tilt_deg,)) if steps else []
+                    grip = (grip[:-1] + between + grip[-1:]) if between is not None else None
                 above = np.array(over, float)
                 above[2] = max(over[2], rise[2])
                 out = (self.arm.solve_tilted([above, drop], grip[-1], load) if grip is not None
@@ -165,16 +175,22 @@ class UnloadPlanner:
         at its top, or going on from there through ``then`` (or ``detour`` where ``then``
         would not keep ``m`` clear of the plate's other materials): at the speed, of those
         tried, that ends soonest and keeps the joints within their limits."""
+        return self.lift_from(self.arm.q(obs), m, carry, then, detour)
+
+    def lift_from(self, q: np.ndarray, m: Material, carry: UnloadPath,
+                  then: Sequence[Waypoint] = (), detour: Sequence[Waypoint] = ()) -> Points:
+        """``lift``, the arm at ``q`` (gripping ``m`` on its slot)."""
         limits = self.arm.limits
-        others, offset = self.others(m), self.held_offset(obs, m)
+        others = self.others(m)
+        offset = held_offset(q, self.layout.plate_slots[m.slot])
         for way in ((then, detour) if detour else (then,)):
             best = None
             for speed in (UNLOAD_LIFT_END_SPEEDS if way else (0.0,)):
-                lift = timed_path([self.arm.q(obs), *carry.lift], limits,
+                lift = timed_path([q, *carry.lift], limits,
                                   self.arm.clock.now + self.s.plan_latency, end_speed=speed,
                                   min_time=self.s.timing.lift)
                 try:
-                    points = self.arm.plan(self.arm.q(obs), [*lift, *way])
+                    points = self.arm.plan(q, [*lift, *way])
                 except PlanError:
                     continue
                 within = all(np.all(np.abs(v) <= limits.velocity) for _, _, v, _ in points)

@@ -1,7 +1,8 @@
 """The geometry of the Zu 12's picks and places (no ROS, no state): where its way crosses the
 belt's near edge, whether a swing of its joints passes low over the belt, the straight lift out
-of a queue, the points over a place, and whether two IK solutions lie on one branch. The loader
-(loader.py) plans with these; each has its own unit tests (tests/unit/test_pick_geometry.py)."""
+of a queue, the points over a place, and whether two IK solutions lie on one branch. The
+coordinator's loader (coordinator/pipeline/loader.py) plans with these; each has its own unit
+tests (tests/unit/test_pick_geometry.py)."""
 from __future__ import annotations
 
 import math
@@ -13,8 +14,10 @@ from cell_layout.layout import CellLayout
 from cell_layout.reach import zu12_cup_positions
 from controllers.arrays import Vector
 from controllers.pick_place import PickTiming
-from coordinator.pipeline.model import EDGE_CLEARANCE_M
 
+# The Zu 12 crosses the belt's near edge this far outside it, with what it carries (or its
+# empty cup) at least this far above the belt's top [m].
+EDGE_CLEARANCE_M = 0.05
 # A lift out of the end stop's queue keeps to the straight line up through a point this often
 # [m].
 LIFT_LINE_STEP_M = 0.01
