@@ -322,8 +322,9 @@ def test_the_trip_load_is_a_share_and_the_last_youbot_that_can_take_the_rest_tak
     does not carry, the west side's takes it on this trip, up to a full plate."""
     from dataclasses import replace
 
-    from coordinator.pipeline import Material, Pipeline, Settings
     from test_pipeline import FakeCell
+
+    from coordinator.pipeline import Material, Pipeline, Settings
     base = layout_from_world(load_world(TWO))
     assert base.trip_load == 6
     for oranges, limited in ((7, True), (6, False)):
