@@ -17,6 +17,7 @@ from pathlib import Path
 from typing import Any, Callable, Dict, Iterator, Optional, Set, TypedDict
 
 from ros_common.dds import hold_free_domain, with_profile
+from studies.progress import read_progress
 from studies.recorded import bag_metadata
 from studies.sweep import SweepError, point_world
 from studies.trial_graph import TIME_STEP, pipeline_graph
@@ -103,6 +104,8 @@ def run_trial(trial: int, seed: int, belt_speed: float, domain_id: int, out_dir:
         while (coordinator is not None and coordinator.poll() is None
                and time.monotonic() < deadline and not INTERRUPTED.wait(0.2)):
             pass
+        late = (coordinator is not None and coordinator.poll() is None
+                and time.monotonic() >= deadline)
         cpu = {name: _cpu_seconds(p.pid) for name, p in procs.items() if p.poll() is None}
     finally:
         _stop_group(group, procs, interrupted=INTERRUPTED.is_set())
@@ -111,7 +114,8 @@ def run_trial(trial: int, seed: int, belt_speed: float, domain_id: int, out_dir:
                   wall_time=time.monotonic() - start, cpu_seconds=cpu)
     coordinator = procs.get('coordinator_node')
     result = _record(trial_dir, run, seed, belt_speed,
-                     coordinator.returncode if coordinator is not None else None)
+                     coordinator.returncode if coordinator is not None else None,
+                     wall_timeout if late else None)
     result = replace(result, parameters=dict(parameters or {}), scenario=ran)
     result.write(result_file)
     outcome_file.unlink(missing_ok=True)
@@ -129,8 +133,9 @@ def scenario(world: str, time_step: float) -> Dict[str, Any]:
 
 
 def _record(trial_dir: Path, run: RunInfo, seed: int, belt_speed: float,
-            exit_code: Optional[int]) -> TrialResult:
-    """The trial's record: the coordinator's, with the run's metadata; or, without one, why."""
+            exit_code: Optional[int], late: Optional[float] = None) -> TrialResult:
+    """The trial's record: the coordinator's, with the run's metadata; or, without one, why
+    (``late``: the wall timeout it ran past, and was stopped at)."""
     outcome, problem = read_result(trial_dir / OUTCOME_FILE)
     if outcome is not None:
         # (The coordinator measured its own CPU time; the runner the others', still running.)
@@ -139,6 +144,15 @@ def _record(trial_dir: Path, run: RunInfo, seed: int, belt_speed: float,
     if INTERRUPTED.is_set():     # (stopped by the user: --resume runs it again)
         return TrialResult.failure('interrupted', 'the campaign was interrupted', run.trial,
                                    seed, belt_speed, run)
+    if late is not None:
+        # (It said only "no result (coordinator exit 0)", the coordinator stopped cleanly.)
+        progress = read_progress(trial_dir / PROGRESS_FILE) or {}
+        where = (f' at {progress["sim_time"]:.1f} s simulated' if 'sim_time' in progress
+                 else '')
+        return TrialResult.failure(
+            'error', f'stopped at its wall timeout ({late:g} s of wall time){where}: the '
+            f'machine ran it too slowly (--wall-timeout gives a trial longer); see {trial_dir}',
+            run.trial, seed, belt_speed, run)
     return TrialResult.failure(
         'error', f'no result (coordinator exit {exit_code}'
         + (f'; its result file: {problem}' if problem else '') + f'); see {trial_dir}',

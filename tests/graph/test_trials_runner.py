@@ -135,3 +135,21 @@ def test_a_campaign_stopped_mid_trial_keeps_the_trials_bag_whole(tmp_path):
         assert 'Traceback' not in text and '[FATAL]' not in text, (log.name, text[-2000:])
     wait_for(lambda: not _session_processes(runner.pid), 10.0,
              what='no process of the campaign left')
+
+
+def test_a_trial_past_its_wall_timeout_says_so(tmp_path):
+    """A trial the machine runs too slowly is stopped at its wall timeout, and its record says
+    that, and how far it got (it said only "no result (coordinator exit 0)": the coordinator,
+    stopped, exits cleanly); the campaign goes on, and no process of the trial is left."""
+    out = tmp_path / 'campaign'
+    run = subprocess.run([shutil.which('run_trials'), '--trials', '1', '--seed0', '7',
+                          '--wall-timeout', '8', '--out', str(out), '--bar', 'off'],
+                         capture_output=True, text=True, start_new_session=True, timeout=600)
+    assert 'Traceback' not in run.stdout + run.stderr
+    result = json.loads((out / 'trial_000' / 'result.json').read_text())
+    assert result['status'] == 'error'
+    assert result['message'].startswith('stopped at its wall timeout (8 s of wall time)'), \
+        result['message']
+    assert '--wall-timeout' in result['message']
+    rows = list(csv.DictReader((out / 'trials.csv').open()))
+    assert [r['status'] for r in rows] == ['error']

@@ -316,6 +316,30 @@ def test_a_youbot_at_the_loading_pose_with_nothing_left_for_it_makes_way():
         np.array(layout.park('youbot2')[:2]), abs=0.05)
 
 
+def test_the_trip_load_is_a_share_and_the_last_youbot_that_can_take_the_rest_takes_it():
+    """The example's youBots set off with six (``trip_load``) while the other may carry some
+    of what is to come; once only the platform's blue is left, which the east side's youBot
+    does not carry, the west side's takes it on this trip, up to a full plate."""
+    from dataclasses import replace
+
+    from test_pipeline import FakeCell
+
+    from coordinator.pipeline import Material, Pipeline, Settings
+    base = layout_from_world(load_world(TWO))
+    assert base.trip_load == 6
+    for oranges, limited in ((7, True), (6, False)):
+        layout = replace(base, manifest={'purple': 0, 'orange': oranges, 'blue': 1})
+        run_ = Pipeline(layout, FakeCell(layout, []), Settings())
+        room = run_.transport.room
+        run_.materials.update({10 + k: Material(10 + k, 'orange', np.zeros(3), 0.0, 3,
+                                                status='on_plate', slot=k, plate='youbot')
+                               for k in range(6)})
+        blue = Material(1, 'blue', np.zeros(3), 0.0, 3)
+        assert room.can_take('youbot2') is limited          # (an orange still to come)
+        assert room.has_room('youbot') is not limited
+        assert bool(room.plate_slots(blue, 'youbot')) is not limited
+
+
 def test_a_fleet_of_one_holds_both_places_and_nothing_holds_its_drives_back():
     layout = layout_from_world(load_world(PAPER))
     t = _traffic(layout)

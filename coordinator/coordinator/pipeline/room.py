@@ -52,22 +52,29 @@ class Room:
                 and (x.status in (MaterialStatus.PICKING, MaterialStatus.ON_PLATE)
                      or x.left_on_plate)]
 
-    def has_room(self, plate: str, on_plates: Optional[List[Material]] = None) -> bool:
+    def has_room(self, plate: str, on_plates: Optional[List[Material]] = None,
+                 limited: bool = True) -> bool:
         """Whether the trip's load (the cell's ``trip_load``) leaves room on ``plate``
-        (``on_plates``: the materials on any plate, if known)."""
-        if not self.layout.trip_load:
+        (``on_plates``: the materials on any plate, if known). The trip's load is a share: it
+        holds only while another youBot may carry some of what is still to come (with
+        ``limited``); else the plate takes all it can. (With eight materials, the second youBot
+        of the example, which does not carry the platform's blue, was done, and the first went
+        twice: six, then the blue alone.)"""
+        if not (self.layout.trip_load and limited and any(
+                self.can_take(r.name, limited=False) for r in self.layout.transports
+                if r.name != plate)):
             return True
         on = self._on_plates() if on_plates is None else on_plates
         return sum(1 for x in on if x.plate == plate
                    and not x.left_on_plate) < self.layout.trip_load
 
-    def plate_slots(self, m: Material, plate: str) -> List[int]:
+    def plate_slots(self, m: Material, plate: str, limited: bool = True) -> List[int]:
         """The slots of youBot ``plate``'s plate free for ``m`` now, in the order they are
         filled (none once it has its trip's load): for a pool material, only in a row whose
         stand has a drop spot left for it (those the materials on every plate will take
         counted)."""
         on_plates = self._on_plates(m)
-        if not self.has_room(plate, on_plates):
+        if not self.has_room(plate, on_plates, limited):
             return []
         taken = {x.slot: x.color for x in on_plates if x.plate == plate}
         free = self.layout.free_slots(m.color, taken, self.to_come_counts(), plate)
@@ -84,12 +91,12 @@ class Room:
                             - bound.count(st.row))
         return [k for k in free if room.get(self.layout.slot_row(k), 0) > 0]
 
-    def can_take(self, plate: str) -> bool:
+    def can_take(self, plate: str, limited: bool = True) -> bool:
         """Whether youBot ``plate`` has a place (a plate slot, and a drop spot or slot at its
         destination from its side of the pool) for any carried material still to come: a
-        youBot whose side of the pool is full is done."""
+        youBot whose side of the pool is full is done. (Not ``limited``: by the trip's load.)"""
         return any(self.plate_slots(Material(-1, c, np.zeros(3), 0.0, 0,
-                                             size=self.layout.size_of(c)), plate)
+                                             size=self.layout.size_of(c)), plate, limited)
                    for c in self.layout.manifest if self.layout.carried(c) and self.to_come(c))
 
     def load_complete(self, plate: str, loaded: bool) -> bool:
