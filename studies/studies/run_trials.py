@@ -268,15 +268,20 @@ def _run_again(rerun: Rerun, out: Path, args: argparse.Namespace) -> int:
 
 def _study(args: argparse.Namespace, parser: argparse.ArgumentParser) -> int:
     """run_trials --study FILE [--out DIR | --resume DIR]: the study's trials and answer."""
-    from studies.study import StudyError, prepare, run_study
+    from studies.study import StudyError, check, claim, run_study
     plan = [k for k in PLAN_DEFAULTS if k != 'time_step' and getattr(args, k) is not None]
     if plan or args.report_only or args.show_graph:
         parser.error('--study takes its plan from the study file: no '
                      f'{", ".join("--" + k.replace("_", "-") for k in plan) or "--report-only"}')
     _campaign_directory(args, parser)
     try:
-        study = prepare(args.study, args.out, args.resume is not None)
+        study = check(args.study)
+        try:
+            args.out.mkdir(parents=True, exist_ok=True)
+        except OSError as exc:
+            raise CampaignError(f'--out {args.out}: {exc.strerror or exc}') from None
         with campaign_lock(args.out):
+            claim(study, args.study, args.out, args.resume is not None)
             code = code_version()
             trial_options = {'wall_timeout': args.wall_timeout, 'record': args.record,
                              'code': code, 'world': study.world,

@@ -35,14 +35,19 @@ class StudyStopped(Exception):
     """The user stopped the study (its finished trials are kept)."""
 
 
-def prepare(path: Path, out: Path, resume: bool) -> Study:
-    """The study file, checked with its worlds, and its directory: new, or (``resume``) the
-    same study's (CampaignError / StudyError with one line otherwise)."""
+def check(path: Path) -> Study:
+    """The study file, checked with its worlds (StudyError / CampaignError, one line)."""
     study = load_study(path)
     from studies.plan import check_world
     check_world(study.world)
     with tempfile.TemporaryDirectory(prefix='run_trials-study-') as scratch:
         check_study_worlds(study, Path(scratch))
+    return study
+
+
+def claim(study: Study, path: Path, out: Path, resume: bool) -> None:
+    """The study's directory (held by this runner): new, or (``resume``) the same study's
+    (CampaignError otherwise)."""
     state = out / STUDY_STATE
     if state.exists():
         held = _read_state(state)
@@ -52,15 +57,14 @@ def prepare(path: Path, out: Path, resume: bool) -> Study:
         if held != study.digest:
             raise CampaignError(f'{path} is not the study in {out} (its {STUDY_COPY} asks '
                                 'something else): give another --out')
-    elif resume and any(out.glob('trial_*')):
-        raise CampaignError(f'{out} holds trials but no {STUDY_STATE}: not a study to resume')
-    out.mkdir(parents=True, exist_ok=True)
+    elif any(out.glob('trial_*')):
+        raise CampaignError(f'{out} holds trials but no {STUDY_STATE}: not a study\'s '
+                            'directory; give another --out')
     if not (out / STUDY_COPY).exists() or not (out / STUDY_COPY).samefile(path):
         shutil.copyfile(path, out / STUDY_COPY)
     scratch_state = state.with_name(state.name + '.new')
     scratch_state.write_text(json.dumps({'study': study.digest, 'file': str(path)}, indent=1))
     os.replace(scratch_state, state)
-    return study
 
 
 def _read_state(path: Path) -> str:
@@ -128,14 +132,17 @@ def run_study(study: Study, pool: Pool, out: Path, code: str, progress_period: f
         print(line, flush=True)
     trials = StudyTrials(pool, out, code, say, progress_period)
     kind = 'search' if study.search else 'screening'
+    where = pool.describe()         # (a Ray pool cannot say it once closed)
     say(f'[study] {study.question or study.path}: a {kind} over '
-        f'{", ".join(f.name for f in study.factors)}, {pool.describe()}, into {out}')
+        f'{", ".join(f.name for f in study.factors)}, {where}, into {out}')
     try:
         if study.search is not None:
             lines, answer = _search(study, trials, pool.capacity, out, say)
         else:
             lines, answer = _screen(study, trials, out)
-    except StudyStopped:
+    except (StudyStopped, KeyboardInterrupt) as exc:
+        if isinstance(exc, KeyboardInterrupt):
+            pool.stop()
         pool.close()
         write_csv(list(trials.results.values()), out / 'trials.csv')
         say(f'[study] stopped: {len(trials.results)} trials kept in {out}; '
@@ -147,7 +154,7 @@ def run_study(study: Study, pool: Pool, out: Path, code: str, progress_period: f
     head = [f'# Study: {study.question or study.path}', '',
             f'World `{study.world}`, study seed {study.seed}; {len(trials.results)} trials '
             f'({trials.ran} run now, {trials.reused} taken from this directory), {wall:.0f} s '
-            f'of wall time, {pool.describe()}; code {code}. The study file: '
+            f'of wall time, {where}; code {code}. The study file: '
             f'[{STUDY_COPY}]({STUDY_COPY}); each trial in its `trial_NNN` directory (re-run, '
             'compare and storyboard take them), all of them in `trials.csv`.', '']
     (out / REPORT).write_text('\n'.join(head + lines) + '\n')
@@ -201,4 +208,4 @@ def _screen(study: Study, trials: StudyTrials, out: Path) -> Any:
     return lines, {'ranking': answer}
 
 
-__all__ = ['StudyError', 'prepare', 'run_study']
+__all__ = ['StudyError', 'check', 'claim', 'run_study']
