@@ -170,7 +170,7 @@ def _parser() -> '_Parser':
     parser.add_argument('--set', action='append', default=None, metavar='NAME=VALUE',
                         help='with --rerun: change belt_speed or a number of the world file '
                              '(by its path) for the re-run')
-    parser.add_argument('--study', type=Path, default=None, metavar='FILE',
+    parser.add_argument('--study', default=None, metavar='FILE',
                         help='run a study (a search under a constraint, or a screening of '
                              'factors) described by FILE into --out (docs/studies.md); '
                              '--resume DIR goes on with a stopped one')
@@ -275,13 +275,13 @@ def _study(args: argparse.Namespace, parser: argparse.ArgumentParser) -> int:
                      f'{", ".join("--" + k.replace("_", "-") for k in plan) or "--report-only"}')
     _campaign_directory(args, parser)
     try:
-        study = check(args.study)
+        study, path = check(args.study)
         try:
             args.out.mkdir(parents=True, exist_ok=True)
         except OSError as exc:
             raise CampaignError(f'--out {args.out}: {exc.strerror or exc}') from None
         with campaign_lock(args.out):
-            claim(study, args.study, args.out, args.resume is not None)
+            claim(study, path, args.out, args.resume is not None)
             code = code_version()
             trial_options = {'wall_timeout': args.wall_timeout, 'record': args.record,
                              'code': code, 'world': study.world,

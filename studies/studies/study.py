@@ -17,7 +17,7 @@ import shutil
 import tempfile
 import time
 from pathlib import Path
-from typing import Any, Callable, Dict, List, Optional
+from typing import Any, Callable, Dict, List, Optional, Tuple
 
 from studies.campaign import CampaignError, finished_result, write_csv
 from studies.pool import Pool
@@ -35,14 +35,20 @@ class StudyStopped(Exception):
     """The user stopped the study (its finished trials are kept)."""
 
 
-def check(path: Path) -> Study:
-    """The study file, checked with its worlds (StudyError / CampaignError, one line)."""
+def check(given: str) -> Tuple[Study, Path]:
+    """The study file (a path, or package://), checked with its worlds (StudyError /
+    CampaignError, one line); and where it is."""
+    from world_description.resources import ResourceError, resolve_resource
+    try:
+        path = resolve_resource(given)
+    except (ResourceError, ValueError) as exc:
+        raise StudyError(f'--study {given}: {exc}') from None
     study = load_study(path)
     from studies.plan import check_world
     check_world(study.world)
     with tempfile.TemporaryDirectory(prefix='run_trials-study-') as scratch:
         check_study_worlds(study, Path(scratch))
-    return study
+    return study, path
 
 
 def claim(study: Study, path: Path, out: Path, resume: bool) -> None:

@@ -199,7 +199,7 @@ class Searcher:
         c = min(beyond, key=lambda v: sign * v)
         mid = f.snap((b + c) / 2.0)
         if mid in (b, c) or abs(c - b) <= _resolution(f):
-            return None, tried[b], f'{b:g} meets it and {c:g} does not'
+            return None, tried[b], f'{b:g} meets it and {c:g} does not ({tried[c].how})'
         return mid, tried[b], ''
 
     def run(self) -> SearchAnswer:
