@@ -76,7 +76,7 @@ def claim(study: Study, path: Path, out: Path, resume: bool) -> None:
 def _read_state(path: Path) -> str:
     try:
         f = Fields(parse_json(read_text(path, 'a study state', 65536), str(path)), str(path))
-        f.only(('study', 'file'))
+        f.only(('study', 'file', 'answer'))
         return f.text('study', '', limit=64)
     except RecordError as exc:
         raise CampaignError(str(exc)) from None

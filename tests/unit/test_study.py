@@ -3,6 +3,7 @@ checks, the constraint's decisions, the search against a dense sweep of the same
 screening's ranking."""
 from __future__ import annotations
 
+import json
 import math
 import random
 from pathlib import Path
@@ -229,3 +230,32 @@ def test_the_screening_ranks_the_factors_by_their_effect(seed: int) -> None:
     assert all(math.isfinite(e.s1) for e in ranked)
     # (Completion time does not vary here: no effect is clear of zero.)
     assert all(e.low <= 0.0 <= e.high for e in effects(study, x, ys['completion_time']))
+
+
+# -- the study's directory -----------------------------------------------------------------
+
+def test_a_directory_resumes_only_its_own_study(tmp_path: Path) -> None:
+    from studies.campaign import CampaignError
+    from studies.study import STUDY_STATE, claim
+    a, b = tmp_path / 'a.yaml', tmp_path / 'b.yaml'
+    a.write_text(yaml.safe_dump(_study()))
+    b.write_text(yaml.safe_dump(_study(seed=9)))
+    out = tmp_path / 'out'
+    out.mkdir()
+    claim(load_study(a), a, out, resume=False)
+    assert (out / 'study.yaml').read_text() == a.read_text()
+    with pytest.raises(CampaignError, match='holds a study already'):
+        claim(load_study(a), a, out, resume=False)
+    with pytest.raises(CampaignError, match='is not the study in'):
+        claim(load_study(b), b, out, resume=True)
+    # A finished study (its answer written) resumes: every trial is taken, the report again.
+    state = json.loads((out / STUDY_STATE).read_text())
+    (out / STUDY_STATE).write_text(json.dumps({**state, 'answer': {'summary': 'x'}}))
+    claim(load_study(out / 'study.yaml'), out / 'study.yaml', out, resume=True)
+    (out / STUDY_STATE).write_text('{"study": "x", "extra": 1}')
+    with pytest.raises(CampaignError, match='extra'):
+        claim(load_study(a), a, out, resume=True)
+    campaign = tmp_path / 'campaign'
+    (campaign / 'trial_000').mkdir(parents=True)
+    with pytest.raises(CampaignError, match='not a study'):
+        claim(load_study(a), a, campaign, resume=False)
