@@ -215,18 +215,18 @@ class Searcher:
         planned = [{name: self._ends()[0]}] if self.bracketed else []
         explored = repeats = since_better = 0
         best_before: Optional[Setting] = None
-        why, settled = 'the budget ran out', False
+        why, settled = '', False
         while self.trials < spec.budget:
             proposal: Optional[Dict[str, float]] = None
             if planned:
                 proposal = planned.pop(0)
             elif self.bracketed and explored >= spec.explore:
-                value, best, why = self._halving()
+                value, best, closed = self._halving()
                 if value is None and best is not None and best.provisional:
                     self.extend(best)       # (the answer's trials in full: met, or go on)
                     continue
                 if value is None:
-                    settled = best is not None
+                    why, settled = closed, best is not None
                     break
                 proposal = {name: value}
             elif not self.bracketed and since_better >= max(PATIENCE, spec.explore):
@@ -253,7 +253,7 @@ class Searcher:
             since_better = 0 if best is not best_before else since_better + 1
             best_before = best
         return SearchAnswer(self.settings, self.best(), settled,
-                            self._summary(why, settled), self.trials)
+                            self._summary(why or 'the budget ran out', settled), self.trials)
 
     def _tell(self, search: Any, trial: Any, s: Setting) -> None:
         c = self.spec.constraint
