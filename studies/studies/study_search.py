@@ -176,7 +176,7 @@ class Searcher:
 
     def _ends(self) -> List[float]:
         """A bracketed search tries the range's far end first (met there: that is the answer),
-        then, if it fails there, its near end."""
+        then, if it fails there, its near end (and then its interior, coarse to fine)."""
         f = self.study.factors[0]
         return [f.high, f.low] if self.spec.maximise else [f.low, f.high]
 
@@ -187,11 +187,12 @@ class Searcher:
         sign = 1.0 if self.spec.maximise else -1.0
         tried = {s.values[f.name]: s for s in self.settings}
         ok = [v for v, s in tried.items() if s.looks_met]
-        near = self._ends()[1]
-        if not ok and near not in tried:
-            return near, None, ''           # (the far end failed: the near one next)
         if not ok:
-            return None, None, 'no setting tried meets the constraint'
+            # (Both ends failed: the interior is probed coarse to fine before the search says
+            # that nothing meets the constraint; the rate need not fall with the factor.)
+            probe = next((v for v in _probes(f) if v not in tried), None)
+            return probe, None, ('' if probe is not None else
+                                 f'no value of {f.name} on its grid meets the constraint')
         b = max(ok, key=lambda v: sign * v)
         beyond = [v for v, s in tried.items() if not s.looks_met and sign * (v - b) > 0]
         if not beyond:
@@ -283,6 +284,20 @@ class Searcher:
         state = 'settled' if settled else 'not settled'
         return (f'{head}, from {self.trials} trials over {len(self.settings)} settings; '
                 f'{sure}; {state}: {why}.')
+
+
+def _probes(f: Factor) -> List[float]:
+    """The factor's values, coarse to fine: the near end (after the far one), then the middle,
+    the quarters, the eighths, ... down to its resolution."""
+    out: List[float] = [f.low, f.high]
+    depth = 1
+    while (f.high - f.low) / 2 ** depth >= _resolution(f) / 2 and depth < 12:
+        for k in range(1, 2 ** depth, 2):
+            v = f.snap(f.low + (f.high - f.low) * k / 2 ** depth)
+            if v not in out:
+                out.append(v)
+        depth += 1
+    return out
 
 
 def _resolution(f: Factor) -> float:

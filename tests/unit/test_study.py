@@ -167,7 +167,20 @@ def test_a_search_where_nothing_meets_the_constraint_says_so() -> None:
     study = parse_study(_study(), 's')
     answer = Searcher(study, _cell(lambda i: 1), 2, lambda line: None).run()
     assert answer.best is None and not answer.settled
-    assert 'no setting of the' in answer.summary and answer.trials < 12
+    assert 'no setting of the 17 tried meets' in answer.summary and answer.trials == 33
+    # (Each failed at its first trials: the ends, then the interior coarse to fine.)
+    assert [s.values['belt_speed'] for s in answer.settings[:5]] == [0.35, 0.05, 0.2, 0.13,
+                                                                       0.27]
+
+
+def test_a_search_whose_ends_fail_finds_what_meets_it_inside() -> None:
+    """The perturbed cell at 0.9: both ends fail (two unlucky seeds at 0.05 m/s), 0.08 meets
+    it: a search that stopped at its ends said no speed does."""
+    study = parse_study(_study(), 's')
+    answer = Searcher(study, _cell(lambda i: 0 if 0.1 <= i['belt_speed'] <= 0.15 else 1), 2,
+                      lambda line: None).run()
+    assert answer.best is not None and answer.best.values['belt_speed'] == 0.15
+    assert answer.settled and answer.trials <= 33
 
 
 def test_a_search_stops_at_its_budget() -> None:
