@@ -6,7 +6,10 @@ seeds, ``trials_per_setting`` trials a point); judges each point of the sweep by
 constraint, on all its trials; and prints what the sweep says (the best point that meets it),
 what the search said, how far apart they are, and the trials each took. With ``--at-least P``
 the sweep is judged at another bound too (the same trials: the sweep's answer to the question
-asked with P). Writes JSON to bench/results/study.json.
+asked with P), and the search is replayed at that bound on the sweep's own trials (its settings
+on the sweep's grid: a lock-step trial at the same seed and speed is the same run, so a search
+run there would get these results), to set its answer and its trials beside the sweep's.
+Writes JSON to bench/results/study.json.
 
     python bench/bench_study.py --sweep docs/studies/belt-speed-dense --study runs/belt-study
 """
@@ -14,13 +17,14 @@ import argparse
 import json
 import math
 import sys
+from dataclasses import replace
 from pathlib import Path
 from typing import Any, Dict, List, Optional
 
 from studies.campaign import trial_results
 from studies.study import STUDY_COPY, STUDY_STATE
 from studies.study_file import Constraint, load_study
-from studies.study_search import decide
+from studies.study_search import Searcher, decide
 from trial_record.result import TrialResult
 
 HERE = Path(__file__).resolve().parent
@@ -47,6 +51,22 @@ def sweep_answer(results: List[TrialResult], name: str, c: Constraint, per: int,
             met.append(value)
     best: Optional[float] = (max(met) if maximise else min(met)) if met else None
     return {'points': rows, 'answer': best, 'trials': sum(r['trials'] for r in rows)}
+
+
+def replay(study: Any, results: List[TrialResult], at_least: float) -> Dict[str, Any]:
+    """The study's search at ``at_least``, its trials taken from the sweep's (KeyError: a
+    setting off the sweep's grid or seeds)."""
+    by_run = {(r.scenario_seed, round(r.belt_speed, 6)): r for r in results}
+    spec = study.search
+    asked = replace(study, search=replace(spec, constraint=replace(spec.constraint,
+                                                                     at_least=at_least)))
+
+    def lookup(items: List[Any]) -> List[TrialResult]:
+        return [by_run[(i['seed'], round(i['belt_speed'], 6))] for i in items]
+    answer = Searcher(asked, lookup, 2, lambda line: None).run()
+    name = study.factors[0].name
+    return {'answer': answer.best.values[name] if answer.best else None,
+            'trials': answer.trials, 'settled': answer.settled, 'summary': answer.summary}
 
 
 def main() -> int:
@@ -86,9 +106,19 @@ def main() -> int:
     other = {}
     for p in args.at_least:
         at = Constraint(spec.constraint.response, p, spec.constraint.confidence)
-        other[p] = sweep_answer(results, name, at, spec.trials_per_setting,
-                                spec.maximise)['answer']
-        print(f'[bench] with at_least {p:g}, the sweep says {other[p]}')
+        dense = sweep_answer(results, name, at, spec.trials_per_setting, spec.maximise)
+        try:
+            searched = replay(study, results, p)
+        except KeyError as exc:
+            print(f'[bench] at_least {p:g}: the sweep says {dense["answer"]}; the search asks '
+                  f'for a trial the sweep has not run ({exc}): no replay', flush=True)
+            other[p] = {'sweep': dense['answer']}
+            continue
+        other[p] = {'sweep': dense['answer'], 'search': searched}
+        print(f"[bench] at_least {p:g}: the sweep says {dense['answer']} from "
+              f"{dense['trials']} trials; the search, replayed on them, "
+              f"{searched['answer']} from {searched['trials']} trials "
+              f"({'settled' if searched['settled'] else 'not settled'})", flush=True)
     out = HERE / 'results' / 'study.json'
     out.parent.mkdir(exist_ok=True)
     out.write_text(json.dumps({'study': str(args.study), 'sweep': str(args.sweep),
