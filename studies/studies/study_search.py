@@ -227,7 +227,8 @@ class Searcher:
                     self.extend(best)       # (the answer's trials in full: met, or go on)
                     continue
                 if value is None:
-                    why, settled = closed, best is not None
+                    # (Settled: the bracket closed, or every value on the grid failed.)
+                    why, settled = closed, True
                     break
                 proposal = {name: value}
             elif not self.bracketed and since_better >= max(PATIENCE, spec.explore):
@@ -275,7 +276,8 @@ class Searcher:
                      f'least {c.at_least:g}' if c else ''))
         if best is None:
             return (f'{wanted}: no setting of the {len(self.settings)} tried meets the '
-                    f'constraint ({self.trials} trials); {why}.')
+                    f'constraint ({self.trials} trials); {"settled" if settled else "not settled"}'
+                    f': {why}.')
         values = ', '.join(f'{k} {v:g}' for k, v in best.values.items())
         head = f'{wanted}: {values}'
         if spec.objective not in best.values:
