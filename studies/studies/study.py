@@ -20,7 +20,7 @@ from pathlib import Path
 from typing import Any, Callable, Dict, List, Optional, Tuple
 
 from studies.campaign import CampaignError, finished_result, write_csv
-from studies.pool import Pool
+from studies.pool import Pool, campaign_progress
 from studies.study_file import Study, StudyError, check_study_worlds, load_study
 from studies.trial_process import PlanItem
 from trial_record.records import Fields, RecordError, parse_json, read_text
@@ -109,6 +109,11 @@ class StudyTrials:
                     self.pool.submit(pending.pop(0))
                 r = self.pool.wait(self._period)
                 if r is None:
+                    states, _ = campaign_progress(self.pool, list(self.results.values()), 0)
+                    self.say('[study] running: ' + ('; '.join(
+                        f'trial {p.trial}: {p.sim_time:.0f} s sim, {p.delivered}/{p.total} '
+                        f'delivered' for p in states) or 'starting')
+                        + f'; {self.ran} run, {self.reused} taken')
                     continue
                 got[r.trial if r.trial is not None else -1] = r
                 self.ran += 1
