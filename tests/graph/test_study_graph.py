@@ -16,20 +16,10 @@ import pytest
 import yaml
 from ray.cluster_utils import Cluster
 
-from tests.helpers import wait_for
-from world_description.resources import resolve_resource
+from helpers import wait_for
 
 pytestmark = pytest.mark.slow
 
-
-@pytest.fixture
-def small_world(tmp_path) -> Path:
-    world = yaml.safe_load(resolve_resource(
-        'package://world_description/worlds/pipeline_cell.yaml').read_text())
-    world['materials']['counts'] = {'purple': 1, 'orange': 1}
-    path = tmp_path / 'two_materials.yaml'
-    path.write_text(yaml.safe_dump(world))
-    return path
 
 
 def _search_file(tmp_path: Path, world: Path) -> Path:
