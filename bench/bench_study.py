@@ -95,6 +95,15 @@ def main() -> int:
     apart = (abs(found - judged['answer']) if found is not None
              and judged['answer'] is not None else None)
     print(f'[bench] the question: {answer.get("summary", "")}')
+    # (The study's trials at the sweep's seeds and speeds are the same lock-step runs.)
+    own, _ = trial_results(args.study)
+    swept = {(r.scenario_seed, round(r.belt_speed, 6)): r for r in results}
+    pairs = [(r, swept[(r.scenario_seed, round(r.belt_speed, 6))]) for r in own
+             if (r.scenario_seed, round(r.belt_speed, 6)) in swept]
+    same = sum(a.handled_verified == b.handled_verified and a.events == b.events
+               for a, b in pairs)
+    print(f'[bench] the study\'s trials that the sweep ran too: {same} of {len(pairs)} the same '
+          'run (the same events and materials handled)')
     for row in judged['points']:
         print(f"[bench]   sweep {name} {row['value']:g}: {row['successes']:g}/{row['n']:g} "
               f"in {row['trials']} trials: {'met' if row['met'] else 'failed'} ({row['how']})")
