@@ -68,7 +68,7 @@ def search_plot(study: Study, answer: SearchAnswer, path: Path) -> None:
         return
     c = spec.constraint
     name = study.factors[0].name
-    fig, ax = plt.subplots(figsize=(7.5, 4.2))
+    fig, ax = plt.subplots(figsize=(8.0, 4.6))
     for s in answer.settings:
         x = s.values[name]
         if c is not None:
@@ -84,7 +84,13 @@ def search_plot(study: Study, answer: SearchAnswer, path: Path) -> None:
         else:
             ax.plot([x], [s.mean(spec.objective)], 'o', color='tab:blue')
     if c is not None:
-        ax.axhline(c.at_least, color='black', linestyle='--', linewidth=0.8)
+        ax.axhline(c.at_least, color='black', linestyle='--', linewidth=0.8,
+                   label=f'the bound: lower bound at least {c.at_least:g}')
+        ax.plot([], [], 'o', color='tab:green', label='meets it')
+        ax.plot([], [], 'o', color='tab:red', label=f'fails it (its lower bound cannot reach '
+                f'{c.at_least:g} in {spec.trials_per_setting} trials)')
+        ax.legend(fontsize=7, loc='upper center', bbox_to_anchor=(0.5, -0.16), ncol=3,
+                  frameon=False)
         ax.set_ylabel(f'{c.response} rate ({c.confidence:.0%} Wilson interval)')
     else:
         ax.set_ylabel(spec.objective)
