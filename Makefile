@@ -30,7 +30,8 @@ trials: setup
 	  $${TIME_STEP:+--time-step $$TIME_STEP}'
 
 # A what-if study: the paper's cell with perturbations on, its belt speed swept
-# (docs/studies.md): make study [SWEEP=name=START:STOP:STEP] [SWEEP2=...] [TRIALS_PER_POINT=4].
+# (docs/studies.md): make study [SWEEP=name=START:STOP:STEP] [SWEEP2=...] [TRIALS_PER_POINT=4];
+# or a study file: make study STUDY=package://studies/study_files/belt_speed.yaml [RESUME=DIR].
 study: setup
 	@bash scripts/study.sh
 

@@ -5,6 +5,8 @@
 # and the completion time against the belt speed.
 #   SWEEP="belt_speed=0.05:0.35:0.05"   (a second SWEEP2=... makes a grid)
 #   TRIALS_PER_POINT=4  PARALLEL=2  WORLD=package://...  BREAK_BELOW=0.9  OUT=runs/study-...
+# STUDY=FILE runs a study file instead (a search under a constraint, or a screening: e.g.
+# STUDY=package://studies/study_files/belt_speed.yaml); RESUME=DIR goes on with a stopped one.
 # Exit 0 when the study ran (whether or not the cell failed at some points: that is what a
 # study looks for), 2 on a bad option, 130 when stopped (run_trials --resume OUT goes on).
 set -euo pipefail
@@ -12,6 +14,12 @@ ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 # shellcheck disable=SC1091
 source "$ROOT/scripts/env.sh"
 OUT="${OUT:-$ROOT/runs/study-$(date +%Y%m%d-%H%M%S)}"
+if [ -n "${STUDY:-}" ]; then
+  if [ -n "${RESUME:-}" ]; then
+    exec run_trials --study "$STUDY" --resume "$RESUME" --parallel "${PARALLEL:-2}"
+  fi
+  exec run_trials --study "$STUDY" --out "$OUT" --parallel "${PARALLEL:-2}"
+fi
 set +e
 run_trials --world "${WORLD:-package://world_description/worlds/pipeline_cell_perturbed.yaml}" \
   --sweep "${SWEEP:-belt_speed=0.05:0.35:0.05}" ${SWEEP2:+--sweep "$SWEEP2"} \

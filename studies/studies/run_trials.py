@@ -170,6 +170,10 @@ def _parser() -> '_Parser':
     parser.add_argument('--set', action='append', default=None, metavar='NAME=VALUE',
                         help='with --rerun: change belt_speed or a number of the world file '
                              '(by its path) for the re-run')
+    parser.add_argument('--study', default=None, metavar='FILE',
+                        help='run a study (a search under a constraint, or a screening of '
+                             'factors) described by FILE into --out (docs/studies.md); '
+                             '--resume DIR goes on with a stopped one')
     parser.add_argument('--resume', nargs='?', const='', default=None, metavar='DIR',
                         help='go on with an interrupted campaign in DIR (or --out), with its '
                              'plan: skip the trials whose result is there (same seed and belt '
@@ -184,6 +188,8 @@ def _main(argv: Optional[Sequence[str]]) -> int:
     _check_arguments(args, parser)
     if args.rerun is not None:
         return _rerun(args)
+    if args.study is not None:
+        return _study(args, parser)
     _campaign_directory(args, parser)
     try:
         given = _given_plan(args)
@@ -260,6 +266,36 @@ def _run_again(rerun: Rerun, out: Path, args: argparse.Namespace) -> int:
     return 1 if not rerun.changes else 0
 
 
+def _study(args: argparse.Namespace, parser: argparse.ArgumentParser) -> int:
+    """run_trials --study FILE [--out DIR | --resume DIR]: the study's trials and answer."""
+    from studies.study import StudyError, check, claim, run_study
+    plan = [k for k in PLAN_DEFAULTS if k != 'time_step' and getattr(args, k) is not None]
+    if plan or args.report_only or args.show_graph:
+        parser.error('--study takes its plan from the study file: no '
+                     f'{", ".join("--" + k.replace("_", "-") for k in plan) or "--report-only"}')
+    _campaign_directory(args, parser)
+    try:
+        study, path = check(args.study)
+        try:
+            args.out.mkdir(parents=True, exist_ok=True)
+        except OSError as exc:
+            raise CampaignError(f'--out {args.out}: {exc.strerror or exc}') from None
+        with campaign_lock(args.out):
+            claim(study, path, args.out, args.resume is not None)
+            code = code_version()
+            trial_options = {'wall_timeout': args.wall_timeout, 'record': args.record,
+                             'code': code, 'world': study.world,
+                             'time_step': args.time_step or PLAN_DEFAULTS['time_step'],
+                             'domain_base': args.domain_base}
+            pool = _pool(args, trial_options)
+            if pool is None:
+                return 2
+            return run_study(study, pool, args.out, code, args.progress_period)
+    except (StudyError, CampaignError) as exc:
+        print(f'run_trials: error: {exc}', file=sys.stderr, flush=True)
+        return 2
+
+
 def _campaign_directory(args: argparse.Namespace, parser: argparse.ArgumentParser) -> None:
     """``args.out``: the directory named by --resume or --out, or a new one under runs/."""
     if args.resume:
@@ -269,7 +305,8 @@ def _campaign_directory(args: argparse.Namespace, parser: argparse.ArgumentParse
     if args.out is None:
         if args.resume is not None or args.report_only:
             parser.error('name the campaign directory: --resume DIR, or --out DIR')
-        args.out = Path('runs') / time.strftime('trials-%Y%m%d-%H%M%S')
+        args.out = Path('runs') / time.strftime(
+            ('study' if args.study is not None else 'trials') + '-%Y%m%d-%H%M%S')
     if (args.resume is not None or args.report_only) and not args.out.is_dir():
         parser.error(f'{args.out} is not a campaign directory (nothing to '
                      f'{"resume" if args.resume is not None else "report"})')

@@ -82,6 +82,7 @@ def run_trial(trial: int, seed: int, belt_speed: float, domain_id: int, out_dir:
     procs: Dict[str, 'subprocess.Popen[bytes]'] = {}
     cpu: Dict[str, float] = {}
     group: Optional[int] = None
+    not_started = ''                # why a process could not start (its executable gone)
     start = time.monotonic()
     try:
         # (A user's stop is looked for before each process starts and while each is waited
@@ -93,10 +94,19 @@ def run_trial(trial: int, seed: int, belt_speed: float, domain_id: int, out_dir:
                 # (The recorder hears the first /clock: the coordinator steps only after it.)
                 _wait_for_file(trial_dir / RECORDER_READY, 30.0)
             log = open(trial_dir / f'{name}.log', 'w')
-            procs[name] = subprocess.Popen(
-                argv, stdout=log, stderr=subprocess.STDOUT, env=env,
-                preexec_fn=_trial_process(0 if group is None else group))
-            log.close()
+            try:
+                procs[name] = subprocess.Popen(
+                    argv, stdout=log, stderr=subprocess.STDOUT, env=env,
+                    preexec_fn=_trial_process(0 if group is None else group))
+            except OSError as exc:
+                # (A workspace rebuilt under a running campaign: the trial fails, the others
+                # go on.)
+                not_started = (f'cannot start {name} ({argv[0]}): {exc.strerror or exc}; is '
+                               'the workspace built and sourced (source scripts/env.sh)?')
+                log.write(not_started + '\n')
+                break
+            finally:
+                log.close()
             group = procs[name].pid if group is None else group
             ACTIVE_GROUPS.add(group)
         coordinator = procs.get('coordinator_node')
@@ -113,6 +123,11 @@ def run_trial(trial: int, seed: int, belt_speed: float, domain_id: int, out_dir:
     run = RunInfo(trial=trial, code=code,
                   wall_time=time.monotonic() - start, cpu_seconds=cpu)
     coordinator = procs.get('coordinator_node')
+    if not_started:
+        failed = replace(TrialResult.failure('error', not_started, trial, seed, belt_speed, run),
+                         parameters=dict(parameters or {}), scenario=ran)
+        failed.write(result_file)
+        return failed
     result = _record(trial_dir, run, seed, belt_speed,
                      coordinator.returncode if coordinator is not None else None,
                      wall_timeout if late else None)

@@ -1,7 +1,22 @@
-"""Fixtures for graph tests: simulator processes and a probe node over real DDS."""
+"""Fixtures for graph tests: simulator processes, a probe node over real DDS, and a small
+cell for tests that run whole trials."""
 import pytest
+import yaml
 
 from helpers import NodeProcess, Probe
+from world_description.resources import resolve_resource
+
+
+@pytest.fixture
+def small_world(tmp_path):
+    """The paper's cell with two materials (one purple, one orange: both of the Zu 12's routes
+    and the youBot's delivery), for tests of the trial machinery that need whole trials."""
+    world = yaml.safe_load(resolve_resource(
+        'package://world_description/worlds/pipeline_cell.yaml').read_text())
+    world['materials']['counts'] = {'purple': 1, 'orange': 1}
+    path = tmp_path / 'two_materials.yaml'
+    path.write_text(yaml.safe_dump(world))
+    return path
 
 
 @pytest.fixture

@@ -11,11 +11,7 @@ import random
 import subprocess
 from pathlib import Path
 
-import pytest
-import yaml
 from ray.cluster_utils import Cluster
-
-from world_description.resources import resolve_resource
 
 SEEDS = ('11', '12', '13', '14')
 # Everything a trial's row holds except what depends on the machine's load.
@@ -23,15 +19,6 @@ COMPARED = ('trial', 'scenario_seed', 'belt_speed', 'status', 'completion_time',
             'identification_rate', 'grasp_success_rate', 'handling_success_rate', 'identified',
             'picked', 'delivered', 'grasp_attempts', 'grasp_successes', 'missed', 'failed')
 
-
-@pytest.fixture
-def small_world(tmp_path) -> Path:
-    world = yaml.safe_load(resolve_resource(
-        'package://world_description/worlds/pipeline_cell.yaml').read_text())
-    world['materials']['counts'] = {'purple': 1, 'orange': 1}
-    path = tmp_path / 'two_materials.yaml'
-    path.write_text(yaml.safe_dump(world))
-    return path
 
 
 def _campaign(out: Path, world: Path, domain_base: int, *extra: str) -> list:

@@ -220,3 +220,19 @@ def test_trial_results_skip_nothing_silently(tmp_path):
     assert [r.trial for r in results] == [0]
     assert len(problems) == 1 and 'trial_001/result.json: not JSON' in problems[0]
     assert read_campaign(tmp_path) is None
+
+
+def test_a_trial_whose_executable_is_gone_fails_alone(tmp_path, monkeypatch):
+    """A workspace rebuilt under a running campaign (its executables gone for a moment): the
+    trial that could not start its processes was an exception that ended the whole campaign
+    (a 110-trial sweep, 56 trials in). It is now a failed trial, and says why."""
+    from studies.trial_process import run_trial
+    monkeypatch.setenv('PATH', str(tmp_path / 'nothing_here'))
+    result = run_trial(3, 11, 0.12, 231, tmp_path, wall_timeout=5.0,
+                       parameters={'belt_speed': 0.12})
+    assert result.status == 'error' and result.trial == 3
+    assert result.message.startswith('cannot start sim_node (sim_node): No such file')
+    assert 'source scripts/env.sh' in result.message
+    written = json.loads((tmp_path / 'trial_003' / 'result.json').read_text())
+    assert written['status'] == 'error' and written['parameters'] == {'belt_speed': 0.12}
+    assert 'cannot start sim_node' in (tmp_path / 'trial_003' / 'sim_node.log').read_text()

@@ -27,7 +27,8 @@ PYTHON_KEYS = {
     'zstandard': 'python3-zstandard-pip', 'ruckig': 'python3-ruckig-pip',
     'ray': 'python3-ray-pip', 'foxglove': 'python3-foxglove-sdk-pip',
     'websockets': 'python3-websockets', 'cryptography': 'python3-cryptography',
-    're2': 'python3-google-re2-pip',
+    're2': 'python3-google-re2-pip', 'optuna': 'python3-optuna-pip',
+    'SALib': 'python3-salib-pip', 'scipy': 'python3-scipy', 'matplotlib': 'python3-matplotlib',
 }
 # Modules that come with rclpy or the interface packages, declared by their ROS package name.
 ROS_MODULES = {'rclpy', 'rcl_interfaces', 'builtin_interfaces', 'ament_index_python',

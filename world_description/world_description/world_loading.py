@@ -34,14 +34,14 @@ def load_world(path: str | Path) -> WorldConfig:
     value (a list too) replacing the base's; ``more_obstacles`` are added to the base's
     obstacles, and ``materials.classes`` replaces the base's ``counts`` and ``colors``."""
     path = Path(path)
-    return parse_world(_resolved(path, _read(path), (path.resolve(),)), str(path))
+    return parse_world(_resolved(path, read_yaml(path), (path.resolve(),)), str(path))
 
 
 def world_data(path: str | Path) -> Dict[str, Any]:
     """A world file as one mapping, the worlds it extends merged in (what ``load_world``
     parses): a world as it was, to run it again. Checked as load_world checks it."""
     path = Path(path)
-    data = _resolved(path, _read(path), (path.resolve(),))
+    data = _resolved(path, read_yaml(path), (path.resolve(),))
     parse_world(data, str(path))
     return _absolute_resources(dict(data), path.resolve().parent)
 
@@ -62,19 +62,21 @@ def _absolute_resources(data: Dict[str, Any], base_dir: Path) -> Dict[str, Any]:
     return data
 
 
-def _read(path: Path) -> Any:
+def read_yaml(path: Path, what: str = 'world file') -> Any:
+    """A YAML file of at most MAX_WORLD_BYTES (and MAX_WORLD_VALUES once expanded), read;
+    WorldConfigError with one line naming it (``what``) otherwise."""
     try:
         info = path.stat()
     except FileNotFoundError:
-        raise WorldConfigError(f'world file {path} does not exist') from None
+        raise WorldConfigError(f'{what} {path} does not exist') from None
     except OSError as exc:          # (a symbolic link loop, a directory that cannot be read)
-        raise WorldConfigError(f'world file {path}: {exc.strerror}') from None
+        raise WorldConfigError(f'{what} {path}: {exc.strerror}') from None
     if stat.S_ISDIR(info.st_mode):
-        raise WorldConfigError(f'world file {path} is a directory')
+        raise WorldConfigError(f'{what} {path} is a directory')
     if not stat.S_ISREG(info.st_mode):
-        raise WorldConfigError(f'world file {path} is not a regular file')
+        raise WorldConfigError(f'{what} {path} is not a regular file')
     if info.st_size > MAX_WORLD_BYTES:
-        raise WorldConfigError(f'world file {path} has {info.st_size} bytes; a world file is '
+        raise WorldConfigError(f'{what} {path} has {info.st_size} bytes; a {what} is '
                                f'at most {MAX_WORLD_BYTES} bytes')
     try:
         data = yaml.safe_load(path.read_text(encoding='utf-8'))
@@ -83,8 +85,8 @@ def _read(path: Path) -> Any:
     except yaml.YAMLError as exc:
         mark = getattr(exc, 'problem_mark', None)
         where = f' at line {mark.line + 1}, column {mark.column + 1}' if mark else ''
-        what = getattr(exc, 'problem', None) or str(exc).splitlines()[0]
-        raise WorldConfigError(f'{path}: not valid YAML{where}: {what}') from None
+        problem = getattr(exc, 'problem', None) or str(exc).splitlines()[0]
+        raise WorldConfigError(f'{path}: not valid YAML{where}: {problem}') from None
     except RecursionError:
         raise WorldConfigError(f'{path}: nested too deeply') from None
     except UnicodeDecodeError as exc:
@@ -92,6 +94,8 @@ def _read(path: Path) -> Any:
                                f'{exc.object[exc.start:exc.start + 1]!r})') from None
     except OSError as exc:
         raise WorldConfigError(f'{path}: cannot be read ({exc.strerror})') from None
+
+
 
 
 def _check_expanded_size(data: Any, path: Path) -> None:
@@ -125,7 +129,7 @@ def _resolved(path: Path, data: Any, seen: Tuple[Path, ...]) -> Any:
         raise WorldConfigError(f'{path}: extends {uri}, which extends it again')
     if len(seen) > MAX_EXTENDS:
         raise WorldConfigError(f'{path}: worlds extend each other more than {MAX_EXTENDS} deep')
-    base = _resolved(base_path, _read(base_path), seen + (base_path.resolve(),))
+    base = _resolved(base_path, read_yaml(base_path), seen + (base_path.resolve(),))
     if not isinstance(base, dict):
         raise WorldConfigError(f'{base_path}: the top level must be a mapping')
     own = {k: v for k, v in data.items() if k not in ('extends', 'more_obstacles')}
