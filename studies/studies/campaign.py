@@ -10,22 +10,25 @@ from __future__ import annotations
 
 import csv
 import fcntl
+import io
 import json
 import math
 import os
 import sys
+import tempfile
 from contextlib import contextmanager
 from pathlib import Path
 from typing import IO, Any, Callable, Dict, Iterator, List, Optional, Sequence, Tuple
 
-from studies.sweep import SweepError, grid, parse_axis
+from ros_common.outputs import OutputError, open_lock, write_text
+from studies.directory import CAMPAIGN_FILE
+from studies.sweep import SweepError, grid, parse_axis, point_world
 from studies.trial_graph import CONTROL_RATE, TIME_STEP
-from studies.trial_process import PlanItem
+from studies.trial_process import PlanItem, scenario
 from trial_record.records import Fields, RecordError, is_int, is_number, parse_json, read_text
 from trial_record.result import CSV_FIELDS, RESULT_FILE, TrialResult, read_result
 from world_description import PIPELINE_CELL
 
-CAMPAIGN_FILE = 'campaign.json'
 LOCK_FILE = '.run_trials.lock'
 # The options that define a campaign's plan, and their defaults. A campaign keeps them in
 # its directory (CAMPAIGN_FILE), so that ``--resume DIR`` needs nothing else.
@@ -136,10 +139,7 @@ def read_campaign(out: Path) -> Optional[Dict[str, Any]]:
 
 def write_campaign(out: Path, plan: Dict[str, Any], code: str) -> None:
     """The plan, written whole or not at all (a crash leaves the previous file)."""
-    path = out / CAMPAIGN_FILE
-    scratch = path.with_name(path.name + '.new')
-    scratch.write_text(json.dumps({'plan': plan, 'code': code}, indent=1))
-    os.replace(scratch, path)
+    write_text(out / CAMPAIGN_FILE, json.dumps({'plan': plan, 'code': code}, indent=1))
 
 
 def trial_results(out: Path) -> Tuple[List[TrialResult], List[str]]:
@@ -167,11 +167,10 @@ def trial_results(out: Path) -> Tuple[List[TrialResult], List[str]]:
 def campaign_lock(out: Path) -> Iterator[None]:
     """Hold the campaign directory for this runner (an advisory lock, gone with its process):
     a second runner into it is refused with the first one's process id."""
-    path = out / LOCK_FILE
     try:
-        handle: IO[str] = open(path, 'a+')
-    except OSError as exc:
-        raise CampaignError(f'{out}: cannot be written ({exc.strerror or exc})') from None
+        handle: IO[str] = open_lock(out / LOCK_FILE, 'the campaign lock')
+    except OutputError as exc:
+        raise CampaignError(str(exc)) from None
     try:
         try:
             fcntl.flock(handle, fcntl.LOCK_EX | fcntl.LOCK_NB)
@@ -191,13 +190,12 @@ def campaign_lock(out: Path) -> Iterator[None]:
 
 def write_csv(trials: Sequence[TrialResult], path: Path) -> None:
     """The trials' rows, written whole or not at all (a signal mid-write leaves the last)."""
-    scratch = path.with_name(path.name + '.new')
-    with open(scratch, 'w', newline='') as f:
-        writer = csv.DictWriter(f, CSV_FIELDS)
-        writer.writeheader()
-        for t in sorted(trials, key=lambda t: t.trial or 0):
-            writer.writerow(t.to_row())
-    os.replace(scratch, path)
+    text = io.StringIO(newline='')
+    writer = csv.DictWriter(text, CSV_FIELDS)
+    writer.writeheader()
+    for t in sorted(trials, key=lambda t: t.trial or 0):
+        writer.writerow(t.to_row())
+    write_text(path, text.getvalue())
 
 
 def rebuild(out: Path) -> int:
@@ -227,18 +225,62 @@ def rebuild(out: Path) -> int:
     return 0
 
 
-def finished_result(out: Path, item: PlanItem, code: str) -> Optional[TrialResult]:
-    """The result of a planned trial already in ``out`` (same seed and belt speed, made by the
-    same code), if any; a result file that cannot be used is said so, and the trial runs
-    again."""
+class Reuse:
+    """Which results already in a directory a plan's trials may take instead of running: only
+    a trial that ran the cell to an outcome (``TrialResult.ran``), and ran what the plan's
+    trial would run: the same seed, belt speed and sweep point, the same world as one mapping
+    (its file as it is now, what it extends merged in, the point's values set), the same
+    physics step, and the same code (``code_version``)."""
+
+    def __init__(self, world: str, time_step: float, code: str) -> None:
+        self.world, self.time_step, self.code = world, time_step, code
+        self._worlds: Dict[str, Any] = {}
+
+    def _world_of(self, parameters: Dict[str, float]) -> Any:
+        """The world a trial at ``parameters`` runs, as its result keeps it (trial_process.
+        scenario), or the reason it cannot be read now."""
+        key = json.dumps(parameters, sort_keys=True)
+        if key not in self._worlds:
+            with tempfile.TemporaryDirectory(prefix='run_trials-reuse-') as scratch:
+                try:
+                    ran = scenario(point_world(self.world, parameters, Path(scratch)),
+                                   self.time_step)
+                except SweepError as exc:
+                    ran = {'world_problem': str(exc)}
+            self._worlds[key] = (json.loads(json.dumps(ran['world_data'])) if 'world_data'
+                                 in ran else None)
+        return self._worlds[key]
+
+    def why_not(self, r: TrialResult, item: PlanItem) -> str:
+        """'' if ``r`` may stand for the plan's ``item``; else why not, in words."""
+        if not r.ran:
+            return f'did not run ({r.status})'
+        if (r.scenario_seed != item['seed'] or r.belt_speed != item['belt_speed']
+                or r.parameters != item.get('parameters', {})):
+            return 'is of another seed, belt speed or setting'
+        if r.run.code != self.code:
+            return f'was made by other code ({r.run.code}; this is {self.code})'
+        if r.scenario.get('time_step') != self.time_step:
+            ran = r.scenario.get('time_step', 'unknown')
+            return f'is of another physics step ({ran} s; this is {self.time_step:g} s)'
+        world = self._world_of(dict(item.get('parameters', {})))
+        if world is None or r.scenario.get('world_data') != world:
+            return 'is of another world (the world file has changed since)'
+        return ''
+
+
+def finished_result(out: Path, item: PlanItem, reuse: Reuse) -> Optional[TrialResult]:
+    """The result of a planned trial already in ``out`` that ``reuse`` allows, if any; a
+    result that cannot be used is said so, and the trial runs again."""
     path = out / f'trial_{item["trial"]:03d}' / RESULT_FILE
     r, problem = read_result(path)
     if problem is not None:
         print(f'[trials] {path}: {problem}; trial {item["trial"]} runs again', flush=True)
     if r is None:
         return None
-    if (r.scenario_seed != item['seed'] or r.belt_speed != item['belt_speed']
-            or r.parameters != item.get('parameters', {})
-            or r.status == 'interrupted' or r.run.code != code):
+    why = reuse.why_not(r, item)
+    if why:
+        print(f'[trials] trial {item["trial"]} runs again: its result ({path.parent.name}) '
+              f'{why}', flush=True)
         return None
     return r if r.trial is not None else r.with_run(trial=item['trial'])

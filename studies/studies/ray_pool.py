@@ -29,6 +29,7 @@ from typing import Any, Dict, List, Optional, Tuple
 
 import ray
 
+from ros_common.outputs import OutputError, inner_dir, write_file
 from studies.progress import read_progress
 from studies.trial_process import PROGRESS_FILE, PlanItem, run_leased_trial
 from trial_record.result import RESULT_FILE, RunInfo, TrialResult, code_version
@@ -185,12 +186,19 @@ class RayPool:
 
     def _write(self, trial: int, result: TrialResult, files: Dict[str, bytes]) -> None:
         trial_dir = self._out / f'trial_{trial:03d}'
-        trial_dir.mkdir(parents=True, exist_ok=True)
-        for name, data in files.items():
-            path = trial_dir / name
-            path.parent.mkdir(parents=True, exist_ok=True)
-            path.write_bytes(data)
-        result.write(trial_dir / RESULT_FILE)
+        try:
+            inner_dir(trial_dir, 'the trial\'s directory')
+            for name, data in files.items():
+                parts = Path(name).parts
+                if not parts or Path(name).is_absolute() or '..' in parts:
+                    continue                  # (only files of the trial's own directory)
+                where = trial_dir
+                for part in parts[:-1]:
+                    where = inner_dir(where / part, 'a directory of the trial\'s')
+                write_file(where / parts[-1], data)
+            result.write(trial_dir / RESULT_FILE)
+        except OutputError as exc:
+            print(f'[trials] trial {trial}: its files are not written: {exc}', flush=True)
 
     def progress(self) -> Dict[int, Dict[str, Any]]:
         """The running trials' progress, as their tasks last reported it."""

@@ -11,7 +11,7 @@ from typing import Dict, List, Sequence, Tuple
 
 import yaml
 
-from ros_common.outputs import OutputError, make_dir
+from ros_common.outputs import OutputError, make_dir, write_text
 from studies.recorded import RecordError, load_trial
 from studies.sweep import TRIAL_PARAMETERS, SweepError, point_world
 from trial_record.result import TrialResult
@@ -67,8 +67,8 @@ def prepare(run: Path, sets: Sequence[str], out: Path) -> Rerun:
     except OutputError as exc:
         raise RerunError(str(exc)) from None
     world = out / ORIGINAL_WORLD
-    world.write_text(f'# The world of {source}, as it ran\n'
-                     + yaml.safe_dump(data, sort_keys=False))
+    write_text(world, f'# The world of {source}, as it ran\n'
+               + yaml.safe_dump(data, sort_keys=False))
     try:
         point_world(str(world), changes, out / '.check')
     except SweepError as exc:

@@ -19,10 +19,12 @@ from pathlib import Path
 from typing import Any, Dict, List, NoReturn, Optional, Sequence
 
 from ros_common.outputs import OutputError, check_output_dir
+from studies import directory
 from studies.campaign import (
     CAMPAIGN_FILE,
     PLAN_DEFAULTS,
     CampaignError,
+    Reuse,
     campaign_lock,
     check_plan,
     finished_result,
@@ -53,9 +55,6 @@ from trial_record.result import (
 from world_description import PIPELINE_CELL
 
 PROGRESS_PERIOD_S = 10.0     # wall seconds between two progress lines
-# A trial with one of these ended without an outcome of the cell (its processes failed or were
-# stopped): a re-run that ends so has failed (exit 1), whatever it changed.
-DID_NOT_RUN = ('error', 'node_timeout', 'interrupted')
 
 
 def _terminated(signum: int, frame: Any) -> None:
@@ -86,16 +85,10 @@ def _plan_options(args: argparse.Namespace, given: Dict[str, Any]) -> Dict[str, 
     stored: Dict[str, Any] = {}
     if args.resume is not None:
         stored = read_campaign(args.out) or {}
-        if not stored:
-            print(f'[trials] {args.out} has no {CAMPAIGN_FILE}: resuming with the plan of the '
-                  'command line and the defaults', flush=True)
         for k, v in given.items():
             if k in stored and stored[k] != v:
                 raise CampaignError(f'--{k.replace("_", "-")} {v} differs from the campaign '
                                     f'being resumed ({stored[k]}, in {args.out / CAMPAIGN_FILE})')
-    elif read_campaign(args.out) is not None:
-        raise CampaignError(f'{args.out} holds a campaign already ({CAMPAIGN_FILE}): go on '
-                            f'with --resume {args.out}, or give another --out')
     return check_plan({**PLAN_DEFAULTS, **stored, **given}, 'the plan')
 
 
@@ -205,9 +198,14 @@ def _main(argv: Optional[Sequence[str]]) -> int:
             raise CampaignError(f'--out {args.out}: {exc.strerror or exc}') from None
         with campaign_lock(args.out):
             if args.report_only:
+                if directory.holds(args.out) == directory.STUDY:
+                    raise CampaignError(f'{args.out} holds a study: its report is '
+                                        f'{args.out / "study.md"}; '
+                                        + directory.how_to_resume(directory.STUDY, args.out))
                 return rebuild(args.out)
+            directory.claim(args.out, directory.CAMPAIGN, args.resume is not None)
             return _campaign(args, given)
-    except CampaignError as exc:
+    except (CampaignError, directory.DirectoryError) as exc:
         print(f'run_trials: error: {exc}', file=sys.stderr, flush=True)
         return 2
 
@@ -246,7 +244,7 @@ def _run_again(rerun: Rerun, out: Path, args: argparse.Namespace) -> int:
         return 130
     again = results[0]
     write_csv(results, out / 'trials.csv')
-    if again.status in DID_NOT_RUN:
+    if not again.ran:
         # (Nothing to compare: the exit code says the re-run failed, whatever was asked.)
         print(f'[rerun] the re-run did not run to its end: {again.status}: '
               f'{again.message or "no message"} ({out})', flush=True)
@@ -275,22 +273,24 @@ def _study(args: argparse.Namespace, parser: argparse.ArgumentParser) -> int:
                      f'{", ".join("--" + k.replace("_", "-") for k in plan) or "--report-only"}')
     _campaign_directory(args, parser)
     try:
+        if args.time_step is not None:
+            check_plan({'time_step': args.time_step}, 'the command line')
         study, path = check(args.study)
         try:
             args.out.mkdir(parents=True, exist_ok=True)
         except OSError as exc:
             raise CampaignError(f'--out {args.out}: {exc.strerror or exc}') from None
         with campaign_lock(args.out):
-            claim(study, path, args.out, args.resume is not None)
+            step = claim(study, path, args.out, args.resume is not None, args.time_step)
             code = code_version()
             trial_options = {'wall_timeout': args.wall_timeout, 'record': args.record,
-                             'code': code, 'world': study.world,
-                             'time_step': args.time_step or PLAN_DEFAULTS['time_step'],
+                             'code': code, 'world': study.world, 'time_step': step,
                              'domain_base': args.domain_base}
             pool = _pool(args, trial_options)
             if pool is None:
                 return 2
-            return run_study(study, pool, args.out, code, args.progress_period)
+            return run_study(study, pool, args.out, Reuse(study.world, step, code),
+                             args.progress_period)
     except (StudyError, CampaignError) as exc:
         print(f'run_trials: error: {exc}', file=sys.stderr, flush=True)
         return 2
@@ -387,12 +387,13 @@ def _campaign(args: argparse.Namespace, given: Dict[str, Any]) -> int:
     results: List[TrialResult] = []
     code = code_version()
     if args.resume is not None:
-        done = [r for r in (finished_result(args.out, item, code) for item in plan)
+        reuse = Reuse(opts['world'], opts['time_step'], code)
+        done = [r for r in (finished_result(args.out, item, reuse) for item in plan)
                 if r is not None]
         plan = [item for item in plan if item['trial'] not in {r.trial for r in done}]
         results.extend(done)
         print(f'[trials] resuming: {len(done)} trials of the plan already in {args.out} '
-              f'made by this code ({code})', flush=True)
+              f'ran as the plan runs them (code {code})', flush=True)
     write_campaign(args.out, opts, code)
     trial_options = {'wall_timeout': args.wall_timeout, 'record': args.record, 'code': code,
                      'world': opts['world'], 'time_step': opts['time_step'],

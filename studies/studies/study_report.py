@@ -6,6 +6,7 @@ import math
 from pathlib import Path
 from typing import List
 
+from ros_common.outputs import save_figure
 from studies.study_file import Study
 from studies.study_search import SearchAnswer, Setting
 
@@ -99,5 +100,5 @@ def search_plot(study: Study, answer: SearchAnswer, path: Path) -> None:
     ax.set_xlabel(f'{name} (each point: setting: trials)')
     ax.set_title((study.question or 'search')[:90], fontsize=10)
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
+    save_figure(fig, path)
     plt.close(fig)

@@ -20,6 +20,7 @@ from typing import Any, Dict, List, Sequence, Tuple
 
 import numpy as np
 
+from ros_common.outputs import save_figure
 from studies.plan import trial_plan
 from studies.study_file import Study, response_of
 from studies.trial_process import PlanItem
@@ -74,7 +75,7 @@ def responses(study: Study, items: Sequence[PlanItem], results: Sequence[TrialRe
               ) -> Tuple[np.ndarray, Dict[str, np.ndarray]]:
     """The settings that ran (rows of factors) and each response at each, over its
     replicates; a trial that did not run (an error) leaves its setting out."""
-    by_trial = {r.trial: r for r in results if r.status not in ('error', 'interrupted')}
+    by_trial = {r.trial: r for r in results if r.ran}
     rows: Dict[Tuple[float, ...], List[TrialResult]] = {}
     for item in items:
         key = tuple(item['parameters'][f.name] for f in study.factors)
@@ -104,6 +105,9 @@ def effects(study: Study, x: np.ndarray, y: np.ndarray) -> List[Effect]:
     dof = len(x) - a.shape[1]
     if dof < 1:
         return []
+    # (Centred: a response that does not vary fits to exact zeros, not to rounding noise
+    # whose interval leaves out zero.)
+    y = y - float(np.mean(y))
     coef, *_ = np.linalg.lstsq(a, y, rcond=None)
     resid = y - a @ coef
     sigma2 = float(resid @ resid) / dof
@@ -187,5 +191,5 @@ def plot(study: Study, ranked: Dict[str, List[Effect]], path: Path) -> None:
         ax.set_title(f'{name}: change from low to high', fontsize=9)
     fig.suptitle(study.question or 'screening', fontsize=10)
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
+    save_figure(fig, path)
     plt.close(fig)

@@ -16,6 +16,7 @@ from typing import Any, Callable, Dict, List, Optional, Sequence, Tuple
 
 import yaml
 
+from ros_common.outputs import write_text
 from trial_record.result import TrialResult
 from world_description.resources import resolve_resource
 from world_description.world_config import WorldConfigError, load_world
@@ -122,7 +123,7 @@ def point_world(base: str, point: Dict[str, float], directory: Path) -> str:
     path = directory / WORLD_FILE
     text = (f'# {base} with a sweep point\'s values\n'
             + yaml.safe_dump({'extends': str(base_path), **overrides}, sort_keys=False))
-    path.write_text(text)
+    write_text(path, text)
     try:
         load_world(path)
     except WorldConfigError as exc:
@@ -170,7 +171,7 @@ def summarise(results: Sequence[TrialResult]) -> List[PointSummary]:
     """Each point's trials (by their ``parameters``), in the order of their values."""
     by_point: Dict[Tuple[Tuple[str, float], ...], List[TrialResult]] = {}
     for r in results:
-        if r.parameters and r.status not in ('error', 'interrupted'):
+        if r.parameters and r.ran:
             by_point.setdefault(tuple(sorted(r.parameters.items())), []).append(r)
     out = []
     for point in sorted(by_point):

@@ -17,6 +17,7 @@ from pathlib import Path
 from typing import Any, Callable, Dict, Iterator, Optional, Set, TypedDict
 
 from ros_common.dds import hold_free_domain, with_profile
+from ros_common.outputs import OutputError, inner_dir, open_new
 from studies.progress import read_progress
 from studies.recorded import bag_metadata
 from studies.sweep import SweepError, point_world
@@ -54,7 +55,11 @@ def run_trial(trial: int, seed: int, belt_speed: float, domain_id: int, out_dir:
     the trial's ``result.json``. ``parameters``: a sweep's point (its world's values go into
     the trial's own ``world.yaml``)."""
     trial_dir = out_dir / f'trial_{trial:03d}'
-    trial_dir.mkdir(parents=True, exist_ok=True)
+    try:
+        inner_dir(trial_dir, 'the trial\'s directory')
+    except OutputError as exc:        # (nothing can be written for it: the result says why)
+        return replace(TrialResult.failure('error', str(exc), trial, seed, belt_speed),
+                       parameters=dict(parameters or {}))
     result_file = trial_dir / RESULT_FILE
     outcome_file = trial_dir / OUTCOME_FILE
     for stale in (result_file, outcome_file, trial_dir / PROGRESS_FILE):
@@ -93,7 +98,7 @@ def run_trial(trial: int, seed: int, belt_speed: float, domain_id: int, out_dir:
             if name == 'coordinator_node' and 'recorder' in procs:
                 # (The recorder hears the first /clock: the coordinator steps only after it.)
                 _wait_for_file(trial_dir / RECORDER_READY, 30.0)
-            log = open(trial_dir / f'{name}.log', 'w')
+            log = open_new(trial_dir / f'{name}.log')
             try:
                 procs[name] = subprocess.Popen(
                     argv, stdout=log, stderr=subprocess.STDOUT, env=env,

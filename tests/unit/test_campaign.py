@@ -8,6 +8,7 @@ import pytest
 import studies.run_trials as trials
 import studies.trial_process as trial_run
 from studies.campaign import (
+    PLAN_DEFAULTS,
     CampaignError,
     campaign_lock,
     check_plan,
@@ -15,6 +16,7 @@ from studies.campaign import (
     trial_results,
 )
 from studies.plan import trial_plan
+from studies.trial_process import scenario
 from trial_record.result import ResultError, RunInfo, TrialResult
 
 WORLD_LINE = 'run_trials: error: --world'
@@ -141,10 +143,12 @@ def test_a_result_file_that_is_not_a_result(capsys, tmp_path, monkeypatch):
     plan = trial_plan(2, 0, 7, (0.1, 0.16))
     (tmp_path / 'campaign.json').write_text(json.dumps(
         {'plan': {'trials': 2, 'seed0': 7}, 'code': 'abc123'}))
+    ran_as = scenario(PLAN_DEFAULTS['world'], PLAN_DEFAULTS['time_step'])
     for k, content in ((0, []), (1, {'trial': 1, 'scenario_seed': plan[1]['seed'],
                                      'belt_speed': plan[1]['belt_speed'],
                                      'status': 'completed', 'completion_time': 60.0,
-                                     'wall_time': 9.0, 'code': 'abc123'})):
+                                     'wall_time': 9.0, 'code': 'abc123',
+                                     'scenario': ran_as})):
         (tmp_path / f'trial_{k:03d}').mkdir()
         (tmp_path / f'trial_{k:03d}' / 'result.json').write_text(json.dumps(content))
     refused(capsys, ['--report-only', '--out', str(tmp_path)],
@@ -155,6 +159,7 @@ def test_a_result_file_that_is_not_a_result(capsys, tmp_path, monkeypatch):
                    world, time_step):
         ran.append(trial)
         return TrialResult('completed', 61.0, scenario_seed=seed, belt_speed=belt_speed,
+                           scenario=scenario(world, time_step),
                            run=RunInfo(trial=trial, wall_time=9.0, code=code))
     monkeypatch.setattr(trial_run, 'run_trial', fake_trial)
     import studies.report

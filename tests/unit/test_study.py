@@ -270,5 +270,5 @@ def test_a_directory_resumes_only_its_own_study(tmp_path: Path) -> None:
         claim(load_study(a), a, out, resume=True)
     campaign = tmp_path / 'campaign'
     (campaign / 'trial_000').mkdir(parents=True)
-    with pytest.raises(CampaignError, match='not a study'):
+    with pytest.raises(CampaignError, match='holds trials of no campaign or study'):
         claim(load_study(a), a, campaign, resume=False)

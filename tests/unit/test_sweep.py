@@ -120,6 +120,8 @@ def test_a_sweep_runs_every_point_with_the_same_seeds_and_reports_where_it_break
         tmp_path, monkeypatch):
     import studies.run_trials as trials
     import studies.trial_process as trial_run
+    from studies.sweep import point_world
+    from studies.trial_process import scenario
     monkeypatch.setattr(trials, 'code_version', lambda: 'abc123')
     ran = []
 
@@ -132,6 +134,8 @@ def test_a_sweep_runs_every_point_with_the_same_seeds_and_reports_where_it_break
                              scenario_seed=seed, belt_speed=belt_speed, total=8,
                              identified_correct=8, handled_verified=handled, grasp_attempts=8,
                              grasp_successes=8, parameters=dict(parameters),
+                             scenario=scenario(point_world(
+                                 world, parameters, out_dir / f'trial_{trial:03d}'), time_step),
                              run=RunInfo(trial=trial, wall_time=1.0, code=code))
         result.write(out_dir / f'trial_{trial:03d}' / 'result.json')
         return result

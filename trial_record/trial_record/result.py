@@ -18,6 +18,7 @@ from dataclasses import asdict, dataclass, field, fields, replace
 from pathlib import Path
 from typing import Any, Dict, List, Mapping, Optional, Tuple
 
+from ros_common.outputs import write_text
 from trial_record.records import (
     MAX_COUNT,
     MAX_SIM_TIME_S,
@@ -44,6 +45,10 @@ RATES = ('identification_rate', 'grasp_success_rate', 'handling_success_rate',
 _FLAT_RUN_KEYS = ('trial', 'code', 'wall_time', 'cpu_seconds', 'node', 'ray_node', 'niceness',
                   'bag')
 STATUSES = ('completed', 'incomplete', 'timeout', 'node_timeout', 'error', 'interrupted')
+# The statuses of a trial that ended without an outcome of the cell: its processes could not
+# start or failed, its nodes never came up, it ran past its wall time, or it was stopped. Such
+# a trial says nothing about the cell: no rate counts it, and nothing reuses it.
+DID_NOT_RUN = ('error', 'node_timeout', 'interrupted')
 MODES = ('', 'lock-step', 'real-time')
 COUNTS = ('total', 'identified', 'picked', 'delivered', 'grasp_attempts', 'grasp_successes',
           'missed', 'failed', 'zu12_grasp_attempts', 'zu12_grasp_successes',
@@ -165,6 +170,11 @@ class TrialResult:
     def trial(self) -> Optional[int]:
         return self.run.trial
 
+    @property
+    def ran(self) -> bool:
+        """The trial ran the cell to an outcome (completed or not): evidence about the cell."""
+        return self.status not in DID_NOT_RUN
+
     def with_run(self, **changes: Any) -> 'TrialResult':
         """The same result, its metadata changed (``RunInfo``'s fields)."""
         return replace(self, run=replace(self.run, **changes))
@@ -198,9 +208,7 @@ class TrialResult:
     def write(self, path: Path) -> None:
         """Written whole or not at all (a crash mid-write leaves no half a record)."""
         path.parent.mkdir(parents=True, exist_ok=True)
-        scratch = path.with_name(path.name + '.new')
-        scratch.write_text(self.to_json())
-        os.replace(scratch, path)
+        write_text(path, self.to_json())
 
     @classmethod
     def from_dict(cls, data: Any, what: str = 'the result') -> 'TrialResult':
