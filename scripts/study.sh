@@ -6,7 +6,8 @@
 #   SWEEP="belt_speed=0.05:0.35:0.05"   (a second SWEEP2=... makes a grid)
 #   TRIALS_PER_POINT=4  PARALLEL=2  WORLD=package://...  BREAK_BELOW=0.9  OUT=runs/study-...
 # STUDY=FILE runs a study file instead (a search under a constraint, or a screening: e.g.
-# STUDY=package://studies/study_files/belt_speed.yaml); RESUME=DIR goes on with a stopped one.
+# STUDY=package://studies/study_files/belt_speed.yaml); RESUME=DIR goes on with a stopped study
+# or sweep (STUDY= may be left out: the directory's own study file is taken).
 # Exit 0 when the study ran (whether or not the cell failed at some points: that is what a
 # study looks for), 2 on a bad option, 130 when stopped (run_trials --resume OUT goes on).
 set -euo pipefail
@@ -14,6 +15,14 @@ ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 # shellcheck disable=SC1091
 source "$ROOT/scripts/env.sh"
 OUT="${OUT:-$ROOT/runs/study-$(date +%Y%m%d-%H%M%S)}"
+if [ -n "${RESUME:-}" ] && [ -z "${STUDY:-}" ]; then
+  # (RESUME alone goes on with what the directory holds: a study with its own study file, a
+  # sweep with its own plan; run_trials refuses anything else in one line.)
+  if [ -e "$RESUME/study.json" ]; then
+    exec run_trials --study "$RESUME/study.yaml" --resume "$RESUME" --parallel "${PARALLEL:-2}"
+  fi
+  exec run_trials --resume "$RESUME" --parallel "${PARALLEL:-2}"
+fi
 if [ -n "${STUDY:-}" ]; then
   if [ -n "${RESUME:-}" ]; then
     exec run_trials --study "$STUDY" --resume "$RESUME" --parallel "${PARALLEL:-2}"

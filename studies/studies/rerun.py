@@ -5,18 +5,20 @@ different. Without a change, a lock-step trial runs again the same, to the last 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+import tempfile
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Dict, List, Sequence, Tuple
 
 import yaml
 
 from ros_common.outputs import OutputError, make_dir, write_text
+from studies.campaign import CampaignError
+from studies.directory import ORIGINAL_WORLD
+from studies.plan import check_world
 from studies.recorded import RecordError, load_trial
-from studies.sweep import TRIAL_PARAMETERS, SweepError, point_world
+from studies.sweep import TRIAL_PARAMETERS, SweepError, check_names, point_world
 from trial_record.result import TrialResult
-
-ORIGINAL_WORLD = 'original_world.yaml'
 
 
 class RerunError(ValueError):
@@ -27,11 +29,19 @@ class RerunError(ValueError):
 class Rerun:
     original: TrialResult
     source: Path                  # the original's result file
-    world: str                    # the world file the re-run starts from (the original's)
+    world: str                    # the world file the re-run starts from (the original's),
+    #                               once written (Rerun.written_to); '' before
     seed: int
     belt_speed: float
     time_step: float
     changes: Dict[str, float]     # --set: NAME: VALUE
+
+    def written_to(self, out: Path) -> 'Rerun':
+        """The re-run with its world written into ``out`` (which must be there)."""
+        world = out / ORIGINAL_WORLD
+        write_text(world, f'# The world of {self.source}, as it ran\n'
+                   + yaml.safe_dump(self.original.scenario['world_data'], sort_keys=False))
+        return replace(self, world=str(world))
 
 
 def parse_sets(sets: Sequence[str]) -> Dict[str, float]:
@@ -47,11 +57,16 @@ def parse_sets(sets: Sequence[str]) -> Dict[str, float]:
             raise RerunError(f'--set {item!r}: give NAME=NUMBER (NAME: belt_speed or a number '
                              'of the world file, such as perturbations.camera.pixel_noise)')
         out[name.strip()] = number
+    try:
+        check_names([item.partition('=')[0].strip() for item in sets], '--set')
+    except SweepError as exc:
+        raise RerunError(str(exc)) from None
     return out
 
 
-def prepare(run: Path, sets: Sequence[str], out: Path) -> Rerun:
-    """The re-run of ``run`` with ``sets``, its world written into ``out`` and checked."""
+def check(run: Path, sets: Sequence[str]) -> Rerun:
+    """The re-run of ``run`` with ``sets``, every part of it checked (the changed world as
+    ``--world`` checks a world) and nothing written yet (RerunError)."""
     try:
         original, source = load_trial(run)
     except RecordError as exc:
@@ -62,22 +77,38 @@ def prepare(run: Path, sets: Sequence[str], out: Path) -> Rerun:
                          'before the re-run feature); run it again with its seed instead: '
                          f'run_trials --seeds {original.scenario_seed}')
     changes = parse_sets(sets)
-    try:
-        make_dir(out, '--out')
-    except OutputError as exc:
-        raise RerunError(str(exc)) from None
-    world = out / ORIGINAL_WORLD
-    write_text(world, f'# The world of {source}, as it ran\n'
-               + yaml.safe_dump(data, sort_keys=False))
-    try:
-        point_world(str(world), changes, out / '.check')
-    except SweepError as exc:
-        raise RerunError(str(exc).replace('the sweep point', '--set')) from None
     belt = changes.get('belt_speed', original.belt_speed)
     step = float(original.scenario.get('time_step', math.nan))
     if not (math.isfinite(belt) and 0.0 < belt <= 2.0 and math.isfinite(step) and step > 0.0):
         raise RerunError(f'{source}: belt speed {belt} or physics step {step} cannot be run')
-    return Rerun(original, source, str(world), original.scenario_seed, belt, step, changes)
+    rerun = Rerun(original, source, '', original.scenario_seed, belt, step, changes)
+    with tempfile.TemporaryDirectory(prefix='run_trials-rerun-') as scratch:
+        world = rerun.written_to(Path(scratch)).world
+        changed = ''
+        try:
+            changed = point_world(world, changes, Path(scratch) / 'changed')
+            check_world(changed)
+        except SweepError as exc:
+            raise RerunError(str(exc).replace('the sweep point', '--set')) from None
+        except CampaignError as exc:
+            # (Said of the world as --set changes it, not of a scratch file.)
+            why = str(exc)
+            for name in (f'--world {changed}: ', '--world: ', f'{changed}: ', changed):
+                why = why.replace(name, '')
+            raise RerunError(f'--set {", ".join(sets) or "(none)"}: the world as changed '
+                             f'cannot be run: {why}') from None
+    return rerun
+
+
+def prepare(run: Path, sets: Sequence[str], out: Path) -> Rerun:
+    """The re-run of ``run`` with ``sets``, checked (RerunError), its world written into
+    ``out`` (made if need be) only then."""
+    rerun = check(run, sets)
+    try:
+        make_dir(out, '--out')
+    except OutputError as exc:
+        raise RerunError(str(exc)) from None
+    return rerun.written_to(out)
 
 
 def world_changes(changes: Dict[str, float]) -> Dict[str, float]:

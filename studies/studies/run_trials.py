@@ -18,7 +18,7 @@ import time
 from pathlib import Path
 from typing import Any, Dict, List, NoReturn, Optional, Sequence
 
-from ros_common.outputs import OutputError, check_output_dir
+from ros_common.outputs import OutputError, check_output_dir, make_dir
 from studies import directory
 from studies.campaign import (
     CAMPAIGN_FILE,
@@ -40,7 +40,8 @@ from studies.progress import (
     progress_line,
     running_figures,
 )
-from studies.rerun import Rerun, RerunError, figures, first_parting, prepare
+from studies.rerun import Rerun, RerunError, figures, first_parting
+from studies.rerun import check as check_rerun
 from studies.trial_graph import pipeline_graph
 from studies.trial_process import (
     INTERRUPTED,
@@ -215,11 +216,12 @@ def _rerun(args: argparse.Namespace) -> int:
     out = args.out or Path('runs') / time.strftime('rerun-%Y%m%d-%H%M%S')
     try:
         check_output_dir(out, '--out')
-        rerun = prepare(Path(args.rerun), args.set or [], out)
-        check_world(rerun.world)
+        rerun = check_rerun(Path(args.rerun), args.set or [])
+        make_dir(out, '--out')
         with campaign_lock(out):
-            return _run_again(rerun, out, args)
-    except (RerunError, CampaignError, OutputError) as exc:
+            directory.claim(out, directory.RERUN, resume=False)
+            return _run_again(rerun.written_to(out), out, args)
+    except (RerunError, CampaignError, OutputError, directory.DirectoryError) as exc:
         print(f'run_trials: error: {exc}', file=sys.stderr, flush=True)
         return 2
 

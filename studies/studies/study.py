@@ -89,6 +89,9 @@ def claim(study: Study, path: Path, out: Path, resume: bool,
     else:
         step = stored if stored is not None else TIME_STEP
     copy = out / STUDY_COPY
+    if copy.is_dir() and not copy.is_symlink():
+        raise CampaignError(f'{copy} is a directory, where the study keeps its file: give '
+                            'another --out')
     try:
         if not (copy.is_file() and copy.samefile(path)):
             write_file(copy, path.read_bytes())
@@ -96,7 +99,7 @@ def claim(study: Study, path: Path, out: Path, resume: bool,
                                       'time_step': step}, indent=1))
     except OSError as exc:
         raise CampaignError(f'{out}: cannot write the study\'s files '
-                            f'({exc.strerror or exc}: {exc.filename or copy})') from None
+                            f'({exc.strerror or exc})') from None
     return step
 
 

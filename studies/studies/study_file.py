@@ -23,7 +23,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Dict, List, Optional, Tuple
 
-from studies.sweep import _NAME, RATES, TRIAL_PARAMETERS, SweepError, point_world
+from studies.sweep import _NAME, RATES, TRIAL_PARAMETERS, SweepError, check_names, point_world
 from trial_record.result import COUNTS, MAX_PARAMETERS, TrialResult
 from world_description.world_config import WorldConfigError
 from world_description.world_loading import read_yaml
@@ -31,6 +31,7 @@ from world_description.world_loading import read_yaml
 MAX_BELT_SPEED = 0.5                 # m/s (as a campaign's)
 MAX_STUDY_TRIALS = 10_000
 MAX_SETTING_TRIALS = 200
+MAX_GRID = 100_000               # values on a factor's grid (low + k * step)
 # The responses a study reads from a result: each rate (a proportion over materials, or grasp
 # attempts), and a number of it.
 NUMBERS = ('completion_time',) + COUNTS
@@ -132,6 +133,11 @@ def _number(value: Any) -> bool:
             and math.isfinite(value))
 
 
+def _integer(value: Any) -> bool:
+    """An integer, not a truth value (YAML's ``true`` is Python's 1)."""
+    return isinstance(value, int) and not isinstance(value, bool)
+
+
 def parse_study(data: Any, where: str) -> Study:
     """A study's mapping as read from ``where`` (StudyError naming the first wrong key)."""
     def bad(key: str, what: str) -> StudyError:
@@ -151,7 +157,7 @@ def parse_study(data: Any, where: str) -> Study:
     if not isinstance(world, str) or not world.strip():
         raise bad('world', 'the path or package:// address of a world file')
     seed = data.get('seed', 2026)
-    if not (isinstance(seed, int) and not isinstance(seed, bool) and 0 <= seed < 2 ** 31):
+    if not (_integer(seed) and 0 <= seed < 2 ** 31):
         raise bad('seed', f'an integer within 0..{2 ** 31 - 1}')
     factors = _factors(data.get('factors'), where)
     belt = data.get('belt_speed', [0.10, 0.16])
@@ -200,9 +206,19 @@ def _factors(data: Any, where: str) -> Tuple[Factor, ...]:
                              'step: S, 0 < S <= H - L, for values on a grid)')
         factor = Factor(name, float(spec['low']), float(spec['high']),
                         float(spec.get('step', 0.0)))
+        span = factor.high - factor.low
+        if not math.isfinite(span):
+            raise StudyError(f'{where}: {key}: high - low must be a finite number')
+        if factor.step > 0.0 and span / factor.step > MAX_GRID:
+            raise StudyError(f'{where}: {key}: a step of {factor.step:g} makes '
+                             f'{span / factor.step:.3g} values; at most {MAX_GRID}')
         if name == 'belt_speed' and not 0.0 < factor.low < factor.high <= MAX_BELT_SPEED:
             raise StudyError(f'{where}: {key}: belt speeds within (0, {MAX_BELT_SPEED}] m/s')
         out.append(factor)
+    try:
+        check_names([f.name for f in out], f'{where}: factors')
+    except SweepError as exc:
+        raise StudyError(str(exc)) from None
     return tuple(out)
 
 
@@ -239,19 +255,19 @@ def _search(data: Any, factors: Tuple[Factor, ...], where: str) -> Search:
         raise StudyError(f'{where}: search: maximising a factor asks for a constraint '
                          '(subject_to:), or the answer is the range\'s end')
     per = data.get('trials_per_setting', 10)
-    if not (isinstance(per, int) and 1 <= per <= MAX_SETTING_TRIALS):
+    if not (_integer(per) and 1 <= per <= MAX_SETTING_TRIALS):
         raise bad('trials_per_setting', f'an integer within 1..{MAX_SETTING_TRIALS}')
     first = data.get('first_trials', min(2, per))
-    if not (isinstance(first, int) and 1 <= first <= per):
+    if not (_integer(first) and 1 <= first <= per):
         raise bad('first_trials', 'an integer within 1..trials_per_setting')
     budget = data.get('budget', 10 * per)
-    if not (isinstance(budget, int) and per <= budget <= MAX_STUDY_TRIALS):
+    if not (_integer(budget) and per <= budget <= MAX_STUDY_TRIALS):
         raise bad('budget', f'an integer within trials_per_setting..{MAX_STUDY_TRIALS}')
     # (One factor maximised or minimised under a constraint is a bracket to close by halving;
     # the sampler's free proposals are worth their trials where there is more to search.)
     bracketed = constraint is not None and len(factors) == 1 and objective == names[0]
     explore = data.get('explore', 0 if bracketed else 4)
-    if not (isinstance(explore, int) and 0 <= explore <= 100):
+    if not (_integer(explore) and 0 <= explore <= 100):
         raise bad('explore', 'an integer within 0..100')
     return Search(objective, 'maximise' in data, constraint, per, first, budget, explore)
 
@@ -261,19 +277,21 @@ def _screening(data: Any, count: int, where: str) -> Screening:
         raise StudyError(f'{where}: screening must be a mapping of points (the design\'s, '
                          'at least 4 per factor) and replicates')
     points = data.get('points', 8 * count)
-    if not (isinstance(points, int) and max(8, 4 * count) <= points <= MAX_STUDY_TRIALS):
+    if not (_integer(points) and max(8, 4 * count) <= points <= MAX_STUDY_TRIALS):
         raise StudyError(f'{where}: screening.points must be an integer within '
                          f'{max(8, 4 * count)}..{MAX_STUDY_TRIALS} (at least 4 per factor, '
                          f'{count} factors)')
     replicates = data.get('replicates', 1)
-    if not (isinstance(replicates, int) and 1 <= replicates <= 100):
+    if not (_integer(replicates) and 1 <= replicates <= 100):
         raise StudyError(f'{where}: screening.replicates must be an integer within 1..100')
     return Screening(points, replicates)
 
 
 def check_study_worlds(study: Study, scratch: Path) -> None:
     """The worlds at the factors' corners (all low, all high, each factor alone at either
-    end) load and are checked: a range the world refuses stops the study before it starts."""
+    end) load and are checked, and each factor alone takes values across its range (its grid,
+    or points inside a continuous range: a number the world takes whole, such as a count,
+    refuses those): a range the world refuses stops the study before it starts."""
     from studies.plan import check_world
     world_factors = [f for f in study.factors if f.name not in TRIAL_PARAMETERS]
     if not world_factors:
@@ -289,3 +307,30 @@ def check_study_worlds(study: Study, scratch: Path) -> None:
         except SweepError as exc:
             raise StudyError(f'{study.path}: {exc}') from None
         check_world(world)
+    for f in world_factors:
+        for value in _inside(f):
+            try:
+                point_world(study.world, {**lows, f.name: value}, scratch / 'inside')
+            except SweepError as exc:
+                hint = ('' if f.step > 0.0 else '; without a step, a factor takes any value '
+                        'between low and high (a count needs step: 1)')
+                why = str(exc).partition('gives no valid world: ')[2] or str(exc)
+                raise StudyError(f'{study.path}: factors.{f.name} takes {value:g} inside its '
+                                 f'range, which the world refuses: {why}{hint}') from None
+
+
+# (Fractions of a continuous range where a factor is tried before the study: none of them a
+# simple fraction, so that a number the world takes only whole is caught.)
+_INSIDE = (0.1464, 0.5, 0.7071)
+MAX_PROBES = 24
+
+
+def _inside(f: Factor) -> List[float]:
+    """Values of a factor inside its range, tried before the study starts: its grid (every
+    value, or MAX_PROBES spread over it), or a few points of a continuous range."""
+    if f.step <= 0.0:
+        return [f.low + (f.high - f.low) * k for k in _INSIDE]
+    count = int(math.floor((f.high - f.low) / f.step + 1e-9))
+    ks = sorted({round(j * count / (MAX_PROBES - 1)) for j in range(MAX_PROBES)}
+                if count >= MAX_PROBES else range(count + 1))
+    return [f.snap(f.low + k * f.step) for k in ks if 0 < k < count]

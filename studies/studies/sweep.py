@@ -77,12 +77,25 @@ def parse_axis(spec: str) -> Axis:
     return Axis(name, points)
 
 
+def check_names(names: Sequence[str], what: str) -> None:
+    """Parameters that can be set together: no name twice, and none inside another (``conveyor``
+    and ``conveyor.length``: the first would replace what holds the second); SweepError
+    naming ``what`` otherwise."""
+    for i, a in enumerate(names):
+        for b in names[i + 1:]:
+            if a == b:
+                raise SweepError(f'{what} name {a} twice')
+            inner, outer = (a, b) if a.startswith(b + '.') else (b, a)
+            if inner.startswith(outer + '.'):
+                raise SweepError(f'{what} name {outer} and {inner}, which is a part of it: '
+                                 'give one of them')
+
+
 def grid(axes: Sequence[Axis]) -> List[Dict[str, float]]:
     """The points of one axis, or of two as a grid (the first axis the outer one)."""
     if not 1 <= len(axes) <= 2:
         raise SweepError(f'a sweep has one or two parameters, got {len(axes)}')
-    if len({a.name for a in axes}) != len(axes):
-        raise SweepError(f'--sweep names {axes[0].name} twice')
+    check_names([a.name for a in axes], '--sweep')
     count = math.prod(len(a.values) for a in axes)
     if count > MAX_POINTS:
         raise SweepError(f'the grid has {count} points (at most {MAX_POINTS})')
@@ -96,6 +109,7 @@ def grid(axes: Sequence[Axis]) -> List[Dict[str, float]]:
 
 def world_overrides(point: Dict[str, float]) -> Dict[str, Any]:
     """A point's world-file parameters as the nested mapping a world file gives them."""
+    check_names(list(point), 'the point')
     out: Dict[str, Any] = {}
     for name, value in point.items():
         if name in TRIAL_PARAMETERS:

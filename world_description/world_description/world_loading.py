@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import stat
 from pathlib import Path
-from typing import Any, Dict, Tuple
+from typing import Any, Dict, Hashable, Tuple
 
 import yaml
 
@@ -29,21 +29,27 @@ MAX_EXTENDS = 8
 
 
 def load_world(path: str | Path) -> WorldConfig:
-    """A world file, read and checked. One that ``extends`` another (a path relative to it, or
-    ``package://``) is that world with its own keys merged in: a mapping key by key, any other
-    value (a list too) replacing the base's; ``more_obstacles`` are added to the base's
-    obstacles, and ``materials.classes`` replaces the base's ``counts`` and ``colors``."""
-    path = Path(path)
+    """A world file (a path, or as a user names it: ``package://``, ``file://``), read and
+    checked. One that ``extends`` another (a path relative to it, or ``package://``) is that
+    world with its own keys merged in: a mapping key by key, any other value (a list too)
+    replacing the base's; ``more_obstacles`` are added to the base's obstacles, and
+    ``materials.classes`` replaces the base's ``counts`` and ``colors``."""
+    path = _located(path)
     return parse_world(_resolved(path, read_yaml(path), (path.resolve(),)), str(path))
 
 
 def world_data(path: str | Path) -> Dict[str, Any]:
     """A world file as one mapping, the worlds it extends merged in (what ``load_world``
     parses): a world as it was, to run it again. Checked as load_world checks it."""
-    path = Path(path)
+    path = _located(path)
     data = _resolved(path, read_yaml(path), (path.resolve(),))
     parse_world(data, str(path))
     return _absolute_resources(dict(data), path.resolve().parent)
+
+
+def _located(world: str | Path) -> Path:
+    """A world named as a user names it (a ``package://`` address too) or a path: its file."""
+    return resolve_resource(world) if isinstance(world, str) else Path(world)
 
 
 def _absolute_resources(data: Dict[str, Any], base_dir: Path) -> Dict[str, Any]:
@@ -55,11 +61,38 @@ def _absolute_resources(data: Dict[str, Any], base_dir: Path) -> Dict[str, Any]:
             rel = value[len('file://'):] if value.startswith('file://') else value
             if not Path(rel).is_absolute():
                 holder[key] = str(base_dir / rel)
-    for robot in data.get('robots') or []:
+    # (Also before the world is checked: what is not a list of mappings is left as it is,
+    # for parse_world to refuse.)
+    robots = data.get('robots')
+    for robot in robots if isinstance(robots, list) else []:
         absolute(robot, 'urdf')
-        for controller in (robot.get('controllers') or [] if isinstance(robot, dict) else []):
+        controllers = robot.get('controllers') if isinstance(robot, dict) else None
+        for controller in controllers if isinstance(controllers, list) else []:
             absolute(controller, 'joint_limits')
     return data
+
+
+class _Loader(yaml.SafeLoader):
+    """YAML's safe loader that refuses a mapping giving a key twice: YAML forbids it, and
+    PyYAML would keep the last silently (a factor or a robot given twice, one of them lost)."""
+
+
+def _mapping(loader: _Loader, node: yaml.MappingNode, deep: bool = False) -> Dict[Any, Any]:
+    seen = set()
+    for key_node, _ in node.value:
+        if key_node.tag == 'tag:yaml.org,2002:merge':
+            continue             # (``<<: *base``: its keys may be given again, to override)
+        key = loader.construct_object(key_node, deep=True)
+        if isinstance(key, Hashable):
+            if key in seen:
+                raise yaml.constructor.ConstructorError(
+                    None, None, f'the key {str(key)[:80]!r} is given twice in one mapping',
+                    key_node.start_mark)
+            seen.add(key)
+    return loader.construct_mapping(node, deep=deep)
+
+
+_Loader.add_constructor(yaml.resolver.BaseResolver.DEFAULT_MAPPING_TAG, _mapping)
 
 
 def read_yaml(path: Path, what: str = 'world file') -> Any:
@@ -79,7 +112,7 @@ def read_yaml(path: Path, what: str = 'world file') -> Any:
         raise WorldConfigError(f'{what} {path} has {info.st_size} bytes; a {what} is '
                                f'at most {MAX_WORLD_BYTES} bytes')
     try:
-        data = yaml.safe_load(path.read_text(encoding='utf-8'))
+        data = yaml.load(path.read_text(encoding='utf-8'), Loader=_Loader)
         _check_expanded_size(data, path)
         return data
     except yaml.YAMLError as exc:
@@ -132,6 +165,9 @@ def _resolved(path: Path, data: Any, seen: Tuple[Path, ...]) -> Any:
     base = _resolved(base_path, read_yaml(base_path), seen + (base_path.resolve(),))
     if not isinstance(base, dict):
         raise WorldConfigError(f'{base_path}: the top level must be a mapping')
+    # (The base's own relative files are relative to the base, wherever the world that
+    # extends it is: a sweep's point, or a re-run's world, in a trial's directory.)
+    base = _absolute_resources(base, base_path.resolve().parent)
     own = {k: v for k, v in data.items() if k not in ('extends', 'more_obstacles')}
     more = data.get('more_obstacles') or []
     if not isinstance(more, list):
