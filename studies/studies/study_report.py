@@ -78,8 +78,8 @@ def search_plot(study: Study, answer: SearchAnswer, path: Path) -> None:
             if not math.isfinite(rate):
                 continue
             colour = 'tab:green' if s.feasible else 'tab:red'
-            ax.errorbar([x], [rate], yerr=[[rate - low], [high - rate]], fmt='o', color=colour,
-                        capsize=3)
+            ax.errorbar([x], [rate], yerr=[[max(0.0, rate - low)], [max(0.0, high - rate)]],
+                        fmt='o', color=colour, capsize=3)
             ax.annotate(f'{s.index}: {len(s.results)}', (x, high), fontsize=7,
                         textcoords='offset points', xytext=(0, 4), ha='center')
         else:

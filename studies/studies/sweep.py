@@ -161,7 +161,8 @@ def wilson(successes: float, n: float, z: float = 1.96) -> Tuple[float, float]:
     p = min(1.0, max(0.0, successes / n))
     centre = (p + z * z / (2 * n)) / (1 + z * z / n)
     half = z * math.sqrt(p * (1 - p) / n + z * z / (4 * n * n)) / (1 + z * z / n)
-    return max(0.0, centre - half), min(1.0, centre + half)
+    # (The interval holds p; at p = 1, centre + half is 1 - 1e-16 in floating point.)
+    return max(0.0, min(p, centre - half)), min(1.0, max(p, centre + half))
 
 
 # The rates a sweep reports: a result's (successes, trials) of each, summed over a point.
