@@ -11,7 +11,7 @@ too. What is checked here, from the layout alone, the coordinator relies on whil
 from __future__ import annotations
 
 import math
-from typing import Any, Dict, List, Sequence, Tuple
+from typing import Any, Dict, List, Optional, Sequence, Tuple
 
 import numpy as np
 
@@ -102,12 +102,16 @@ def _ways(layout: CellLayout, robot: str) -> Dict[str, np.ndarray]:
     """A youBot's ways, by name: from its park to the loading pose, out to each stand of its
     side of the pool, between them, and back to the loading pose and to its park."""
     bay, park = layout.youbot_home, layout.park(robot)
-    ways = {'its park to the loading pose': route_poses(park, bay)}
+    # (A youBot parked at the loading pose, as one alone is, has no ways to its park.)
+    parked = not np.allclose(park, bay)
+    ways = {'its park to the loading pose': route_poses(park, bay)} if parked else {}
     for st in layout.stands_of(robot):
         ways[f'the loading pose to {st.name}'] = route_poses(bay, st.pose, layout.way_out(st.name))
         ways[f'{st.name} to the loading pose'] = route_poses(st.pose, bay,
                                                              way_off(layout, st, bay))
-        ways[f'{st.name} to its park'] = route_poses(st.pose, park, way_to_park(layout, st, park))
+        if parked:
+            ways[f'{st.name} to its park'] = route_poses(st.pose, park,
+                                                         way_to_park(layout, st, park))
         for other in layout.stands_of(robot):
             if other is not st:
                 ways[f'{st.name} to {other.name}'] = route_poses(st.pose, other.pose,
@@ -115,36 +119,49 @@ def _ways(layout: CellLayout, robot: str) -> Dict[str, np.ndarray]:
     return ways
 
 
-def check_fleet(layout: CellLayout, obstacles: Sequence[Any],
-                loading_given: bool) -> None:
-    """A LayoutError (one line, naming the robot) unless the fleet's youBots can share the
-    floor: the loading pose given apart from the parks, each park clear of the obstacles, the
-    loading pose and the other parks, each youBot's ways off the obstacles and clear of the
-    other youBots' parks, its way to its park clear of the loading pose and its way to the
-    loading pose clear of the stands (with the cell's clearance)."""
-    if not layout.fleet:
-        return
+def check_fleet(layout: CellLayout, obstacles: Sequence[Any], loading_given: bool,
+                conveyor: Optional[Any] = None) -> None:
+    """A LayoutError (one line, naming the robot) unless the cell's youBots, one or several,
+    can share the floor: each park (its start pose) and the loading pose off the obstacles and
+    the conveyor, and each youBot's ways off them; and for a fleet, the loading pose given
+    apart from the parks, the parks apart, each youBot's ways clear of the other youBots'
+    parks, its way to its park clear of the loading pose and its way to the loading pose clear
+    of the stands (with the cell's clearance)."""
+    bay = np.array([layout.youbot_home])
+    parks = {r.name: np.array([layout.park(r.name)]) for r in layout.transports}
+    boxes = _obstacle_boxes(obstacles) + _conveyor_box(conveyor)
+    for name, park in parks.items():
+        hit = next((o for o, box in boxes if _box_clearance(park, box) <= 0.0), None)
+        if hit is not None:
+            raise LayoutError(f'robot {name}: its start pose overlaps obstacle {hit}')
+    hit = next((o for o, box in boxes if _box_clearance(bay, box) <= 0.0), None)
+    if hit is not None:
+        raise LayoutError(f'the loading pose (where a youBot is loaded) overlaps obstacle {hit}')
+    ways = {name: _ways(layout, name) for name in parks}
+    if layout.fleet:
+        _check_shared_floor(layout, parks, ways, bay, loading_given)
+    # (Then the obstacles: a way that is in another's way is named for that first.)
+    _check_off_the_obstacles(ways, boxes)
+
+
+def _check_shared_floor(layout: CellLayout, parks: Dict[str, np.ndarray],
+                        ways: Dict[str, Dict[str, np.ndarray]], bay: np.ndarray,
+                        loading_given: bool) -> None:
+    """check_fleet's rules for two youBots or more."""
+    fp, gap = YOUBOT_FOOTPRINT, layout.clearance
     if not loading_given:
         raise LayoutError(f'the cell has {len(layout.transports)} youBots: its cell section '
                           'gives the loading pose (cell.loading: x, y, yaw), apart from their '
                           'start poses, where each waits while another is loaded')
-    fp, gap = YOUBOT_FOOTPRINT, layout.clearance
-    bay = np.array([layout.youbot_home])
-    parks = {r.name: np.array([layout.park(r.name)]) for r in layout.transports}
-    boxes = _obstacle_boxes(obstacles)
     for name, park in parks.items():
         if clearance(park, fp, bay, fp) < gap:
             raise LayoutError(f'robot {name}: its start pose is within {gap:g} m of the loading '
                               'pose (cell.loading): it waits there while another is loaded')
-        hit = next((o for o, box in boxes if _box_clearance(park, box) <= 0.0), None)
-        if hit is not None:
-            raise LayoutError(f'robot {name}: its start pose overlaps obstacle {hit}')
         for other, there in parks.items():
             if other < name and clearance(park, fp, there, fp) < gap:
                 raise LayoutError(f'robot {name}: its start pose is within {gap:g} m of '
                                   f'{other}\'s')
     stands = np.array([st.pose for st in layout.stands])
-    ways = {name: _ways(layout, name) for name in parks}
     for name in parks:
         for way, poses in ways[name].items():
             keep: List[Tuple[str, np.ndarray]] = [
@@ -161,8 +178,6 @@ def check_fleet(layout: CellLayout, obstacles: Sequence[Any],
                         f'robot {name}: its way from {way} passes {max(d, 0.0):.2f} m from '
                         f'{what} (the cell keeps {gap:g} m, and {TRACKING_MARGIN_M:g} m more '
                         'for the drive\'s errors)')
-    # (Then the obstacles: a way that is in another's way is named for that first.)
-    _check_off_the_obstacles(ways, boxes)
 
 
 def _check_off_the_obstacles(ways: Dict[str, Dict[str, np.ndarray]],
@@ -196,6 +211,30 @@ def _obstacle_boxes(obstacles: Sequence[Any]) -> List[Tuple[str, np.ndarray]]:
         corners = Footprint(*half).corners((o.position[0], o.position[1], o.yaw))
         out.append((o.name or o.shape, corners))
     return out
+
+
+def check_loader_base(layout: CellLayout, obstacles: Sequence[Any],
+                      conveyor: Optional[Any] = None) -> None:
+    """A LayoutError unless the loader's base stands on the floor, or on top of what is under
+    it (a pedestal), not inside an obstacle or the conveyor."""
+    x, y, z, _ = layout.zu12_base
+    tops = {o.name or o.shape: o.position[2] + obstacle_height(o) / 2 for o in obstacles}
+    if conveyor is not None:
+        tops['conveyor'] = conveyor.position[2]
+    for name, box in _obstacle_boxes(obstacles) + _conveyor_box(conveyor):
+        if (tops.get(name, math.inf) > z + OBSTACLE_LOW_M
+                and polygon_distance(Footprint(1e-3, 1e-3).corners((x, y, 0.0)), box) <= 0.0):
+            raise LayoutError(f'robot {layout.loader.name}: its base stands inside obstacle '
+                              f'{name}')
+
+
+def _conveyor_box(conveyor: Optional[Any]) -> List[Tuple[str, np.ndarray]]:
+    """The conveyor's frame, from the floor up to its belt, as an obstacle (name, corners)."""
+    if conveyor is None:
+        return []
+    corners = Footprint(conveyor.length / 2, conveyor.width / 2).corners(
+        (conveyor.position[0], conveyor.position[1], conveyor.yaw))
+    return [('conveyor', corners)]
 
 
 def _box_clearance(poses: np.ndarray, corners: np.ndarray) -> float:

@@ -15,6 +15,7 @@ from cell_layout.fleet_routes import (
     YOUBOT_HALF_LENGTH_M,
     YOUBOT_HALF_WIDTH_M,
     check_fleet,
+    check_loader_base,
     obstacle_height,
     way_back,
 )
@@ -165,7 +166,8 @@ def layout_from_world(world: Any) -> CellLayout:
     layout = replace(layout, regions=regions, stands=tuple(
         replace(st, serves=st.serves | frozenset(served.get(st.name, ()))) for st in stands))
     _check_capacity(layout)
-    check_fleet(layout, world.obstacles, roles.loading is not None)
+    check_fleet(layout, world.obstacles, roles.loading is not None, world.conveyor)
+    check_loader_base(layout, world.obstacles, world.conveyor)
     return layout
 
 

@@ -21,7 +21,6 @@ from typing import Any, Dict, List, NoReturn, Optional, Sequence
 from ros_common.outputs import OutputError, check_output_dir, make_dir
 from studies import directory
 from studies.campaign import (
-    CAMPAIGN_FILE,
     PLAN_DEFAULTS,
     CampaignError,
     Reuse,
@@ -33,6 +32,7 @@ from studies.campaign import (
     write_campaign,
     write_csv,
 )
+from studies.directory import CAMPAIGN_FILE
 from studies.plan import check_sweep_worlds, check_world, plan_of
 from studies.pool import LocalPool, Pool, campaign_progress
 from studies.progress import (

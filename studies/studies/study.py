@@ -82,7 +82,7 @@ def claim(study: Study, path: Path, out: Path, resume: bool,
             raise CampaignError(f'{path} is not the study in {out} (its {STUDY_COPY} asks '
                                 'something else): give another --out')
     if time_step is not None:
-        step = check_plan({'time_step': time_step}, '--time-step')['time_step']
+        step = float(check_plan({'time_step': time_step}, '--time-step')['time_step'])
         if stored is not None and step != stored:
             raise CampaignError(f'--time-step {step:g} differs from the study being resumed '
                                 f'({stored:g}, in {state})')

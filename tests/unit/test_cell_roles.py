@@ -125,7 +125,7 @@ def test_what_the_controller_cannot_drive_is_refused_at_start_up_in_one_line():
     data['robots'].append(copy.deepcopy(data['robots'][1]))
     data['robots'][-1].update(name='carrier2', namespace='cell_carrier2',
                               frame_prefix='cell_carrier2/')
-    data['robots'][-1]['pose']['y'] += 1.0
+    data['robots'][-1]['pose']['y'] -= 1.0         # (clear of the belt, north of the youBot)
     data['cell']['transports'].append('carrier2')
     with pytest.raises(LayoutError, match='gives the loading pose'):
         layout_from_world(parse_world(data))

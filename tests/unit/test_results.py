@@ -232,8 +232,13 @@ def test_an_interrupted_campaign_goes_on_where_it_stopped(tmp_path, monkeypatch)
     import studies.report
     import studies.run_trials as trials
     import studies.trial_process as trial_run
+    from studies.campaign import PLAN_DEFAULTS
+    from studies.trial_process import scenario
     plan = trial_plan(4, 0, 7, (0.1, 0.16))
     monkeypatch.setattr(trials, 'code_version', lambda: 'abc123')
+    (tmp_path / 'campaign.json').write_text(json.dumps(
+        {'plan': {'trials': 4, 'seed0': 7}, 'code': 'abc123'}))
+    ran_as = scenario(PLAN_DEFAULTS['world'], PLAN_DEFAULTS['time_step'])
     # Trial 0 of this plan finished before the interruption; trial 1's result is of another
     # plan (another seed), trial 2 was stopped by the interruption, and trial 3 was run by
     # other code: those three run again.
@@ -244,7 +249,8 @@ def test_an_interrupted_campaign_goes_on_where_it_stopped(tmp_path, monkeypatch)
         (tmp_path / f'trial_{k:03d}').mkdir()
         (tmp_path / f'trial_{k:03d}' / 'result.json').write_text(json.dumps({
             'trial': k, 'scenario_seed': seed, 'belt_speed': plan[k]['belt_speed'],
-            'status': status, 'completion_time': 60.0, 'wall_time': 100.0, 'code': code}))
+            'status': status, 'completion_time': 60.0, 'wall_time': 100.0, 'code': code,
+            'scenario': ran_as}))
     ran = []
 
     def fake_trial(trial, seed, belt_speed, domain_id, out_dir, wall_timeout, record, code,
@@ -272,6 +278,7 @@ def test_a_campaign_stopped_by_the_user_keeps_a_report_and_resumes_with_its_plan
     is refused."""
     import studies.run_trials as trials
     import studies.trial_process as trial_run
+    from studies.trial_process import scenario
     monkeypatch.setattr(trials, 'code_version', lambda: 'abc123')
     ran, reports = [], []
 
@@ -282,6 +289,7 @@ def test_a_campaign_stopped_by_the_user_keeps_a_report_and_resumes_with_its_plan
             raise KeyboardInterrupt          # (the user's Ctrl-C, as the pool passes it on)
         ran.append(trial)
         result = TrialResult('completed', 60.0, scenario_seed=seed, belt_speed=belt_speed,
+                             scenario=scenario(world, time_step),
                              run=RunInfo(trial=trial, wall_time=90.0, code=code))
         result.write(out_dir / f'trial_{trial:03d}' / 'result.json')
         return result

@@ -242,14 +242,31 @@ class IdentificationCheck:
                              'distance': round(distance, 4) if true_color else None})
 
 
+def identified_materials(identifications: Sequence[bool],
+                         details: Optional[Sequence[Dict[str, Any]]] = None) -> int:
+    """The materials identified with their true colour: with each identification's ``details``
+    (IdentificationCheck.details, in the same order), each true material once, when every
+    identification made on it was right; without them, each identification as one material.
+    A material seen again and again (held in the camera's view) is still one material."""
+    if details is None or len(details) != len(identifications):
+        return sum(1 for ok in identifications if ok)
+    verdict: Dict[int, bool] = {}
+    for ok, d in zip(identifications, details):
+        k = d.get('truth_id')
+        if k is not None:
+            verdict[k] = verdict.get(k, True) and bool(ok)
+    return sum(verdict.values())
+
+
 def score(result: RunResult, final_truth: Sequence[TruePose], identifications: Sequence[bool],
-          regions: Destinations, tracks: Optional[Dict[int, int]] = None) -> TrialResult:
+          regions: Destinations, tracks: Optional[Dict[int, int]] = None,
+          details: Optional[Sequence[Dict[str, Any]]] = None) -> TrialResult:
     """The run's figures: counts, the three rates and the completion time. The materials not at
     their destination are named by their simulator id, and with ``tracks`` (tracks_of) by the
-    coordinator's too."""
+    coordinator's too; identifications are counted by material (identified_materials)."""
     total = max(result.total, 1)
     handled = sum(1 for color, p in final_truth if at_destination(color, p, regions))
-    correct = sum(1 for ok in identifications if ok)
+    correct = min(identified_materials(identifications, details), result.total)
     missing = not_at_destination(final_truth, regions, tracks)
     told = [f'material {m["id"]} ({m["color"]}'
             + (f', the coordinator\'s {m["material"]}' if m['material'] >= 0 else '')
@@ -309,7 +326,8 @@ def build_result(result: RunResult, final_truth: Sequence[TruePose],
     """A run's result record: its score (``score``), each material by both ids, where every
     material rests and why it is not at its destination, and what the run went through."""
     tracks = tracks_of(trace.identification_details)
-    out = score(result, final_truth, identifications, regions, tracks)
+    out = score(result, final_truth, identifications, regions, tracks,
+                trace.identification_details)
     sim_id = {material: k for k, material in tracks.items()}
     materials = [{**m, 'sim_id': sim_id.get(m['id'], -1)} for m in out.materials]
     final = [{'id': k, 'material': tracks.get(k, -1), 'color': color,

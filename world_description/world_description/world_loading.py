@@ -72,7 +72,7 @@ def _absolute_resources(data: Dict[str, Any], base_dir: Path) -> Dict[str, Any]:
     return data
 
 
-class _Loader(yaml.SafeLoader):
+class _Loader(yaml.SafeLoader):  # type: ignore[misc]
     """YAML's safe loader that refuses a mapping giving a key twice: YAML forbids it, and
     PyYAML would keep the last silently (a factor or a robot given twice, one of them lost)."""
 
@@ -89,7 +89,8 @@ def _mapping(loader: _Loader, node: yaml.MappingNode, deep: bool = False) -> Dic
                     None, None, f'the key {str(key)[:80]!r} is given twice in one mapping',
                     key_node.start_mark)
             seen.add(key)
-    return loader.construct_mapping(node, deep=deep)
+    mapping: Dict[Any, Any] = loader.construct_mapping(node, deep=deep)
+    return mapping
 
 
 _Loader.add_constructor(yaml.resolver.BaseResolver.DEFAULT_MAPPING_TAG, _mapping)

@@ -3,13 +3,13 @@ number, and the reader that checks each field as it is read (``Reader``)."""
 from __future__ import annotations
 
 import math
-import re
 from dataclasses import dataclass, field
 from typing import Any, Dict, List, Optional, Set, Tuple, Union
 
 from world_description.errors import WorldConfigError
 from world_description.material_classes import MaterialClass
 from world_description.perturbations import Perturbations
+from world_description.ros_names import token_problem
 
 Vec3 = Tuple[float, float, float]
 
@@ -228,7 +228,6 @@ class WorldConfig:
         raise KeyError(name)
 
 
-NAME = re.compile(r'^[A-Za-z][A-Za-z0-9_]*$')
 
 # Every number of a world has a range: a world file, or the copy of one a result or a bag
 # keeps, may come from elsewhere, and a value without one (gravity 1e300) runs a world that is
@@ -275,8 +274,9 @@ class Reader:
 
     def name(self, data: Dict[str, Any], key: str, where: str) -> str:
         value = self.string(data, key, where)
-        if not NAME.match(value):
-            raise self.fail(where, key, f'"{value}" must be a ROS name ([A-Za-z][A-Za-z0-9_]*)')
+        problem = token_problem(value)
+        if problem:
+            raise self.fail(where, key, f'{value[:80]!r} {problem}')
         return value
 
     def number(self, data: Dict[str, Any], key: str, where: str, *, lo: float, hi: float,

@@ -8,6 +8,7 @@ import re
 from typing import Any, Dict, List, Optional, Set, Tuple, Union
 
 from world_description.errors import WorldConfigError
+from world_description.graph_names import graph_problem
 from world_description.material_classes import (
     PAPER_RULES,
     ROUTES,
@@ -22,11 +23,11 @@ from world_description.perturbations import (
     RobotPerturbation,
     TimingPerturbation,
 )
+from world_description.ros_names import MAX_TOKEN_LENGTH, relative_problem, token_problem
 from world_description.world_schema import (
     GRAVITY_RANGE,
     MAX_JOINT_POSITION,
     MAX_SIZE_M,
-    NAME,
     TURN_RAD,
     WORLD_EXTENT_M,
     CameraConfig,
@@ -59,6 +60,10 @@ def parse_world(data: Any, source: str = '<memory>') -> WorldConfig:
     namespaces = [rb.namespace for rb in robots]
     if len(set(namespaces)) != len(namespaces):
         raise WorldConfigError(f'{source}: robot namespaces must be unique, got {namespaces}')
+    prefixes = [rb.frame_prefix for rb in robots]
+    if len(set(prefixes)) != len(prefixes):
+        raise WorldConfigError(f'{source}: robot frame prefixes must be unique (each robot\'s '
+                               f'frames are its own), got {prefixes}')
     cell = _cell(r, data['cell'], robots) if data.get('cell') is not None else None
     left_out = set(cell.left_out) if cell is not None else set()
     robots = [rb for rb in robots if rb.name not in left_out]
@@ -73,15 +78,19 @@ def parse_world(data: Any, source: str = '<memory>') -> WorldConfig:
         if conveyor is None:
             raise WorldConfigError(f'{source}: materials need a conveyor to be placed on')
         materials = _materials(r, data['materials'], obstacles)
-    return WorldConfig(source=source,
-                       gravity=r.number(data, 'gravity', 'world', default=-9.81,
-                                        lo=GRAVITY_RANGE[0], hi=GRAVITY_RANGE[1]),
-                       floor_size=r.number(data, 'floor_size', 'world', default=4.0, lo=0.1,
-                                           hi=2 * WORLD_EXTENT_M),
-                       robots=robots, obstacles=obstacles, cameras=cameras, conveyor=conveyor,
-                       materials=materials,
-                       perturbations=_perturbations(r, data.get('perturbations') or {}),
-                       cell=cell)
+    world = WorldConfig(source=source,
+                        gravity=r.number(data, 'gravity', 'world', default=-9.81,
+                                         lo=GRAVITY_RANGE[0], hi=GRAVITY_RANGE[1]),
+                        floor_size=r.number(data, 'floor_size', 'world', default=4.0, lo=0.1,
+                                            hi=2 * WORLD_EXTENT_M),
+                        robots=robots, obstacles=obstacles, cameras=cameras,
+                        conveyor=conveyor, materials=materials,
+                        perturbations=_perturbations(r, data.get('perturbations') or {}),
+                        cell=cell)
+    problem = graph_problem(world)
+    if problem:
+        raise WorldConfigError(f'{source}: {problem}')
+    return world
 
 
 def _cell(r: Reader, item: Any, robots: List[RobotConfig]) -> CellRoles:
@@ -138,8 +147,15 @@ def _robot(r: Reader, item: Any, i: int) -> RobotConfig:
                          'controllers', 'initial_joint_positions', 'fixed_base', 'suction'})
     name = r.name(item, 'name', where)
     namespace = r.string(item, 'namespace', where, default=name).strip('/')
-    if namespace and not all(NAME.match(part) for part in namespace.split('/')):
-        raise WorldConfigError(f'{r.source}: {where}.namespace "{namespace}" is not a ROS name')
+    problem = relative_problem(namespace) if namespace else ''
+    if problem:
+        raise r.fail(where, 'namespace', f'{namespace[:80]!r} {problem}')
+    frame_prefix = r.string(item, 'frame_prefix', where, default='')
+    if frame_prefix and not (len(frame_prefix) <= MAX_TOKEN_LENGTH
+                             and re.fullmatch(r'[A-Za-z][A-Za-z0-9_]*(/[A-Za-z0-9_]+)*/?',
+                                              frame_prefix)):
+        raise r.fail(where, 'frame_prefix', f'{frame_prefix[:80]!r} must be a frame name\'s '
+                     f'start of at most {MAX_TOKEN_LENGTH} characters (youbot/ or youbot_)')
     pose_data = item.get('pose', {}) or {}
     r.only(pose_data, where + '.pose', {'x', 'y', 'z', 'yaw'})
     pose = Pose(*(r.number(pose_data, k, where + '.pose', default=0.0,
@@ -184,10 +200,12 @@ def _robot(r: Reader, item: Any, i: int) -> RobotConfig:
                                 r.number(item['suction'], 'max_payload', sw, default=12.0,
                                          lo=1e-3, hi=1000.0),
                                 r.string(item['suction'], 'service', sw, default='suction'))
-        if not re.fullmatch(r'[a-z][a-z0-9_]*(/[a-z][a-z0-9_]*)*', suction.service):
-            raise r.fail(sw, 'service', f'"{suction.service}" is not a relative ROS name')
+        if not (len(suction.service) <= MAX_TOKEN_LENGTH
+                and re.fullmatch(r'[a-z][a-z0-9_]*(/[a-z][a-z0-9_]*)*', suction.service)):
+            raise r.fail(sw, 'service', f'{suction.service[:80]!r} is not a relative ROS name '
+                         f'of at most {MAX_TOKEN_LENGTH} characters')
     return RobotConfig(name=name, urdf=r.string(item, 'urdf', where), namespace=namespace,
-                       pose=pose, frame_prefix=r.string(item, 'frame_prefix', where, default=''),
+                       pose=pose, frame_prefix=frame_prefix,
                        drive=drive, limits=limits, controllers=controllers,
                        initial_joint_positions=initial_positions, fixed_base=fixed_base,
                        suction=suction)
@@ -390,9 +408,10 @@ def _classes(r: Reader, data: Any, size: float, mass: float) -> Tuple[MaterialCl
     rows = []
     for name, spec in data.items():
         at = f'{where}.{name}'
-        if not isinstance(name, str) or not NAME.match(name):
-            raise WorldConfigError(f'{r.source}: {where}: class name {name!r} must be a ROS '
-                                   'name ([A-Za-z][A-Za-z0-9_]*)')
+        if not isinstance(name, str) or token_problem(name):
+            raise WorldConfigError(f'{r.source}: {where}: class name {str(name)[:80]!r} must '
+                                   f'be a ROS name ([A-Za-z][A-Za-z0-9_]*) of at most '
+                                   f'{MAX_TOKEN_LENGTH} characters')
         r.only(spec, at, {'color', 'count', 'destination', 'route', 'size', 'mass', 'hue'})
         route = r.string(spec, 'route', at)
         if route not in ROUTES:
