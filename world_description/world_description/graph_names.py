@@ -114,9 +114,9 @@ def graph_names(world: WorldConfig) -> List[GraphName]:
             out += [GraphName(_under(ns, t), 'topic', owner) for t in KINEMATICS_TOPICS]
             out += [GraphName(_under(ns, s), 'service', owner) for s in KINEMATICS_SERVICES]
     spaces = {r.name: r.namespace for r in world.robots}
-    for cam in world.cameras:
+    for i, cam in enumerate(world.cameras):
         ns = spaces.get(cam.robot, '') if cam.robot else ''
-        out += [GraphName(_under(ns, f'{cam.name}/{t}'), 'topic', f'camera {cam.name}')
+        out += [GraphName(_under(ns, f'{cam.name}/{t}'), 'topic', f'cameras[{i}] ({cam.name})')
                 for t in CAMERA_TOPICS]
     return out
 
