@@ -52,6 +52,9 @@ PLATE_SLOTS_IN_BASE_M = plate_grid(0.05)
 SLOT_GAP_M = 0.02
 SLOT_EDGE_M = 0.025
 POOL = 'pool_floor'
+# How far a resting material's centre may sink into, or stand off, what it rests on, as the
+# simulator's contacts leave it [m].
+RESTING_TOLERANCE_M = 0.002
 
 
 class LayoutError(ValueError):
@@ -82,9 +85,12 @@ class Region:
 
     def box(self, size: float) -> Tuple[float, ...]:
         """Where the centre of a material of edge ``size`` resting on it lies (x0, x1, y0, y1,
-        z0, z1): on the face, not on another material."""
+        z0, z1): on the face, not on another material. A cube that touches the face, however
+        it lies (flat, on an edge, leaning), has its centre at most half its space diagonal
+        over it; one higher rests on something else, such as another material."""
         (x, y), (hx, hy) = self.center, self.half
-        return (x - hx, x + hx, y - hy, y + hy, self.top, self.top + size)
+        return (x - hx, x + hx, y - hy, y + hy, self.top,
+                self.top + size * math.sqrt(3.0) / 2.0 + RESTING_TOLERANCE_M)
 
 
 def slot_grid(center: Tuple[float, float], half: Tuple[float, float], top: float, size: float,

@@ -423,21 +423,34 @@ def test_each_material_not_at_its_destination_says_what_went_wrong():
                 'true_color': true_color}
     details = [seen(1, 11, 'orange', 'orange'), seen(2, 12, 'purple', 'orange'),
                seen(3, 13, 'orange', 'orange'), seen(4, 14, 'orange', 'orange'),
-               seen(5, 15, 'orange', 'orange'), seen(6, 16, 'purple', 'purple')]
+               seen(5, 15, 'orange', 'orange'), seen(6, 16, 'purple', 'purple'),
+               seen(7, 17, 'orange', 'orange'), seen(8, 18, 'orange', 'orange'),
+               seen(9, 19, 'orange', 'orange')]
     materials = [{'id': 11, 'status': 'delivered', 'failure': ''},
                  {'id': 12, 'status': 'placed', 'failure': ''},
                  {'id': 13, 'status': 'missed', 'failure': 'went off the belt end unpicked'},
                  {'id': 14, 'status': 'failed', 'failure': 'grasp: nothing within 4 mm'},
                  {'id': 15, 'status': 'on_plate', 'failure': ''},
-                 {'id': 16, 'status': 'seen', 'failure': ''}]
+                 {'id': 16, 'status': 'seen', 'failure': ''},
+                 {'id': 17, 'status': 'picking', 'failure': ''},
+                 {'id': 18, 'status': 'delivered', 'failure': ''},
+                 {'id': 19, 'status': 'failed', 'failure': 'unreachable'}]
     events = [[2.0, 'picked', 'zu12', 11, 'orange', ''], [3.0, 'grasp_failed', 'zu12', 14,
                                                           'orange', 'grasp: nothing'],
               [4.0, 'picked', 'zu12', 15, 'orange', ''], [5.0, 'loaded', 'zu12', 15, 'orange',
-                                                          'plate slot 0']]
+                                                          'plate slot 0'],
+              [6.0, 'picked', 'zu12', 17, 'orange', '']]
+    where = {8: 'on pool_floor but 0.049 m over its face, on another material, at (2, -1, 0.05)'}
     causes = {k: failure_cause(k, 'purple' if k == 6 else 'orange', details, materials,
-                               events)[0] for k in range(7)}
+                               events, where.get(k, ''))[0] for k in range(10)}
+    # (A material left on the plate was said to be lost on the way, never unloaded.)
     assert causes == {0: 'not_seen', 1: 'out_of_place', 2: 'wrong_colour', 3: 'missed',
-                      4: 'grasp_missed', 5: 'dropped', 6: 'not_handled'}
+                      4: 'grasp_missed', 5: 'left_on_plate', 6: 'not_handled', 7: 'dropped',
+                      8: 'on_another', 9: 'given_up'}
+    assert 'no unload of it was tried' in failure_cause(5, 'orange', details, materials,
+                                                        events)[1]
+    assert 'on another material' in failure_cause(8, 'orange', details, materials, events,
+                                                  where[8])[1]
     assert failure_cause(4, 'orange', details, materials, events)[1] == \
         'grasp: nothing within 4 mm'
     assert failure_cause(2, 'orange', details, materials, events)[1] == \
@@ -557,3 +570,16 @@ def test_a_run_is_completed_only_if_the_ground_truth_has_every_material_at_its_d
     assert ok.status == 'completed' and ok.not_at_destination == []
     # A material that never appeared is not at its destination either.
     assert score(_result(total=8), good, [True] * 7, regions).status == 'incomplete'
+
+
+def test_a_material_leaning_on_another_in_the_pool_is_not_delivered(regions):
+    """An orange that ended leaning on another, its centre 49 mm over the pool's floor (a
+    50 mm cube lying on it has its centre 25 mm up), was scored as delivered, and its run as
+    completed. A cube that touches the floor however it lies has its centre at most half its
+    space diagonal (43 mm) over it."""
+    from trial_record.scoring import at_destination, why_not_there
+    floor = 0.002                                            # the pool floor's top face
+    for height, there in ((0.025, True), (0.0354, True), (0.043, True), (0.049, False),
+                          (0.075, False)):
+        assert at_destination('orange', (2.1, -1.3, floor + height), regions) is there, height
+    assert 'on another material' in why_not_there('orange', (2.1, -1.3, floor + 0.049), regions)

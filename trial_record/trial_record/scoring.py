@@ -106,18 +106,22 @@ FAILURE_CAUSES = {
     'wrong_colour': 'the vision took it for another class',
     'missed': 'it went off the belt\'s end unpicked',
     'grasp_missed': 'a grasp of it failed, and was given up',
-    'dropped': 'it was lifted off the belt and lost on the way',
+    'given_up': 'it was given up',
+    'dropped': 'it was lifted off the belt and lost before it was set down',
+    'left_on_plate': 'it was loaded onto a youBot\'s plate and not unloaded by the run\'s end',
+    'on_another': 'it was set down on another material, not on its destination',
     'out_of_place': 'it was set down, but off its destination',
     'not_handled': 'the run ended before it was handled',
 }
 
 
 def failure_cause(sim_id: int, true_color: str, details: Sequence[Dict[str, Any]],
-                  materials: Sequence[Dict[str, Any]], events: Sequence[Sequence[Any]]
-                  ) -> Tuple[str, str]:
+                  materials: Sequence[Dict[str, Any]], events: Sequence[Sequence[Any]],
+                  where: str = '') -> Tuple[str, str]:
     """Why the simulator's material ``sim_id`` is not at its destination: a FAILURE_CAUSES key
     and what tells it, from what the vision reported (the identifications' ``details``), what
-    the coordinator made of it (its ``materials``) and the run's ``events``."""
+    the coordinator made of it (its ``materials``), the run's ``events`` and where the ground
+    truth has it (``where``: why_not_there)."""
     seen = [d for d in details if d.get('truth_id') == sim_id]
     if not seen:
         return 'not_seen', FAILURE_CAUSES['not_seen']
@@ -128,15 +132,25 @@ def failure_cause(sim_id: int, true_color: str, details: Sequence[Dict[str, Any]
     mine = [m for m in materials if m.get('id') in ids]
     status = {m.get('status') for m in mine}
     kinds = {str(e[1]) for e in events if len(e) > 3 and e[3] in ids}
+    failure = next((m.get('failure') for m in mine if m.get('failure')), '')
+    lies = f' (it lies {where})' if where else ''
     if status & {'placed', 'delivered'}:
-        return 'out_of_place', FAILURE_CAUSES['out_of_place']
+        if 'on another material' in where:
+            return 'on_another', FAILURE_CAUSES['on_another'] + lies
+        return 'out_of_place', FAILURE_CAUSES['out_of_place'] + lies
     if 'missed' in status:
         return 'missed', FAILURE_CAUSES['missed']
     if 'grasp_failed' in kinds:
-        why = next((m.get('failure') for m in mine if m.get('failure')), '')
-        return 'grasp_missed', why or FAILURE_CAUSES['grasp_missed']
+        return 'grasp_missed', failure or FAILURE_CAUSES['grasp_missed']
+    if 'on_plate' in status:
+        tried = 'unload_grasped' in kinds or 'grasp_missed' in kinds
+        return 'left_on_plate', (FAILURE_CAUSES['left_on_plate']
+                                 + (', after an unload was tried' if tried
+                                    else ': no unload of it was tried') + lies)
+    if 'failed' in status:
+        return 'given_up', failure or FAILURE_CAUSES['given_up']
     if 'picked' in kinds:
-        return 'dropped', FAILURE_CAUSES['dropped']
+        return 'dropped', FAILURE_CAUSES['dropped'] + lies
     return 'not_handled', (f'the run ended with it {", ".join(sorted(map(str, status)))}'
                            if status else FAILURE_CAUSES['not_handled'])
 
@@ -343,7 +357,7 @@ def build_result(result: RunResult, final_truth: Sequence[TruePose],
     missing = []
     for m in out.not_at_destination:
         cause, why = failure_cause(m['id'], m['color'], trace.identification_details,
-                                   materials, events)
+                                   materials, events, m.get('why', ''))
         missing.append({**m, 'cause': cause, 'cause_detail': why})
     peaks = {arm: {'fraction_of_limit': round(p.fraction, 4),
                    'joint': trace.joint_names[arm][p.joint] if p.joint >= 0 else '',
