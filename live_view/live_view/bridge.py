@@ -77,6 +77,25 @@ def graph_change(advertised: Dict[str, str],
     return GraphChange(add, drop)
 
 
+def paced(change: GraphChange, limit: int) -> GraphChange:
+    """At most ``limit`` of a change's drops and adverts, drops first; the rest wait for the
+    next look at the graph (which finds them again). Each is a control message to every client,
+    which the SDK queues (``message_backlog_size`` of them) faster than its sender sends them:
+    a burst past its queue, such as the channels of a graph that appears at once, and the SDK
+    closes the client's connection."""
+    drop = change.drop[:limit]
+    waiting = set(change.drop[limit:])
+    add = tuple(item for item in change.advertise
+                if item[0] not in waiting)[:max(0, limit - len(drop))]
+    return GraphChange(add, drop)
+
+
+def changes_per_look(backlog: int) -> int:
+    """How many channel changes a look at the graph makes, for the SDK's ``backlog``: half of
+    it, the rest of its control queue left for what else it sends (status, services)."""
+    return max(1, backlog // 2)
+
+
 class ClientOutbox:
     """The frames owed to one client, at most ``limit`` bytes: past it, the oldest message data
     is dropped. If only frames that must not be dropped are left over the limit, the client is

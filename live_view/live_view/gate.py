@@ -235,7 +235,8 @@ class Gate:
                 client.wake.set()
         except ConnectionClosed:
             pass
-        return 'was disconnected: the Foxglove server closed its connection'
+        return ('was disconnected: the Foxglove server closed its connection (it does when '
+                'its queue of control messages for it, message_backlog_size, fills)')
 
     @staticmethod
     async def _send(connection: ServerConnection, client: _Client) -> None:

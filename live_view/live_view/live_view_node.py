@@ -28,7 +28,14 @@ from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.subscription import Subscription
 
-from live_view.bridge import SEND_LOSSY_LOGGER, SlowClients, TopicFilter, graph_change
+from live_view.bridge import (
+    SEND_LOSSY_LOGGER,
+    SlowClients,
+    TopicFilter,
+    changes_per_look,
+    graph_change,
+    paced,
+)
 from live_view.gate import Gate, GateError, default_origins, self_signed_certificate
 from recording.qos_profiles import adapt_to_publishers
 from recording.types import TypeResolutionError, TypeResolver, message_class
@@ -48,7 +55,9 @@ PARAMS = (
           'went', 0.02, 10.0),
     Param('message_backlog_size', 16, "Messages the Foxglove SDK queues for the gate's "
           "connection of a client (the gate drains it at once into the client's outbox); "
-          'past that its oldest are dropped', 1, 1024),
+          'past that its oldest are dropped. Its queue of control messages (channels '
+          'advertised and gone) is as long, and a client is disconnected when that one fills: '
+          'a look at the graph changes at most half this many channels', 2, 1024),
     Param('queue_depth', 10, 'History depth of the ROS subscriptions', 1, 10000),
     Param('report_period', 5.0, 'Wall seconds between reports of clients that fell behind',
           0.1, 3600.0),
@@ -111,6 +120,7 @@ class LiveView(Node):
         except ValueError as exc:
             raise LiveViewError(str(exc)) from None
         self._depth = int(p['queue_depth'])
+        self._changes_per_look = changes_per_look(int(p['message_backlog_size']))
         self._types = TypeResolver()
         self._topics: Dict[str, _Topic] = {}
         self._skipped: Dict[str, str] = {}          # topic: the type it could not be streamed as
@@ -175,8 +185,8 @@ class LiveView(Node):
     def _update(self) -> None:
         graph = [(topic, types, self.count_publishers(topic))
                  for topic, types in self.get_topic_names_and_types()]
-        change = graph_change({t: s.msgtype for t, s in self._topics.items()}, graph,
-                              self._filter)
+        change = paced(graph_change({t: s.msgtype for t, s in self._topics.items()}, graph,
+                                    self._filter), self._changes_per_look)
         for topic in change.drop:
             self._drop(topic)
         for topic, msgtype in change.advertise:

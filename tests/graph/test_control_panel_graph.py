@@ -366,11 +366,12 @@ def test_a_hostile_page_gets_reasons_and_stays_connected(start_node):
 TWO_ROBOTS = """
 robots:
   - {name: mini_a, urdf: package://robot_description/urdf/mini_robot.urdf, namespace: mini_a,
+     frame_prefix: mini_a/,
      pose: {x: 0.0, y: 0.0, z: 0.0305, yaw: 0.0}, drive: &drive {type: diff_drive,
      left_wheel_joint: left_wheel_joint, right_wheel_joint: right_wheel_joint,
      wheel_radius: 0.03, wheel_separation: 0.113, wheel_effort: 0.15}}
   - {name: mini_b, urdf: package://robot_description/urdf/mini_robot.urdf, namespace: mini_b,
-     pose: {x: 0.0, y: 1.0, z: 0.0305, yaw: 0.0}, drive: *drive}
+     frame_prefix: mini_b/, pose: {x: 0.0, y: 1.0, z: 0.0305, yaw: 0.0}, drive: *drive}
 """
 
 

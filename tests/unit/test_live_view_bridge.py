@@ -5,7 +5,15 @@ import struct
 
 import pytest
 
-from live_view.bridge import ClientOutbox, SlowClients, TopicFilter, graph_change
+from live_view.bridge import (
+    ClientOutbox,
+    GraphChange,
+    SlowClients,
+    TopicFilter,
+    changes_per_look,
+    graph_change,
+    paced,
+)
 
 
 def data(channel: int, size: int) -> bytes:
@@ -68,3 +76,35 @@ def test_topics_are_advertised_while_they_have_a_publisher_and_one_type():
     assert change.drop == ('/gone',)
     with pytest.raises(ValueError, match='absolute'):
         TopicFilter(['odom'])
+
+
+def test_a_graph_that_appears_at_once_is_advertised_a_few_channels_per_look():
+    """Each channel advertised or dropped is a control message to every client, queued by the
+    SDK (message_backlog_size) faster than it sends them; past its queue, the SDK closes the
+    client (a loaded suite's live-view client, at a backlog of 4, got nothing more). A look at
+    the graph makes at most half the backlog of changes, drops first; the rest come at the next
+    looks, and a topic whose type changed is advertised again only once it has been dropped."""
+    assert [changes_per_look(b) for b in (2, 4, 16, 1024)] == [1, 2, 8, 512]
+    advertised = {'/gone': 'std_msgs/msg/String', '/retyped': 'std_msgs/msg/String'}
+    graph = [(f'/t{k:02d}', ['std_msgs/msg/Int32'], 1) for k in range(40)]
+    graph.append(('/retyped', ['std_msgs/msg/Float64'], 1))
+    looks = 0
+    while True:
+        change = paced(graph_change(advertised, graph, TopicFilter()), changes_per_look(4))
+        if not change.advertise and not change.drop:
+            break
+        looks += 1
+        assert len(change.advertise) + len(change.drop) <= 2
+        assert not {t for t, _ in change.advertise} & set(advertised) - set(change.drop)
+        for topic in change.drop:
+            del advertised[topic]
+        advertised.update(change.advertise)
+    assert looks == 22 and len(advertised) == 41
+    assert advertised['/retyped'] == 'std_msgs/msg/Float64' and '/gone' not in advertised
+    # The drops go first, and a retyped topic is not advertised while its drop waits.
+    first = paced(GraphChange((('/a', 'x'), ('/b', 'y')), ('/a', '/c')), 1)
+    assert first == GraphChange((), ('/a',))
+    second = paced(GraphChange((('/a', 'x'), ('/b', 'y')), ('/c', '/a')), 2)
+    assert second == GraphChange((), ('/c', '/a'))
+    third = paced(GraphChange((('/a', 'x'), ('/b', 'y')), ('/c', '/a')), 1)
+    assert third == GraphChange((), ('/c',))

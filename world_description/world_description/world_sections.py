@@ -63,7 +63,7 @@ def parse_world(data: Any, source: str = '<memory>') -> WorldConfig:
     prefixes = [rb.frame_prefix for rb in robots]
     if len(set(prefixes)) != len(prefixes):
         raise WorldConfigError(f'{source}: robot frame prefixes must be unique (each robot\'s '
-                               f'frames are its own), got {prefixes}')
+                               f'frames are its own: frame_prefix: NAME/), got {prefixes}')
     cell = _cell(r, data['cell'], robots) if data.get('cell') is not None else None
     left_out = set(cell.left_out) if cell is not None else set()
     robots = [rb for rb in robots if rb.name not in left_out]
