@@ -119,10 +119,15 @@ class MotionProfile:
         fastest = cls(length, max_speed, max_accel)
         if length <= 0.0 or duration <= fastest.duration:
             return fastest
-        # A trapezoid at speed v lasts length / v + v / a: the lower root for the duration.
+        # A trapezoid at speed v lasts length / v + v / a: the lower root for the duration,
+        # written as 2 a L / (a d + sqrt(...)), which keeps its digits for a tiny length (the
+        # difference a d - sqrt(...) came to 0 for a turn of 1e-17 rad: no profile, and a
+        # fleet's coordinator ended with a traceback).
         a = max_accel
-        speed = 0.5 * (a * duration - math.sqrt(max(0.0, (a * duration) ** 2
-                                                    - 4.0 * a * length)))
+        root = math.sqrt(max(0.0, (a * duration) ** 2 - 4.0 * a * length))
+        speed = 2.0 * a * length / (a * duration + root)
+        if not speed > 0.0:             # (a length of a few denormals: nothing to stretch)
+            return fastest
         return cls(length, min(max_speed, speed), max_accel)
 
     @property

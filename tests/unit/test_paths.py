@@ -73,6 +73,12 @@ def test_a_profile_stretched_to_a_duration_takes_exactly_that_long():
         assert p.max_speed < 0.6
     # Asked for less than the fastest: the fastest (the limits always hold).
     assert MotionProfile.lasting(0.7, 0.5, 0.6, 0.6).duration == fastest.duration
+    # A length next to nothing (a turn of 1e-17 rad, between two drives of a fleet) stretched
+    # over seconds: a profile, not an error (its speed came out 0 to rounding).
+    for tiny in (1e-17, 1e-300):
+        p = MotionProfile.lasting(tiny, 4.0, 1.5, 2.0)
+        assert p.max_speed > 0.0 and p.duration == pytest.approx(4.0, abs=1e-6)
+    assert MotionProfile.lasting(5e-324, 4.0, 1.5, 2.0).max_speed == 1.5
 
 
 def test_a_holonomic_turn_runs_on_its_own_profile_and_ends_with_the_travel():
