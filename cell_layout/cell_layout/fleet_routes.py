@@ -15,7 +15,7 @@ from typing import Any, Dict, List, Optional, Sequence, Tuple
 
 import numpy as np
 
-from cell_layout.layout import POOL, CellLayout, LayoutError, UnloadStand, Wall, pool_sides
+from cell_layout.layout import POOL, CellLayout, LayoutError, UnloadStand, pool_sides
 from controllers.bezier import BezierPath, Pose2D, key_poses_between
 from controllers.footprint import Footprint, clearance, polygon_distance
 
@@ -226,16 +226,6 @@ def check_loader_base(layout: CellLayout, obstacles: Sequence[Any],
                 and polygon_distance(Footprint(1e-3, 1e-3).corners((x, y, 0.0)), box) <= 0.0):
             raise LayoutError(f'robot {layout.loader.name}: its base stands inside obstacle '
                               f'{name}')
-
-
-def walls_of(obstacles: Sequence[Any], conveyor: Optional[Any] = None) -> Tuple[Wall, ...]:
-    """The obstacles an arm reaching over the floor must keep clear of (every one that
-    collides, the conveyor too), as Walls."""
-    tops = {o.name or o.shape: o.position[2] + obstacle_height(o) / 2 for o in obstacles}
-    if conveyor is not None:
-        tops['conveyor'] = conveyor.position[2]
-    return tuple(Wall(name, tuple((float(x), float(y)) for x, y in corners), float(tops[name]))
-                 for name, corners in _obstacle_boxes(obstacles) + _conveyor_box(conveyor))
 
 
 def _conveyor_box(conveyor: Optional[Any]) -> List[Tuple[str, np.ndarray]]:

@@ -172,15 +172,6 @@ PAPER_TRANSPORT = CellRobot('youbot', 'youbot', tuple(youbot_arm.JOINT_NAMES),
 
 
 @dataclass(frozen=True)
-class Wall:
-    """An obstacle as an arm reaching over it sees it: its outline on the floor (corners in
-    order, world x, y) and its top (world z)."""
-    name: str
-    corners: Tuple[Tuple[float, float], ...]
-    top: float
-
-
-@dataclass(frozen=True)
 class CellLayout:
     belt_y: float                       # the belt's centre line (world y) [m]
     belt_top: float                     # its top surface (world z) [m]
@@ -240,9 +231,6 @@ class CellLayout:
     end_stop: bool = False              # materials accumulate at the end instead of falling off
     # The youBot plate's slots for the largest carried class (plate_grid).
     plate_slots: Tuple[Tuple[float, float], ...] = PLATE_SLOTS_IN_BASE_M
-    # What an arm reaching over the floor must keep clear of: each obstacle it could touch
-    # (the pool's walls, the platform), seen from above, and its top.
-    walls: Tuple['Wall', ...] = ()
 
     @property
     def total(self) -> int:
@@ -372,14 +360,6 @@ def slot_in_world(pose: Pose2D, slot: Tuple[float, float], base_z: float,
     c, s = math.cos(yaw), math.sin(yaw)
     return np.array([x + c * slot[0] - s * slot[1], y + s * slot[0] + c * slot[1],
                      base_z + PLATE_TOP_IN_BASE_M])
-
-
-def base_to_world(pose: Pose2D, point: Vector) -> np.ndarray:
-    """A point in the frame of a base at ``pose`` as a world point (planar: z unchanged)."""
-    x, y, yaw = pose
-    c, s = math.cos(yaw), math.sin(yaw)
-    return np.array([x + c * point[0] - s * point[1], y + s * point[0] + c * point[1],
-                     point[2]])
 
 
 def world_to_base(pose: Pose2D, point: Vector) -> np.ndarray:

@@ -4,16 +4,13 @@ drop, and whether a motion keeps what is held clear of the plate's other materia
 coordinator's transport plans with these; tests/unit/test_unload_geometry.py tests each."""
 from __future__ import annotations
 
-import math
 from typing import List, Sequence, Tuple, cast
 
 import numpy as np
 
-from cell_layout.layout import PLATE_TOP_IN_BASE_M, Wall, base_to_world
+from cell_layout.layout import PLATE_TOP_IN_BASE_M
 from cell_layout.world_layout import GRASP_STANDOFF_M
 from controllers.arrays import Vector
-from controllers.bezier import Pose2D
-from controllers.footprint import polygon_distance
 from controllers.youbot_kinematics import YoubotKinematics
 
 # A motion's samples: (absolute time [s], joint positions, velocities, accelerations).
@@ -101,68 +98,3 @@ def held_offset(q: np.ndarray, slot: Vector) -> np.ndarray:
 def short_of(q: np.ndarray, goal: np.ndarray) -> float:
     """How far the gripper at joints ``q`` is from where it is at ``goal``, across [m]."""
     return float(np.linalg.norm(YOUBOT_FK.fk(q)[:2, 3] - YOUBOT_FK.fk(goal)[:2, 3]))
-
-
-# A material let go over a region it drops onto (the pool) is let go this low: its lowest point
-# this far over the region's face [m], the first of these the arm reaches keeping clear of the
-# walls. Let go 14 cm up at the tool's tilt (30-80 deg far into the pool), a cube landed on an
-# edge and tumbled up to 5 cm, onto its neighbour's spot.
-RELEASE_GAPS_M = (0.01, 0.02, 0.03, 0.05, 0.08)
-# What the arm (its joints, its tool, its fingertips, and what lies between them) keeps over
-# the top of an obstacle it passes over [m].
-ARM_CLEARANCE_M = 0.015
-# ... an obstacle it passes over: its outline grown by this much [m] (the links' girth).
-ARM_GIRTH_M = 0.02
-
-
-def release_height(face: float, size: float, tilt: float, gap: float) -> float:
-    """The tool's height (world z) that puts the lowest point of a cube of edge ``size``,
-    gripped by its top face at the tool ``tilt`` [rad] from vertical, ``gap`` over ``face``."""
-    reach = ((YOUBOT_GRASP_STANDOFF_M + size) * math.cos(tilt)
-             + size / 2.0 * abs(math.sin(tilt)))
-    return face + gap + reach
-
-
-def arm_points(q: np.ndarray, pose: Pose2D, base_z: float) -> List[np.ndarray]:
-    """The youBot arm at joints ``q`` on a base at ``pose`` (world), as points: its joint
-    frames from the shoulder on, its tool, and its fingertips (beyond the tool)."""
-    origins = YOUBOT_FK.frame_origins(q)[1:]
-    tool = YOUBOT_FK.fk(q)
-    tips = tool[:3, 3] + tool[:3, 2] * YOUBOT_GRASP_STANDOFF_M
-    lift = np.array([0.0, 0.0, base_z])
-    return [base_to_world(pose, p) + lift for p in (*origins, tips)]
-
-
-def clearance_over(points: Sequence[np.ndarray], walls: Sequence[Wall],
-                   steps: int = 8) -> float:
-    """The least height of the polyline through ``points`` (world) over the top of any of
-    ``walls`` it passes over (within ARM_GIRTH_M of its outline); math.inf over none."""
-    least = math.inf
-    boxes = [(wall, np.array(wall.corners)) for wall in walls]
-    near = [(wall, corners, corners.min(0) - ARM_GIRTH_M, corners.max(0) + ARM_GIRTH_M)
-            for wall, corners in boxes]
-    for a, b in zip(points, points[1:]):
-        for t in np.linspace(0.0, 1.0, steps + 1):
-            p = a + t * (b - a)
-            for wall, corners, low, high in near:
-                if (p[2] - wall.top >= least or not (low[0] <= p[0] <= high[0])
-                        or not (low[1] <= p[1] <= high[1])):
-                    continue
-                square = np.array([[p[0] - 1e-3, p[1] - 1e-3], [p[0] + 1e-3, p[1] - 1e-3],
-                                   [p[0] + 1e-3, p[1] + 1e-3], [p[0] - 1e-3, p[1] + 1e-3]])
-                if polygon_distance(square, corners) <= ARM_GIRTH_M:
-                    least = p[2] - wall.top
-    return least
-
-
-def clear_of_the_walls(qs: Sequence[np.ndarray], pose: Pose2D, base_z: float,
-                       walls: Sequence[Wall], steps: int = 6) -> bool:
-    """Whether the arm, moving through the joint positions ``qs`` (straight in joint space
-    between them), keeps ARM_CLEARANCE_M over every wall it passes over."""
-    for q0, q1 in zip(qs, qs[1:]):
-        for t in np.linspace(0.0, 1.0, steps + 1):
-            q = q0 + t * (q1 - q0)
-            if clearance_over(arm_points(q, pose, base_z), walls) < ARM_CLEARANCE_M:
-                return False
-    return len(qs) > 1 or clearance_over(arm_points(qs[0], pose, base_z),
-                                         walls) >= ARM_CLEARANCE_M

@@ -17,7 +17,6 @@ from cell_layout.fleet_routes import (
     check_fleet,
     check_loader_base,
     obstacle_height,
-    walls_of,
     way_back,
 )
 from cell_layout.layout import (
@@ -155,7 +154,6 @@ def layout_from_world(world: Any) -> CellLayout:
         via_back=way_back(stands, home),
         loader=loader, transports=transports, clearance=roles.clearance,
         trip_load=roles.trip_load, more_sides=more_sides,
-        walls=walls_of(world.obstacles, world.conveyor),
         parks=tuple((r.pose.x, r.pose.y, r.pose.yaw) for r in map(world.robot, (
             t.name for t in transports))) if _parks_apart(roles.loading, yb, transports)
         else ())

@@ -103,14 +103,6 @@ class ArmKinematics:
         return ArmSolution(True, self._from_chain(q), '',
                            *pose_distance(reached.tolist(), target.tolist()))
 
-    def frame_origins(self, positions: Vector) -> List[np.ndarray]:
-        """Where the arm is at ``positions``: each joint frame's origin, then the tool frame's,
-        in base_link (the points a check of what the arm passes over samples between)."""
-        frames = self.chain.frames(self._to_chain(positions))
-        out = [(self._base @ f)[:3, 3] for f in frames[:-1]]
-        out.append(self.fk(positions)[:3, 3])
-        return out
-
     def _reaches(self, q_chain: np.ndarray, flange: np.ndarray, tol: float = 1e-6) -> bool:
         reached = self.chain.fk(q_chain)
         return bool(np.abs(reached - flange).max() < tol)

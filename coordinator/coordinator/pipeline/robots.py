@@ -183,15 +183,6 @@ class YoubotArm(Arm):
     # The tool tilt [deg] of the last path solve_tilted found.
     tilt_deg = 0
 
-    def solve_at(self, point: np.ndarray, tilt: float, seed: np.ndarray
-                 ) -> Optional[np.ndarray]:
-        """Joint positions that put the tool at ``point`` (base_link) at ``tilt`` [rad], nearest
-        ``seed``; None where it does not reach (a question asked of several points, not a
-        failure: nothing is logged)."""
-        solution, _ = self.ports.solve(self.name, point, youbot_tool_quaternion(point, tilt),
-                                       'base_link', seed)
-        return solution
-
     def solve_tilted(self, points: Sequence[np.ndarray], seed: np.ndarray,
                      payload: float = 0.0, held_from: int = 0,
                      tilts: Sequence[int] = tuple(range(0, 90, 10))

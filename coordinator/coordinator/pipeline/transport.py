@@ -61,8 +61,7 @@ TRANSPORT_TRANSITIONS = transition_table({
     # another stand, or home; or waiting to drive off the pool).
     _S.GRASP: (_S.GRASP, _S.CARRY, _S.DRIVE, _S.LEAVE),
     _S.CARRY: (_S.CARRY, _S.RELEASE, _S.GRASP, _S.DRIVE, _S.LEAVE),
-    # (Up from a drop let go low over the pool, first; then on.)
-    _S.RELEASE: (_S.RELEASE, _S.GRASP, _S.DRIVE, _S.LEAVE),
+    _S.RELEASE: (_S.GRASP, _S.DRIVE, _S.LEAVE),
     _S.LEAVE: (_S.DRIVE,),
     _S.WAIT_BAY: (_S.DRIVE, _S.FOLD),
     _S.FOLD: (_S.DONE,),
@@ -105,8 +104,6 @@ class Transport(Machine):
         self._armed = False
         # The arm holds a material up, over the plate, until the base stands at its stand.
         self._drop_pending = False
-        # Where the arm rises to after letting go low in the pool (UnloadPath.high).
-        self._rise: Optional[np.ndarray] = None
         self.trips = 0                                  # loads it has set off with
         self.carried = 0                                # materials it has set off with
         S = TransportState
@@ -362,25 +359,23 @@ class Transport(Machine):
                 return self.move(TransportState.CARRY, obs, self._lift(obs, m))
             except PlanError as exc:
                 return self._unload_failed(obs, m, EventKind.FAILED, f'unload: {exc}')
-        self._carry_out(obs, m, known(self._carry, 'the unload path'), lift=True)
+        self._carry_out(obs, m, known(self._carry, 'the unload path').over,
+                            known(self._carry, 'the unload path').drop, lift=True)
 
-    def _carry_out(self, obs: Observation, m: Material, path: UnloadPath,
+    def _carry_out(self, obs: Observation, m: Material, over: np.ndarray, drop: np.ndarray,
                    lift: bool = False) -> None:
         """Over to the material's drop (first up off the plate with ``lift``)."""
         t = self.s.timing
-        over, drop = path.over, path.drop
         self._drop_pending = False
-        # Over the pool, straight down to where it is let go low (UnloadPath.high).
-        down = [] if path.high is None else [Waypoint(path.high, stop=False)]
         if not self.layout.region_of(m.color).drop:
             # Set down on its slot gently, from above, and still before letting go.
             carry = [Waypoint(over, stop=False),
                      Waypoint(drop, hold=SETTLE_S, min_time=t.place_descend)]
         else:
-            # Over the pool, its fingers over the walls: straight there, or over it first where
-            # the straight swing would not clear the plate's other materials; then down.
-            carry = [*down, Waypoint(drop)]
-        detour = [Waypoint(over, stop=False), *down, Waypoint(drop)]
+            # Let go over the pool, 14 cm up (4 cm over its walls): straight there, or over it
+            # first where the straight swing would not clear the plate's other materials.
+            carry = [Waypoint(drop)]
+        detour = [Waypoint(over, stop=False), Waypoint(drop)]
         try:
             if lift:
                 try:
@@ -426,7 +421,7 @@ class Transport(Machine):
                     or known(self._carry, 'the unload path'))
             self._carry = path
             self.book.keep_place(m, path.place)
-            return self._carry_out(obs, m, path)
+            return self._carry_out(obs, m, path.over, path.drop)
         if not arrived:
             held = self.planner.held_beyond(obs, m)
             self.log.event(now, EventKind.ARM_STALLED, self.arm.name, m,
@@ -445,19 +440,12 @@ class Transport(Machine):
         else:
             where += f' slot {m.place}'
         self.log.event(now, EventKind.DELIVERED, self.arm.name, m, where)
-        self._rise = known(self._carry, 'the unload path').high
         # The arm stays still while the material falls free of the fingers.
         self.enter(TransportState.RELEASE, now, RELEASE_HOLD_S)
 
     def _release(self, obs: Observation) -> None:
         if not self.late(obs.now):
             return
-        if self._rise is not None:
-            # Let go low in the pool: straight back up over it before anything else (a swing
-            # from down there would sweep the fingers through the wall).
-            rise, self._rise = self._rise, None
-            return self.move(TransportState.RELEASE, obs,
-                             self.arm.plan(self.arm.q(obs), [Waypoint(rise)]))
         dq = self.arm.dq(obs)
         still = dq is None or float(np.max(np.abs(dq))) <= self.s.rest_speed
         if still or obs.now > self.deadline + SPRING_BACK_WAIT_S:

@@ -5,22 +5,18 @@ unload_geometry.py. The transport (transport.py) decides what to unload and when
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from typing import List, Optional, Sequence, Tuple
 
 import numpy as np
 
-from cell_layout.layout import CellLayout, base_to_world, world_to_base
-from cell_layout.reach import YOUBOT_LOAD_MAX, youbot_hold_need, youbot_holds
+from cell_layout.layout import CellLayout, world_to_base
+from cell_layout.reach import YOUBOT_LOAD_MAX, youbot_hold_need
 from cell_layout.unload_geometry import (
-    RELEASE_GAPS_M,
-    YOUBOT_FK,
     YOUBOT_GRASP_STANDOFF_M,
     clear_of_the_plate,
-    clear_of_the_walls,
     grip_points,
     held_offset,
-    release_height,
 )
 from controllers.bezier import Pose2D
 from controllers.time_optimal import PlanError, Waypoint, timed_path
@@ -40,9 +36,6 @@ class UnloadPath:
     drop: np.ndarray              # where it is let go
     place: int = -1               # the destination's slot it is set down on (not the pool)
     pose: Optional[Pose2D] = None  # where the base stands for it
-    # Let go low over the pool: the tool straight over the drop, where the arm comes down from
-    # and goes back up to (clear of the walls); None: let go there.
-    high: Optional[np.ndarray] = None
 
 
 # A youBot unload whose drop is reached at another tool tilt than its grip rises this much more
@@ -171,32 +164,9 @@ class UnloadPlanner:
                        else None)
                 path = grip + out if grip is not None and out is not None else None
             if path is not None:
-                unload = UnloadPath(path[0], path[1], path[2:-2], path[-2], path[-1], place,
-                                    pose)
-                return self._let_go_low(unload, m, load) if region.drop else unload
+                return UnloadPath(path[0], path[1], path[2:-2], path[-2], path[-1], place,
+                                  pose)
         return None
-
-    def _let_go_low(self, path: UnloadPath, m: Material, load: float) -> UnloadPath:
-        """``path`` let go low over its region's face, straight down from where it let go: the
-        first of RELEASE_GAPS_M the arm reaches at the drop's tool tilt, holding ``load``, and
-        keeping clear of the walls on the way down (and back up); ``path`` itself if none."""
-        assert path.pose is not None
-        region, base_z = self.layout.region_of(m.color), self.layout.youbot_base_z
-        tool = YOUBOT_FK.fk(path.drop)
-        tilt = math.acos(max(-1.0, min(1.0, -float(tool[2, 2]))))
-        high = base_to_world(path.pose, tool[:3, 3]) + np.array([0.0, 0.0, base_z])
-        for gap in RELEASE_GAPS_M:
-            height = release_height(region.top, m.size, tilt, gap)
-            if height >= high[2] - RELEASE_GAPS_M[0]:
-                break                               # (no lower than it was)
-            target = world_to_base(path.pose, (high[0], high[1], height))
-            target[2] -= base_z
-            q = self.arm.solve_at(target, tilt, path.drop)
-            if (q is not None and youbot_holds([q], load)
-                    and clear_of_the_walls([path.drop, q], path.pose, base_z,
-                                           self.layout.walls)):
-                return replace(path, high=path.drop, drop=q)
-        return path
 
     def lift(self, obs: Observation, m: Material, carry: UnloadPath,
              then: Sequence[Waypoint] = (), detour: Sequence[Waypoint] = ()) -> Points:
