@@ -136,28 +136,21 @@ def _check(data: Dict[str, Any], tmp_path: Path) -> None:
     check_world(str(path))
 
 
-def test_a_single_youbot_inside_the_conveyor_is_refused(tmp_path):
+@pytest.mark.parametrize('robot, where, words', [
+    ('youbot', (-0.3, 0.75), 'robot youbot: its start pose overlaps obstacle conveyor'),
+    ('youbot', (2.1, -1.3), 'robot youbot: its way from .* runs over obstacle pool_wall'),
+    ('zu12', (-0.3, 0.75), 'robot zu12: its base stands inside obstacle conveyor'),
+])
+def test_a_robot_inside_the_conveyor_or_the_pool_is_refused(tmp_path, robot, where, words):
     """The fleet check returned early for one youBot: a youBot inside the conveyor was taken,
     and the run wrote a record the runner's own reader refused."""
     data = _data()
-    _robot(data, 'youbot')['pose'].update(x=-0.3, y=0.75)
-    with pytest.raises(CampaignError, match='robot youbot: its start pose overlaps obstacle '
-                                            'conveyor'):
-        _check(data, tmp_path)
-    data = _data()
-    _robot(data, 'youbot')['pose'].update(x=2.1, y=-1.3)          # in the pool
-    with pytest.raises(CampaignError, match='robot youbot: its way from .* runs over '
-                                            'obstacle pool_wall'):
+    _robot(data, robot)['pose'].update(x=where[0], y=where[1])
+    with pytest.raises(CampaignError, match=words):
         _check(data, tmp_path)
 
 
-def test_a_loaders_base_inside_the_conveyor_is_refused_and_on_a_pedestal_taken(tmp_path):
-    data = _data()
-    _robot(data, 'zu12')['pose'].update(x=-0.3, y=0.75)
-    with pytest.raises(CampaignError, match='robot zu12: its base stands inside obstacle '
-                                            'conveyor'):
-        _check(data, tmp_path)
-    # On top of a block of its own (a pedestal), it stands on it.
+def test_a_loader_on_a_pedestal_stands_on_it_and_one_inside_it_is_refused():
     data = _data()
     data['obstacles'].append({'name': 'pedestal', 'shape': 'box', 'size': [0.3, 0.3, 0.1],
                               'position': [0.0, 0.0, -0.05]})
