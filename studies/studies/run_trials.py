@@ -170,9 +170,10 @@ def _parser() -> '_Parser':
                              '--resume DIR goes on with a stopped one')
     parser.add_argument('--resume', nargs='?', const='', default=None, metavar='DIR',
                         help='go on with an interrupted campaign in DIR (or --out), with its '
-                             'plan: skip the trials whose result is there (same seed and belt '
-                             'speed, and made by the same code: the same commit, with no '
-                             'uncommitted changes)')
+                             'plan (with --study: a study): skip each trial whose result is '
+                             'there and ran what the plan asks (it ran to an outcome, with the '
+                             'same seed, belt speed, setting, world, physics step, and code: '
+                             'the same commit, with no uncommitted changes)')
     return parser
 
 
