@@ -54,3 +54,13 @@ def test_a_world_that_cannot_be_read_is_one_line(tmp_path, capsys):
     assert main([str(tmp_path / 'none.yaml')]) == 2
     err = capsys.readouterr().err.strip()
     assert err.startswith('live_view_layout: ') and '\n' not in err
+
+
+def test_a_world_named_by_its_package_is_read(tmp_path, capsys):
+    """`live_view_layout package://...` said the file did not exist (issue 62)."""
+    out = tmp_path / 'cell.json'
+    assert main(['package://world_description/worlds/pipeline_cell.yaml', '-o', str(out)]) == 0
+    assert json.loads(out.read_text()) == foxglove_layout(load_world(resolve_resource(
+        'package://world_description/worlds/pipeline_cell.yaml')))
+    assert main(['package://no_such_package/worlds/x.yaml']) == 2
+    assert 'package "no_such_package" not found' in capsys.readouterr().err
