@@ -92,6 +92,12 @@ def test_a_worlds_own_relative_files_are_found_from_anywhere(tmp_path):
     moved = tmp_path / 'elsewhere.yaml'
     moved.write_text(yaml.safe_dump(data))
     assert load_world(moved).robots[0].urdf == str(tmp_path / 'cell' / 'arm.urdf')
+    # A world elsewhere that extends it (a sweep's point in a trial's directory): the base's own
+    # files stay where the base is (they were looked for beside the world that extends it).
+    (tmp_path / 'trial').mkdir()
+    point = tmp_path / 'trial' / 'world.yaml'
+    point.write_text(f'extends: {tmp_path / "cell" / "world.yaml"}\nmaterials: {{mass: 0.2}}\n')
+    assert world_data(point)['robots'][0]['urdf'] == str(tmp_path / 'cell' / 'arm.urdf')
 
 
 def test_changes_are_numbers_by_name():
