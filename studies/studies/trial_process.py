@@ -17,7 +17,7 @@ from pathlib import Path
 from typing import Any, Callable, Dict, Iterator, Optional, Set, TypedDict
 
 from ros_common.dds import hold_free_domain, with_profile
-from ros_common.outputs import OutputError, inner_dir, open_new
+from ros_common.outputs import OutputError, inner_dir, make_dir, open_new
 from studies.progress import read_progress
 from studies.recorded import bag_metadata
 from studies.sweep import SweepError, point_world
@@ -56,6 +56,7 @@ def run_trial(trial: int, seed: int, belt_speed: float, domain_id: int, out_dir:
     the trial's own ``world.yaml``)."""
     trial_dir = out_dir / f'trial_{trial:03d}'
     try:
+        make_dir(out_dir, 'the campaign\'s directory')    # (a Ray worker's: made here)
         inner_dir(trial_dir, 'the trial\'s directory')
     except OutputError as exc:        # (nothing can be written for it: the result says why)
         return replace(TrialResult.failure('error', str(exc), trial, seed, belt_speed),

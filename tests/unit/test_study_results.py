@@ -389,3 +389,13 @@ def test_a_reruns_changed_world_is_checked_as_world_checks_it(tmp_path, cell, ca
     _one_line(capsys, _run(['--rerun', str(trial), '--out', str(campaign)]),
               'holds a campaign')
     assert (campaign / 'trial_000' / 'result.json').read_bytes() == before
+
+
+def test_a_trial_makes_a_campaign_directory_that_is_not_there_yet(tmp_path, monkeypatch):
+    """A Ray worker runs its trials in a directory of its own that nothing made before."""
+    from studies.trial_process import run_trial
+    monkeypatch.setenv('PATH', str(tmp_path / 'nothing_here'))
+    out = tmp_path / 'worker' / 'campaign'
+    result = run_trial(0, 11, 0.12, 231, out, wall_timeout=5.0)
+    assert result.message.startswith('cannot start sim_node')
+    assert (out / 'trial_000' / 'result.json').is_file()
