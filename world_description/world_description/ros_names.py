@@ -15,8 +15,14 @@ MAX_TOKEN_LENGTH = 64
 TOKEN = re.compile(r'[A-Za-z_][A-Za-z0-9_]*')
 
 
+# A fully qualified name ROS takes (its length aside).
+_FULL = re.compile(r'/|(/[A-Za-z_][A-Za-z0-9_]*)+')
+
+
 def name_problem(name: str) -> str:
     """Why ``name`` (fully qualified) is not a name ROS takes, or ''."""
+    if len(name) <= MAX_NAME_LENGTH and _FULL.fullmatch(name):
+        return ''
     if not name.startswith('/'):
         return 'is not absolute'
     if len(name) > MAX_NAME_LENGTH:
