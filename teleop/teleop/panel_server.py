@@ -14,6 +14,7 @@ import http
 import itertools
 import json
 import threading
+import time
 from pathlib import Path
 from typing import Any, Dict, Optional, Protocol
 
@@ -22,6 +23,7 @@ from websockets.datastructures import Headers
 from websockets.exceptions import ConnectionClosed
 from websockets.http11 import Request, Response
 
+from ros_common.log_limit import KeyedLimiter
 from ros_common.web_access import WebAccess
 from teleop.panel_core import Outbox
 
@@ -31,6 +33,12 @@ STATIC = {'/': ('index.html', 'text/html; charset=utf-8'),
           '/panel.js': ('panel.js', 'text/javascript; charset=utf-8'),
           '/panel.css': ('panel.css', 'text/css; charset=utf-8')}
 MAX_FRAME = 64 * 1024           # what a page may send in one message
+# Keepalive: a page whose pong has not come back PING_TIMEOUT s after a ping is dropped (its
+# slot freed, page_gone). The pong queues behind everything the page sent before it and behind
+# the server's own backlog on a busy machine, so the timeout is a liveness check, not a
+# deadline: safety is the dead man's (deadman_timeout, 0.3 s), not this. (At 1 s / 2 s a page
+# that sent a burst and then waited for its answer was cut off on a loaded machine.)
+PING_INTERVAL, PING_TIMEOUT = 5.0, 20.0
 
 
 class PanelServerError(RuntimeError):
@@ -59,6 +67,7 @@ class PanelServer:
                 raise PanelServerError(f'the page is missing: {web / name}')
         self._handler, self._log, self._web = handler, logger, web
         self._host, self.port = host, port
+        self._lines = KeyedLimiter(1.0)          # (one line a second of each kind)
         self._access, self._max_pages = access, max_pages
         self._pages: Dict[int, _Page] = {}        # (the loop owns them)
         self._page_ids = itertools.count(1)
@@ -104,7 +113,7 @@ class PanelServer:
     async def _start(self) -> None:
         self._server = await serve(self._page, self._host, self.port,
                                    process_request=self._http, max_size=MAX_FRAME,
-                                   ping_interval=1.0, ping_timeout=2.0)
+                                   ping_interval=PING_INTERVAL, ping_timeout=PING_TIMEOUT)
         if self.port == 0:
             self.port = self._server.sockets[0].getsockname()[1]
 
@@ -116,13 +125,13 @@ class PanelServer:
         refusal = self._access.check(request.headers.get_all('Host'),
                                      request.headers.get_all('Origin'), websocket)
         if refusal is not None:
-            self._log.warn(f'refused a request for {path[:100]!r} from {_peer(connection)}: '
-                           f'{refusal.reason}', throttle_duration_sec=1.0)
+            self._warn('refused', f'refused a request for {path[:100]!r} from '
+                       f'{_peer(connection)}: {refusal.reason}')
             return connection.respond(http.HTTPStatus(refusal.status), refusal.reason + '\n')
         if websocket:
             if len(self._pages) >= self._max_pages:
-                self._log.warn(f'refused a page: {len(self._pages)} pages are connected '
-                               '(max_pages)', throttle_duration_sec=1.0)
+                self._warn('full', f'refused a page: {len(self._pages)} pages are connected '
+                           '(max_pages)')
                 return connection.respond(http.HTTPStatus.SERVICE_UNAVAILABLE,
                                           f'{len(self._pages)} pages are connected\n')
             return None                         # the page's WebSocket
@@ -158,9 +167,16 @@ class PanelServer:
         try:
             return self._handler.command(page, text)
         except Exception as exc:    # (a bug must not cut the page off)
-            self._log.error(f'page {page}: a message failed: {type(exc).__name__}: {exc}',
-                            throttle_duration_sec=1.0)
+            line = self._lines.text('failed', time.monotonic(), f'page {page}: a message '
+                                    f'failed: {type(exc).__name__}: {exc}')
+            if line is not None:
+                self._log.error(line)
             return f'internal error: {type(exc).__name__}'
+
+    def _warn(self, kind: str, text: str) -> None:
+        line = self._lines.text(kind, time.monotonic(), text)
+        if line is not None:
+            self._log.warn(line)
 
     def _post_all(self, kind: str, data: Any) -> None:
         for page in self._pages.values():

@@ -335,7 +335,9 @@ def test_a_hostile_page_gets_reasons_and_stays_connected(start_node):
     ws_url = url.replace('http', 'ws') + 'ws'
 
     async def session():
-        async with websockets.connect(ws_url) as ws:
+        # (max_queue=None: the client reads what it is sent as a browser does, answering the
+        # panel's keepalive pings, while the test reads only what it needs.)
+        async with websockets.connect(ws_url, max_queue=None) as ws:
             await _reply(ws, 'hello', match=lambda m: m['robots'])
             reasons = []
             for message in HOSTILE_MESSAGES:
@@ -346,6 +348,9 @@ def test_a_hostile_page_gets_reasons_and_stays_connected(start_node):
                 await ws.send('{"op": "hold", "motion": ["forward"]}')
             await ws.send('{"op": "speed", "fraction": 0.25}')
             hello = await _reply(ws, 'hello', match=lambda m: m['speed'] == 0.25)
+            await asyncio.sleep(1.1)            # (a refusal logged after the log's 1 s)
+            await ws.send('{"op": "hold", "motion": ["forward"]}')
+            await _reply(ws, 'refused')
             # One page more than max_pages is turned away.
             async with websockets.connect(ws_url):
                 with pytest.raises(InvalidStatus, match='503'):
@@ -359,6 +364,13 @@ def test_a_hostile_page_gets_reasons_and_stays_connected(start_node):
             'namespace' in reasons[4], 'true or false' in reasons[5],
             'JSON text' in reasons[6], 'at most' in reasons[7]] == [True] * 8
     assert hello['speed'] == 0.25
+    # The flood is in the log as a line that counts what it stands for, not line by line.
+    wait_for(lambda: re.search(r'page 1: refused: unknown motion .*\(and (\d+) more like it '
+                               r'before\)', panel.output()), 10.0, what='the counted line')
+    lines = [line for line in panel.output().splitlines() if 'page 1: refused' in line]
+    counted = sum(1 + int(m.group(1)) if (m := re.search(r'\(and (\d+) more', line)) else 1
+                  for line in lines)
+    assert counted == len(HOSTILE_MESSAGES) + 3000 + 1 and len(lines) < 20, lines
     assert 'Traceback' not in panel.output() and 'failed' not in panel.output()
     assert panel.alive()
 
@@ -388,7 +400,9 @@ def test_a_flooding_page_delays_no_other_pages_stop(start_node, probe, tmp_path)
     cmd_a = probe.collect(Twist, '/mini_a/cmd_vel')
 
     async def session():
-        async with websockets.connect(ws_url) as flood, websockets.connect(ws_url) as page:
+        # (Both read as browsers do: max_queue=None, as in the test above.)
+        async with websockets.connect(ws_url, max_queue=None) as flood, \
+                websockets.connect(ws_url, max_queue=None) as page:
             await _reply(page, 'hello', match=lambda m: len(m['robots']) == 2)
             for k in range(5000):
                 await flood.send(json.dumps({'op': 'select',
