@@ -152,16 +152,22 @@ class Pipeline:
         for d in obs.detections:
             m = self.materials.get(d.id)
             if m is None:
-                if (d.hits < self.s.confirm_hits or not self._on_belt_area(d.position)
-                        or d.position[0] >= self.s.pick_x):
+                if not self._on_belt_area(d.position) or d.position[0] >= self.s.pick_x:
+                    continue
+                if d.hits < self.s.confirm_hits:
+                    # (Not acted on yet, but upstream of the pick point it rides freely.)
+                    self.belt.sighted(None, d, obs.now)
                     continue
                 if d.color not in self.layout.rules:
                     continue                # (no class of this cell: the vision's config)
                 m = self.book.confirm(d, self.belt.seen_at(d, obs.now), obs.now)
+                self.belt.sighted(None, d, obs.now)
                 self.log.event(obs.now, EventKind.SEEN, 'vision', m,
                                f'at {np.round(m.position, 3).tolist()}')
             else:
                 self.belt.sighted(m, d, obs.now)
+        # The belt's speed, as these frames tell it.
+        self.belt.estimate.update(self.belt.running_clock(obs.now))
         # Without an end stop, a material still on the belt past its end was not picked.
         for m in self.materials.values():
             if (m.status == MaterialStatus.SEEN and not self.layout.end_stop

@@ -6,7 +6,10 @@
   what became of one.
 - ``BeltModel``: where each material the belt carries is, and will be. What the camera confirmed
   rides on at the belt's speed while the belt runs, and queues at the end stop (or behind what
-  the stop holds). The model is carried forward to each observation, and to the moment a
+  the stop holds). The speed is the one the cell senses (``controllers.belt_speed``: the
+  slopes of the vision's tracks), not the set point: the belt drifts. Every frame that sees a
+  material the belt still carries puts it where the frame shows it, up to the moment the cup
+  comes down onto it. The model is carried forward to each observation, and to the moment a
   material is lifted off. It acts on nothing: the run switches the belt and records when
   (``switched``), the machines ask where a material will be (``track``) and when it reaches a
   point (``reaches``).
@@ -14,11 +17,12 @@
 from __future__ import annotations
 
 import math
-from typing import Callable, Dict, List, Sequence, Set, Tuple, cast
+from typing import Callable, Dict, List, Optional, Sequence, Set, Tuple, cast
 
 import numpy as np
 
 from cell_layout.layout import CellLayout
+from controllers.belt_speed import BeltSpeed, BeltSpeedEstimate
 from controllers.conveyor import Item, advance, held
 from coordinator.pipeline.clock import Clock
 from coordinator.pipeline.model import (
@@ -55,9 +59,16 @@ class MaterialBook:
         """A pick of it has begun (the cup on its way down)."""
         m.attempts += 1
 
-    def left_on_belt(self, m: Material) -> None:
-        """Its pick was given up before it began: it waits on the belt again."""
-        m.status = MaterialStatus.SEEN
+    def left_on_belt(self, m: Material, at_rest: bool = False) -> None:
+        """Its pick was given up before it began (``at_rest``: its attempts on the move
+        missed; it is picked once at rest at the end stop): it waits on the belt again."""
+        m.status, m.hands_on = MaterialStatus.SEEN, math.inf
+        if at_rest:
+            m.at_rest_from = m.attempts
+
+    def coming_down(self, m: Material, t: float) -> None:
+        """The cup of its pick comes down onto it from ``t`` on (infinity: no longer)."""
+        m.hands_on = t
 
     def give_up(self, now: float, m: Material, kind: EventKind, why: str, robot: str) -> None:
         """Failed (or missed, off the belt's end): the event says why."""
@@ -135,10 +146,17 @@ class BeltModel:
         self.log: List[Tuple[float, bool]] = [
             (-math.inf, True) if ran_before else (clock.now, False)]
         self._time = clock.now            # the model's time (``advance``)
+        self._t0 = clock.now              # (the origin of ``running_clock``)
+        self.estimate = BeltSpeedEstimate(layout.belt_speed)
+
+    @property
+    def sensed(self) -> BeltSpeed:
+        """The belt's speed while it runs, as the cell senses it now."""
+        return self.estimate.current
 
     @property
     def speed(self) -> float:
-        return self.layout.belt_speed if self.running else 0.0
+        return self.sensed.speed if self.running else 0.0
 
     def on_belt(self) -> List[Material]:
         return [m for m in self.materials.values() if m.status in _ON_BELT and not m.picked]
@@ -228,7 +246,7 @@ class BeltModel:
 
     def advance(self, now: float) -> None:
         """Carry the model forward to ``now``."""
-        travel = self.layout.belt_speed * self.running_time(self._time, now)
+        travel = self.sensed.speed * self.running_time(self._time, now)
         self._time = max(self._time, now)
         if travel <= 0.0:
             return
@@ -252,14 +270,30 @@ class BeltModel:
                 total += max(0.0, min(end, t1) - max(start, t0))
         return total
 
-    def sighted(self, m: Material, d: Detection, now: float) -> None:
-        """A frame showed ``m`` again at ``now``: one still waiting on the belt is placed where
-        the frame puts it (``seen_at``); any is noted as seen then."""
-        if m.status == MaterialStatus.SEEN:
+    def sighted(self, m: Optional[Material], d: Detection, now: float) -> None:
+        """A frame showed ``m`` again at ``now`` (None: a track not acted on yet, upstream of
+        the pick point, where nothing holds what the belt carries). One the belt still carries
+        (waiting, or being picked until the cup comes down onto it) is placed where the frame
+        puts it (``seen_at``), and its track tells the belt's speed while nothing holds it
+        back; any is noted as seen then."""
+        if m is None:
+            self.estimate.sighted(d.id, self.running_clock(d.stamp), float(d.position[0]))
+            return
+        on_belt = (m.status in _ON_BELT and not m.picked and d.stamp < m.hands_on)
+        if on_belt and not self.held(m):
+            self.estimate.sighted(m.id, self.running_clock(d.stamp), float(d.position[0]))
+        else:
+            self.estimate.forget(m.id)
+        if on_belt:
             m.position, m.stamp, m.hits = self.seen_at(d, now), now, d.hits
         m.last_seen = now
 
     def seen_at(self, d: Detection, now: float) -> np.ndarray:
         """A detection carried to ``now``: in the camera's view the belt carries it freely."""
-        travel = self.layout.belt_speed * self.running_time(d.stamp, now)
+        travel = self.sensed.speed * self.running_time(d.stamp, now)
         return cast(np.ndarray, np.asarray(d.position, float) + np.array([travel, 0.0, 0.0]))
+
+    def running_clock(self, t: float) -> float:
+        """How long the belt had run at ``t`` since the model began (negative before)."""
+        return (self.running_time(self._t0, t) if t >= self._t0
+                else -self.running_time(t, self._t0))

@@ -31,6 +31,12 @@ PICK_LEAD_S = 0.1
 # with what it holds at least this far above the tallest of them [m].
 SET_DOWN_CLEARANCE_M = 0.02
 PICK_TRIES = 6
+# A pick under way is re-aimed when the material will be this far (along the belt) from where
+# its motion meets it, as the newest sightings and belt speed tell [m] (the cup seals within
+# 4 mm of a face's centre in the fake cell, the real one's within about 20 mm) ...
+REAIM_TOLERANCE_M = 0.003
+# ... up to this long before the cup is over it, about to come down [s].
+REAIM_LEAD_S = 0.1
 # A pick whose joint path is out of the limits is met this much later on the track [s].
 PICK_REPLAN_STEP_S = 0.3
 # Real time: a pick allows for this much more than the longest plan of one has taken (the next
@@ -225,6 +231,12 @@ class Material:
     # Its unload failed: it may still stand on its plate slot, which is never used again.
     left_on_plate: bool = False
     plate: str = ''               # the youBot whose plate slot it has (or is kept for it)
+    # When the cup of a pick under way begins to come down onto it: from then on what the
+    # camera sees of it is not where the belt carries it (infinity: no pick under way).
+    hands_on: float = math.inf
+    # Its picks on the move all missed: it is picked again once it rests at the end stop, its
+    # attempts from this one on (-1: not deferred).
+    at_rest_from: int = -1
 
     @property
     def on_the_plate(self) -> bool:

@@ -5,8 +5,9 @@ The loader (loader.py) decides what to pick and when; this plans it, with the ar
 pure geometry of pick_geometry.py."""
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field, replace
-from typing import Any, Callable, List, Optional, Union
+from typing import Any, Callable, List, Optional, Tuple, Union
 
 import numpy as np
 
@@ -36,6 +37,8 @@ from coordinator.pipeline.model import (
     PICK_REPLAN_STEP_S,
     PICK_TRIES,
     QUEUE_LIFT_PAUSE_LEAD_S,
+    REAIM_LEAD_S,
+    REAIM_TOLERANCE_M,
     SETTLE_S,
     Material,
     Observation,
@@ -63,6 +66,11 @@ class PlaceWay:
     above_q: np.ndarray
     onto_plate: bool
 
+    @property
+    def rise(self) -> Tuple[np.ndarray, np.ndarray, np.ndarray, bool]:
+        """What the cup adopts for its rise from the place (CupPlace.adopt)."""
+        return self.then, self.above, self.above_q, self.onto_plate
+
 
 @dataclass
 class Ahead:
@@ -75,6 +83,8 @@ class Ahead:
 
 # A pick that cannot be made before the material leaves the belt.
 LEAVE = 'leave'
+# A running motion's sample: (time, joint positions, velocities, accelerations).
+Moving = Tuple[float, np.ndarray, np.ndarray, np.ndarray]
 
 
 @dataclass
@@ -91,6 +101,18 @@ class PickPlan:
     q_lift: np.ndarray = field(default_factory=lambda: np.zeros(0))
     waypoints: List[Waypoint] = field(default_factory=list)
     points: Points = field(default_factory=list)
+    # Re-aimed: the running motion's sample (time, q, v, a) the new one goes on from.
+    moving: Optional[Moving] = None
+    hover_at: float = math.inf    # when the cup is over the material, about to come down
+    # From when the motion may be re-aimed (past a way from a place: its rise and the belt's
+    # edge).
+    reaim_from: float = math.inf
+    reaimed: float = 0.0          # re-aimed: by how far the old plan would have been off [m]
+
+    @property
+    def contact_x(self) -> float:
+        """Where (along the belt) the plan meets the material."""
+        return float(self.track(self.contact)[0])
 
 
 class PickPlanner:
@@ -198,7 +220,9 @@ class PickPlanner:
             waypoints += self.lift_way(m, pick, path[-1][1], q_path[-1], times[-1], qs[-1])
             pick.waypoints, pick.q_lift = waypoints, qs[-1]
             try:
-                pick.points = self.cup.plan(obs, waypoints, pick.start, pick.q_edge)
+                pick.points = self._motion(obs, waypoints, pick)
+                pick.hover_at = float(times[0])
+                pick.reaim_from = self._past_the_way_in(pick)
                 return ''
             except TooLate as too_late:
                 pick.contact += max(too_late.by, 0.0) + PICK_LEAD_S / 2
@@ -208,6 +232,50 @@ class PickPlanner:
                 refused = f'no motion for the pick: {exc}'
                 pick.contact += PICK_REPLAN_STEP_S
         return refused or 'the arm cannot meet the material in time'
+
+    def reaim(self, obs: Observation, pick: 'PickPlan', running: Points
+              ) -> Union['PickPlan', str, None]:
+        """Correction until contact: where the newest sightings and the belt's sensed speed
+        put the material at the pick's contact, against where its motion meets it. More than
+        REAIM_TOLERANCE_M off, the pick planned again on from its ``running`` motion's sample
+        a plan latency ahead, to meet the material where it will be (up to REAIM_LEAD_S before
+        the cup is over it; not one the end stop holds by then, where it rests): the new plan,
+        why there is none, or None (nothing to correct). Predicted from a speed measured 2 s
+        earlier, a drifting belt had carried materials 33-102 mm from the cup."""
+        m = pick.m
+        t1 = self.arm.clock.now + self.s.plan_latency
+        if (not pick.reaim_from <= t1 < pick.hover_at - REAIM_LEAD_S
+                or self.belt.held_by(m, pick.contact)):
+            return None
+        fresh = self.belt.track(m)
+        off = float(fresh(pick.contact)[0]) - pick.contact_x
+        after = [p for p in running if p[0] > t1]
+        if abs(off) <= REAIM_TOLERANCE_M or not after:
+            return None
+        new = PickPlan(m, pick.timing, fresh, after[0][0], pick.contact, q_hover=pick.q_hover,
+                       moving=after[0], reaimed=off)
+        why = self.meet(obs, new)
+        if why:
+            return (f'not re-aimed ({"it leaves the belt first" if why == LEAVE else why}): '
+                    f'the pick goes on, {off * 1000:+.0f} mm off')
+        return new
+
+    def _motion(self, obs: Observation, waypoints: List[Waypoint], pick: 'PickPlan') -> Points:
+        """The pick's motion through ``waypoints``: from where the arm is (after the rise from
+        a place, over the belt's edge), or, re-aimed, on from the running motion's sample."""
+        if pick.moving is None:
+            return self.cup.plan(obs, waypoints, pick.start, pick.q_edge)
+        t1, q1, v1, a1 = pick.moving
+        return plan(q1, waypoints, self.arm.limits, t1, v0=v1, a0=a1).points()
+
+    @staticmethod
+    def _past_the_way_in(pick: 'PickPlan') -> float:
+        """When the motion is past its way in from a place (over the belt's edge; its start,
+        without one): from then on it may be re-aimed."""
+        if pick.moving is not None or pick.q_edge is None:
+            return pick.points[0][0] if pick.moving is None else pick.moving[0]
+        edge = pick.q_edge
+        return min(pick.points, key=lambda p: float(np.max(np.abs(p[1] - edge))))[0]
 
     def lift_way(self, m: Material, pick: 'PickPlan', on: np.ndarray, q_on: np.ndarray,
                   t_on: float, q_lift: np.ndarray) -> List[Waypoint]:
@@ -263,7 +331,7 @@ class PickPlanner:
                    pick.waypoints[:-1] + [Waypoint(pick.q_lift, stop=crowded,
                                                    min_time=pick.timing.lift)])
         try:
-            whole = self.cup.plan(obs, through + place_way.waypoints, pick.start, pick.q_edge)
+            whole = self._motion(obs, through + place_way.waypoints, pick)
         except PlanError:
             return None                 # (the place is planned at the lift point then)
         ahead = Ahead(place_way, pick.q_lift, pick.points[-1][0])
