@@ -69,7 +69,7 @@ def test_the_way_back_from_a_low_place_rises_over_it_before_it_swings_to_the_bel
     lift = np.array([layout.belt_end_x - 0.026, layout.belt_y, layout.belt_top + 0.122])
     zu12.planner.room.free_places = lambda name, material: [0]
     way = zu12.planner.place_way(m, lift, layout.youbot_home, READY)
-    zu12._adopt(way)
+    zu12.cup.adopt(*way.rise)
     zu12.cup.released()
     hover = np.array([0.6, layout.belt_y, layout.belt_top + 0.1])
     crossing = edge_point(layout, hover, zu12.cup.above, pick_geometry.EDGE_CLEARANCE_M)
