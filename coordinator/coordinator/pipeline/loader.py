@@ -27,6 +27,7 @@ from coordinator.pipeline.model import (
     PICK_LEAD_S,
     PLAN_MARGIN,
     QUEUE_LIFT_PAUSE_LEAD_S,
+    REAIM_LEAD_S,
     LoaderState,
     Material,
     MaterialStatus,
@@ -221,7 +222,7 @@ class Loader(Machine):
                 return self._pick_failed(obs, m, f'the suction did not switch on: {why}')
         self.cup.after_send()
         self._leave = pick.contact + pick.timing.dwell + late
-        self.book.coming_down(m, pick.contact + late - pick.timing.descend)
+        self.book.coming_down(m, pick.hover_at + late - REAIM_LEAD_S)
         self._pick_plan = pick if not late else None
         if self._ahead is not None:
             self._ahead.lift_end += late
@@ -290,13 +291,8 @@ class Loader(Machine):
             self._picked_or_not(obs, m, arrived)
 
     def _reaim(self, obs: Observation, m: Material) -> None:
-        """Correction until contact: where the newest sightings and the belt's sensed speed
-        put the material at the pick's contact, against where its motion meets it. More than
-        REAIM_TOLERANCE_M off, the motion is planned again on from its own sample a plan
-        latency ahead, to meet the material where it will be (up to REAIM_LEAD_S before the
-        cup is over it; a material the end stop holds by then is where it rests). Predicted
-        from a speed measured 2 s earlier, a drifting belt carried materials 33-102 mm from
-        the cup."""
+        """Correction until contact: the pick re-aimed (``PickPlanner.reaim``) goes on from the
+        running motion's sample; one that cannot be is said once, and goes on as it was."""
         pick, now = self._pick_plan, obs.now
         if pick is None or pick.m is not m:
             return
@@ -308,7 +304,7 @@ class Loader(Machine):
             self._ahead = self.planner.onward(obs, new)
             self.arm.send_continuing(now, known(new.moving, 'the sample')[0], new.points)
             self._leave = new.contact + new.timing.dwell
-            self.book.coming_down(m, new.contact - new.timing.descend)
+            self.book.coming_down(m, new.hover_at - REAIM_LEAD_S)
             self._pick_plan = new
             self.log.event(now, EventKind.REPLANNED, self.arm.name, m,
                            f're-aimed {new.reaimed * 1000:+.1f} mm: contact at '

@@ -32,11 +32,15 @@ PICK_LEAD_S = 0.1
 SET_DOWN_CLEARANCE_M = 0.02
 PICK_TRIES = 6
 # A pick under way is re-aimed when the material will be this far (along the belt) from where
-# its motion meets it, as the newest sightings and belt speed tell [m] (the cup seals within
-# 4 mm of a face's centre in the fake cell, the real one's within about 20 mm) ...
+# its motion meets it, as the newest sightings and belt speed tell, and farther than twice the
+# prediction's own error (the speed's standard error times how far ahead it predicts) [m] (the
+# cup seals within 4 mm of a face's centre in the fake cell, the real one's within about
+# 20 mm) ...
 REAIM_TOLERANCE_M = 0.003
-# ... up to this long before the cup is over it, about to come down [s].
-REAIM_LEAD_S = 0.1
+# ... up to this long before the cup is over it, about to come down; from then on the arm is in
+# the camera's view above the material and hides part of it, and what the camera sees of it is
+# not used (its centre seen up to 20 mm off, in the perturbed sweep) [s].
+REAIM_LEAD_S = 0.6
 # A pick whose joint path is out of the limits is met this much later on the track [s].
 PICK_REPLAN_STEP_S = 0.3
 # Real time: a pick allows for this much more than the longest plan of one has taken (the next
@@ -231,8 +235,8 @@ class Material:
     # Its unload failed: it may still stand on its plate slot, which is never used again.
     left_on_plate: bool = False
     plate: str = ''               # the youBot whose plate slot it has (or is kept for it)
-    # When the cup of a pick under way begins to come down onto it: from then on what the
-    # camera sees of it is not where the belt carries it (infinity: no pick under way).
+    # When the arm of a pick under way comes over it (REAIM_LEAD_S before the cup is): from
+    # then on what the camera sees of it is not used (infinity: no pick under way).
     hands_on: float = math.inf
     # Its picks on the move all missed: it is picked again once it rests at the end stop, its
     # attempts from this one on (-1: not deferred).

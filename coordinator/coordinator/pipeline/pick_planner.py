@@ -237,9 +237,10 @@ class PickPlanner:
               ) -> Union['PickPlan', str, None]:
         """Correction until contact: where the newest sightings and the belt's sensed speed
         put the material at the pick's contact, against where its motion meets it. More than
-        REAIM_TOLERANCE_M off, the pick planned again on from its ``running`` motion's sample
-        a plan latency ahead, to meet the material where it will be (up to REAIM_LEAD_S before
-        the cup is over it; not one the end stop holds by then, where it rests): the new plan,
+        REAIM_TOLERANCE_M off, and more than the prediction's own error, the pick planned again
+        on from its ``running`` motion's sample a plan latency ahead, to meet the material where
+        it will be (up to REAIM_LEAD_S before the cup is over it; not one the end stop holds by
+        then, where it rests): the new plan,
         why there is none, or None (nothing to correct). Predicted from a speed measured 2 s
         earlier, a drifting belt had carried materials 33-102 mm from the cup."""
         m = pick.m
@@ -250,7 +251,10 @@ class PickPlanner:
         fresh = self.belt.track(m)
         off = float(fresh(pick.contact)[0]) - pick.contact_x
         after = [p for p in running if p[0] > t1]
-        if abs(off) <= REAIM_TOLERANCE_M or not after:
+        sensed = self.belt.sensed
+        known_to = 2.0 * sensed.std * max(0.0, pick.contact - m.last_seen) if math.isfinite(
+            sensed.std) else 0.0
+        if abs(off) <= max(REAIM_TOLERANCE_M, known_to) or not after:
             return None
         new = PickPlan(m, pick.timing, fresh, after[0][0], pick.contact, q_hover=pick.q_hover,
                        moving=after[0], reaimed=off)
