@@ -684,7 +684,7 @@ def test_a_material_missed_on_the_move_is_picked_at_rest_at_the_end_stop():
     assert [e.detail for e in kinds(cell, 'grasp_missed') if e.material == 3] == [
         'attempt 1', 'attempt 2']
     deferred, = [e for e in kinds(cell, 'replanned') if e.material == 3]
-    assert 'picked at rest at the end stop' in deferred.detail
+    assert 'picked again at rest at the end stop' in deferred.detail
     picked, = [e for e in kinds(cell, 'picked') if e.material == 3]
     assert picked.detail == 'attempt 3'
     tracking = [e for e in kinds(cell, 'tracking') if e.material == 3]
@@ -693,6 +693,17 @@ def test_a_material_missed_on_the_move_is_picked_at_rest_at_the_end_stop():
     # Met at the stop: the cup came down where it rests.
     stop = cell.layout.belt_end_x - cell.layout.material_size / 2
     assert cell.final_x[3] == pytest.approx(stop, abs=0.06)
+
+
+def test_a_material_missed_at_the_end_stop_is_tried_again_there():
+    """The purple rides to the end stop and is picked there; both attempts missed: it was
+    given up, although as many again are given to one missed on the move."""
+    cell = FakeCell(cell_layout(), PAPER, grasp_failures={2: 2})
+    p = run(cell, Settings(max_retries=1))
+    assert p.result.status == 'completed' and not kinds(cell, 'grasp_failed')
+    tracking = [e for e in kinds(cell, 'tracking') if e.material == 2]
+    assert len(tracking) == 3 and all('held at the stop' in e.detail for e in tracking)
+    assert [e.detail for e in kinds(cell, 'picked') if e.material == 2] == ['attempt 3']
 
 
 def test_a_grasp_that_keeps_missing_is_reported_and_the_run_goes_on():
