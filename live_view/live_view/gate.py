@@ -16,7 +16,9 @@ import datetime
 import http
 import ipaddress
 import itertools
+import json
 import logging
+import re
 import ssl
 import threading
 from dataclasses import dataclass, field
@@ -45,6 +47,66 @@ _QUIET.setLevel(logging.WARNING)
 # takes no client publishing).
 MAX_CLIENT_FRAME = 1024 * 1024
 UPSTREAM_HOST = '127.0.0.1'
+# A subscription the SDK refuses as one to an unknown channel is sent again this often, this
+# many times at most: the SDK advertises a new channel a moment before it takes subscriptions
+# to it, and a client that subscribed as the advertisement came lost its subscription under
+# load ("Client ... attempted to subscribe to unknown channel: 8"; no odometry in 30 s), told
+# only by a status message that no client acts on [s].
+RESUBSCRIBE_S, RESUBSCRIBE_TRIES = 0.1, 20
+_UNKNOWN_CHANNEL = re.compile(r'Unknown channel ID: (\d+)')
+
+
+class Resubscriber:
+    """A client's subscriptions as it sent them, by channel, and the one to send again when the
+    SDK says it does not know the channel yet."""
+
+    def __init__(self) -> None:
+        self._subscriptions: Dict[int, Dict[str, object]] = {}
+        self._tries: Dict[int, int] = {}
+
+    def sent(self, frame: object) -> None:
+        """A frame the client sent the SDK."""
+        msg = _json(frame)
+        entries, ids = msg.get('subscriptions'), msg.get('subscriptionIds')
+        if msg.get('op') == 'subscribe' and isinstance(entries, list):
+            for entry in entries:
+                if isinstance(entry, dict) and isinstance(entry.get('channelId'), int):
+                    self._subscriptions[entry['channelId']] = entry
+                    self._tries.pop(entry['channelId'], None)
+        elif msg.get('op') == 'unsubscribe' and isinstance(ids, list):
+            gone = {i for i in ids if isinstance(i, int)}
+            for channel, entry in list(self._subscriptions.items()):
+                if entry.get('id') in gone:
+                    del self._subscriptions[channel]
+
+    def again(self, frame: object) -> Optional[str]:
+        """For a frame from the SDK: the subscribe to send again if it is the SDK's refusal of
+        one of the client's subscriptions as to an unknown channel (and it has not been sent
+        RESUBSCRIBE_TRIES times yet), else None."""
+        if not (isinstance(frame, str) and 'Unknown channel' in frame):
+            return None
+        msg = _json(frame)
+        found = _UNKNOWN_CHANNEL.search(str(msg.get('message', ''))) if msg.get(
+            'op') == 'status' else None
+        if found is None or int(found.group(1)) not in self._subscriptions:
+            return None
+        channel = int(found.group(1))
+        tries = self._tries.get(channel, 0)
+        if tries >= RESUBSCRIBE_TRIES:
+            return None
+        self._tries[channel] = tries + 1
+        return json.dumps({'op': 'subscribe', 'subscriptions': [self._subscriptions[channel]]})
+
+
+def _json(frame: object) -> Dict[str, object]:
+    """A text frame's JSON object, or an empty one."""
+    if not isinstance(frame, str):
+        return {}
+    try:
+        msg = json.loads(frame)
+    except ValueError:
+        return {}
+    return msg if isinstance(msg, dict) else {}
 
 
 class GateError(RuntimeError):
@@ -76,6 +138,7 @@ class _Client:
     outbox: ClientOutbox
     wake: asyncio.Event = field(default_factory=asyncio.Event)
     reported: int = 0               # drops already handed to SlowClients
+    subscriptions: Resubscriber = field(default_factory=Resubscriber)
 
 
 class Gate:
@@ -208,7 +271,7 @@ class Gate:
         why = 'left'
         tasks = [asyncio.ensure_future(task) for task in (
             self._down(upstream, client), self._send(connection, client),
-            self._up(connection, upstream))]
+            self._up(connection, upstream, client))]
         try:
             done, _ = await asyncio.wait(tasks, return_when=asyncio.FIRST_COMPLETED)
             for task in done:
@@ -229,6 +292,11 @@ class Gate:
         """The SDK's frames into the client's outbox, as fast as they come."""
         try:
             async for frame in upstream:
+                again = client.subscriptions.again(frame)
+                if again is not None:       # (the SDK takes it once it knows the channel)
+                    asyncio.get_running_loop().call_later(
+                        RESUBSCRIBE_S, asyncio.ensure_future, _send_quietly(upstream, again))
+                    continue
                 if not client.outbox.put(frame):
                     return ('too slow: was disconnected (its outbox held '
                             f'{client.outbox.size} bytes of messages that cannot be dropped)')
@@ -251,13 +319,22 @@ class Gate:
             pass
 
     @staticmethod
-    async def _up(connection: ServerConnection, upstream: ClientConnection) -> None:
+    async def _up(connection: ServerConnection, upstream: ClientConnection,
+                  client: _Client) -> None:
         """The client's requests (subscriptions and the like) to the SDK."""
         try:
             async for frame in connection:
+                client.subscriptions.sent(frame)
                 await upstream.send(frame)
         except ConnectionClosed:
             pass
+
+
+async def _send_quietly(upstream: ClientConnection, frame: str) -> None:
+    try:
+        await upstream.send(frame)
+    except ConnectionClosed:
+        pass
 
 
 def _peer(connection: ServerConnection) -> str:
