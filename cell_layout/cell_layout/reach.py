@@ -129,6 +129,18 @@ def youbot_reaches(points_in_base: Sequence[Vector], payload: float = 0.0) -> bo
     return False
 
 
+def youbot_tilts(points_in_base: Sequence[Vector], payload: float = 0.0, held_from: int = 0,
+                 tilts: Sequence[int] = YOUBOT_TILTS_DEG) -> Tuple[int, ...]:
+    """Those of ``tilts`` [deg] at which the youBot's arm reaches every point (base_link),
+    holding ``payload`` kg at rest from point ``held_from`` on (youbot_holds)."""
+    found = []
+    for tilt in tilts:
+        qs = _youbot_solutions(points_in_base, tilt)
+        if qs is not None and (payload <= 0.0 or youbot_holds(qs[held_from:], payload)):
+            found.append(tilt)
+    return tuple(found)
+
+
 def _youbot_solutions(points_in_base: Sequence[Vector], tilt_deg: float
                       ) -> Optional[List[np.ndarray]]:
     """The youBot arm's joint positions for its tool at each point (base_link) at one tilt,

@@ -4,13 +4,17 @@ drop, and whether a motion keeps what is held clear of the plate's other materia
 coordinator's transport plans with these; tests/unit/test_unload_geometry.py tests each."""
 from __future__ import annotations
 
-from typing import List, Sequence, Tuple, cast
+from dataclasses import dataclass
+from functools import lru_cache
+from typing import List, Optional, Sequence, Tuple, cast
 
 import numpy as np
 
-from cell_layout.layout import PLATE_TOP_IN_BASE_M
+from cell_layout.layout import PLATE_TOP_IN_BASE_M, world_to_base
+from cell_layout.reach import youbot_tilts
 from cell_layout.world_layout import GRASP_STANDOFF_M
 from controllers.arrays import Vector
+from controllers.bezier import Pose2D
 from controllers.youbot_kinematics import YoubotKinematics
 
 # A motion's samples: (absolute time [s], joint positions, velocities, accelerations).
@@ -98,3 +102,69 @@ def held_offset(q: np.ndarray, slot: Vector) -> np.ndarray:
 def short_of(q: np.ndarray, goal: np.ndarray) -> float:
     """How far the gripper at joints ``q`` is from where it is at ``goal``, across [m]."""
     return float(np.linalg.norm(YOUBOT_FK.fk(q)[:2, 3] - YOUBOT_FK.fk(goal)[:2, 3]))
+
+
+@dataclass
+class UnloadPath:
+    """The youBot's joint positions for one unload, all at one tool tilt."""
+    hover: np.ndarray             # over the material on the plate
+    contact: np.ndarray           # the fingers round it
+    lift: List[np.ndarray]        # up off the plate, straight, to clear of its neighbours
+    over: np.ndarray              # 5 cm above its drop
+    drop: np.ndarray              # where it is let go
+    place: int = -1               # the destination's slot it is set down on (not the pool)
+    pose: Optional[Pose2D] = None  # where the base stands for it
+    grip_tilt: int = 0            # the tool's tilt [deg] at the grip...
+    drop_tilt: int = 0            # ... and where it lets go: the material level only if equal
+
+    @property
+    def level(self) -> bool:
+        """Whether what it holds is let go level (as it lay on the plate)."""
+        return self.grip_tilt == self.drop_tilt
+
+    @property
+    def let_go(self) -> str:
+        """How what it holds is let go: 'level', or 'tilted N deg'."""
+        return 'level' if self.level else f'tilted {abs(self.drop_tilt - self.grip_tilt)} deg'
+
+
+# A youBot unload whose drop is reached at another tool tilt than its grip rises this much more
+# before the wrist turns [m].
+TILT_CHANGE_RISE_M = 0.06
+# ... through a point this far apart [m].
+RISE_STEP_M = 0.01
+
+
+def youbot_grip_tilts(grip: Sequence[np.ndarray], load: float) -> Tuple[int, ...]:
+    """The tilts [deg] the youBot's arm grips a material at along ``grip`` (its hover, contact
+    and lift; base_link), holding ``load`` kg from the contact on (youbot_tilts)."""
+    return _grip_tilts(tuple(tuple(np.round(p, 6)) for p in grip), round(load, 6))
+
+
+@lru_cache(maxsize=256)
+def _grip_tilts(grip: Tuple[Tuple[float, ...], ...], load: float) -> Tuple[int, ...]:
+    return youbot_tilts([np.array(p) for p in grip], load, held_from=1)
+
+
+def drop_ways(pose: Pose2D, candidates: Sequence[Tuple[int, np.ndarray]], base_z: float,
+              lift_top: float, clear: float, load: float, level: bool,
+              leant_first: bool = False
+              ) -> List[Tuple[int, np.ndarray, np.ndarray, Tuple[int, ...]]]:
+    """For the base at ``pose``, each candidate drop (place, world point) in base_link: its
+    place, the drop, the point over it, and (with ``level``) the tilts the arm reaches both at
+    holding ``load`` kg (youbot_tilts); with ``leant_first``, the drop that needs the arm
+    leant furthest first (a pool's: a grip far back on the plate leans further, and leaves
+    the drops reached leaning less to the grips that cannot). Over the drop is
+    as high as the lift's top (``lift_top``, base_link) at least, and ``clear`` over it: where
+    a joint motion from there straight down to a pool drop (lower than the plate) would swing
+    what is held into the plate's next material, one over here keeps it clear."""
+    ways = []
+    for place, point in candidates:
+        drop = world_to_base(pose, point)
+        drop[2] -= base_z
+        over = drop.copy()
+        over[2] = max(drop[2] + 0.05, lift_top, drop[2] + clear)
+        ways.append((place, drop, over, youbot_tilts([over, drop], load) if level else ()))
+    if level and leant_first:
+        ways.sort(key=lambda w: -min(w[3], default=0))
+    return ways

@@ -19,6 +19,7 @@ from cell_layout.layout import (
 from cell_layout.unload_geometry import (
     DROP_REACH_TOLERANCE_M,
     YOUBOT_CARRY_Q,
+    UnloadPath,
     clear_of_the_plate,
     short_of,
 )
@@ -46,7 +47,7 @@ from coordinator.pipeline.record import EventLog
 from coordinator.pipeline.robots import BaseDrive, YoubotArm
 from coordinator.pipeline.room import Room
 from coordinator.pipeline.traffic import LOADING, Traffic, stands_place
-from coordinator.pipeline.unload_planner import UnloadPath, UnloadPlanner
+from coordinator.pipeline.unload_planner import UnloadPlanner
 from trial_record.events import EventKind
 
 _S = TransportState
@@ -417,8 +418,9 @@ class Transport(Machine):
                 self.log.event(now, EventKind.ARM_STALLED, self.arm.name, m,
                                'the lift off the plate not completed')
             # Over to its drop as the base stands now (the drive ends a little off its goal).
-            path = (self.planner.unload_path(m, obs.bases[self.base.robot].pose, self.arm.q(obs))
-                    or known(self._carry, 'the unload path'))
+            carry = known(self._carry, 'the unload path')
+            path = self.planner.unload_path(m, obs.bases[self.base.robot].pose, self.arm.q(obs),
+                                            gripped=carry.grip_tilt) or carry
             self._carry = path
             self.book.keep_place(m, path.place)
             return self._carry_out(obs, m, path.over, path.drop)
@@ -436,7 +438,8 @@ class Transport(Machine):
         self.book.delivered(m, self.base.goal)
         where = self.layout.destination(m.color)
         if self.layout.region_of(m.color).drop:
-            where += f' drop {m.place} from {self.base.goal}'
+            let_go = known(self._carry, 'the unload path').let_go
+            where += f' drop {m.place} (let go {let_go}) from {self.base.goal}'
         else:
             where += f' slot {m.place}'
         self.log.event(now, EventKind.DELIVERED, self.arm.name, m, where)

@@ -5,18 +5,22 @@ unload_geometry.py. The transport (transport.py) decides what to unload and when
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
 from typing import List, Optional, Sequence, Tuple
 
 import numpy as np
 
-from cell_layout.layout import CellLayout, world_to_base
-from cell_layout.reach import YOUBOT_LOAD_MAX, youbot_hold_need
+from cell_layout.layout import CellLayout
+from cell_layout.reach import YOUBOT_LOAD_MAX, youbot_hold_need, youbot_tilts
 from cell_layout.unload_geometry import (
+    RISE_STEP_M,
+    TILT_CHANGE_RISE_M,
     YOUBOT_GRASP_STANDOFF_M,
+    UnloadPath,
     clear_of_the_plate,
+    drop_ways,
     grip_points,
     held_offset,
+    youbot_grip_tilts,
 )
 from controllers.bezier import Pose2D
 from controllers.time_optimal import PlanError, Waypoint, timed_path
@@ -25,24 +29,6 @@ from coordinator.pipeline.model import Material, Observation, Points, Settings
 from coordinator.pipeline.robots import YoubotArm
 from coordinator.pipeline.room import Room
 
-
-@dataclass
-class UnloadPath:
-    """The youBot's joint positions for one unload, all at one tool tilt."""
-    hover: np.ndarray             # over the material on the plate
-    contact: np.ndarray           # the fingers round it
-    lift: List[np.ndarray]        # up off the plate, straight, to clear of its neighbours
-    over: np.ndarray              # 5 cm above its drop
-    drop: np.ndarray              # where it is let go
-    place: int = -1               # the destination's slot it is set down on (not the pool)
-    pose: Optional[Pose2D] = None  # where the base stands for it
-
-
-# A youBot unload whose drop is reached at another tool tilt than its grip rises this much more
-# before the wrist turns [m].
-TILT_CHANGE_RISE_M = 0.06
-# ... through a point this far apart [m].
-RISE_STEP_M = 0.01
 # A heavy material's unload slides the base along its stand's line only this far or further
 # (nearer, it is unloaded from where the base stands) [m].
 SLIDE_MIN_M = 0.03
@@ -64,7 +50,8 @@ class UnloadPlanner:
         return self.layout.stand_for(m.color, m.slot, m.plate).name
 
     def unload_path(self, m: Material, pose: Pose2D, seed: np.ndarray,
-                     high: bool = False, slide: bool = False) -> Optional['UnloadPath']:
+                     high: bool = False, slide: bool = False, gripped: Optional[int] = None
+                     ) -> Optional['UnloadPath']:
         """Joint positions over the material on the plate (5 cm over it with ``high``, else 3), on
         it, up its straight lift clear of its neighbours, above its drop and at its drop, for
         the base standing at ``pose``. The fingers come down from 3 cm over its top face (the
@@ -73,7 +60,8 @@ class UnloadPlanner:
         6 cm apart the joints' straight line swings what is held 2 cm sideways and tilts it 8
         degrees, into a neighbour 1 cm away. With ``slide``, where the arm holds the material
         at none of its drops from ``pose``, the base may stand elsewhere along its stand's
-        line: abeam the drop nearest there that it holds it at (UnloadPath.pose)."""
+        line: abeam the drop nearest there that it holds it at, or lets it go level at
+        (UnloadPath.pose). With ``gripped``, it holds ``m`` already, at that tilt [deg]."""
         size, t = m.size, self.s.timing
         mass = self.layout.rule(m.color).mass
         stand = self.stand_for(m)
@@ -86,87 +74,100 @@ class UnloadPlanner:
             up = np.array([0.0, 0.0, size + t.place_gap + YOUBOT_GRASP_STANDOFF_M])
             candidates = [(k, region.slots[k] + up) for k in self.room.free_places(region.name, m)]
         else:
-            # The stand's first unused drop; if the arm cannot reach it from this slot as the
-            # base stands (a far slot, a base a centimetre off), the others in turn. A drop
-            # spot is used once: a cube dropped onto another can tumble back over the wall.
+            # The stand's unused drops, in turn (its first may be out of reach from this slot
+            # or base pose). Each used once: a cube dropped on another can tumble over the wall.
             drops = self.layout.stand(stand).drops
             used = self.book.dropped(stand)
             candidates = [(k, d) for k, d in enumerate(drops) if k not in used]
         # First a way whose every pose the arm holds with the material at rest (its load
         # within youbot_holds); only if there is none, the first it reaches (a heavy material
-        # held out over a far drop sags the arm, but is still delivered).
-        for load in (mass, 0.0) if mass > 0.0 else (0.0,):
-            path = self.unload_way(m, pose, seed, high, load, candidates, clear)
-            if path is None and slide and load > 0.0:
-                path = self.slid_way(m, pose, seed, high, load, candidates, clear)
-            if path is not None:
-                return path
+        # held out over a far drop sags the arm, but is still delivered). Each first let go
+        # level, from where the base stands or slid along its stand's line, and only then
+        # tilted (a pool drop).
+        loads = (mass, 0.0) if mass > 0.0 else (0.0,)
+        for load in loads:
+            for level in (True, False) if region.drop else (True,):
+                path = self.unload_way(m, pose, seed, high, load, candidates, clear, level,
+                                       gripped)
+                if path is None and slide and load == loads[0]:
+                    path = self.slid_way(m, pose, seed, high, load, candidates, clear, level,
+                                         gripped)
+                if path is not None:
+                    return path
         return None
 
     def slid_way(self, m: Material, pose: Pose2D, seed: np.ndarray, high: bool, load: float,
-                  candidates: Sequence[Tuple[int, np.ndarray]], clear: float
-                  ) -> Optional['UnloadPath']:
-        """_unload_path's way to a candidate from the base slid along its stand's line abeam
-        of it (UnloadStand.abeam; at least SLIDE_MIN_M from ``pose``), in the candidates' order
-        (the pool's spots nearest its wall first, a destination's slots nearest the stand): a
-        heavy material's far drops are beyond what the arm holds (the shoulder sags, or the
-        arm stalls). (Taken by the shortest slide, a 0.08 kg orange went to a spot 21 cm in from
-        the wall, 7 cm from one that had landed 5 cm off its own, and landed on it.)"""
+                 candidates: Sequence[Tuple[int, np.ndarray]], clear: float, level: bool,
+                 gripped: Optional[int]) -> Optional['UnloadPath']:
+        """unload_way from the base slid along its stand's line abeam of a candidate (at least
+        SLIDE_MIN_M from ``pose``), in their order (not the shortest slide: an orange so taken
+        far in landed on another): what the arm does not hold out, or let go level, from
+        ``pose`` it may from there."""
         stand = self.layout.stand(self.stand_for(m))
         for place, point in candidates:
             at = stand.abeam(point)
             if math.hypot(at[0] - pose[0], at[1] - pose[1]) < SLIDE_MIN_M:
                 continue
-            path = self.unload_way(m, at, seed, high, load, [(place, point)], clear)
+            path = self.unload_way(m, at, seed, high, load, [(place, point)], clear, level,
+                                   gripped)
             if path is not None:
                 return path
         return None
 
     def unload_way(self, m: Material, pose: Pose2D, seed: np.ndarray, high: bool,
-                    load: float, candidates: Sequence[Tuple[int, np.ndarray]], clear: float
-                    ) -> Optional['UnloadPath']:
-        """_unload_path's way to the first of ``candidates`` (place, world point) the arm
-        reaches, holding ``load`` kg at rest from the grip on."""
-        region = self.layout.region_of(m.color)
+                   load: float, candidates: Sequence[Tuple[int, np.ndarray]], clear: float,
+                   level: bool = True, gripped: Optional[int] = None) -> Optional['UnloadPath']:
+        """unload_path's way to the first of ``candidates`` (place, world point) the arm
+        reaches holding ``load`` kg at rest: with ``level`` at the grip's tilt throughout, else
+        another at the drop. Tilts are tried first with the arm's own kinematics (youbot_tilts,
+        0.15 ms a point): a candidate none reaches costs no call to the kinematics node."""
         contact, hover, lift = grip_points(self.layout.plate_slots[m.slot], m.size,
                                            m.unload_attempts, high, self.tallest_other(m))
-        for place, drop_world in candidates:
-            drop = world_to_base(pose, drop_world)
-            drop[2] -= self.layout.youbot_base_z
-            # Over the drop, at least as high as the lift's top: a swing there keeps what is
-            # held over the plate's other materials where a joint motion from the lift's top
-            # straight down to a pool drop (lower than the plate) would swing it into the next
-            # one. Taken only when that is so (_lift).
-            over = drop.copy()
-            over[2] = max(drop[2] + 0.05, lift[-1][2], drop[2] + clear)
-            # (Held from the contact on: the arm must hold it still all the way to its drop.)
-            path = self.arm.solve_tilted([hover, contact, *lift, over, drop],
-                                         np.array(seed, float), load, held_from=1)
-            if path is None and region.drop:
-                # A drop spot further in is reached leaning another way: the material, let go
-                # over the pool, need not stay level (one it is set down must). It rises
-                # TILT_CHANGE_RISE_M more first, still level, so that what it holds clears the
-                # others on the plate as the wrist turns: straight up, through a point every
-                # centimetre at the grip's tilt (in one joint step it swung 2 cm sideways, into
-                # the plate's next material).
-                rise = np.array(lift[-1], float) + np.array([0.0, 0.0, TILT_CHANGE_RISE_M])
-                grip = self.arm.solve_tilted([hover, contact, *lift, rise], np.array(seed, float),
-                                             load, held_from=1)
-                if grip is not None:
-                    steps = [np.array(lift[-1], float) + np.array([0.0, 0.0, h]) for h in
-                             np.arange(RISE_STEP_M, TILT_CHANGE_RISE_M - 1e-9, RISE_STEP_M)]
-                    between = self.arm.solve_tilted(steps, grip[-2], load,
-                                                    tilts=(self.arm.tilt_deg,)) if steps else []
-                    grip = (grip[:-1] + between + grip[-1:]) if between is not None else None
-                above = np.array(over, float)
-                above[2] = max(over[2], rise[2])
-                out = (self.arm.solve_tilted([above, drop], grip[-1], load) if grip is not None
-                       else None)
-                path = grip + out if grip is not None and out is not None else None
-            if path is not None:
-                return UnloadPath(path[0], path[1], path[2:-2], path[-2], path[-1], place,
-                                  pose)
+        grip = [hover, contact, *lift]
+        grip_tilts = (gripped,) if gripped is not None else youbot_grip_tilts(grip, load)
+        ways = drop_ways(pose, candidates, self.layout.youbot_base_z, lift[-1][2], clear, load,
+                         level, leant_first=self.layout.region_of(m.color).drop)
+        for place, drop, over, tilts in ways:
+            if level:
+                tilts = tuple(t for t in tilts if t in grip_tilts)
+                # (Held from the contact on: the arm must hold it still all the way to its drop.)
+                path = (self.arm.solve_tilted([*grip, over, drop], np.array(seed, float), load,
+                                              held_from=1, tilts=tilts) if tilts else None)
+                if path is not None:
+                    return UnloadPath(path[0], path[1], path[2:-2], path[-2], path[-1], place,
+                                      pose, self.arm.tilt_deg, self.arm.tilt_deg)
+                continue
+            way = self.tilted_way(grip, over, drop, seed, load, grip_tilts)
+            if way is not None:
+                (q, a, b) = way
+                return UnloadPath(q[0], q[1], q[2:-2], q[-2], q[-1], place, pose, a, b)
         return None
+
+    def tilted_way(self, grip: List[np.ndarray], over: np.ndarray, drop: np.ndarray,
+                   seed: np.ndarray, load: float, grip_tilts: Sequence[int]
+                   ) -> Optional[Tuple[List[np.ndarray], int, int]]:
+        """A way to a pool drop leaning another way than the grip (what it holds is let go
+        tilted): TILT_CHANGE_RISE_M higher first, straight up at the grip's tilt, a point every
+        RISE_STEP_M, so that it clears the plate's others as the wrist turns (in one joint step
+        it swung 2 cm sideways, into the next material). The joints, grip's and drop's tilt."""
+        rise = np.array(grip[-1], float) + np.array([0.0, 0.0, TILT_CHANGE_RISE_M])
+        above = np.array(over, float)
+        above[2] = max(over[2], rise[2])
+        drop_tilts = youbot_tilts([above, drop], load)
+        path = (self.arm.solve_tilted([*grip, rise], np.array(seed, float), load, held_from=1,
+                                      tilts=grip_tilts) if grip_tilts and drop_tilts else None)
+        if path is None:
+            return None
+        tilt = self.arm.tilt_deg
+        steps = [np.array(grip[-1], float) + np.array([0.0, 0.0, h]) for h in
+                 np.arange(RISE_STEP_M, TILT_CHANGE_RISE_M - 1e-9, RISE_STEP_M)]
+        between = (self.arm.solve_tilted(steps, path[-2], load, tilts=(tilt,)) if steps
+                   else [])
+        out = (self.arm.solve_tilted([above, drop], path[-1], load, tilts=drop_tilts)
+               if between is not None else None)
+        if between is None or out is None:
+            return None
+        return path[:-1] + between + path[-1:] + out, tilt, self.arm.tilt_deg
 
     def lift(self, obs: Observation, m: Material, carry: UnloadPath,
              then: Sequence[Waypoint] = (), detour: Sequence[Waypoint] = ()) -> Points:
