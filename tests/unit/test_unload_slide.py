@@ -97,8 +97,8 @@ def test_a_heavy_material_is_held_all_the_way_to_every_pool_drop(mass):
                     assert stand.slide[0] - 1e-9 <= along @ heading <= stand.slide[1] + 1e-9
                     assert np.linalg.norm(along) >= SLIDE_MIN_M
                     # Without the slide, the arm holds it out to no drop as the base stands.
-                    assert tr.planner.unload_way(m, stand.pose, YOUBOT_CARRY_Q, True, mass, [
-                        (d, stand.drops[d])], 0.0) is None
+                    assert all(tr.planner.unload_way(m, stand.pose, YOUBOT_CARRY_Q, True, mass, [
+                        (d, stand.drops[d])], 0.0, level) is None for level in (True, False))
     assert slid > 0
 
 
