@@ -26,6 +26,28 @@ YOUBOT_CARRY_Q = np.zeros(5)
 YOUBOT_GRASP_STANDOFF_M = GRASP_STANDOFF_M
 
 
+# The youBot's fingertips reach this far beyond gripper_tcp [m].
+YOUBOT_FINGERTIP_M = 0.0104
+# Its arm stopped on its way down onto a plate material this far above the grip at most, and
+# this near it across, stopped on the material's top: the material stands that much taller
+# than loaded (a perturbed cell's edges vary by 4 %: a 56 mm cube stopped it 6 mm up) [m].
+TOUCH_HIGHER_MAX_M = 0.025
+TOUCH_ACROSS_MAX_M = 0.006
+
+
+def touched_edge(q: np.ndarray, contact: np.ndarray) -> Optional[float]:
+    """A plate material's edge as the youBot's fingers found it [m], if its arm at ``q``, sent
+    down to the grip ``contact`` (joints) and stopped short of it, stopped on the material's
+    top: over the grip (less than TOUCH_ACROSS_MAX_M off across) and higher (by 1 mm to
+    TOUCH_HIGHER_MAX_M), its fingertips on it; None if it stopped elsewhere."""
+    tool, goal = YOUBOT_FK.fk(q)[:3, 3], YOUBOT_FK.fk(contact)[:3, 3]
+    higher = float(tool[2] - goal[2])
+    if (np.linalg.norm(tool[:2] - goal[:2]) > TOUCH_ACROSS_MAX_M
+            or not 0.001 <= higher <= TOUCH_HIGHER_MAX_M):
+        return None
+    return float(tool[2]) - YOUBOT_FINGERTIP_M - PLATE_TOP_IN_BASE_M
+
+
 # What the youBot holds passes this far over the tops of the plate's other materials [m].
 PLATE_CLEARANCE_M = 0.01
 YOUBOT_FK = YoubotKinematics('gripper_tcp')

@@ -102,6 +102,10 @@ class MaterialBook:
         m.place = place
         m.unload_attempts += 1
 
+    def sized(self, m: Material, edge: float) -> None:
+        """Its edge as the youBot's fingers found it on the plate."""
+        m.size = edge
+
     def delivered(self, m: Material, stand: str) -> None:
         """Set down or dropped at its destination by the youBot, standing at ``stand``."""
         m.status = MaterialStatus.DELIVERED

@@ -2,26 +2,19 @@
 from __future__ import annotations
 
 import math
-from typing import (
-    Callable,
-    List,
-    Optional,
-    Sequence,
-)
+from typing import Callable, List, Optional, Sequence
 
 import numpy as np
 
 from cell_layout.fleet_routes import way_between, way_off, way_to_park
-from cell_layout.layout import (
-    POOL,
-    CellLayout,
-)
+from cell_layout.layout import POOL, CellLayout
 from cell_layout.unload_geometry import (
     DROP_REACH_TOLERANCE_M,
     YOUBOT_CARRY_Q,
     UnloadPath,
     clear_of_the_plate,
     short_of,
+    touched_edge,
 )
 from controllers.path_follower import PathFollower
 from controllers.time_optimal import (
@@ -329,9 +322,16 @@ class Transport(Machine):
         arrived = self.arrival(obs)
         if arrived is None:
             return
-        if not arrived:
-            return self._unload_failed(obs, m, EventKind.GRASP_FAILED,
-                                       'unload: the arm did not reach the material')
+        if not arrived and not self._armed:
+            # Stopped on its way down: on its top (it stands taller than loaded: its edge as
+            # found is kept, and the fingers close there), or elsewhere: failed.
+            edge = touched_edge(self.arm.q(obs), known(self._carry, 'the unload path').contact)
+            if edge is None:
+                return self._unload_failed(obs, m, EventKind.GRASP_FAILED,
+                                           'unload: the arm did not reach the material')
+            self.log.event(now, EventKind.REPLANNED, self.arm.name, m, f'the fingers met its top '
+                           f'{1e3 * (edge - m.size):.1f} mm higher than loaded: gripped there')
+            self.book.sized(m, edge)
         if not self._armed:
             # Closed only now: its 20 mm reach would take a neighbour on the way down.
             self.ports.grip(self.arm.name, True)
