@@ -205,6 +205,8 @@ class CellLayout:
     # The pool's other sides a fleet unloads at (the first, the west, is via_out and via_turn's):
     # each youBot of a fleet has a side (side_of), so two youBots unload at once.
     more_sides: Tuple[PoolSide, ...] = ()
+    # The conveyor drive's encoder: its resolution [m per count] (0: the cell has none).
+    belt_encoder: float = 0.0
 
     @property
     def transport(self) -> CellRobot:

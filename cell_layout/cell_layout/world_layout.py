@@ -136,6 +136,7 @@ def layout_from_world(world: Any) -> CellLayout:
     layout = CellLayout(
         belt_y=conv.position[1], belt_top=conv.position[2],
         belt_end_x=conv.position[0] + conv.length / 2, belt_speed=conv.belt_speed,
+        belt_encoder=conv.encoder.resolution if conv.encoder is not None else 0.0,
         belt_width=conv.width,
         end_stop=conv.end_stop,
         material_size=mats.largest, manifest=dict(mats.counts),

@@ -1,5 +1,6 @@
 """The belt's speed as the cell senses it (no ROS): from the vision's tracks of the materials
-the belt carries freely.
+the belt carries freely, and from the conveyor drive's encoder where the cell has one
+(``measured``: its speed over its own window, weighed with the tracks' by its error).
 
 A real belt's speed is not its set point: it drifts with load, wear and its drive (a perturbed
 world drifts it by up to 15 %), and a material the cell meets 2 s after it last saw it is off
@@ -36,7 +37,8 @@ class BeltSpeed:
     """The belt's speed while it runs, as estimated now."""
     speed: float            # [m/s]
     std: float              # its standard error [m/s] (inf: the set point, not measured)
-    source: str             # 'vision' (the tracks'), or 'set point' before any track
+    source: str             # 'vision' (the tracks'), 'encoder' (the drive's, with the tracks'),
+    #                         or 'set point' before either
     tracks: int             # how many tracks the estimate is made of
     stamp: float            # the running time of the newest sighting it uses [s]
     age: float = 0.0        # how much running time has passed since, at the last update [s]
@@ -63,6 +65,7 @@ class BeltSpeedEstimate:
         self._tracks: Dict[int, Deque[Tuple[float, float]]] = {}
         self.current = BeltSpeed(set_point, math.inf, 'set point', 0, -math.inf)
         self._newest = -math.inf
+        self._encoder: Optional[Tuple[float, float, float]] = None   # (running time, speed, std)
 
     def sighted(self, track: int, running_time: float, x: float) -> None:
         """Track ``track`` was at ``x`` (along the belt [m]) at ``running_time`` (the belt's
@@ -77,6 +80,13 @@ class BeltSpeedEstimate:
             return
         points.append((running_time, x))
         self._newest = max(self._newest, running_time)
+
+    def measured(self, running_time: float, speed: float, std: float) -> None:
+        """The conveyor drive's encoder read ``speed`` +- ``std`` [m/s] up to
+        ``running_time``: in the estimate with the tracks', each by how well it is known."""
+        if math.isfinite(speed) and math.isfinite(std) and std > 0.0:
+            self._encoder = (running_time, speed, std)
+            self._newest = max(self._newest, running_time)
 
     def forget(self, track: int) -> None:
         """The track no longer rides freely (lifted, held at the stop, gone)."""
@@ -99,12 +109,17 @@ class BeltSpeedEstimate:
             fit = _slope(points)
             if fit is not None and points[-1][0] - points[0][0] >= self.min_span:
                 slopes.append(fit)
+        source = 'vision'
+        if self._encoder is not None and self._encoder[0] >= since:
+            slopes.append((self._encoder[1], self._encoder[2] ** 2))
+            source = 'encoder'
         if slopes:
             weights = [1.0 / var for _, var in slopes]
             total = sum(weights)
             speed = sum(w * s for w, (s, _) in zip(weights, slopes)) / total
-            self.current = BeltSpeed(max(0.0, speed), math.sqrt(1.0 / total), 'vision',
-                                     len(slopes), self._newest)
+            tracks = len(slopes) - (source == 'encoder')
+            self.current = BeltSpeed(max(0.0, speed), math.sqrt(1.0 / total), source,
+                                     tracks, self._newest)
         if math.isfinite(self.current.stamp):
             self.current = replace(self.current,
                                    age=max(0.0, running_time - self.current.stamp))

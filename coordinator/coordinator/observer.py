@@ -41,6 +41,7 @@ from coordinator.ros_ports import Stopped, call_service
 from ros_common.geometry import yaw_of
 from ros_common.stamps import to_ns
 from trial_record.scoring import IdentificationCheck, PeakJointSpeed
+from world_description.graph_names import BELT_ENCODER_TOPIC
 
 CAMERA_TOPIC = '/belt_camera/image_raw'
 STARTUP_GRACE_S = 1.0      # simulated seconds in which a lost camera frame is tolerated
@@ -79,6 +80,8 @@ class Inputs:
                      for arm, limits in speed_joints.items()}
         self.driven_past: List[Dict[str, Any]] = []
         self.closest_bases: Optional[Dict[str, Any]] = None    # (the simulator's, latched)
+        self.belt: List[Tuple[int, float]] = []     # the encoder's (stamp [ns], travel) read
+        self.belt_stamp = -1
         self._subscribe(sim)
 
     def _subscribe(self, sim: str) -> None:
@@ -98,6 +101,8 @@ class Inputs:
         self._detections_sub: Optional[Subscription] = node.create_subscription(
             MaterialDetectionArray, '/detections', self._on_detections, qos)
         node.create_subscription(MarkerArray, '/cell/materials', self._on_markers, qos)
+        if self.layout.belt_encoder > 0.0:
+            node.create_subscription(JointState, BELT_ENCODER_TOPIC, self._on_belt, qos)
         latched = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL)
         node.create_subscription(DiagnosticArray, f'{sim}/joint_limits', self._on_joint_limits,
                                  latched)
@@ -121,6 +126,16 @@ class Inputs:
                                  np.array([msg.position[index[n]] for n in names]), velocity)
             if speeds is not None:
                 self.peak[arm].update(speeds, to_ns(msg.header.stamp) * 1e-9)
+            self.lock.notify_all()
+
+    def _on_belt(self, msg: JointState) -> None:
+        if 'belt' not in msg.name or len(msg.position) != len(msg.name):
+            self.node.get_logger().warn(f'{BELT_ENCODER_TOPIC} without the belt joint ignored',
+                                        throttle_duration_sec=5.0)
+            return
+        with self.lock:
+            self.belt_stamp = to_ns(msg.header.stamp)
+            self.belt.append((self.belt_stamp, float(msg.position[msg.name.index('belt')])))
             self.lock.notify_all()
 
     def _on_joint_limits(self, msg: DiagnosticArray) -> None:
@@ -396,7 +411,9 @@ class Observer:
         def ready() -> bool:
             stamps = [j[0] for j in heard.joints.values()] + [g[0] for g in heard.grip.values()]
             stamps += [o[0] for o in heard.odom.values()]
-            if len(stamps) < 2 * len(self.layout.robots) + len(self.layout.transports):
+            stamps += [heard.belt_stamp] if self.layout.belt_encoder > 0.0 else []
+            if len(stamps) < (2 * len(self.layout.robots) + len(self.layout.transports)
+                              + (self.layout.belt_encoder > 0.0)):
                 return False
             return all(s >= stamp_ns for s in stamps) if first else \
                 all(s == stamp_ns for s in stamps)
@@ -404,7 +421,8 @@ class Observer:
             if not self._wait(ready, self.service_timeout):
                 have = {**{f'{a} joints': j[0] for a, j in self.inputs.joints.items()},
                         **{f'{a} grip': g[0] for a, g in self.inputs.grip.items()},
-                        **{f'{b} odom': o[0] for b, o in self.inputs.odom.items()}}
+                        **{f'{b} odom': o[0] for b, o in self.inputs.odom.items()},
+                        'belt encoder': self.inputs.belt_stamp}
                 raise NodeTimeout(f'no states from the simulator for t = {stamp_ns * 1e-9:.3f} s'
                                   f' (latest stamps [ns]: {have})')
 
@@ -434,7 +452,9 @@ class Observer:
                     for name, (_, q, dq) in self.inputs.joints.items()}
             bases = {name: BaseReading(odom[1], odom[2])
                      for name, odom in self.inputs.odom.items()}
-            return Observation(t_ns * 1e-9, arms, bases, dets)
+            belt = [(s * 1e-9, x) for s, x in self.inputs.belt if s <= t_ns]
+            self.inputs.belt = [(s, x) for s, x in self.inputs.belt if s > t_ns]
+            return Observation(t_ns * 1e-9, arms, bases, dets, belt)
 
     def final_truth(self, end: float) -> list:
         """The materials' true poses after the run (the score's ground truth)."""

@@ -53,6 +53,10 @@ class StepSink(Protocol):
     def on_world_state(self, time_ns: int) -> None:
         """The world's props (materials) are due; called only for worlds that have them."""
 
+    def on_belt(self, time_ns: int) -> None:
+        """The conveyor's drive reports, if the world has one (with the robots' states,
+        before them)."""
+
     def on_trajectory_aborted(self, robot: str, controller: str, reason: str) -> None:
         """A joint group stopped following its trajectory and holds where it is."""
 
@@ -94,6 +98,9 @@ class NullSink:
         pass
 
     def on_world_state(self, time_ns: int) -> None:
+        pass
+
+    def on_belt(self, time_ns: int) -> None:
         pass
 
     def on_trajectory_aborted(self, robot: str, controller: str, reason: str) -> None:
@@ -350,6 +357,7 @@ class SimRunner:
                 self._state_next_ns = next_on_grid(t_ns, self.state_period_ns)
                 world.check_free_bodies(pose=True)
                 self._report_lost(sink)
+                sink.on_belt(t_ns)
                 for name in world.robots:
                     self.check_robot(name, sink)
                     sink.on_state(name, t_ns)

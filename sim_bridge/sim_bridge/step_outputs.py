@@ -26,6 +26,7 @@ from robot_description import with_frame_prefix
 from ros_common.stamps import stamp_from_ns
 from sim_bridge import messages
 from sim_bridge.base_clearance import Closest
+from sim_bridge.belt_encoder import BELT_JOINT, ENCODER_TOPIC, BeltEncoder
 from sim_bridge.camera import ImageBuffer
 from sim_bridge.frames import WorldFrames
 from sim_bridge.hold_watch import HoldWatch
@@ -82,6 +83,13 @@ class StepOutputs:
         self.hold_watch = HoldWatch(world)
         self._materials_pub = (node.create_publisher(MarkerArray, '/cell/materials', HISTORY)
                                if world.source is not None else None)
+        # The conveyor drive's encoder, where the world gives the cell one.
+        conveyor = world.conveyor
+        self._encoder = (BeltEncoder(conveyor.config.encoder, world.source.seed)
+                         if conveyor is not None and world.source is not None
+                         and conveyor.config.encoder is not None else None)
+        self._encoder_pub = (node.create_publisher(JointState, ENCODER_TOPIC, HISTORY)
+                             if self._encoder is not None else None)
 
     # --- start-up -----------------------------------------------------------------------------
     def _robot_io(self, name: str) -> _RobotIO:
@@ -225,6 +233,16 @@ class StepOutputs:
             grip = GripState(armed=suction.armed, holding=holding)
             grip.header.stamp = stamp
             state_pub.publish(grip)
+
+    def on_belt(self, time_ns: int) -> None:
+        if self._encoder is None or self._encoder_pub is None or self._world.conveyor is None:
+            return
+        # (Read whether or not anyone listens: its speed is over the period since.)
+        travel, speed = self._encoder.read(time_ns * 1e-9, self._world.conveyor.travel)
+        if wanted(self._encoder_pub):
+            msg = JointState(name=[BELT_JOINT], position=[travel], velocity=[speed])
+            msg.header.stamp = stamp_from_ns(time_ns)
+            self._encoder_pub.publish(msg)
 
     def on_world_state(self, time_ns: int) -> None:
         if self._materials_pub is None or not wanted(self._materials_pub):

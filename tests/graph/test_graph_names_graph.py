@@ -4,10 +4,12 @@ node, topic and service it has must be in the table the world's start-up check r
 by, or a clash could pass unseen."""
 from typing import Set, Tuple
 
+import numpy as np
 import pytest
 import yaml
+from sensor_msgs.msg import JointState
 
-from helpers import wait_for
+from helpers import stamp_s, wait_for
 from studies.trial_graph import pipeline_graph
 from world_description.graph_names import graph_names
 from world_description.resources import resolve_resource
@@ -23,6 +25,8 @@ def renamed_world(tmp_path):
         robot.update(name=name, namespace=f'line_a/{name}', frame_prefix=f'{name}/')
     data['robots'][1]['suction']['service'] = 'hand/grasp'
     data['cell'] = {'loader': 'picker', 'transports': ['carrier']}
+    # (A conveyor drive with an encoder: its topic, and the coordinator's subscription.)
+    data['conveyor']['encoder'] = {'resolution': 1.0e-4, 'noise': 0.001}
     path = tmp_path / 'renamed.yaml'
     path.write_text(yaml.safe_dump(data))
     return path
@@ -44,7 +48,8 @@ def test_every_name_of_a_running_graph_is_in_the_worlds_table(renamed_world, sta
     own = f'/{probe.node.get_name()}'
     expected = {('service', '/sim_node/reset'), ('service', '/line_a/picker/solve_ik'),
                 ('service', '/line_a/carrier/hand/grasp'), ('topic', '/coordinator_node/events'),
-                ('topic', '/detections'), ('node', '/line_a/carrier/kinematics_node')}
+                ('topic', '/detections'), ('node', '/line_a/carrier/kinematics_node'),
+                ('topic', '/conveyor/joint_states')}
     wait_for(lambda: expected <= _live(probe.node), 90.0, period=0.5,
              what='every node of the graph to be discovered')
     # (Discovery brings a node's names in bursts: the set is read until two readings a second
@@ -63,3 +68,15 @@ def test_every_name_of_a_running_graph_is_in_the_worlds_table(renamed_world, sta
     # And the table is the graph's, not a list of every name there could be: most of it runs.
     robots = {n for n in table if '/line_a/' in n[1]}
     assert len(robots & seen) >= 0.8 * len(robots), sorted(robots - seen)
+    # The encoder counts the belt's travel in whole counts, and reads the belt's set speed
+    # while it runs.
+    readings = probe.collect(JointState, '/conveyor/joint_states')
+    wait_for(lambda: len(readings) >= 60, 60.0, what="the belt encoder's readings")
+    msgs = [m for _, m in list(readings)]
+    assert all(m.name == ['belt'] for m in msgs)
+    assert all(abs(m.position[0] / 1e-4 - round(m.position[0] / 1e-4)) < 1e-6 for m in msgs)
+    moving = [(b.position[0] - a.position[0]) / (stamp_s(b.header.stamp)
+                                                 - stamp_s(a.header.stamp))
+              for a, b in zip(msgs, msgs[1:]) if b.position[0] > a.position[0]]
+    set_speed = yaml.safe_load(renamed_world.read_text())['conveyor']['belt_speed']
+    assert len(moving) >= 10 and float(np.median(moving)) == pytest.approx(set_speed, rel=0.05)

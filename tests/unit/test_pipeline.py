@@ -50,12 +50,15 @@ class FakeCell:
                  taken_late: float = 0.0, held_in_view: bool = False,
                  solve_cost: float = 0.0, refuse_picks: int = 0,
                  base_loop: bool = False,
-                 belt_drift: Callable[[float], float] = lambda t: 1.0) -> None:
+                 belt_drift: Callable[[float], float] = lambda t: 1.0,
+                 encoder: float = 0.0) -> None:
         self.layout = layout
         self.now = 0.0
         self.belt_speed = 0.0
         # The belt runs at its set speed times this (at the simulated time): it drifts.
         self.belt_drift = belt_drift
+        # The conveyor drive's encoder: its resolution (0: none), and the belt's travel.
+        self.encoder, self.travel = encoder, 0.0
         # Materials: id -> [x, y, colour, on_belt]
         self.materials = {i + 1: [-1.15 - i * gap, layout.belt_y, c, True]
                           for i, c in enumerate(colors)}
@@ -212,6 +215,7 @@ class FakeCell:
         for m, x in zip(on, advance(items, stop, self.belt_speed * self.belt_drift(self.now)
                                     * DT)):
             m[0] = x
+        self.travel += self.belt_speed * self.belt_drift(self.now) * DT
         for arm in self.q:
             t_end, goal = self.goal[arm]
             if arm == 'zu12' and self.plans[arm] is not None and not self.stall:
@@ -272,8 +276,10 @@ class FakeCell:
         arms = {arm: ArmReading(self.q[arm].copy(), np.full(len(self.q[arm]),
                                                             0.5 if self.moving[arm] else 0.0),
                                 self.holding[arm], self.armed[arm]) for arm in self.q}
+        counts = ([(self.now, math.floor(self.travel / self.encoder) * self.encoder)]
+                  if self.encoder else [])
         return Observation(self.now, arms, {b: BaseReading(tuple(self.poses[b]), velocities[b])
-                                            for b in self.bases}, dets)
+                                            for b in self.bases}, dets, counts)
 
     def _move_base(self, base):
         """One step of a base on its twist (the follower's, with ``base_loop``)."""
@@ -1184,3 +1190,38 @@ def test_odometry_is_turned_into_the_cells_frame_from_the_bases_start_pose():
     # Sideways in its own frame (Mecanum): along the cell's -y there.
     _, velocity = odometry_in_cell(home, 1.0, 0.0, math.pi / 2, 0.0, 0.4, 0.0)
     assert velocity == pytest.approx((0.0, -0.4, 0.0), abs=1e-12)
+
+
+@pytest.mark.parametrize('encoder', [0.0, 1e-4])
+def test_where_the_conveyor_has_an_encoder_the_cell_carries_each_material_by_its_counts(
+        encoder):
+    """A belt that wanders 15 % about its set point (as the perturbed world's): from the
+    tracks' speed alone, where the cell believes a material is drifts from where it is (11 mm
+    before its pick here). Where the conveyor's drive has an encoder, the cell carries each
+    material by the counts since it saw it: within a count (0.1 mm) of where it is at every
+    step; and the speed it plans with is the drive's and the tracks' together."""
+    from coordinator.pipeline.model import MaterialStatus
+
+    class Watched(FakeCell):
+        def step(self):
+            if self.pipeline is not None:
+                for m in self.pipeline.materials.values():
+                    if (m.status == MaterialStatus.SEEN and not m.picked
+                            and self.materials[m.id][3]):
+                        errors.append(abs(m.position[0] - self.materials[m.id][0]))
+            return super().step()
+
+    def drift(t):
+        return 1.0 + 0.15 * (0.7 * math.sin(2 * math.pi * t / 20.0 + 1.0)
+                             + 0.3 * math.sin(2 * math.pi * t / 20.0 * 2.618))
+    errors = []
+    cell = Watched(dataclasses.replace(cell_layout(), belt_encoder=encoder), PAPER,
+                   belt_drift=drift, encoder=encoder)
+    p = run(cell)
+    assert p.result.status == 'completed' and len(errors) > 500
+    sources = {re.search(r'\((vision|encoder|set point)', e.detail).group(1)
+               for e in kinds(cell, 'tracking')}
+    if encoder:
+        assert max(errors) <= 2 * encoder and sources == {'encoder'}
+    else:
+        assert max(errors) > 0.005 and sources == {'vision'}

@@ -37,6 +37,8 @@ COORDINATOR_TOPICS = ('state', 'events')
 # Names the graph makes at the top level (ROS's own, the simulator's, the vision node's).
 GLOBAL_TOPICS = ('/rosout', '/parameter_events', '/clock', '/tf', '/tf_static',
                  '/diagnostics', '/cell/materials', '/detections', '/debug_image')
+# The conveyor drive's encoder, where the world gives the cell one (sim_bridge.belt_encoder).
+BELT_ENCODER_TOPIC = '/conveyor/joint_states'
 # What a robot has under its namespace, by what it is.
 ROBOT_TOPICS = ('joint_states', 'robot_description')
 BASE_TOPICS = ('odom',)                          # a mobile base (no fixed base)
@@ -87,6 +89,8 @@ def graph_names(world: WorldConfig) -> List[GraphName]:
     out += [GraphName(_under(SIM_NODE, t), 'topic', sim) for t in SIM_TOPICS]
     for a in SIM_ACTIONS:
         out += _action(_under(SIM_NODE, a), sim)
+    if world.conveyor is not None and world.conveyor.encoder is not None:
+        out.append(GraphName(BELT_ENCODER_TOPIC, 'topic', "the conveyor's encoder"))
     out += _node('', VISION_NODE, 'the vision node')
     out += _node('', COORDINATOR_NODE, 'the coordinator')
     out += [GraphName(_under(COORDINATOR_NODE, t), 'topic', 'the coordinator')

@@ -133,6 +133,16 @@ class ObstacleConfig:
 
 
 @dataclass(frozen=True)
+class BeltEncoderConfig:
+    """The conveyor drive's encoder, as a real drive reports it: the belt's travel in whole
+    counts, and its speed, read over each period with its noise; published with the robots'
+    states on ``/conveyor/joint_states`` (joint ``belt``: position [m], velocity [m/s])."""
+
+    resolution: float = 1.0e-4     # belt travel per count [m]
+    noise: float = 0.0             # standard deviation of the speed reading [m/s]
+
+
+@dataclass(frozen=True)
 class ConveyorConfig:
     """A belt: a box whose top surface carries what lies on it along its x axis (at ``yaw``)."""
 
@@ -144,6 +154,9 @@ class ConveyorConfig:
     # A wall across the belt's downstream end: what reaches it stays on the belt (accumulates)
     # while the belt runs on beneath it, instead of falling off.
     end_stop: bool = False
+    # What the cell is told of the belt's motion by its drive (None: nothing; the cell then
+    # senses the belt's speed from its camera's tracks only).
+    encoder: Optional[BeltEncoderConfig] = None
 
 
 @dataclass(frozen=True)

@@ -7,6 +7,7 @@ import math
 import re
 from typing import Any, Dict, List, Optional, Set, Tuple, Union
 
+from world_description.conveyor_section import conveyor_section
 from world_description.errors import WorldConfigError
 from world_description.graph_names import graph_problem
 from world_description.material_classes import (
@@ -33,7 +34,6 @@ from world_description.world_schema import (
     CameraConfig,
     CellRoles,
     ControllerConfig,
-    ConveyorConfig,
     DiffDriveConfig,
     DriveLimitsConfig,
     MaterialsConfig,
@@ -72,7 +72,7 @@ def parse_world(data: Any, source: str = '<memory>') -> WorldConfig:
     cameras = [_camera(r, item, i, robots)
                for i, item in enumerate(r.list(data, 'cameras', 'world'))
                if not (isinstance(item, dict) and item.get('robot') in left_out)]
-    conveyor = _conveyor(r, data['conveyor']) if data.get('conveyor') is not None else None
+    conveyor = conveyor_section(r, data['conveyor']) if data.get('conveyor') is not None else None
     materials = None
     if data.get('materials') is not None:
         if conveyor is None:
@@ -283,21 +283,6 @@ def _obstacle(r: Reader, item: Any, i: int) -> ObstacleConfig:
                           yaw=r.number(item, 'yaw', where, default=0.0, lo=-TURN_RAD,
                                        hi=TURN_RAD), color=color,
                           name=r.string(item, 'name', where, default=''), collision=collision)
-
-
-def _conveyor(r: Reader, item: Any) -> ConveyorConfig:
-    where = 'conveyor'
-    r.only(item, where, {'position', 'length', 'width', 'yaw', 'belt_speed', 'end_stop'})
-    end_stop = item.get('end_stop', False)
-    if not isinstance(end_stop, bool):
-        raise r.fail(where, 'end_stop', f'must be true or false, got {end_stop!r}')
-    return ConveyorConfig(position=r.vec3(item, 'position', where),
-                          length=r.number(item, 'length', where, lo=0.1, hi=50.0),
-                          width=r.number(item, 'width', where, lo=0.02, hi=5.0),
-                          yaw=r.number(item, 'yaw', where, default=0.0, lo=-TURN_RAD,
-                                       hi=TURN_RAD),
-                          belt_speed=r.number(item, 'belt_speed', where, default=0.05, lo=0.0,
-                                              hi=2.0), end_stop=end_stop)
 
 
 def _materials(r: Reader, item: Any, obstacles: List[ObstacleConfig]) -> MaterialsConfig:

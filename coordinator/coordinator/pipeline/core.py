@@ -148,7 +148,7 @@ class Pipeline:
 
     # --- perception ---------------------------------------------------------------------------
     def _see(self, obs: Observation) -> None:
-        self.belt.advance(obs.now)
+        self.belt.advance(obs.now, obs.belt)    # (with the encoder's counts, if it has one)
         for d in obs.detections:
             m = self.materials.get(d.id)
             if m is None:
@@ -166,7 +166,7 @@ class Pipeline:
                                f'at {np.round(m.position, 3).tolist()}')
             else:
                 self.belt.sighted(m, d, obs.now)
-        # The belt's speed, as these frames tell it.
+        # The belt's speed, as these frames (and its encoder, if it has one) tell it.
         self.belt.estimate.update(self.belt.running_clock(obs.now))
         # Without an end stop, a material still on the belt past its end was not picked.
         for m in self.materials.values():

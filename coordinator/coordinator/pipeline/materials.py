@@ -23,6 +23,7 @@ import numpy as np
 
 from cell_layout.layout import CellLayout
 from controllers.belt_speed import BeltSpeed, BeltSpeedEstimate
+from controllers.belt_travel import BeltTravel, carried
 from controllers.conveyor import Item, advance, held
 from coordinator.pipeline.clock import Clock
 from coordinator.pipeline.model import (
@@ -152,6 +153,7 @@ class BeltModel:
         self._time = clock.now            # the model's time (``advance``)
         self._t0 = clock.now              # (the origin of ``running_clock``)
         self.estimate = BeltSpeedEstimate(layout.belt_speed)
+        self.encoder = BeltTravel(layout.belt_encoder) if layout.belt_encoder > 0.0 else None
 
     @property
     def sensed(self) -> BeltSpeed:
@@ -248,9 +250,17 @@ class BeltModel:
         self.advance(now)
         m.picked = True
 
-    def advance(self, now: float) -> None:
-        """Carry the model forward to ``now``."""
-        travel = self.sensed.speed * self.running_time(self._time, now)
+    def advance(self, now: float, readings: Sequence[Tuple[float, float]] = ()) -> None:
+        """Carry the model forward to ``now`` (first taking in the encoder's ``readings``,
+        (stamp, travel) oldest first, where the conveyor has one: its speed goes into the
+        estimate)."""
+        if self.encoder is not None and readings:
+            for stamp, counted in readings:
+                self.encoder.read(stamp, counted)
+            speed = self.encoder.speed(self.running_time)
+            if speed is not None:
+                self.estimate.measured(self.running_clock(self.encoder.newest), *speed)
+        travel = carried(self.encoder, self._time, now, self.sensed.speed, self.running_time)
         self._time = max(self._time, now)
         if travel <= 0.0:
             return
@@ -294,7 +304,7 @@ class BeltModel:
 
     def seen_at(self, d: Detection, now: float) -> np.ndarray:
         """A detection carried to ``now``: in the camera's view the belt carries it freely."""
-        travel = self.sensed.speed * self.running_time(d.stamp, now)
+        travel = carried(self.encoder, d.stamp, now, self.sensed.speed, self.running_time)
         return cast(np.ndarray, np.asarray(d.position, float) + np.array([travel, 0.0, 0.0]))
 
     def running_clock(self, t: float) -> float:

@@ -126,6 +126,7 @@ class Observation:
     arms: Mapping[str, ArmReading]
     bases: Mapping[str, BaseReading]
     detections: Sequence[Detection] = ()
+    belt: Sequence[Tuple[float, float]] = ()     # the conveyor's encoder: (stamp, travel) read
 
 
 class Ports(Protocol):
