@@ -1,5 +1,5 @@
-"""The figures of issues 12 ("Trials at scale") and 37 (what-if studies) from this `make bench`
-run, beside their goals.
+"""The figures of issues 12 ("Trials at scale"), 37 (what-if studies) and 63 (the closed loop's
+cost) from this `make bench` run, beside their goals.
 
 Reads the JSON the benchmarks of this run wrote to bench/results/ (files older than
 ``--since``, the run's start, are refused: every figure comes from the same run) and prints
@@ -37,6 +37,7 @@ def rows(since: float, results: Path = RESULTS) -> List[Row]:
     pipeline = _load('bench_pipeline.json', since, results)
     recorder = _load('bench_recorder.json', since, results)
     kinematics = _load('bench_kinematics.json', since, results)
+    closed = _load('bench_closed_loop.json', since, results)
     return [
         _row('CPU per simulated second, the nodes measured when filed: cut', '>= 3x', pipeline,
              lambda d: d['cpu_cut_vs_filed'], '{:.2f}x', lambda v: v >= 3.0),
@@ -65,6 +66,9 @@ def rows(since: float, results: Path = RESULTS) -> List[Row]:
              lambda d: d['youbot_ik_per_s'], '{:,.0f} /s', lambda v: v >= 20000),
         _row('Zu 12 IK, median', '<= 0.1 ms', kinematics,
              lambda d: d['zu12_ik_median_ms'], '{:.3f} ms', lambda v: v <= 0.1),
+        # (Issue 63: the closed loop against the open loop's last revision, side by side.)
+        _row('closed loop / open loop, CPU per simulated second (perturbed cell)', '<= 1.05',
+             closed, lambda d: d['ratio'], '{:.3f}', lambda v: v <= 1.05),
     ]
 
 

@@ -15,5 +15,7 @@ python "$ROOT/bench/bench_live_view.py"
 python "$ROOT/bench/bench_requests.py"
 # Joint speed limits in random cells and every example world (issue 48); the brake's cost.
 python "$ROOT/bench/bench_joint_limits.py" --cells 12 --examples
+# The closed loop's CPU against the open loop's last revision, side by side (issue 63).
+python "$ROOT/bench/bench_closed_loop.py"
 # The issue-12 goals, from the figures of this run only.
 python "$ROOT/bench/goals.py" --since "$START"
