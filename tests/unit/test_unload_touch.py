@@ -17,7 +17,9 @@ from cell_layout.reach import youbot_tool_quaternion
 from cell_layout.unload_geometry import YOUBOT_CARRY_Q, YOUBOT_FK
 from cell_layout.world_layout import layout_from_world
 from coordinator.pipeline import Material, Pipeline, Settings
-from coordinator.pipeline.model import TransportState
+from coordinator.pipeline.model import ArmReading, Observation, TransportState
+
+last = []           # (the observation the arm stopped at)
 
 
 class Ports(_YoubotIK):
@@ -64,7 +66,9 @@ def stopped(shift):
         tool, math.radians(tr._carry.grip_tilt)), 'base_link', contact)
     assert q is not None
     end = tr.arm.motion.end + run_.s.settle_margin + 0.1
-    tr._grasp(observation(end, np.zeros(6), q, stand.pose, youbot_dq=np.zeros(5)))
+    obs = observation(end, np.zeros(6), q, stand.pose, youbot_dq=np.zeros(5))
+    last[:] = [obs]
+    tr._grasp(obs)
     return tr, m, ports
 
 
@@ -78,6 +82,20 @@ def test_an_arm_stopped_on_the_material_s_top_grips_it_there_and_keeps_its_edge(
     assert m.status == 'on_plate'
     touched = [e for e in ports.events if e.kind.value == 'replanned']
     assert touched and 'higher than loaded' in touched[-1].detail
+    # The gripper has not reported closing yet (its state comes a tick or two later): the
+    # unload waits for it, though the arm's motion ended more than its settle margin ago.
+    q = tr.arm.q(last[0])
+    tr._grasp(Observation(last[0].now + 0.1, {'zu12': ArmReading(np.zeros(6)),
+                                              'youbot': ArmReading(q, np.zeros(5))},
+                          last[0].bases))
+    assert tr.state is TransportState.GRASP and m.status == 'on_plate'
+    # The gripper reports closed and holding a moment later: off the plate from there.
+    later = Observation(last[0].now + 0.2, {'zu12': ArmReading(np.zeros(6)),
+                                            'youbot': ArmReading(q, np.zeros(5), True, True)},
+                        last[0].bases)
+    tr._grasp(later)
+    assert [e.kind.value for e in ports.events][-2:] == ['unload_grasped', 'state']
+    assert tr.state is TransportState.CARRY
 
 
 @pytest.mark.parametrize('shift', [(0.03, 0.0, 0.0), (0.0, 0.0, 0.05), (0.0, 0.012, 0.006)])

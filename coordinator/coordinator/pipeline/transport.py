@@ -332,6 +332,7 @@ class Transport(Machine):
             self.log.event(now, EventKind.REPLANNED, self.arm.name, m, f'the fingers met its top '
                            f'{1e3 * (edge - m.size):.1f} mm higher than loaded: gripped there')
             self.book.sized(m, edge)
+            self.deadline = now + self.s.settle_margin      # (for the gripper to report)
         if not self._armed:
             # Closed only now: its 20 mm reach would take a neighbour on the way down.
             self.ports.grip(self.arm.name, True)
