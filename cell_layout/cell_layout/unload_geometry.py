@@ -30,9 +30,11 @@ YOUBOT_GRASP_STANDOFF_M = GRASP_STANDOFF_M
 YOUBOT_FINGERTIP_M = 0.0104
 # Its arm stopped on its way down onto a plate material this far above the grip at most, and
 # this near it across, stopped on the material's top: the material stands that much taller
-# than loaded (a perturbed cell's edges vary by 4 %: a 56 mm cube stopped it 6 mm up) [m].
+# than loaded (a perturbed cell's edges vary by 4 %: a 56 mm cube stopped the tool 7.6 mm up
+# and 8.5 mm across, pushed aside on its top face; within 15 mm the fingertips' centre is still
+# over a 50 mm material's top, and far from the next slot's, 60 mm away) [m].
 TOUCH_HIGHER_MAX_M = 0.025
-TOUCH_ACROSS_MAX_M = 0.006
+TOUCH_ACROSS_MAX_M = 0.015
 
 
 def touched_edge(q: np.ndarray, contact: np.ndarray) -> Optional[float]:
