@@ -200,6 +200,7 @@ class SimRobot:
                 self.body, j, self._initial.get(j, 0.0) + self.sensors.encoder_offset(j), 0.0)
         if self.drive is not None:
             self.drive.command(0.0, 0.0, 0.0)
+        self.sensors.restart_odometry()
         for group in self.controllers.values():
             group.hold_current()
 
