@@ -2,8 +2,8 @@
 on the material's top, over the grip (the material stands taller than it was loaded as: a
 perturbed cell's edges vary by 4 %, and a 56 mm cube stopped the tool 7.6 mm up and 8.5 mm
 across), it keeps the edge its fingers found and closes them there; stopped anywhere else, the
-unload fails as before. (In the perturbed cell's dense sweep, one seed lost two oranges this way at every belt
-speed: "the arm did not reach the material".)"""
+unload fails as before. (In the perturbed cell's dense sweep, one seed lost two oranges this
+way at every belt speed: "the arm did not reach the material".)"""
 import copy
 import math
 
