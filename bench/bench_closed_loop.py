@@ -34,6 +34,7 @@ BELT = 0.14
 def baseline_tree(rev: str, into: Path) -> Dict[str, str]:
     """The baseline's source tree under ``into``: the path its nodes import from (its Python
     packages, each ``<pkg>/<pkg>``), and its world."""
+    into.mkdir(parents=True, exist_ok=True)
     archive = subprocess.run(['git', '-C', str(ROOT), 'archive', rev], check=True,
                              capture_output=True).stdout
     subprocess.run(['tar', '-x', '-C', str(into)], input=archive, check=True)
