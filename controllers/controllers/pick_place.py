@@ -37,7 +37,7 @@ def follow_pick(track: Track, t_contact: float, size: float, timing: PickTiming 
     ``timing.hover`` over the top face, down onto it by ``t_contact`` while moving with it,
     and on it for the dwell. Also returns the lift point: ``timing.lift_height`` over the
     contact, ahead by half the material's travel over the lift (the tool slows from its speed
-    to rest meanwhile).
+    to rest meanwhile), and no further than the track takes it by then (held at an end stop).
 
     The descent is smooth to the second derivative: its height over the top face is
     ``hover (2 f^3 - f^4)`` with ``f`` running from 1 to 0, so it starts at a vertical speed of
@@ -65,5 +65,13 @@ def follow_pick(track: Track, t_contact: float, size: float, timing: PickTiming 
         out.append((t, on(t) + np.array([0.0, 0.0, timing.hover * (2 * f ** 3 - f ** 4)])))
     if timing.dwell > 0.0:
         out += [(t, on(t)) for t in times(t_contact, t_leave)[1:]]
-    lift = on(t_leave) + v_leave * timing.lift / 2 + np.array([0.0, 0.0, timing.lift_height])
+    # Ahead by half the travel over the lift, but never past where the track holds it (an end
+    # stop): met 55 mm before the stop at 0.36 m/s, the lift point lay 35 mm beyond it, the
+    # cup dragged the material into the stop's wall and the arm stalled, the material held.
+    ahead = v_leave * timing.lift / 2
+    held = np.array(track(t_leave + timing.lift / 2), float) - np.array(track(t_leave), float)
+    held[2] = 0.0
+    if float(np.linalg.norm(held)) < float(np.linalg.norm(ahead)) - 1e-9:
+        ahead = held
+    lift = on(t_leave) + ahead + np.array([0.0, 0.0, timing.lift_height])
     return out, lift

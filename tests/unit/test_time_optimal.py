@@ -189,6 +189,22 @@ def test_the_pick_path_moves_with_the_material_while_on_it():
     assert lift == pytest.approx(track(5.15) + np.array([0.12 * 0.15, 0.0, 0.025 + 0.12]))
 
 
+def test_the_lift_point_stays_behind_the_end_stop_that_holds_the_material():
+    """Met just before an end stop on a fast belt, the lift point is no further ahead than
+    where the stop holds the material: half the lift's travel would put it past the stop's
+    wall, and the cup would drag the material into it."""
+    stop_x = 0.675
+    track = lambda t: np.array([min(0.62 + 0.36 * (t - 5.0), stop_x), 0.75, 0.425])  # noqa: E731
+    timing = PickTiming(hover=0.06, descend=0.3, dwell=0.14, lift=0.2, lift_height=0.07)
+    path, lift = follow_pick(track, 5.0, 0.05, timing, period=0.05)
+    assert path[-1][1][0] < stop_x                   # still carried at the end of the dwell
+    assert lift[0] == pytest.approx(stop_x)          # (unclamped: 0.6704 + 0.036 = 0.706)
+    # Carried freely past the lift, the lead is the same as before.
+    free = lambda t: np.array([0.62 + 0.36 * (t - 5.0), 0.75, 0.425])  # noqa: E731
+    assert follow_pick(free, 5.0, 0.05, timing)[1][0] == pytest.approx(
+        free(5.14)[0] + 0.36 * 0.1)
+
+
 def _curve(s):
     """A curved joint-space path (a tool's straight line is one for a real arm)."""
     s = np.asarray(s, float)
