@@ -2,8 +2,8 @@
 how far the belt carried what rides on it between two times is read off the counts, not
 reckoned from a speed. A material last seen 4 s before the arm meets it was off by the belt's
 drift times those 4 s (a perturbed belt drifts by up to 15 %); from the counts it is off by a
-count or two. Readings come in with the robots' states; between two readings the travel is
-taken as linear, and past the newest one it is unknown (``travel`` says None)."""
+count or two. The drive reports at its own rate (10 Hz by default); between two readings the
+travel is taken as linear, and past the newest one it is unknown (``travel`` says None)."""
 from __future__ import annotations
 
 import bisect
@@ -24,6 +24,8 @@ class BeltTravel:
         self.resolution = resolution
         self._t: List[float] = []
         self._x: List[float] = []
+        # The belt's travel that what rides on it has been carried to (``carry``).
+        self._carried_to: Optional[float] = None
 
     def read(self, stamp: float, travel: float) -> None:
         """The encoder read ``travel`` [m] at ``stamp`` [s] (readings in time order; an older
@@ -73,6 +75,37 @@ class BeltTravel:
         if moved is None or ran < SPEED_WINDOW_S / 2:
             return None
         return moved / ran, math.sqrt(2.0) * self.resolution / ran
+
+
+    def estimate(self, t: float, speed: float,
+                 running_time: Callable[[float, float], float]) -> Optional[float]:
+        """The belt's travel at ``t``: as read up to the newest reading, and past it at
+        ``speed`` for as long as the belt ran; None before the first reading."""
+        if not self._t or t < self._t[0]:
+            return None
+        if t <= self._t[-1]:
+            return self.at(t)
+        return self._x[-1] + speed * running_time(self._t[-1], t)
+
+    def carry(self, t0: float, t1: float, speed: float,
+              running_time: Callable[[float, float], float]) -> float:
+        """How far to carry what rides on the belt from ``t0`` to ``t1``: from where it was
+        last carried to (on the belt's travel) to where the readings put the belt at ``t1``.
+        Between two readings the travel is reckoned at ``speed``; the next reading makes good
+        what that got wrong, and a shortfall (reckoned too far) is held back until the belt
+        has made it up, never carried backwards. (Reckoned afresh from each reading instead,
+        what the speed got wrong between readings was never made good: at 10 Hz readings and
+        a speed 13 % off, a material out of the camera's view drifted 7 mm from where it was.)"""
+        at = self.estimate(t1, speed, running_time)
+        if at is None or self._carried_to is None:
+            travel = carried(self, t0, t1, speed, running_time)
+            self._carried_to = at
+            return travel
+        travel = at - self._carried_to
+        if travel <= 0.0:
+            return 0.0
+        self._carried_to = at
+        return travel
 
 
 def carried(encoder: Optional[BeltTravel], t0: float, t1: float, speed: float,

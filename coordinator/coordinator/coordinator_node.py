@@ -154,6 +154,7 @@ class CoordinatorNode(Node):
         if self.synchronous and state_period > steps_per_tick * dt_ns:
             raise CoordinatorError('lock-step needs state_publish_rate >= control_rate')
         cams = [c for c in self.world.cameras if c.name == 'belt_camera']
+        encoder = self.world.conveyor.encoder if self.world.conveyor is not None else None
         self.service_timeout = float(p['service_timeout'])
         self.result_file = p['result_file']
         self.progress_file = Path(p['progress_file']) if p['progress_file'] else None
@@ -172,7 +173,8 @@ class CoordinatorNode(Node):
         arms = {name: robot.joints for name, robot in layout.robots.items()}
         self.observer = Observer(
             self, layout, arms, sim, self.synchronous, self.rate, dt_ns, state_period,
-            round(1e9 / cams[0].rate) if cams else None, self.service_timeout,
+            round(1e9 / cams[0].rate) if cams else None,
+            round(1e9 / encoder.rate) if encoder is not None else None, self.service_timeout,
             float(p['drive_lead']), commands,
             {arm: speed_limits(self.world, arm) for arm in arms},
             drive=lambda base, vx, vy, wz: self.ports.drive(base, vx, vy, wz))

@@ -238,7 +238,8 @@ class Observer:
 
     def __init__(self, node: Node, layout: CellLayout, arms: Mapping[str, Sequence[str]],
                  sim: str, synchronous: bool, rate: float, dt_ns: int, state_period_ns: int,
-                 camera_period_ns: Optional[int], service_timeout: float, drive_lead: float,
+                 camera_period_ns: Optional[int], encoder_period_ns: Optional[int],
+                 service_timeout: float, drive_lead: float,
                  commands: CommandCounter, speed_joints: Dict[str, Dict[str, float]],
                  drive: Callable[[str, float, float, float], None]) -> None:
         self.node, self.layout = node, layout
@@ -249,6 +250,8 @@ class Observer:
         self.steps_per_tick = max(1, round(1e9 / rate / dt_ns))
         self.state_grid = DueGrid(dt_ns, state_period_ns)
         self.camera_grid = (DueGrid(dt_ns, camera_period_ns) if camera_period_ns else None)
+        # The conveyor drive's encoder, where the cell has one (its own rate).
+        self.encoder_grid = (DueGrid(dt_ns, encoder_period_ns) if encoder_period_ns else None)
         self._start_time = 0.0
         self.inputs = Inputs(node, layout, arms, sim, synchronous, drive_lead, speed_joints,
                              self.now, drive)
@@ -343,8 +346,9 @@ class Observer:
             before, after = self._step(self.steps_per_tick)
             self._start_time = after * self.dt_ns * 1e-9
             self.state_grid.start_after(after * self.dt_ns)
-            if self.camera_grid:
-                self.camera_grid.start_after(after * self.dt_ns)
+            for grid in (self.camera_grid, self.encoder_grid):
+                if grid:
+                    grid.start_after(after * self.dt_ns)
             self._wait_states(after * self.dt_ns, first=True)
             return self._observe(after * self.dt_ns, [])
         end = time.monotonic() + self.service_timeout
@@ -388,6 +392,9 @@ class Observer:
         frames = self.camera_grid.advance(before, after) if self.camera_grid else []
         if state_due:
             self._wait_states(state_due[-1])
+        belt_due = self.encoder_grid.advance(before, after) if self.encoder_grid else []
+        if belt_due:
+            self._wait_belt(belt_due[-1])
         self._wait_frames(frames)
         return self._observe(after * self.dt_ns, frames)
 
@@ -411,10 +418,10 @@ class Observer:
         def ready() -> bool:
             stamps = [j[0] for j in heard.joints.values()] + [g[0] for g in heard.grip.values()]
             stamps += [o[0] for o in heard.odom.values()]
-            stamps += [heard.belt_stamp] if self.layout.belt_encoder > 0.0 else []
-            if len(stamps) < (2 * len(self.layout.robots) + len(self.layout.transports)
-                              + (self.layout.belt_encoder > 0.0)):
+            if len(stamps) < 2 * len(self.layout.robots) + len(self.layout.transports):
                 return False
+            if first and self.encoder_grid and heard.belt_stamp < 0:
+                return False            # (its first reading, at the first step)
             return all(s >= stamp_ns for s in stamps) if first else \
                 all(s == stamp_ns for s in stamps)
         with self.inputs.lock:
@@ -425,6 +432,14 @@ class Observer:
                         'belt encoder': self.inputs.belt_stamp}
                 raise NodeTimeout(f'no states from the simulator for t = {stamp_ns * 1e-9:.3f} s'
                                   f' (latest stamps [ns]: {have})')
+
+    def _wait_belt(self, stamp_ns: int) -> None:
+        """Until the encoder's reading stamped ``stamp_ns`` is in."""
+        with self.inputs.lock:
+            if not self._wait(lambda: self.inputs.belt_stamp == stamp_ns, self.service_timeout):
+                raise NodeTimeout(f'no belt encoder reading from the simulator for t = '
+                                  f'{stamp_ns * 1e-9:.3f} s (latest: '
+                                  f'{self.inputs.belt_stamp * 1e-9:.3f} s)')
 
     def _wait_frames(self, frames: Sequence[int]) -> None:
         for stamp in frames:

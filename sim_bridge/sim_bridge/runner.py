@@ -54,8 +54,7 @@ class StepSink(Protocol):
         """The world's props (materials) are due; called only for worlds that have them."""
 
     def on_belt(self, time_ns: int) -> None:
-        """The conveyor's drive reports, if the world has one (with the robots' states,
-        before them)."""
+        """The conveyor's drive reports, if the world has one (on its encoder's own grid)."""
 
     def on_trajectory_aborted(self, robot: str, controller: str, reason: str) -> None:
         """A joint group stopped following its trajectory and holds where it is."""
@@ -190,6 +189,11 @@ class SimRunner:
         self._camera_period_ns: List[int] = [
             max(dt_ns, round(1e9 / cam.config.rate)) for cam in world.cameras]
         self._camera_next_ns: List[int] = [0 for _ in world.cameras]
+        # The conveyor drive's encoder, on its own grid (0: none).
+        encoder = world.conveyor.config.encoder if world.conveyor is not None else None
+        self._encoder_period_ns = (max(dt_ns, round(1e9 / encoder.rate))
+                                   if encoder is not None else 0)
+        self._encoder_next_ns = 0
 
     def applied(self, robot: str) -> Twist3:
         """The command a driven robot's wheels follow now."""
@@ -357,10 +361,12 @@ class SimRunner:
                 self._state_next_ns = next_on_grid(t_ns, self.state_period_ns)
                 world.check_free_bodies(pose=True)
                 self._report_lost(sink)
-                sink.on_belt(t_ns)
                 for name in world.robots:
                     self.check_robot(name, sink)
                     sink.on_state(name, t_ns)
+            if self._encoder_period_ns and t_ns >= self._encoder_next_ns:
+                self._encoder_next_ns = next_on_grid(t_ns, self._encoder_period_ns)
+                sink.on_belt(t_ns)
             if world.source is not None and t_ns >= self._world_state_next_ns:
                 self._world_state_next_ns = next_on_grid(t_ns, self.world_state_period_ns)
                 sink.on_world_state(t_ns)

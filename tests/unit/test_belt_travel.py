@@ -8,6 +8,9 @@ import pytest
 from controllers.belt_speed import BeltSpeedEstimate
 from controllers.belt_travel import SPEED_WINDOW_S, BeltTravel
 from sim_bridge.belt_encoder import BeltEncoder
+from world_description.errors import WorldConfigError
+from world_description.resources import resolve_resource
+from world_description.world_loading import load_world
 from world_description.world_schema import BeltEncoderConfig
 
 
@@ -82,3 +85,36 @@ def test_the_estimate_weighs_the_encoder_with_the_tracks_by_how_well_each_is_kno
     for k in range(60, 80):
         later.sighted(1, k / 15.0, 0.11 * k / 15.0)
     assert later.update(80 / 15.0).source == 'vision'
+
+
+def test_carried_between_readings_at_a_wrong_speed_is_made_good_at_the_next_reading():
+    """Read at 10 Hz and carried at 30 Hz with a speed 20 % high, the travel between readings
+    is reckoned, and each reading makes good what that got wrong (a shortfall is held back,
+    never carried backwards): the total is the counted travel at every reading."""
+    belt, true_speed, always = BeltTravel(1e-4), 0.1, (lambda t0, t1: max(0.0, t1 - t0))
+    total, t_prev = 0.0, 0.0
+    belt.read(0.0, 0.0)
+    for k in range(1, 91):                         # 3 s of decisions at 30 Hz
+        t = k / 30.0
+        if k % 3 == 0:                             # the drive's readings, 10 Hz
+            belt.read(t, math.floor(true_speed * t / 1e-4) * 1e-4)
+        step = belt.carry(t_prev, t, 1.2 * true_speed, always)
+        assert step >= 0.0
+        total, t_prev = total + step, t
+        if k % 3 == 0:
+            assert total == pytest.approx(belt.at(t), abs=1e-9)
+        else:                                      # off by the reckoning since the reading
+            assert abs(total - true_speed * t) <= 0.2 * true_speed * 0.1 + 2e-4
+
+
+def test_a_world_gives_its_encoder_a_rate_of_its_own_and_a_bad_one_is_refused(tmp_path):
+    base = resolve_resource('package://world_description/worlds/pipeline_cell.yaml')
+    for rate, ok in ((25.0, True), (None, True), (0.0, False), ('fast', False)):
+        encoder = {'resolution': 1e-4} if rate is None else {'resolution': 1e-4, 'rate': rate}
+        path = tmp_path / 'w.yaml'
+        path.write_text(f'extends: {base}\nconveyor: {{encoder: {encoder!r}}}\n')
+        if ok:
+            assert load_world(path).conveyor.encoder.rate == (rate or 10.0)
+        else:
+            with pytest.raises(WorldConfigError, match='conveyor.encoder'):
+                load_world(path)

@@ -58,7 +58,7 @@ class FakeCell:
         # The belt runs at its set speed times this (at the simulated time): it drifts.
         self.belt_drift = belt_drift
         # The conveyor drive's encoder: its resolution (0: none), and the belt's travel.
-        self.encoder, self.travel = encoder, 0.0
+        self.encoder, self.travel, self.next_count = encoder, 0.0, 0.0
         # Materials: id -> [x, y, colour, on_belt]
         self.materials = {i + 1: [-1.15 - i * gap, layout.belt_y, c, True]
                           for i, c in enumerate(colors)}
@@ -276,8 +276,11 @@ class FakeCell:
         arms = {arm: ArmReading(self.q[arm].copy(), np.full(len(self.q[arm]),
                                                             0.5 if self.moving[arm] else 0.0),
                                 self.holding[arm], self.armed[arm]) for arm in self.q}
-        counts = ([(self.now, math.floor(self.travel / self.encoder) * self.encoder)]
-                  if self.encoder else [])
+        # (The drive reports at 10 Hz, as the simulator's does by default.)
+        counts = []
+        if self.encoder and self.now >= self.next_count - 1e-9:
+            counts = [(self.now, math.floor(self.travel / self.encoder) * self.encoder)]
+            self.next_count = math.floor(self.now * 10.0 + 1e-6) / 10.0 + 0.1
         return Observation(self.now, arms, {b: BaseReading(tuple(self.poses[b]), velocities[b])
                                             for b in self.bases}, dets, counts)
 
@@ -1198,8 +1201,8 @@ def test_where_the_conveyor_has_an_encoder_the_cell_carries_each_material_by_its
     """A belt that wanders 15 % about its set point (as the perturbed world's): from the
     tracks' speed alone, where the cell believes a material is drifts from where it is (11 mm
     before its pick here). Where the conveyor's drive has an encoder, the cell carries each
-    material by the counts since it saw it: within a count (0.1 mm) of where it is at every
-    step; and the speed it plans with is the drive's and the tracks' together."""
+    material by the counts since it saw it: within three counts (0.3 mm) of where it is at
+    every step; and the speed it plans with is the drive's and the tracks' together."""
     from coordinator.pipeline.model import MaterialStatus
 
     class Watched(FakeCell):
@@ -1222,6 +1225,8 @@ def test_where_the_conveyor_has_an_encoder_the_cell_carries_each_material_by_its
     sources = {re.search(r'\((vision|encoder|set point)', e.detail).group(1)
                for e in kinds(cell, 'tracking')}
     if encoder:
-        assert max(errors) <= 2 * encoder and sources == {'encoder'}
+        # (Read at 10 Hz: between two readings the belt is reckoned at the sensed speed, made
+        # good at the next one.)
+        assert max(errors) <= 3 * encoder and sources == {'encoder'}
     else:
         assert max(errors) > 0.005 and sources == {'vision'}

@@ -21,10 +21,11 @@ def conveyor_section(r: Reader, item: Any) -> ConveyorConfig:
     encoder = None
     if item.get('encoder') is not None:
         enc, at = item['encoder'], f'{where}.encoder'
-        r.only(enc, at, {'resolution', 'noise'})
+        r.only(enc, at, {'resolution', 'noise', 'rate'})
         encoder = BeltEncoderConfig(
             resolution=r.number(enc, 'resolution', at, default=1.0e-4, lo=1.0e-6, hi=0.01),
-            noise=r.number(enc, 'noise', at, default=0.0, lo=0.0, hi=0.1))
+            noise=r.number(enc, 'noise', at, default=0.0, lo=0.0, hi=0.1),
+            rate=r.number(enc, 'rate', at, default=10.0, lo=0.5, hi=1000.0))
     return ConveyorConfig(position=r.vec3(item, 'position', where),
                           length=r.number(item, 'length', where, lo=0.1, hi=50.0),
                           width=r.number(item, 'width', where, lo=0.02, hi=5.0),

@@ -260,7 +260,9 @@ class BeltModel:
             speed = self.encoder.speed(self.running_time)
             if speed is not None:
                 self.estimate.measured(self.running_clock(self.encoder.newest), *speed)
-        travel = carried(self.encoder, self._time, now, self.sensed.speed, self.running_time)
+        travel = (self.encoder.carry(self._time, now, self.sensed.speed, self.running_time)
+                  if self.encoder is not None and now > self._time else
+                  carried(self.encoder, self._time, now, self.sensed.speed, self.running_time))
         self._time = max(self._time, now)
         if travel <= 0.0:
             return
