@@ -354,27 +354,32 @@ class SimRunner:
             closest = self.clearance.update(t_ns * 1e-9)
             if closest is not None:
                 sink.on_bases_closest(closest)
-            if t_ns >= self._clock_next_ns:
-                self._clock_next_ns = next_on_grid(t_ns, self.clock_period_ns)
-                self.tick_clock(sink)
-            if t_ns >= self._state_next_ns:
-                self._state_next_ns = next_on_grid(t_ns, self.state_period_ns)
-                world.check_free_bodies(pose=True)
-                self._report_lost(sink)
-                for name in world.robots:
-                    self.check_robot(name, sink)
-                    sink.on_state(name, t_ns)
-            if self._encoder_period_ns and t_ns >= self._encoder_next_ns:
-                self._encoder_next_ns = next_on_grid(t_ns, self._encoder_period_ns)
-                sink.on_belt(t_ns)
-            if world.source is not None and t_ns >= self._world_state_next_ns:
-                self._world_state_next_ns = next_on_grid(t_ns, self.world_state_period_ns)
-                sink.on_world_state(t_ns)
-            for i, cam in enumerate(world.cameras):
-                if t_ns >= self._camera_next_ns[i]:
-                    # Keep the camera's own grid of due times, skipping frames nobody wanted.
-                    self._camera_next_ns[i] = next_on_grid(t_ns, self._camera_period_ns[i])
-                    sink.on_camera_due(i, t_ns, functools.partial(world.render, cam))
+            self._outputs_due(t_ns, sink)
+
+    def _outputs_due(self, t_ns: int, sink: StepSink) -> None:
+        """After a step at ``t_ns``: the periodic outputs that fall due, each on its grid."""
+        world = self.world
+        if t_ns >= self._clock_next_ns:
+            self._clock_next_ns = next_on_grid(t_ns, self.clock_period_ns)
+            self.tick_clock(sink)
+        if t_ns >= self._state_next_ns:
+            self._state_next_ns = next_on_grid(t_ns, self.state_period_ns)
+            world.check_free_bodies(pose=True)
+            self._report_lost(sink)
+            for name in world.robots:
+                self.check_robot(name, sink)
+                sink.on_state(name, t_ns)
+        if self._encoder_period_ns and t_ns >= self._encoder_next_ns:
+            self._encoder_next_ns = next_on_grid(t_ns, self._encoder_period_ns)
+            sink.on_belt(t_ns)
+        if world.source is not None and t_ns >= self._world_state_next_ns:
+            self._world_state_next_ns = next_on_grid(t_ns, self.world_state_period_ns)
+            sink.on_world_state(t_ns)
+        for i, cam in enumerate(world.cameras):
+            if t_ns >= self._camera_next_ns[i]:
+                # Keep the camera's own grid of due times, skipping frames nobody wanted.
+                self._camera_next_ns[i] = next_on_grid(t_ns, self._camera_period_ns[i])
+                sink.on_camera_due(i, t_ns, functools.partial(world.render, cam))
 
     def _check_bases(self, sink: StepSink) -> None:
         """After every step: no body is stepped on with a state that is not finite. The free
