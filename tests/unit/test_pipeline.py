@@ -654,6 +654,40 @@ def test_in_real_time_a_missed_grasp_stops_the_arm_from_its_running_motion():
     assert min(np.max(np.abs(q[1] - cut[-1][1])) for q in whole) < 0.01
 
 
+def test_a_pick_that_can_no_longer_meet_its_material_is_called_off_at_once(monkeypatch):
+    """Re-aiming finds no motion that meets the material, and the pick would meet it 50 mm off
+    its centre: the arm stops where it is (at rest, from its running motion), the cup off, and
+    the attempt is judged missed then, not at the lift point a second or more later; the
+    material is picked on the next attempt."""
+    from coordinator.pipeline.model import REAIM_LEAD_S
+    from coordinator.pipeline.pick_planner import PickPlanner
+    told = []
+    reaim = PickPlanner.reaim
+
+    def cannot(self, obs, pick, running):
+        t1 = self.arm.clock.now + self.s.plan_latency
+        if (pick.m.id == 3 and not told
+                and pick.reaim_from <= t1 < pick.hover_at - REAIM_LEAD_S):
+            told.append((obs.now, pick.contact))
+            pick.reaimed = 0.05
+            return 'not re-aimed (the arm cannot meet the material in time): the pick goes on'
+        return reaim(self, obs, pick, running)
+    monkeypatch.setattr(PickPlanner, 'reaim', cannot)
+    cell = FakeCell(cell_layout(), PAPER)
+    p = run(cell)
+    assert p.result.status == 'completed'
+    (when, contact), = told
+    called = [e for e in kinds(cell, 'replanned') if e.material == 3]
+    assert [e.detail for e in called] == [
+        'not re-aimed (the arm cannot meet the material in time): called off']
+    missed = [e for e in kinds(cell, 'grasp_missed') if e.material == 3]
+    assert [e.detail for e in missed] == ['attempt 1']
+    assert missed[0].time < contact          # judged before the cup would have come down
+    arm, sent_at, start, stop = [c for c in cell.continuations if c[1] == when][0]
+    assert arm == 'zu12' and not np.any(stop[-1][2]) and stop[-1][0] < contact
+    assert [e.detail for e in kinds(cell, 'picked') if e.material == 3] == ['attempt 2']
+
+
 @pytest.mark.parametrize('drift', [
     pytest.param(lambda t: 1.15, id='15 % fast'), pytest.param(lambda t: 0.85, id='15 % slow'),
     # (As the perturbed world drifts it: two incommensurate sines, up to 15 %, period 20 s.)

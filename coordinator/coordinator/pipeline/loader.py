@@ -22,6 +22,7 @@ from controllers.time_optimal import (
 from coordinator.pipeline.machine import Machine, transition_table
 from coordinator.pipeline.materials import BeltModel, MaterialBook
 from coordinator.pipeline.model import (
+    CALL_OFF_M,
     FOLLOW_TOLERANCE,
     MAX_REPLANS,
     PICK_LEAD_S,
@@ -299,6 +300,16 @@ class Loader(Machine):
         new = self.planner.reaim(obs, pick, self.arm.motion.points)
         if isinstance(new, str):
             pick.reaim_from = math.inf          # (said once: the pick goes on as it was)
+            if abs(pick.reaimed) > CALL_OFF_M and self.arm.stop(now + self.s.plan_latency):
+                # Called off: the arm stops where it is, the cup off; once still, the attempt
+                # is judged missed (_picked_or_not: another, from what the camera sees from
+                # now on, or at rest at the end stop), not 1.5 s later at the lift point.
+                self.ports.grip(self.arm.name, False)
+                self.book.coming_down(m, math.inf)
+                self._ahead = self._pick_plan = None
+                self._leave = math.inf
+                self.deadline = self.arm.motion.end + self.s.settle_margin
+                new = new.replace('the pick goes on', 'called off')
             self.log.event(now, EventKind.REPLANNED, self.arm.name, m, new)
         elif new is not None:
             self._ahead = self.planner.onward(obs, new)

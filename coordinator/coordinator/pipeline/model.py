@@ -41,6 +41,11 @@ REAIM_TOLERANCE_M = 0.003
 # the camera's view above the material and hides part of it, and what the camera sees of it is
 # not used (its centre seen up to 20 mm off, in the perturbed sweep) [s].
 REAIM_LEAD_S = 0.6
+# A pick that cannot be re-aimed, and would meet its material farther than this from the centre
+# of its top face, is called off at once (the arm stopped where it is, the cup switched off):
+# it would miss at the lift point otherwise, a second and a half later (the cup seals on the
+# face it comes down on: half a 50 mm cube's edge, less a margin) [m].
+CALL_OFF_M = 0.02
 # A pick whose joint path is out of the limits is met this much later on the track [s].
 PICK_REPLAN_STEP_S = 0.3
 # Real time: a pick allows for this much more than the longest plan of one has taken (the next

@@ -260,6 +260,7 @@ class PickPlanner:
                        moving=after[0], reaimed=off)
         why = self.meet(obs, new)
         if why:
+            pick.reaimed = off                  # (how far off the pick goes on)
             return (f'not re-aimed ({"it leaves the belt first" if why == LEAVE else why}): '
                     f'the pick goes on, {off * 1000:+.0f} mm off')
         return new

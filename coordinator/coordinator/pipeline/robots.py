@@ -116,6 +116,21 @@ class Arm:
         self.ports.trajectory(self.name, motion.points, now, continuing=True)
         self._motion = motion
 
+    def stop(self, t: float) -> bool:
+        """Stop the running motion as soon as the joints allow, from its first sample after
+        ``t`` (the plan latency ahead: the controller joins it there), at rest where it comes
+        to a stop; False if the motion has no sample left after ``t`` (it ends anyway)."""
+        after = [p for p in self.motion.points if p[0] > t] if self.has_motion else []
+        if not after:
+            return False
+        t1, q1, v1, a1 = after[0]
+        # (Where each joint comes to rest braking at its acceleration limit: planned back to
+        # q1 instead, it would overshoot and return.)
+        brake = q1 + v1 * np.abs(v1) / (2.0 * self.limits.acceleration)
+        stop = plan(q1, [Waypoint(brake)], self.limits, t1, v0=v1, a0=a1)
+        self.send_continuing(self.clock.now, t1, stop.points())
+        return True
+
     def hold(self, q: np.ndarray) -> None:
         """Hold still at ``q`` from the plan latency on (replacing a motion not yet begun)."""
         self.send([(self.clock.now + self.s.plan_latency, q, np.zeros_like(q),
