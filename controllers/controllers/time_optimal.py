@@ -235,6 +235,16 @@ def plan(q0: Vector, waypoints: Sequence[Waypoint], limits: JointLimits,
     return Plan(samples, arrivals)
 
 
+def brake(q: Vector, v: Vector, a: Vector, limits: JointLimits, t: float) -> Plan:
+    """From a moving state (``q``, ``v``, ``a`` at ``t``) to rest as soon as the joints allow,
+    where each comes to rest braking at its acceleration limit, reached at its jerk limit
+    (planned back to ``q``, or short of that, the joints would overshoot and return)."""
+    q0, v0 = np.asarray(q, float), np.asarray(v, float)
+    acc, jerk = limits.acceleration, limits.jerk
+    stop = q0 + v0 * (np.abs(v0) / (2.0 * acc) + acc / (2.0 * jerk))
+    return plan(q0, [Waypoint(stop)], limits, t, v0=v0, a0=np.asarray(a, float))
+
+
 def _checked(q0: np.ndarray, waypoints: Sequence[Waypoint], limits: JointLimits
              ) -> Tuple[List[np.ndarray], List[Optional[np.ndarray]],
                         List[Optional[np.ndarray]]]:

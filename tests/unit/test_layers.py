@@ -195,8 +195,10 @@ def test_no_module_or_class_grows_past_the_houses_sizes():
 # issue 63 closed the loop: the belt's sensed speed, a pick re-aimed until contact, a missed
 # material picked at rest; the estimator itself went to the ROS-free floor, controllers. Then
 # 4150: the conveyor encoder's input (the counts themselves in controllers.belt_travel) and the
-# unload that finds the material's top with its fingers.)
-CONTROLLER_MAX_LINES = 4150
+# unload that finds the material's top with its fingers. Then 4200: lock-step waits for the
+# encoder on its own grid, and a pick that can no longer meet its material is called off; the
+# braking itself is controllers.time_optimal.brake.)
+CONTROLLER_MAX_LINES = 4200
 
 
 def test_the_controller_package_stays_under_its_size():

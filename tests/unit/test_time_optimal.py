@@ -189,6 +189,21 @@ def test_the_pick_path_moves_with_the_material_while_on_it():
     assert lift == pytest.approx(track(5.15) + np.array([0.12 * 0.15, 0.0, 0.025 + 0.12]))
 
 
+def test_a_brake_comes_to_rest_from_a_moving_state_without_going_back():
+    from controllers.time_optimal import brake
+    v = np.array([1.0, -0.5, 0.0])
+    motion = brake(np.zeros(3), v, np.zeros(3), LIMITS, 3.0)
+    points = motion.points()
+    assert points[0][0] == 3.0 and not np.any(points[-1][2])
+    # Each joint ends where it brakes to, hardly coming back (the joints end together: one
+    # braked more gently than it could may come back by a fraction of a milliradian).
+    qs = np.array([p[1] for p in points])
+    assert np.all(np.diff(qs[:, 0]) >= -1e-3) and np.all(np.diff(qs[:, 1]) <= 1e-3)
+    assert np.max(qs[:, 0]) - qs[-1, 0] < 1e-3 and qs[-1, 1] - np.min(qs[:, 1]) < 1e-3
+    acc, jerk = LIMITS.acceleration, LIMITS.jerk
+    assert qs[-1] == pytest.approx(v * (np.abs(v) / (2 * acc) + acc / (2 * jerk)), abs=1e-6)
+
+
 def test_the_lift_point_stays_behind_the_end_stop_that_holds_the_material():
     """Met just before an end stop on a fast belt, the lift point is no further ahead than
     where the stop holds the material: half the lift's travel would put it past the stop's

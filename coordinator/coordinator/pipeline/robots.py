@@ -24,7 +24,7 @@ from controllers import youbot_arm, zu12_arm
 from controllers.arrays import Vector
 from controllers.bezier import BezierPath, Pose2D, key_poses_between
 from controllers.path_follower import PathFollower, PDGains, TurnLimits
-from controllers.time_optimal import SAMPLE_PERIOD_S, JointLimits, Waypoint, plan
+from controllers.time_optimal import SAMPLE_PERIOD_S, JointLimits, Waypoint, brake, plan
 from coordinator.pipeline.clock import Clock
 from coordinator.pipeline.model import (
     DOWN,
@@ -124,11 +124,7 @@ class Arm:
         if not after:
             return False
         t1, q1, v1, a1 = after[0]
-        # (Where each joint comes to rest braking at its acceleration limit: planned back to
-        # q1 instead, it would overshoot and return.)
-        brake = q1 + v1 * np.abs(v1) / (2.0 * self.limits.acceleration)
-        stop = plan(q1, [Waypoint(brake)], self.limits, t1, v0=v1, a0=a1)
-        self.send_continuing(self.clock.now, t1, stop.points())
+        self.send_continuing(self.clock.now, t1, brake(q1, v1, a1, self.limits, t1).points())
         return True
 
     def hold(self, q: np.ndarray) -> None:
