@@ -60,15 +60,28 @@ DROP_REACH_TOLERANCE_M = 0.05
 
 
 def clear_of_the_plate(points: Points, others: Sequence[Tuple[float, float, float]],
-                       size: float, offset: Vector = (0.0, 0.0), steps: int = 8) -> bool:
+                       size: float, offset: Vector = (0.0, 0.0), steps: int = 8,
+                       off_its_slot: bool = False) -> bool:
     """Whether a youBot motion (samples of time, positions, velocities, accelerations) keeps
     the material of edge ``size`` it holds (gripped by its top face, its centre ``offset``
     from the tool in x and y) ``PLATE_CLEARANCE_M`` over each of the plate's ``others`` (slot
     x, y and edge) wherever it passes over one: along the path the controller follows between
-    the samples (cubic in position and velocity)."""
-    if not others:
+    the samples (cubic in position and velocity). ``off_its_slot``: the motion starts with the
+    material standing on its slot (the lift off the plate)."""
+    if not others or not points:
         return True
     shift = np.asarray(offset, float)
+    # Over a neighbour: nearer than their half edges and 5 mm, centre to centre; or, lifted off
+    # its slot beside one nearer than that (a cube 10 mm taller than loaded beside its
+    # neighbour), nearer than it starts (less a millimetre): it lifts straight up beside it
+    # (judged over it from the start, such a cube had no motion off the plate).
+    start = YOUBOT_FK.fk(points[0][1])[:3, 3][:2] + shift
+    reaches = []
+    for sx, sy, other in others:
+        reach = (size + other) / 2 + 0.005
+        apart = max(abs(start[0] - sx), abs(start[1] - sy))
+        beside = off_its_slot and (size + other) / 2 <= apart < reach
+        reaches.append((sx, sy, other, apart - 0.001 if beside else reach))
     for (t0, q0, v0, _), (t1, q1, v1, _) in zip(points, points[1:]):
         h = t1 - t0
         for x in np.linspace(0.0, 1.0, steps, endpoint=False):
@@ -77,9 +90,7 @@ def clear_of_the_plate(points: Points, others: Sequence[Tuple[float, float, floa
             tool = YOUBOT_FK.fk(q)[:3, 3]
             px, py = tool[:2] + shift
             bottom = tool[2] - YOUBOT_GRASP_STANDOFF_M - size
-            for sx, sy, other in others:
-                # Over it: the two nearer than their half edges and 5 mm, centre to centre.
-                reach = (size + other) / 2 + 0.005
+            for sx, sy, other, reach in reaches:
                 if (bottom < PLATE_TOP_IN_BASE_M + other + PLATE_CLEARANCE_M
                         and abs(px - sx) < reach and abs(py - sy) < reach):
                     return False

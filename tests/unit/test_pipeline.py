@@ -1209,6 +1209,39 @@ def test_a_material_held_over_the_plate_clears_each_neighbour_by_its_own_height(
     assert clear_of_the_plate(still, [(sx - 0.064, sy, 0.06)], held)
 
 
+def test_a_material_that_stands_close_beside_a_neighbour_lifts_straight_up_past_it():
+    """A 60 mm cube (a perturbed one, 10 mm taller than loaded) stands 60 mm centre to centre
+    from a 55 mm neighbour: nearer than their half edges and the 5 mm margin, so it was judged
+    over its neighbour from its start, and no motion off the plate was found (4 materials left
+    on the plate in a trial of the screening). Lifted straight up it stays beside it; moved
+    towards it before it is clear of its top, it is over it."""
+    from cell_layout.layout import PLATE_SLOTS_IN_BASE_M, PLATE_TOP_IN_BASE_M
+    from cell_layout.reach import youbot_tool_quaternion
+    from coordinator.pipeline import YOUBOT_GRASP_STANDOFF_M, clear_of_the_plate
+    ports = _YoubotIK()
+    sx, sy = PLATE_SLOTS_IN_BASE_M[2]
+    held, other = 0.06, 0.055
+
+    def at(dx, rise):
+        tool = np.array([sx + dx, sy, PLATE_TOP_IN_BASE_M + held + YOUBOT_GRASP_STANDOFF_M
+                         + rise])
+        return next(q for q, _ in (ports.solve('youbot', tool, youbot_tool_quaternion(
+            tool, math.radians(tilt)), 'base_link', np.zeros(5)) for tilt in range(0, 90, 10))
+            if q is not None)
+
+    def motion(*qs):
+        return [(0.1 * k, q, np.zeros(5), np.zeros(5)) for k, q in enumerate(qs)]
+    neighbour = [(sx + 0.060, sy, other)]
+    up = motion(at(0.0, 0.0), at(0.0, 0.03), at(0.0, 0.07))
+    assert clear_of_the_plate(up, neighbour, held, off_its_slot=True)
+    assert not clear_of_the_plate(up, neighbour, held)       # (not off its slot: the margin)
+    towards = motion(at(0.0, 0.0), at(0.004, 0.02), at(0.004, 0.07))
+    assert not clear_of_the_plate(towards, neighbour, held, off_its_slot=True)
+    # (Farther apart than the margin, the margin holds as before.)
+    assert not clear_of_the_plate(motion(at(0.0, 0.0), at(0.004, 0.02)),
+                                  [(sx + 0.066, sy, other)], held, off_its_slot=True)
+
+
 def test_odometry_is_turned_into_the_cells_frame_from_the_bases_start_pose():
     """The youBot's odom frame is its start pose in the cell (REP-105): a pose in it, and its
     twist in the base's own frame, become a pose and a velocity along the cell's axes (what

@@ -196,7 +196,8 @@ class UnloadPlanner:
                     continue
                 within = all(np.all(np.abs(v) <= limits.velocity) for _, _, v, _ in points)
                 if (within and (best is None or points[-1][0] < best[-1][0])
-                        and clear_of_the_plate(points, others, m.size, offset)):
+                        and clear_of_the_plate(points, others, m.size, offset,
+                                               off_its_slot=True)):
                     best = points
             if best is not None:
                 return best
