@@ -38,6 +38,7 @@ def rows(since: float, results: Path = RESULTS) -> List[Row]:
     recorder = _load('bench_recorder.json', since, results)
     kinematics = _load('bench_kinematics.json', since, results)
     closed = _load('bench_closed_loop.json', since, results)
+    laser = _load('bench_laser.json', since, results)
     return [
         _row('CPU per simulated second, the nodes measured when filed: cut', '>= 3x', pipeline,
              lambda d: d['cpu_cut_vs_filed'], '{:.2f}x', lambda v: v >= 3.0),
@@ -69,6 +70,8 @@ def rows(since: float, results: Path = RESULTS) -> List[Row]:
         # (Issue 63: the closed loop against the open loop's last revision, side by side.)
         _row('closed loop / open loop, CPU per simulated second (perturbed cell)', '<= 1.05',
              closed, lambda d: d['ratio'], '{:.3f}', lambda v: v <= 1.05),
+        _row("a youBot's laser scanner and localization, CPU per simulated second", '<= 1.05',
+             laser, lambda d: d['ratio'], '{:.3f}', lambda v: v <= 1.05),
     ]
 
 

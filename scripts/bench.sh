@@ -17,5 +17,7 @@ python "$ROOT/bench/bench_requests.py"
 python "$ROOT/bench/bench_joint_limits.py" --cells 12 --examples
 # The closed loop's CPU against the open loop's last revision, side by side (issue 63).
 python "$ROOT/bench/bench_closed_loop.py"
+# What the youBot's laser scanner and its localization cost, with and without it (issue 63).
+python "$ROOT/bench/bench_laser.py"
 # The issue-12 goals, from the figures of this run only.
 python "$ROOT/bench/goals.py" --since "$START"

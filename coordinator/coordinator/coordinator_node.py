@@ -36,6 +36,7 @@ from sim_interfaces.msg import PipelineState
 
 from cell_layout.joint_speeds import speed_limits
 from cell_layout.layout import CellLayout, LayoutError
+from cell_layout.scan_map import localizers
 from cell_layout.world_layout import layout_from_world, with_extra_materials
 from controllers.lockstep import CommandCounter
 from coordinator.observer import Observer
@@ -92,6 +93,9 @@ PARAMS = (
           'has failed', 0.5, 120.0),
     Param('result_file', '', 'Write the result (JSON) here at the end'),
     Param('progress_file', '', 'Write the progress (JSON) here once per simulated second'),
+    Param('odometry_drift', 0.05, "How far a youBot's odometry may drift, per metre driven and "
+          'per radian turned, as its laser localization assumes (a youBot with a laser '
+          'scanner)', 0.001, 0.5),
     Param('scenario_seed', -1, 'Recorded with the result (the simulator draws the scenario)'),
     Param('extra_materials', RosParameter.Type.STRING_ARRAY, 'Materials in the batch beyond the '
           "world file's, by class (one entry each: materials spawned through the simulator's "
@@ -177,7 +181,11 @@ class CoordinatorNode(Node):
             round(1e9 / encoder.rate) if encoder is not None else None, self.service_timeout,
             float(p['drive_lead']), commands,
             {arm: speed_limits(self.world, arm) for arm in arms},
-            drive=lambda base, vx, vy, wz: self.ports.drive(base, vx, vy, wz))
+            drive=lambda base, vx, vy, wz: self.ports.drive(base, vx, vy, wz),
+            localizers={base: (loc, round(1e9 / rate))
+                        for base, (loc, rate) in localizers(self.world, {
+                            r.name: self.world.robot(r.name).pose.z
+                            for r in layout.transports}, float(p['odometry_drift'])).items()})
         self.ports = RosPorts(self, layout, sim, self.settings, self.synchronous,
                               self.service_timeout, commands, now=self.observer.now,
                               set_follower=self.observer.inputs.set_follower,

@@ -9,7 +9,8 @@ share a frame:
 - ``<prefix>odom`` -> ``<prefix>base_link``: where a mobile robot's base is (moving);
 - a URDF joint's parent link -> child link: moving for a movable joint, static for a fixed one
   (a robot-mounted camera's optical frame is such a link);
-- ``world`` -> a fixed camera's optical frame (static; z forward, x right, y down).
+- ``world`` -> a fixed camera's optical frame (static; z forward, x right, y down);
+- ``<prefix>base_link`` -> ``<prefix>laser``: a base's laser scanner (static).
 
 Transforms between link frames are taken from PyBullet's link frames (URDF frames, not the
 inertial frames PyBullet reports for bodies and uses for joint origins), and composed in double
@@ -132,16 +133,27 @@ def camera_anchor(camera: SimCamera) -> Optional[FrameTransform]:
                           matrix_to_quaternion(look_at_rotation(c.position, c.look_at)))
 
 
+def laser_mount(robot: SimRobot) -> FrameTransform:
+    """``<prefix>base_link`` -> ``<prefix>laser``: where a robot's laser scanner sits."""
+    c, prefix = robot.config.laser, robot.config.frame_prefix
+    assert c is not None
+    half = 0.5 * c.yaw
+    return FrameTransform(prefix + 'base_link', prefix + 'laser', (c.x, c.y, c.z),
+                          (0.0, 0.0, float(np.sin(half)), float(np.cos(half))))
+
+
 class WorldFrames:
     """Every robot's frames and the fixed cameras', for /tf and /tf_static."""
 
     def __init__(self, world: SimWorld) -> None:
         self.robots = {name: RobotFrames(robot) for name, robot in world.robots.items()}
         self._cameras = [t for t in (camera_anchor(c) for c in world.cameras) if t is not None]
+        self._lasers = [laser_mount(robot) for robot in world.robots.values()
+                        if robot.config.laser is not None]
 
     def static(self) -> List[FrameTransform]:
         """Everything that never moves: what /tf_static carries."""
-        out = list(self._cameras)
+        out = list(self._cameras) + self._lasers
         for frames in self.robots.values():
             out.append(frames.anchor())
             out.extend(frames.fixed_links())

@@ -56,6 +56,9 @@ class StepSink(Protocol):
     def on_belt(self, time_ns: int) -> None:
         """The conveyor's drive reports, if the world has one (on its encoder's own grid)."""
 
+    def on_scan(self, robot: str, time_ns: int) -> None:
+        """A robot's laser scanner has a scan due (on its own grid)."""
+
     def on_trajectory_aborted(self, robot: str, controller: str, reason: str) -> None:
         """A joint group stopped following its trajectory and holds where it is."""
 
@@ -100,6 +103,9 @@ class NullSink:
         pass
 
     def on_belt(self, time_ns: int) -> None:
+        pass
+
+    def on_scan(self, robot: str, time_ns: int) -> None:
         pass
 
     def on_trajectory_aborted(self, robot: str, controller: str, reason: str) -> None:
@@ -194,6 +200,10 @@ class SimRunner:
         self._encoder_period_ns = (max(dt_ns, round(1e9 / encoder.rate))
                                    if encoder is not None else 0)
         self._encoder_next_ns = 0
+        # Each laser scanner, on its own grid: robot: [period, next due] [ns].
+        self._laser_due = {name: [max(dt_ns, round(1e9 / robot.config.laser.rate)), 0]
+                           for name, robot in world.robots.items()
+                           if robot.config.laser is not None}
 
     def applied(self, robot: str) -> Twist3:
         """The command a driven robot's wheels follow now."""
@@ -372,6 +382,10 @@ class SimRunner:
         if self._encoder_period_ns and t_ns >= self._encoder_next_ns:
             self._encoder_next_ns = next_on_grid(t_ns, self._encoder_period_ns)
             sink.on_belt(t_ns)
+        for name, due in self._laser_due.items():
+            if t_ns >= due[1]:
+                due[1] = next_on_grid(t_ns, due[0])
+                sink.on_scan(name, t_ns)
         if world.source is not None and t_ns >= self._world_state_next_ns:
             self._world_state_next_ns = next_on_grid(t_ns, self.world_state_period_ns)
             sink.on_world_state(t_ns)

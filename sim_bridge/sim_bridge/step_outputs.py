@@ -16,7 +16,7 @@ from rclpy.node import Node
 from rclpy.publisher import Publisher
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from rosgraph_msgs.msg import Clock as ClockMsg
-from sensor_msgs.msg import CameraInfo, CompressedImage, Image, JointState
+from sensor_msgs.msg import CameraInfo, CompressedImage, Image, JointState, LaserScan
 from sim_interfaces.msg import GripState
 from std_msgs.msg import Bool, String
 from tf2_msgs.msg import TFMessage
@@ -31,6 +31,7 @@ from sim_bridge.camera import ImageBuffer
 from sim_bridge.frames import WorldFrames
 from sim_bridge.hold_watch import HoldWatch
 from sim_bridge.joint_speed import Braked
+from sim_bridge.laser import LaserScanner
 from sim_bridge.messages import topic
 from sim_bridge.node_diagnostics import LATCHED, NodeDiagnostics
 from sim_bridge.runner import SimRunner, Twist3
@@ -50,6 +51,7 @@ class _RobotIO:
     cmd_out: Optional[Publisher] = None      # for a driven base
     holding: Optional[Tuple[Publisher, Publisher]] = None
     states: Dict[str, Publisher] = field(default_factory=dict)    # per controller
+    scan: Optional[Tuple[Publisher, LaserScanner, LaserScan]] = None   # its laser scanner
 
 
 @dataclass
@@ -112,6 +114,17 @@ class StepOutputs:
             io.cmd_out = node.create_publisher(
                 TwistStamped, topic(ns, 'cmd_vel_out'),
                 QoSProfile(depth=100, durability=DurabilityPolicy.TRANSIENT_LOCAL))
+        laser = robot.config.laser
+        if laser is not None:
+            scanner = LaserScanner(self._world.client, laser, name,
+                                   self._world.source.seed if self._world.source else 0)
+            msg = LaserScan(angle_min=float(scanner.angles[0]),
+                            angle_max=float(scanner.angles[-1]),
+                            angle_increment=scanner.angle_increment, scan_time=1.0 / laser.rate,
+                            range_min=laser.range_min, range_max=laser.range_max)
+            msg.header.frame_id = prefix + 'laser'
+            io.scan = (node.create_publisher(LaserScan, topic(ns, 'scan'), HISTORY), scanner,
+                       msg)
         for controller in robot.controllers:
             io.states[controller] = node.create_publisher(
                 JointTrajectoryControllerState, topic(ns, f'{controller}/controller_state'),
@@ -153,7 +166,10 @@ class StepOutputs:
             # (robot_state_publisher publishes the fixed joints from the robot_description.)
             anchors = {f.anchor().child for f in self._frames.robots.values()}
             cameras = {c.config.frame_id for c in self._world.cameras if c.robot is None}
-            static = [t for t in static if t.child in anchors | cameras]
+            # (A laser scanner is the world's, not in the URDF.)
+            lasers = {r.config.frame_prefix + 'laser' for r in self._world.robots.values()
+                      if r.config.laser is not None}
+            static = [t for t in static if t.child in anchors | cameras | lasers]
         stamp = stamp_from_ns(self._world.sim_time_ns)
         self._tf_static_pub.publish(TFMessage(transforms=[messages.transform(t, stamp)
                                                           for t in static]))
@@ -243,6 +259,15 @@ class StepOutputs:
             msg = JointState(name=[BELT_JOINT], position=[travel], velocity=[speed])
             msg.header.stamp = stamp_from_ns(time_ns)
             self._encoder_pub.publish(msg)
+
+    def on_scan(self, robot: str, time_ns: int) -> None:
+        scan = self._robots[robot].scan
+        if scan is None or not wanted(scan[0]):
+            return
+        pub, scanner, msg = scan
+        msg.header.stamp = stamp_from_ns(time_ns)
+        msg.ranges = scanner.scan(self._world.robots[robot].base_link_world(), time_ns).tolist()
+        pub.publish(msg)
 
     def on_world_state(self, time_ns: int) -> None:
         if self._materials_pub is None or not wanted(self._materials_pub):

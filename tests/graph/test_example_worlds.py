@@ -2,6 +2,7 @@
 runs it, and ends with every material resting on its destination by the simulator's ground
 truth (docs/writing-a-cell.md)."""
 import json
+import re
 import shutil
 import subprocess
 from collections import Counter
@@ -18,7 +19,7 @@ WORLDS = sorted(p.name for p in Path(resolve_resource('package://world_descripti
 
 def test_there_are_example_cells():
     assert {'cell_four_classes.yaml', 'cell_mixed_sizes.yaml', 'cell_two_trips.yaml',
-            'cell_two_youbots.yaml'} <= set(WORLDS)
+            'cell_two_youbots.yaml', 'cell_laser_youbot.yaml'} <= set(WORLDS)
 
 
 @pytest.mark.parametrize('name', WORLDS)
@@ -51,5 +52,12 @@ def test_an_example_cell_completes_with_every_material_at_its_destination(name, 
         assert closest['distance'] >= roles.clearance, closest
     else:
         assert 'closest_bases' not in result
+    # A youBot with a laser scanner: its scans matched the walls, and every arrival says how
+    # far its odometry was off there.
+    lasers = {r.name for r in loaded.robots if r.laser is not None}
+    arrivals = [e[5] for e in result['events'] if e[1] == 'arrived' and e[2] in lasers]
+    assert bool(arrivals) == bool(lasers)
+    assert all(re.search(r'laser: odometry off by .* [1-9][0-9]* scans matched', a)
+               for a in arrivals), arrivals
     report = (out / 'report.md').read_text()
     assert f'Scenario: `{world}`: {materials.total} materials' in report

@@ -88,6 +88,29 @@ class SuctionConfig:
 
 
 @dataclass(frozen=True)
+class LaserConfig:
+    """A planar laser scanner on a mobile base: its mount in base_link (x, y, z [m], yaw
+    [rad]), its field of view [rad] centred on the mount's x axis, the number of rays over it,
+    the ranges it reports [m], its scans a second and the standard deviation of each range [m].
+    By default a 270 degree scanner as mobile manipulators carry at a front corner (Hokuyo's
+    UST-10LX: 10 m, 0.25 degree steps, 40 Hz), read at 1 degree steps to 4 m, 10 times a
+    second. Published as sensor_msgs/LaserScan on
+    ``<namespace>/scan`` in frame ``<frame_prefix>laser``; a ray that hits nothing reads +inf
+    (REP 117)."""
+
+    x: float = 0.0
+    y: float = 0.0
+    z: float = 0.0
+    yaw: float = 0.0
+    fov: float = 4.71238898        # 270 degrees
+    rays: int = 271
+    range_min: float = 0.02
+    range_max: float = 4.0
+    rate: float = 10.0
+    noise: float = 0.01
+
+
+@dataclass(frozen=True)
 class RobotConfig:
     name: str
     urdf: str
@@ -100,6 +123,7 @@ class RobotConfig:
     initial_joint_positions: Tuple[Tuple[str, float], ...] = ()
     fixed_base: bool = False
     suction: Optional[SuctionConfig] = None
+    laser: Optional[LaserConfig] = None
 
 
 @dataclass(frozen=True)

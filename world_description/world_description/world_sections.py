@@ -10,6 +10,7 @@ from typing import Any, Dict, List, Optional, Set, Tuple, Union
 from world_description.conveyor_section import conveyor_section
 from world_description.errors import WorldConfigError
 from world_description.graph_names import graph_problem
+from world_description.laser_section import laser_section
 from world_description.material_classes import (
     PAPER_RULES,
     ROUTES,
@@ -144,7 +145,8 @@ def _cell(r: Reader, item: Any, robots: List[RobotConfig]) -> CellRoles:
 def _robot(r: Reader, item: Any, i: int) -> RobotConfig:
     where = f'robots[{i}]'
     r.only(item, where, {'name', 'urdf', 'namespace', 'pose', 'frame_prefix', 'drive',
-                         'controllers', 'initial_joint_positions', 'fixed_base', 'suction'})
+                         'controllers', 'initial_joint_positions', 'fixed_base', 'suction',
+                         'laser'})
     name = r.name(item, 'name', where)
     namespace = r.string(item, 'namespace', where, default=name).strip('/')
     problem = relative_problem(namespace) if namespace else ''
@@ -204,11 +206,16 @@ def _robot(r: Reader, item: Any, i: int) -> RobotConfig:
                 and re.fullmatch(r'[a-z][a-z0-9_]*(/[a-z][a-z0-9_]*)*', suction.service)):
             raise r.fail(sw, 'service', f'{suction.service[:80]!r} is not a relative ROS name '
                          f'of at most {MAX_TOKEN_LENGTH} characters')
+    laser = None
+    if item.get('laser') is not None:
+        if drive is None:
+            raise r.fail(where, 'laser', 'a laser scanner is for a mobile base (one with a drive)')
+        laser = laser_section(r, item['laser'], where + '.laser')
     return RobotConfig(name=name, urdf=r.string(item, 'urdf', where), namespace=namespace,
                        pose=pose, frame_prefix=frame_prefix,
                        drive=drive, limits=limits, controllers=controllers,
                        initial_joint_positions=initial_positions, fixed_base=fixed_base,
-                       suction=suction)
+                       suction=suction, laser=laser)
 
 
 def _drive(r: Reader, d: Any, dw: str

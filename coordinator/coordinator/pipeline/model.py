@@ -118,9 +118,11 @@ class ArmReading:
 
 @dataclass(frozen=True)
 class BaseReading:
-    """A mobile base as its odometry last told, in the world frame."""
+    """A mobile base as its odometry last told, in the world frame (corrected by its laser
+    scans where it has a scanner)."""
     pose: Pose2D
     velocity: Tuple[float, float, float] = (0.0, 0.0, 0.0)   # world vx, vy, wz
+    located: str = ''       # how its laser scans correct its odometry (none: '')
 
 
 @dataclass

@@ -347,7 +347,8 @@ class BaseDrive:
         if not status.finished:
             self.log.event(obs.now, EventKind.DRIVE_STALLED, self.robot, detail=(
                 f'{status.position_error * 1000:.0f} mm from {self.goal}'))
-        self.log.event(obs.now, EventKind.ARRIVED, self.robot, detail=self.goal)
+        self.log.event(obs.now, EventKind.ARRIVED, self.robot, detail=(
+            f'{self.goal}; {base.located}' if base.located else self.goal))
 
     def follow(self, obs: Observation, target: Pose2D, via: Sequence[Any], goal: str,
                clear: Callable[[PathFollower], bool] = lambda follower: True) -> bool:
