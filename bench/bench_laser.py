@@ -32,6 +32,16 @@ def per_sim_second(results: List) -> float:
             / sum(r.completion_time for r in results))
 
 
+def by_node(results: List) -> Dict[str, float]:
+    """CPU seconds per simulated second of each node, over the trials together."""
+    sim = sum(r.completion_time for r in results)
+    nodes: Dict[str, float] = {}
+    for r in results:
+        for node, cpu in r.run.cpu_seconds.items():
+            nodes[node] = nodes.get(node, 0.0) + cpu / sim
+    return nodes
+
+
 def worlds(into: Path) -> Dict[str, str]:
     """The cell as one file (its extends merged), with and without the scanner."""
     data = world_data(resolve_resource(WORLD))
@@ -66,12 +76,15 @@ def main() -> int:
     for which, results in runs.items():
         each = [sum(r.run.cpu_seconds.values()) / r.completion_time for r in results]
         figures[which] = {'cpu_per_sim_second': per_sim_second(results), 'per_trial': each,
+                          'by_node': by_node(results),
                           'handled': sum(r.handled_verified for r in results),
                           'total': sum(r.total for r in results),
                           'statuses': [r.status for r in results]}
         print(f'{which}: {per_sim_second(results):.3f} CPU-s per simulated second (trials: '
               f'{", ".join(f"{e:.3f}" for e in each)}; median {statistics.median(each):.3f}); '
-              f'handled {figures[which]["handled"]}/{figures[which]["total"]}')  # type: ignore
+              f'handled {figures[which]["handled"]}/{figures[which]["total"]}; '  # type: ignore
+              + ', '.join(f'{n} {v:.3f}' for n, v in sorted(by_node(results).items(),
+                                                            key=lambda i: -i[1])))
     ratio = per_sim_second(runs['laser']) / per_sim_second(runs['no laser'])
     figures['ratio'] = ratio
     print(f'laser / no laser: {ratio:.3f} (goal: at most {GOAL})')
