@@ -53,6 +53,14 @@ TURN_DRIFT_PER_M = 0.01
 START_SIGMA = (0.01, 0.01, 0.01)
 # A correction of more than this, in one scan, is a wrong match, not drift [m, rad].
 MAX_STEP_M, MAX_STEP_RAD = 0.25, 0.2
+# A face's end seen in a scan (face_ends): a run of at least CORNER_RUN points on the face,
+# its last within CORNER_NEAR_M of the end, the next ray CORNER_JUMP_M farther or empty; used
+# once the gate is CORNER_GATE_M or narrower (the points on the right faces by then).
+CORNER_RUN = 3
+CORNER_NEAR_M = 0.06
+CORNER_LINE_M = 0.02
+CORNER_JUMP_M = 0.05
+CORNER_GATE_M = 0.05
 # The odometry messages kept to find the base's odometry at a scan's time.
 ODOM_HISTORY = 64
 
@@ -91,23 +99,25 @@ class WallMap:
     def __len__(self) -> int:
         return len(self.a)
 
-    def nearest(self, points: np.ndarray, sensor: np.ndarray
-                ) -> Tuple[np.ndarray, np.ndarray, np.ndarray]:
+    def nearest(self, points: np.ndarray, sensor: np.ndarray, reach: float = 0.0
+                ) -> Tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """For each point (N x 2): the signed distance to the nearest face that faces
-        ``sensor`` and that its foot lies on, that face's normal, and its distance (inf where
-        no face qualifies)."""
+        ``sensor`` and that its foot lies on (or ``reach`` [m] past its ends, at least
+        FACE_END_M), that face (its index), its distance (inf where no face qualifies), and
+        where its foot lies along the face from its start [m]."""
         if not len(self):
-            return (np.zeros(len(points)), np.zeros((len(points), 2)),
-                    np.full(len(points), np.inf))
+            return (np.zeros(len(points)), np.zeros(len(points), int),
+                    np.full(len(points), np.inf), np.zeros(len(points)))
         rel = points[:, None, :] - self.a[None, :, :]                    # N x M x 2
         t = np.einsum('nmk,mk->nm', rel, self.along)
         signed = np.einsum('nmk,mk->nm', rel, self.normal)
         facing = ((sensor - self.a) * self.normal).sum(axis=1) > 0.0       # M
-        on_face = (t >= -FACE_END_M) & (t <= self.length[None, :] + FACE_END_M)
+        reach = max(reach, FACE_END_M)
+        on_face = (t >= -reach) & (t <= self.length[None, :] + reach)
         dist = np.where(on_face & facing[None, :], np.abs(signed), np.inf)
         best = np.argmin(dist, axis=1)
         rows = np.arange(len(points))
-        return signed[rows, best], self.normal[best], dist[rows, best]
+        return signed[rows, best], best, dist[rows, best], t[rows, best]
 
 
 def box_corners(box: WallBox) -> np.ndarray:
@@ -131,6 +141,24 @@ def _signed_area(poly: np.ndarray) -> float:
 
 
 @dataclass(frozen=True)
+class ScanPoints:
+    """A scan's points in base_link (N x 2), in the order of its rays; each point's ray and range
+    [m]; whether the ray before it and the ray after it return nothing or something at least
+    ``CORNER_JUMP_M`` farther (where a face the point lies on may end); and the angle between
+    two rays [rad]."""
+
+    xy: np.ndarray
+    ray: np.ndarray                     # each point's ray (its index in the scan)
+    ranges: np.ndarray
+    far_before: np.ndarray
+    far_after: np.ndarray
+    step: float
+
+    def __len__(self) -> int:
+        return len(self.xy)
+
+
+@dataclass(frozen=True)
 class ScanMatch:
     """One scan fused with the pose it was expected at: the base's pose and its covariance
     (x, y [m], yaw [rad]), the points on the walls and their RMS distance from them [m]."""
@@ -147,37 +175,106 @@ def _rotate(yaw: float, v: np.ndarray) -> np.ndarray:
     return turned
 
 
-def match_scan(walls: WallMap, points: np.ndarray, sensor: np.ndarray, prior: Pose,
+def _jacobian(direction: np.ndarray, arm: np.ndarray) -> np.ndarray:
+    """d(direction . point)/d(x, y, yaw) of points at ``arm`` from the base (both K x 2)."""
+    return np.column_stack([direction,
+                            direction[:, 1] * arm[:, 0] - direction[:, 0] * arm[:, 1]])
+
+
+def face_ends(walls: WallMap, points: ScanPoints, face: np.ndarray, use: np.ndarray,
+              at: np.ndarray, sensor: np.ndarray
+              ) -> Tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Where the scan sees a face end: a run of at least CORNER_RUN points on a face, taken on
+    from its last matched point through the next rays that stay on the face's line (within
+    CORNER_LINE_M: the pose may be off along the face, and its points past the end it
+    predicts are still the face's), to a ray that returns nothing or something farther (the
+    face turned away: a corner, not something in front of it), within CORNER_NEAR_M of the
+    face's end. Returns, for each, the residual along the face [m] (the corner is half a ray's
+    spacing on the face past the last point), the face's direction there (away from the run),
+    the last point (cell) and the residual's standard deviation [m]."""
+    rs, dirs, pts, sigmas = [], [], [], []
+    for m in np.unique(face[use]):
+        run = np.flatnonzero(use & (face == m))
+        if len(run) < CORNER_RUN:
+            continue
+        t = (at - walls.a[m]) @ walls.along[m]
+        off_line = np.abs((at - walls.a[m]) @ walls.normal[m]) > CORNER_LINE_M
+        for k, end, sign in ((run[np.argmin(t[run])], 0.0, -1.0),
+                             (run[np.argmax(t[run])], float(walls.length[m]), 1.0)):
+            # Which way along the rays the face goes on past k: where t moves towards the end.
+            way = 0
+            for d in (-1, 1):
+                j = k + d
+                if (0 <= j < len(points) and abs(int(points.ray[j]) - int(points.ray[k])) == 1
+                        and not off_line[j] and sign * (t[j] - t[k]) > 0.0):
+                    way = d
+            if way == 0:
+                # Nothing on the face's line past k: k ends it, if a ray's neighbour past it
+                # is far (either side: the other one is the face's own run).
+                inner = k - 1 if k > 0 and face[k - 1] == m and use[k - 1] else k + 1
+                way = 1 if inner == k - 1 else -1
+            else:
+                while True:
+                    j = k + way
+                    if not (0 <= j < len(points)
+                            and abs(int(points.ray[j]) - int(points.ray[k])) == 1
+                            and not off_line[j] and sign * (t[j] - t[k]) > 0.0):
+                        break
+                    k = j
+            if abs(t[k] - end) > CORNER_NEAR_M:
+                continue
+            if not (points.far_after[k] if way == 1 else points.far_before[k]):
+                continue
+            ray = at[k] - sensor
+            rng = float(np.hypot(*ray))
+            slant = abs(float(ray @ walls.normal[m])) / max(rng, 1e-9)
+            spacing = rng * points.step / max(slant, 0.2)
+            rs.append(sign * (t[k] - end) + 0.5 * spacing)
+            dirs.append(sign * walls.along[m])
+            pts.append(at[k])
+            sigmas.append(math.hypot(spacing / math.sqrt(12.0), POINT_SIGMA_M))
+    return (np.array(rs), np.array(dirs).reshape(-1, 2), np.array(pts).reshape(-1, 2),
+            np.array(sigmas))
+
+
+def match_scan(walls: WallMap, points: ScanPoints, sensor: np.ndarray, prior: Pose,
                prior_cov: np.ndarray) -> Optional[ScanMatch]:
-    """The base's most likely pose given ``points`` (N x 2, in base_link) on ``walls`` and the
-    pose it was expected at, ``prior``, with covariance ``prior_cov``: Gauss-Newton on the
-    points' distances to their faces plus the prior's (an iterated Kalman update). What the
-    faces do not fix stays as the prior has it. ``sensor``: the scanner's position in
-    base_link. None when the scan does not show enough of the walls, or does not fit them."""
+    """The base's most likely pose given ``points`` on ``walls`` and the pose it was expected
+    at, ``prior``, with covariance ``prior_cov``: Gauss-Newton on the points' distances to
+    their faces, the face ends the scan sees (face_ends) and the prior (an iterated Kalman
+    update). What they do not fix stays as the prior has it. ``sensor``: the scanner's
+    position in base_link. None when the scan does not show enough of the walls, or does not
+    fit them."""
     expected = np.array(prior, float)
     prior_info = np.linalg.inv(prior_cov)
     pose = expected.copy()
     info = np.zeros((3, 3))
     for gate in GATES_M:
-        at = _rotate(pose[2], points) + pose[:2]
-        signed, normal, dist = walls.nearest(at, _rotate(pose[2], sensor) + pose[:2])
+        at = _rotate(pose[2], points.xy) + pose[:2]
+        eye = _rotate(pose[2], sensor) + pose[:2]
+        signed, face, dist, _ = walls.nearest(at, eye)
         use = dist < gate
         count = int(use.sum())
         if count < MIN_POINTS:
             return None
-        r, n, arm = signed[use], normal[use], at[use] - pose[:2]
-        jac = np.column_stack([n, n[:, 1] * arm[:, 0] - n[:, 0] * arm[:, 1]])
+        jac = _jacobian(walls.normal[face[use]], at[use] - pose[:2])
         # The points' errors are not independent (the same wall, the same mount): a scan
         # counts as EFFECTIVE_POINTS of them at most, each with POINT_SIGMA_M.
         weight = min(1.0, EFFECTIVE_POINTS / count) / POINT_SIGMA_M ** 2
         info = weight * (jac.T @ jac)
-        step = -np.linalg.solve(info + prior_info,
-                                weight * (jac.T @ r) + prior_info @ (pose - expected))
+        grad = weight * (jac.T @ signed[use])
+        if gate <= CORNER_GATE_M:
+            r, dirs, pts, sig = face_ends(walls, points, face, use, at, eye)
+            if len(r):
+                jac = _jacobian(dirs, pts - pose[:2]) / sig[:, None]
+                info = info + jac.T @ jac
+                grad = grad + jac.T @ (r / sig)
+        step = -np.linalg.solve(info + prior_info, grad + prior_info @ (pose - expected))
         pose = pose + step
-        if float(np.abs(step).max()) < 1e-6:
+        if float(np.abs(step).max()) < 1e-6 and gate <= CORNER_GATE_M:
             break
-    at = _rotate(pose[2], points) + pose[:2]
-    signed, _, dist = walls.nearest(at, _rotate(pose[2], sensor) + pose[:2])
+    at = _rotate(pose[2], points.xy) + pose[:2]
+    signed, _, dist, _ = walls.nearest(at, _rotate(pose[2], sensor) + pose[:2])
     use = dist < GATES_M[-1]
     count = int(use.sum())
     if count < MIN_POINTS:
@@ -306,18 +403,22 @@ class ScanLocalizer:
         turn = math.remainder(p1[2] - p0[2], 2.0 * math.pi)
         return (p0[0] + f * (p1[0] - p0[0]), p0[1] + f * (p1[1] - p0[1]), p0[2] + f * turn)
 
-    def points(self, scan: Scan) -> np.ndarray:
-        """The scan's points in base_link (N x 2): its finite ranges within its limits, off
-        the base itself."""
+    def points(self, scan: Scan) -> ScanPoints:
+        """The scan's points in base_link: its finite ranges within its limits, off the base
+        itself, and where the rays beside each return nothing or something farther."""
         r = np.asarray(scan.ranges, float)
-        angle = scan.angle_min + scan.angle_increment * np.arange(len(r))
-        keep = np.isfinite(r) & (r > scan.range_min) & (r < scan.range_max)
-        r, angle = r[keep], angle[keep] + self.mount[2]
+        angle = scan.angle_min + scan.angle_increment * np.arange(len(r)) + self.mount[2]
+        hit = np.isfinite(r) & (r > scan.range_min) & (r < scan.range_max)
+        far = np.where(hit, r, np.inf)
+        r = np.where(hit, r, 0.0)
         pts = np.stack([r * np.cos(angle), r * np.sin(angle)], axis=1) + np.array(
             self.mount[:2])
         off_body = (np.abs(pts[:, 0]) > self.body[0]) | (np.abs(pts[:, 1]) > self.body[1])
-        kept: np.ndarray = pts[off_body]
-        return kept
+        keep = hit & off_body
+        before = np.concatenate([[np.inf], far[:-1]]) >= far + CORNER_JUMP_M
+        after = np.concatenate([far[1:], [np.inf]]) >= far + CORNER_JUMP_M
+        return ScanPoints(pts[keep], np.flatnonzero(keep), r[keep], before[keep],
+                          after[keep], abs(scan.angle_increment))
 
     def _update(self, scan: Scan, odom: Pose) -> None:
         prior = compose(self.correction, odom)
