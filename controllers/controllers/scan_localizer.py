@@ -61,6 +61,9 @@ CORNER_NEAR_M = 0.06
 CORNER_LINE_M = 0.02
 CORNER_JUMP_M = 0.05
 CORNER_GATE_M = 0.05
+# A scan is fused only once the base has moved this far or turned this much since the last
+# one, or this long after it [m, rad, ns].
+UPDATE_MIN_M, UPDATE_MIN_RAD, UPDATE_MAX_NS = 0.01, 0.01, 1_000_000_000
 # The odometry messages kept to find the base's odometry at a scan's time.
 ODOM_HISTORY = 64
 
@@ -271,7 +274,7 @@ def match_scan(walls: WallMap, points: ScanPoints, sensor: np.ndarray, prior: Po
                 grad = grad + jac.T @ (r / sig)
         step = -np.linalg.solve(info + prior_info, grad + prior_info @ (pose - expected))
         pose = pose + step
-        if float(np.abs(step).max()) < 1e-6 and gate <= CORNER_GATE_M:
+        if float(np.abs(step).max()) < 1e-5 and gate <= CORNER_GATE_M:
             break
     at = _rotate(pose[2], points.xy) + pose[:2]
     signed, _, dist, _ = walls.nearest(at, _rotate(pose[2], sensor) + pose[:2])
@@ -321,7 +324,8 @@ class ScanLocalizer:
         self.correction: Pose = (0.0, 0.0, 0.0)
         self.covariance = np.diag(np.square(START_SIGMA))   # of the pose (x, y, yaw)
         self.last: Optional[ScanMatch] = None          # the last scan that matched
-        self.matched = self.unmatched = 0
+        self.matched = self.unmatched = self.skipped = 0
+        self._fused: Optional[Tuple[Pose, int]] = None    # (odometry, stamp) of the last fused
         self._odom: Deque[Tuple[int, Pose]] = deque(maxlen=ODOM_HISTORY)
         self._stamps: Deque[int] = deque(maxlen=ODOM_HISTORY)
         self._scans: Deque[Scan] = deque()
@@ -342,7 +346,7 @@ class ScanLocalizer:
         return (f'laser: odometry off by ({dx * 1000:+.0f}, {dy * 1000:+.0f}) mm, '
                 f'{math.degrees(dyaw):+.2f} deg, pose +- ({sx * 1000:.0f}, {sy * 1000:.0f}) '
                 f'mm, {math.degrees(syaw):.2f} deg; {self.matched} scans matched, '
-                f'{self.unmatched} not{fit}')
+                f'{self.unmatched} not, {self.skipped} at rest{fit}')
 
     def located_velocity(self, velocity: Pose) -> Pose:
         """A velocity along the cell's axes as odometry gives it (vx, vy, wz), corrected."""
@@ -421,6 +425,15 @@ class ScanLocalizer:
                           after[keep], abs(scan.angle_increment))
 
     def _update(self, scan: Scan, odom: Pose) -> None:
+        # A base that has not moved since the last scan fused learns little from the next
+        # (AMCL's update_min_d and update_min_a): at rest, one scan a second.
+        if self._fused is not None:
+            at, when = self._fused
+            dx, dy, dyaw = compose(inverse(at), odom)
+            if (math.hypot(dx, dy) < UPDATE_MIN_M and abs(math.remainder(dyaw, 2 * math.pi))
+                    < UPDATE_MIN_RAD and scan.stamp_ns - when < UPDATE_MAX_NS):
+                self.skipped += 1
+                return
         prior = compose(self.correction, odom)
         found = match_scan(self.walls, self.points(scan), np.array(self.mount[:2]), prior,
                            self.covariance)
@@ -429,6 +442,7 @@ class ScanLocalizer:
             self.unmatched += 1
             return
         self.matched += 1
+        self._fused = (odom, scan.stamp_ns)
         self.last = found
         self.correction = compose(found.pose, inverse(odom))
         self.covariance = found.covariance
