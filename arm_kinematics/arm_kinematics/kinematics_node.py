@@ -1,5 +1,11 @@
 """Kinematics node of an arm: publishes the tool pose from joint_states and answers IK.
 
+Any arm a world names: ``arm`` is the robot's name in ``world``, whose entry gives its URDF, the
+joints of its ``arm_controller`` and its grip tool (the tool frame: a link and an offset). The
+model registry (controllers/arm_registry.py) solves it with an analytic fast path where one is
+registered for the URDF's chain (the Zu 12's, the youBot arm's), else with the generic solver
+(pinocchio, damped least squares within the joint limits).
+
 Run it in the robot's namespace (``--ros-args -r __ns:=/youbot``):
 - subscribes ``joint_states``; publishes ``end_effector_pose`` (PoseStamped, in base_link);
 - service ``solve_ik`` (sim_interfaces/SolveIK): a target pose in, the joint positions out, and
@@ -10,6 +16,8 @@ Run it in the robot's namespace (``--ros-args -r __ns:=/youbot``):
 from __future__ import annotations
 
 import sys
+from dataclasses import replace
+from pathlib import Path
 from typing import Optional, Tuple
 
 import numpy as np
@@ -21,24 +29,25 @@ from sensor_msgs.msg import JointState
 from sim_interfaces.srv import SolveIK
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
+from cell_layout.arm_models import ArmModelError, arm_model, solver_of
 from controllers.arm_model import plan_ik
 from controllers.transforms import matrix_to_quaternion, pose_matrix
-from controllers.youbot_kinematics import YoubotKinematics
-from controllers.zu12_kinematics import Zu12Kinematics
 from ros_common.node_main import run_node
 from ros_common.params import Param, declare_params
 from ros_common.services import SERVICE_QOS
 from ros_common.stamps import duration_from_seconds
+from world_description.errors import WorldConfigError
+from world_description.resources import ResourceError, resolve_resource
+from world_description.world_loading import load_world
+from world_description.world_schema import SuctionConfig
 
-ARMS = {'youbot': (YoubotKinematics, 'gripper_tcp'), 'zu12': (Zu12Kinematics, 'suction_tcp')}
-
+PAPER_WORLD = 'package://world_description/worlds/pipeline_cell.yaml'
 
 PARAMS = (
-    Param('arm', 'youbot', f'Which arm: {sorted(ARMS)}'),
-    Param('tool_frame', '', "Frame whose pose is published and solved for; empty: the arm's "
-          'gripping point (youbot gripper_tcp, zu12 suction_tcp)'),
-    Param('base_pose', [0.0, 0.0, 0.0, 0.0], "x, y, z, yaw of a fixed arm's base_link in the "
-          "world (the world file's pose): targets may then be given in \"world\""),
+    Param('world', PAPER_WORLD, 'The world file that describes the arm'),
+    Param('arm', 'youbot', "The arm's robot name in the world"),
+    Param('tool_frame', '', "Link whose pose is published and solved for; empty: the world's "
+          'grip tool (its link and offset)'),
     Param('frame_prefix', '', "Prefix of the robot's frame names (as in the world file)"),
     Param('velocity_scaling', 0.5, 'Default fraction of the joint velocity limits for IK '
           'motions', 0.01, 1.0),
@@ -62,20 +71,8 @@ class KinematicsNode(Node):
         super().__init__('kinematics_node', **kwargs)
         p = declare_params(self, PARAMS)
         arm = p['arm']
-        if arm not in ARMS:
-            raise KinematicsConfigError(f'arm "{arm}" unknown; known: {sorted(ARMS)}')
-        kinematics, default_tool = ARMS[arm]
-        tool = p['tool_frame'] or default_tool
-        base_pose = [float(v) for v in p['base_pose']]
-        if len(base_pose) != 4 or not all(np.isfinite(base_pose)):
-            raise KinematicsConfigError(f'base_pose must be 4 finite numbers, got {base_pose}')
-        try:
-            if arm == 'zu12':
-                self._kin = kinematics(tool, world_to_base=_planar_pose(*base_pose))
-            else:
-                self._kin = kinematics(tool)
-        except ValueError as exc:
-            raise KinematicsConfigError(str(exc)) from None
+        self._kin, solver = _kinematics(p['world'], arm, p['tool_frame'])
+        tool = p['tool_frame'] or 'its grip tool'
         self._prefix = p['frame_prefix']
         self._motion_defaults = (p['velocity_scaling'], p['min_duration'])
         self._positions: Optional[np.ndarray] = None
@@ -91,7 +88,7 @@ class KinematicsNode(Node):
         self.create_subscription(PoseStamped, 'goal_pose', self._on_goal_pose, reliable)
         self.create_service(SolveIK, 'solve_ik', self._on_solve_ik, qos_profile=SERVICE_QOS)
         self.get_logger().info(
-            f'{arm} arm, tool frame {self._prefix}{tool}: publishing '
+            f'{arm} arm ({solver}), tool frame {self._prefix}{tool}: publishing '
             f'{self._pose_pub.topic_name}; IK on {self.resolve_service_name("solve_ik")} and '
             f'{self.resolve_topic_name("goal_pose")}; motions to {self._traj_pub.topic_name}')
 
@@ -176,9 +173,25 @@ class KinematicsNode(Node):
         return False, message, None, (float('inf'), float('inf')), None
 
 
-def _planar_pose(x: float, y: float, z: float, yaw: float) -> np.ndarray:
-    c, s = np.cos(yaw), np.sin(yaw)
-    return np.array([[c, -s, 0.0, x], [s, c, 0.0, y], [0.0, 0.0, 1.0, z], [0.0, 0.0, 0.0, 1.0]])
+def _kinematics(world: str, arm: str, tool_frame: str):
+    """The arm's kinematics and its solver's name, from the world; a KinematicsConfigError
+    (one line) for an arm the world does not describe."""
+    try:
+        config = load_world(resolve_resource(world))
+    except (WorldConfigError, ResourceError, OSError) as exc:
+        raise KinematicsConfigError(f'world {world}: {exc}') from None
+    names = [r.name for r in config.robots]
+    if arm not in names:
+        raise KinematicsConfigError(f'arm "{arm}" unknown: the world {world} has {names}')
+    robot = config.robot(arm)
+    if tool_frame:
+        robot = replace(robot, suction=SuctionConfig(tool_frame))
+    base_dir = Path(config.source).parent if config.source else None
+    try:
+        model = arm_model(robot, base_dir)
+    except ArmModelError as exc:
+        raise KinematicsConfigError(str(exc)) from None
+    return model.kinematics, solver_of(model.spec)
 
 
 def _fill_pose(msg: PoseStamped, pose: np.ndarray) -> None:

@@ -217,7 +217,7 @@ def check_loader_base(layout: CellLayout, obstacles: Sequence[Any],
                       conveyor: Optional[Any] = None) -> None:
     """A LayoutError unless the loader's base stands on the floor, or on top of what is under
     it (a pedestal), not inside an obstacle or the conveyor."""
-    x, y, z, _ = layout.zu12_base
+    x, y, z, _ = layout.loader_base
     tops = {o.name or o.shape: o.position[2] + obstacle_height(o) / 2 for o in obstacles}
     if conveyor is not None:
         tops['conveyor'] = conveyor.position[2]

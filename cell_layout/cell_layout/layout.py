@@ -14,7 +14,8 @@ from typing import Any, Dict, FrozenSet, List, Optional, Set, Tuple
 
 import numpy as np
 
-from controllers import youbot_arm, zu12_arm
+from cell_layout.arm_models import ARM_CONTROLLER as ARM_CONTROLLER  # (re-exported)
+from cell_layout.arm_models import ArmModel
 from controllers.arrays import Vector
 from controllers.bezier import Pose2D
 from controllers.youbot_arm import ARM_BASE_IN_BASE_LINK_M
@@ -151,24 +152,24 @@ class PoolSide:
 @dataclass(frozen=True)
 class CellRobot:
     """A robot of the cell as the controller talks to it: its name in the world, the
-    namespace of its topics and services, its arm controller's joints in order, and its grip
-    tool's service."""
+    namespace of its topics and services, its arm controller's joints in order, its grip
+    tool's service, and its arm's model (kinematics and limits, from the world)."""
     name: str
     namespace: str
     joints: Tuple[str, ...]
     grip: str                           # absolute, e.g. /zu12/suction
+    arm: Optional[ArmModel] = None
 
     def topic(self, name: str) -> str:
         """One of its topics or services, absolute."""
         return f'/{self.namespace}/{name}' if self.namespace else f'/{name}'
 
-
-# The controller that moves a robot's arm (the simulator's joint group of that name).
-ARM_CONTROLLER = 'arm_controller'
-# The paper's robots, as a layout made by hand has them (layout_from_world names the world's).
-PAPER_LOADER = CellRobot('zu12', 'zu12', tuple(zu12_arm.JOINT_NAMES), '/zu12/suction')
-PAPER_TRANSPORT = CellRobot('youbot', 'youbot', tuple(youbot_arm.JOINT_NAMES),
-                            '/youbot/gripper/grasp')
+    @property
+    def model(self) -> ArmModel:
+        """Its arm's model (a robot of a layout read from a world has one)."""
+        if self.arm is None:
+            raise LayoutError(f'robot {self.name}: no arm model')
+        return self.arm
 
 
 @dataclass(frozen=True)
@@ -182,7 +183,13 @@ class CellLayout:
     manifest: Dict[str, int]            # materials per class in the batch
     youbot_home: Pose2D                 # where a youBot is loaded (the first one's start pose)
     youbot_base_z: float                # its base_link above the floor, on its wheels [m]
-    zu12_base: Tuple[float, float, float, float]   # x, y, z, yaw
+    # Who does what: the arm that loads from the belt (where its base stands: x, y, z, yaw),
+    # and the robots that carry (a fleet of youBots), each with its start pose, where it waits
+    # while another is loaded (``parks``, in order; none for a fleet of one: it starts where it
+    # is loaded).
+    loader: CellRobot
+    loader_base: Tuple[float, float, float, float]
+    transports: Tuple[CellRobot, ...]
     rules: Dict[str, Rule] = field(default_factory=dict)        # per class
     regions: Dict[str, Region] = field(default_factory=dict)    # the classes' destinations
     # Where the youBot stands to unload (the right row, then the left row and the platform),
@@ -192,11 +199,6 @@ class CellLayout:
     via_out: Tuple[Tuple[float, ...], ...] = ()
     via_turn: Tuple[Tuple[float, ...], ...] = ()
     via_back: Tuple[Tuple[float, ...], ...] = ()
-    # Who does what: the arm that loads from the belt, and the robots that carry (a fleet of
-    # youBots), each with its start pose, where it waits while another is loaded (``parks``,
-    # in order; none for a fleet of one: it starts where it is loaded).
-    loader: CellRobot = PAPER_LOADER
-    transports: Tuple[CellRobot, ...] = (PAPER_TRANSPORT,)
     parks: Tuple[Pose2D, ...] = ()
     # Two bases never come nearer than this, footprint to footprint [m]; a youBot sets off
     # with at most ``trip_load`` materials (0: as many as its plate holds).

@@ -11,7 +11,7 @@ from typing import Callable, List, Sequence, Tuple
 import numpy as np
 
 from cell_layout.layout import CellLayout
-from cell_layout.reach import zu12_cup_positions
+from cell_layout.reach import tool_positions
 from controllers.arrays import Vector
 from controllers.pick_place import PickTiming
 
@@ -68,7 +68,7 @@ def edge_point(lay: CellLayout, a: Vector, b: Vector, low: float,
     a, b = np.asarray(a, float), np.asarray(b, float)
     y = lay.belt_y - math.copysign(lay.belt_width / 2 + EDGE_CLEARANCE_M, lay.belt_y - b[1])
     if arc:
-        base = np.array(lay.zu12_base[:2], float)
+        base = np.array(lay.loader_base[:2], float)
         (ra, ta), (rb, tb) = (polar(p[:2] - base) for p in (a, b))
         tb = ta + math.remainder(tb - ta, 2 * math.pi)
         f = crossing(lambda f: base[1] + (ra + f * (rb - ra)) * math.sin(
@@ -88,7 +88,7 @@ def over_the_belt(lay: CellLayout, q_a: np.ndarray, q_b: np.ndarray, held: float
     above the tallest material that rides on it. (From the stop to a ground place 2 cm further
     out than the paper's, the way from the edge bulged 13 cm back out over the belt, 5 cm above
     its top, and a 0.49 kg purple struck what rode there.)"""
-    cup = zu12_cup_positions(lay.zu12_base, q_a, q_b)
+    cup = tool_positions(lay, q_a, q_b)
     half = lay.belt_width / 2 + held / 2
     low = lay.belt_top + lay.material_size + SWING_CLEARANCE_M
     return bool(np.any((np.abs(cup[:, 1] - lay.belt_y) < half) & (cup[:, 0] < lay.belt_end_x)

@@ -1,11 +1,12 @@
 """Whether the arms reach a point with their tools as the pipeline uses them (no ROS): the
-Zu 12's cup pointing down, the youBot's fingers down at one tilt in the arm's plane. The
-layout checks every destination slot with these at start-up."""
+loader's tool pointing down (whatever the arm: its model is the layout's), the youBot's
+fingers down at one tilt in the arm's plane. The layout checks every place with these at
+start-up."""
 from __future__ import annotations
 
 import math
 from functools import lru_cache
-from typing import List, Optional, Sequence, Tuple
+from typing import Any, List, Optional, Sequence, Tuple
 
 import numpy as np
 
@@ -15,12 +16,11 @@ from controllers.statics import ArmStatics
 from controllers.transforms import matrix_to_quaternion, quaternion_to_matrix
 from controllers.youbot_arm import ARM_BASE_IN_BASE_LINK_M
 from controllers.youbot_kinematics import YoubotKinematics
-from controllers.zu12_kinematics import Zu12Kinematics
 from robot_description import urdf_path
 
 # The youBot's tool tilts tried for a path, outwards from straight down [deg].
 YOUBOT_TILTS_DEG = tuple(range(0, 90, 10))
-# The Zu 12's cup straight down: x along world x, z down.
+# The loader's tool straight down: x along world x, z down.
 _DOWN = np.array([[1.0, 0.0, 0.0], [0.0, -1.0, 0.0], [0.0, 0.0, -1.0]])
 
 
@@ -34,11 +34,6 @@ def youbot_tool_quaternion(p: Vector, tilt: float) -> Tuple[float, float, float,
     y = np.array([-sp, cp, 0.0])
     x = np.array([-cp * ct, -sp * ct, -st])         # y x z
     return matrix_to_quaternion(np.column_stack([x, y, z]))
-
-
-@lru_cache(maxsize=1)
-def _zu12() -> Zu12Kinematics:
-    return Zu12Kinematics('suction_tcp')
 
 
 @lru_cache(maxsize=1)
@@ -92,30 +87,42 @@ def youbot_least_need(points_in_base: Sequence[Vector], payload: float
     return best
 
 
-def zu12_reaches(base: Sequence[float], points: Sequence[Vector]) -> bool:
-    """Whether the Zu 12 standing at ``base`` (x, y, z, yaw) reaches every world point with its
-    cup pointing down."""
+def _world_to_base(base: Sequence[float]) -> Tuple[np.ndarray, np.ndarray]:
     x, y, z, yaw = base
     c, s = math.cos(yaw), math.sin(yaw)
-    rot = np.array([[c, s, 0.0], [-s, c, 0.0], [0.0, 0.0, 1.0]])      # world -> base
+    return np.array([[c, s, 0.0], [-s, c, 0.0], [0.0, 0.0, 1.0]]), np.array([x, y, z])
+
+
+def loader_reaches(layout: Any, points: Sequence[Vector]) -> bool:
+    """Whether the layout's loader (cell_layout.layout.CellLayout) reaches every world point
+    with its tool pointing down."""
+    return not loader_misses(layout, points)
+
+
+def loader_misses(layout: Any, points: Sequence[Vector]) -> List[np.ndarray]:
+    """The world points the layout's loader does not reach with its tool pointing down."""
+    kin = layout.loader.model.kinematics
+    rot, origin = _world_to_base(layout.loader_base)
+    missed = []
     for p in points:
         target = np.eye(4)
         target[:3, :3] = rot @ _DOWN
-        target[:3, 3] = rot @ (np.asarray(p, float) - np.array([x, y, z]))
-        if not _zu12().ik(target).success:
-            return False
-    return True
+        target[:3, 3] = rot @ (np.asarray(p, float) - origin)
+        if not kin.ik(target).success:
+            missed.append(np.asarray(p, float))
+    return missed
 
 
-def zu12_cup_positions(base: Sequence[float], q_a: Vector, q_b: Vector, samples: int = 24
-                       ) -> np.ndarray:
-    """Where the Zu 12's cup (standing at ``base``: x, y, z, yaw) passes in the world as its
-    joints go in a straight line from ``q_a`` to ``q_b`` (``samples`` + 1 points, both ends)."""
-    x, y, z, yaw = base
+def tool_positions(layout: Any, q_a: Vector, q_b: Vector, samples: int = 24) -> np.ndarray:
+    """Where the loader's tool passes in the world as its joints go in a straight line from
+    ``q_a`` to ``q_b`` (``samples`` + 1 points, both ends)."""
+    kin = layout.loader.model.kinematics
+    x, y, z, yaw = layout.loader_base
     c, s = math.cos(yaw), math.sin(yaw)
     rot = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])         # base -> world
+    origin = np.array([x, y, z])
     a, b = np.asarray(q_a, float), np.asarray(q_b, float)
-    return np.array([rot @ _zu12().fk(a + f * (b - a))[:3, 3] + np.array([x, y, z])
+    return np.array([rot @ kin.fk(a + f * (b - a))[:3, 3] + origin
                      for f in np.linspace(0.0, 1.0, samples + 1)])
 
 

@@ -6,10 +6,12 @@ from __future__ import annotations
 
 import math
 from dataclasses import replace
+from pathlib import Path
 from typing import Any, Dict, List, Optional, Sequence, Set, Tuple
 
 import numpy as np
 
+from cell_layout.arm_models import ArmModelError, arm_model
 from cell_layout.fleet_routes import (
     OBSTACLE_LOW_M,
     YOUBOT_HALF_LENGTH_M,
@@ -34,7 +36,7 @@ from cell_layout.layout import (
     slot_grid,
     world_to_base,
 )
-from controllers import youbot_arm, zu12_arm
+from controllers import youbot_arm
 from controllers.bezier import Pose2D
 from controllers.youbot_arm import ARM_BASE_IN_BASE_LINK_M
 
@@ -58,8 +60,9 @@ def with_extra_materials(world: Any, extra: Sequence[str]) -> Any:
 
 def _robots(world: Any) -> Tuple[CellRobot, Tuple[CellRobot, ...]]:
     """The loader and the transports, as the world's roles name them (the paper's robots
-    without a ``cell`` section); a LayoutError (one line) for robots this controller cannot
-    drive: it knows the Zu 12's and the youBot's arms."""
+    without a ``cell`` section), each with its arm's model; a LayoutError (one line) for robots
+    this controller cannot drive: the loader may be any serial arm its URDF describes, the
+    transports are youBots (their arm's joints are the youBot's)."""
     roles = world.roles
     names = sorted(r.name for r in world.robots)
     missing = [n for n in (roles.loader, *roles.transports) if n not in names]
@@ -67,20 +70,27 @@ def _robots(world: Any) -> Tuple[CellRobot, Tuple[CellRobot, ...]]:
         raise LayoutError(f'the cell needs its loader {roles.loader} and transports '
                           f'{list(roles.transports)} (the world\'s cell section names them), '
                           f'the world has {names}')
+    base_dir = Path(world.source).parent if world.source else None
     out = []
-    for name, kinematics in ((roles.loader, zu12_arm),
-                             *((t, youbot_arm) for t in roles.transports)):
+    for name in (roles.loader, *roles.transports):
         robot = world.robot(name)
         arm = next((c for c in robot.controllers if c.name == ARM_CONTROLLER), None)
-        if arm is None or tuple(arm.joints) != tuple(kinematics.JOINT_NAMES):
+        if arm is None:
+            raise LayoutError(f'robot {name}: it has no {ARM_CONTROLLER} (the arm the '
+                              'coordinator moves)')
+        if name != roles.loader and tuple(arm.joints) != tuple(youbot_arm.JOINT_NAMES):
             raise LayoutError(f'robot {name}: its {ARM_CONTROLLER} must drive '
-                              f'{list(kinematics.JOINT_NAMES)} (the arm the coordinator knows)')
+                              f'{list(youbot_arm.JOINT_NAMES)} (a transport is a youBot)')
         if robot.suction is None:
             raise LayoutError(f'robot {name}: it has no grip tool (suction)')
+        try:
+            model = arm_model(robot, base_dir)
+        except ArmModelError as exc:
+            raise LayoutError(str(exc)) from None
         ns = robot.namespace
         out.append(CellRobot(name, ns, tuple(arm.joints),
                              f'/{ns}/{robot.suction.service}' if ns
-                             else f'/{robot.suction.service}'))
+                             else f'/{robot.suction.service}', model))
     first = world.robot(roles.transports[0]).pose.z
     for name in roles.transports:
         if abs(world.robot(name).pose.z - first) > 1e-3:
@@ -140,7 +150,7 @@ def layout_from_world(world: Any) -> CellLayout:
         belt_width=conv.width,
         end_stop=conv.end_stop,
         material_size=mats.largest, manifest=dict(mats.counts),
-        youbot_home=home, youbot_base_z=yb.z, zu12_base=(zu.x, zu.y, zu.z, zu.yaw),
+        youbot_home=home, youbot_base_z=yb.z, loader_base=(zu.x, zu.y, zu.z, zu.yaw),
         rules=rules, stands=stands,
         plate_slots=plate_grid(max((r.size for r in rules.values() if r.route == 'carry'),
                                    default=0.0)),
@@ -416,7 +426,7 @@ def _region(layout: CellLayout, obstacle: Any, name: str) -> Tuple[Region, str]:
     """A destination's region and its slots, each checked in reach of the robot that sets a
     material down there (a LayoutError if none is), and the stand the youBot unloads there from
     (a carried class's destination other than the pool: the nearer stand)."""
-    from cell_layout.reach import zu12_reaches
+    from cell_layout.reach import loader_reaches
     ox, oy, oz = obstacle.position
     if abs(math.sin(2 * obstacle.yaw)) > 1e-9:
         raise LayoutError(f'destination {name} is turned {math.degrees(obstacle.yaw):.0f} deg: '
@@ -441,12 +451,12 @@ def _region(layout: CellLayout, obstacle: Any, name: str) -> Tuple[Region, str]:
     if routes == {'place'}:
         slots = slot_grid((ox, oy), (hx, hy), top, size, (ox, oy))
         lift = size + 0.01
-        slots = tuple(p for p in slots if zu12_reaches(
-            layout.zu12_base, [p + np.array([0.0, 0.0, lift]),
-                               p + np.array([0.0, 0.0, lift + 0.07])]))
+        slots = tuple(p for p in slots if loader_reaches(
+            layout, [p + np.array([0.0, 0.0, lift]), p + np.array([0.0, 0.0, lift + 0.07])]))
         if not slots:
-            raise LayoutError(f'destination {name} is out of the Zu 12\'s reach (its base at '
-                              f'{layout.zu12_base[:2]})')
+            raise LayoutError(f'destination {name} is out of the reach of the loader '
+                              f'{layout.loader.name} (its base at {layout.loader_base[:2]}, '
+                              'the tool pointing down)')
         return Region(name, (ox, oy), (hx, hy), top, slots), ''
     stand = min((st for st in layout.stands if st.side == 0),
                 key=lambda st: math.hypot(st.pose[0] - ox, st.pose[1] - oy))

@@ -34,7 +34,26 @@ def _identity(q: Vector) -> np.ndarray:
     return np.asarray(q, float)
 
 
-class ArmKinematics:
+class FrameLookup:
+    """Targets given in a robot's known frames (``reference_frames``: name -> transform from
+    base_link)."""
+
+    reference_frames: Dict[str, np.ndarray]
+
+    def in_base_link(self, frame: str, pose: np.ndarray, prefix: str = '') -> np.ndarray:
+        """A pose given in one of the reference frames (with the robot's frame prefix; empty
+        means base_link) as a pose in base_link. Raises KeyError for other frames."""
+        name = frame[len(prefix):] if prefix and frame.startswith(prefix) else frame
+        name = name or 'base_link'
+        if name not in self.reference_frames:
+            known = [prefix + f if f != 'world' else f for f in self.reference_frames]
+            raise KeyError(f'unknown frame "{frame}": targets must be given in {known} '
+                           '(no tf2 lookup here)')
+        in_base: np.ndarray = self.reference_frames[name] @ np.asarray(pose, float)
+        return in_base
+
+
+class ArmKinematics(FrameLookup):
     """FK and IK of one arm for one of its tool frames."""
 
     def __init__(self, chain: DHChain, solver: Solver, joint_names: Sequence[str],
@@ -124,18 +143,6 @@ class ArmKinematics:
     def within_limits(self, positions: Vector, tol: float = 1e-9) -> bool:
         q = np.asarray(positions, float)
         return bool(np.all(q >= self.lower - tol) and np.all(q <= self.upper + tol))
-
-    def in_base_link(self, frame: str, pose: np.ndarray, prefix: str = '') -> np.ndarray:
-        """A pose given in one of the reference frames (with the robot's frame prefix; empty
-        means base_link) as a pose in base_link. Raises KeyError for other frames."""
-        name = frame[len(prefix):] if prefix and frame.startswith(prefix) else frame
-        name = name or 'base_link'
-        if name not in self.reference_frames:
-            known = [prefix + f if f != 'world' else f for f in self.reference_frames]
-            raise KeyError(f'unknown frame "{frame}": targets must be given in {known} '
-                           '(no tf2 lookup here)')
-        in_base: np.ndarray = self.reference_frames[name] @ np.asarray(pose, float)
-        return in_base
 
 
 def motion_duration(start: Vector, goal: Vector,

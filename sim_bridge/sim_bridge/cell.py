@@ -261,14 +261,22 @@ class Suction:
     later step; switched off, it releases what it holds."""
 
     def __init__(self, client: BulletClient, robot: Any, link: str, reach: float,
-                 max_payload: float) -> None:
+                 max_payload: float, offset: Tuple[float, float, float] = (0.0, 0.0, 0.0)
+                 ) -> None:
         self._p, self._robot = client, robot
         if link not in robot.link_index or robot.link_index[link] == -1:
             raise ValueError(f'robot "{robot.config.name}" has no link "{link}" for suction')
         self.link, self.reach, self.max_payload = link, reach, max_payload
+        # The cup's point in the link's frame (None: the link's origin).
+        self._offset = np.asarray(offset, float) if any(offset) else None
         self.held: Optional[MaterialBody] = None
         self.armed = False
         self._constraint: Optional[int] = None
+
+    def cup_pose(self) -> Tuple[np.ndarray, np.ndarray]:
+        """The cup's point and its link's rotation in the world."""
+        origin, rot = self._robot.link_world_pose(self.link)
+        return (origin if self._offset is None else origin + rot @ self._offset), rot
 
     def switch_on(self, source: Optional[MaterialSource]) -> Tuple[bool, str]:
         """Arm the cup; grips now if a material is within reach."""
@@ -286,7 +294,7 @@ class Suction:
         """The material nearest the cup, and its distance from the cup's centre [m]."""
         if source is None or not source.materials:
             return None
-        tcp, _ = self._robot.link_world_pose(self.link)
+        tcp, _ = self.cup_pose()
         return min(((m, _distance_to_box(tcp, *source.pose(m), m.size / 2))
                     for m in source.materials), key=lambda md: md[1])
 
@@ -295,7 +303,7 @@ class Suction:
             return True, f'already holding material {self.held.index} ({self.held.color})'
         if source is None:
             return False, 'no materials in this world'
-        tcp, rot = self._robot.link_world_pose(self.link)
+        tcp, rot = self.cup_pose()
         near = self.nearest(source)
         best, best_d = near if near else (None, math.inf)
         if best is None or best_d > self.reach:
@@ -305,7 +313,8 @@ class Suction:
             return False, f'material {best.index} is above the {self.max_payload} kg payload'
         pos, mrot = source.pose(best)
         link_index = self._robot.link_index[self.link]
-        rel_pos = rot.T @ (pos - tcp)
+        origin, _ = self._robot.link_world_pose(self.link)
+        rel_pos = rot.T @ (pos - origin)
         rel_rot = rot.T @ mrot
         self._constraint = self._p.createConstraint(
             self._robot.body, link_index, best.body, -1, pybullet.JOINT_FIXED, (0.0, 0.0, 0.0),

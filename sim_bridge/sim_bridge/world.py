@@ -128,7 +128,8 @@ class SimWorld:
             sc = robot.config.suction
             if sc is not None:
                 try:
-                    self.suctions[name] = Suction(p, robot, sc.link, sc.reach, sc.max_payload)
+                    self.suctions[name] = Suction(p, robot, sc.link, sc.reach, sc.max_payload,
+                                                   sc.offset)
                 except ValueError as exc:
                     raise WorldError(str(exc)) from None
 

@@ -157,16 +157,14 @@ def pipeline_graph(seed: int, belt_speed: float, synchronous: bool = True,
                               ('camera_info', '/belt_camera/camera_info'))),
         # (The coordinator seeds every IK request with the arm's state and executes none: the
         # IK servers need no joint_states, 30 messages a second each.)
-        # (One IK server per arm, in its robot's namespace; ``arm`` is its kinematics.)
-        GraphNode(f'{loader}_kinematics', 'arm_kinematics', 'kinematics_node',
-                  namespace=spaces.get(loader, loader),
-                  parameters={'arm': 'zu12', 'frame_prefix': prefixes.get(loader, ''),
-                              'track_joint_states': False}),
-        *(GraphNode(f'{transport}_kinematics', 'arm_kinematics', 'kinematics_node',
-                    namespace=spaces.get(transport, transport),
-                    parameters={'arm': 'youbot', 'frame_prefix': prefixes.get(transport, ''),
+        # (One IK server per arm, in its robot's namespace; ``arm`` is its robot in the world,
+        # whose entry gives its model.)
+        *(GraphNode(f'{arm}_kinematics', 'arm_kinematics', 'kinematics_node',
+                    namespace=spaces.get(arm, arm),
+                    parameters={'world': world, 'arm': arm,
+                                'frame_prefix': prefixes.get(arm, ''),
                                 'track_joint_states': False})
-          for transport in roles.transports),
+          for arm in (loader, *roles.transports)),
         GraphNode('coordinator_node', 'coordinator', 'coordinator_node',
                   parameters=coordinator),
     ]

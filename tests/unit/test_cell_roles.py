@@ -96,7 +96,9 @@ def test_a_trial_starts_the_ik_servers_in_the_robots_namespaces(tmp_path):
     nodes = {n.name: n for n in pipeline_graph(1, 0.05, world=str(world))}
     assert nodes['arm_kinematics'].namespace == 'cell_arm'
     assert nodes['carrier_kinematics'].namespace == 'cell_carrier'
-    assert nodes['arm_kinematics'].parameters['arm'] == 'zu12'
+    # (Each IK server reads its arm's model from the world: the robot named there.)
+    assert nodes['arm_kinematics'].parameters['arm'] == 'arm'
+    assert nodes['arm_kinematics'].parameters['world'] == str(world)
     assert nodes['carrier_kinematics'].parameters['frame_prefix'] == 'cell_carrier/'
 
 
@@ -133,5 +135,6 @@ def test_what_the_controller_cannot_drive_is_refused_at_start_up_in_one_line():
     data = renamed()
     data['robots'][0]['controllers'][0]['joints'] = data['robots'][0]['controllers'][0][
         'joints'][:5]
-    with pytest.raises(LayoutError, match='robot arm: its arm_controller must drive'):
+    with pytest.raises(LayoutError, match=r"robot arm: .*zu12.urdf: joints \['joint_6'\] move "
+                                          'suction_tcp but are not among the arm'):
         layout_from_world(parse_world(data))

@@ -100,14 +100,14 @@ def test_a_class_of_the_users_own_goes_where_its_rule_says():
 @pytest.mark.parametrize('change, fragment', [
     # The ground target across the floor, 3 m from the Zu 12.
     (lambda c, o, m: m.update(ground_target=[3.0, 2.0, 0.001]),
-     r"destination ground_target is out of the Zu 12's reach"),
+     r'destination ground_target is out of the reach of the loader zu12'),
     # The platform carried to, but out by the belt: no stand reaches it.
     (lambda c, o, m: m.update(pool_platform=[-1.5, -1.5, 0.075]),
      r"destination pool_platform is out of the youBot arm's reach"),
     (lambda c, o, m: c['purple'].update(count=12),
      r'destination ground_target has 9 slots in reach for 12 materials'),
     (lambda c, o, m: c['blue'].update(route='place'),
-     r'destination pool_platform is out of the Zu 12'),
+     r'destination pool_platform is out of the reach of the loader'),
     (lambda c, o, m: c['orange'].update(route='place'),
      r"pool_floor is the youBot's: its materials are carried there"),
     (lambda c, o, m: c['purple'].update(destination='pool_floor'),
@@ -529,7 +529,7 @@ def test_a_lift_out_of_the_end_stops_queue_keeps_to_the_straight_line_up():
     on = np.array([0.675, 0.75, 0.4 + 0.05 + 0.001])
     zu12.lift_point = on + np.array([0.0, 0.0, 0.07])
     ready = np.array([1.201, 1.436, -1.222, 1.357, 1.571, -0.37])    # (the world's)
-    q_on, q_lift = run_.zu12.solve_path([on, zu12.lift_point], ready)
+    q_on, q_lift = run_.loader_arm.solve_path([on, zu12.lift_point], ready)
     pick = SimpleNamespace(timing=PickTiming(lift_height=0.07), contact=1.0)
     for crowded in (True, False):
         zu12.belt = SimpleNamespace(held=lambda m: True, held_by=lambda m, t: True,

@@ -15,9 +15,9 @@ from helpers import ROOT
 FLOORS = (
     ('controllers', 'world_description'),                          # the ROS-free ground floor
     ('robot_description', 'ros_common'),
-    ('sim_bridge', 'perception', 'arm_kinematics', 'recording', 'teleop',
+    ('sim_bridge', 'perception', 'recording', 'teleop',
      'cell_layout'),                                               # the cell's model, no ROS
-    ('trial_record',),                                             # a trial's record, no ROS
+    ('trial_record', 'arm_kinematics'),          # a trial's record (no ROS); the IK node
     ('coordinator', 'live_view'),
     ('studies',),
     ('sim_bringup',),                                              # launch files and tools

@@ -75,6 +75,6 @@ def test_the_watch_sees_a_stranger_write(writes):
             arm._home = None
             m.status = model.MaterialStatus.FAILED
 
-    Intruder().write(pipeline.zu12, model.Material(1, 'orange', None, 0.0, 1))
+    Intruder().write(pipeline.loader_arm, model.Material(1, 'orange', None, 0.0, 1))
     assert 'Intruder' in writes[('Arm', '_home')]
     assert 'Intruder' in writes[('Material', 'status')]

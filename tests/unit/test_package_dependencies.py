@@ -29,6 +29,9 @@ PYTHON_KEYS = {
     'websockets': 'python3-websockets', 'cryptography': 'python3-cryptography',
     're2': 'python3-google-re2-pip', 'optuna': 'python3-optuna-pip',
     'SALib': 'python3-salib-pip', 'scipy': 'python3-scipy', 'matplotlib': 'python3-matplotlib',
+    'pybullet_data': 'python3-pybullet-pip',
+    # (pinocchio is a ROS package of the distribution: its key is its name.)
+    'pinocchio': 'pinocchio',
 }
 # Modules that come with rclpy or the interface packages, declared by their ROS package name.
 ROS_MODULES = {'rclpy', 'rcl_interfaces', 'builtin_interfaces', 'ament_index_python',

@@ -40,7 +40,7 @@ def test_polar_is_reach_and_angle():
 
 def test_the_straight_way_crosses_the_near_edge_outside_the_belt_and_above_its_top():
     lay = cell_layout()
-    side = 1.0 if lay.zu12_base[1] > lay.belt_y else -1.0      # (the Zu 12's side)
+    side = 1.0 if lay.loader_base[1] > lay.belt_y else -1.0      # (the Zu 12's side)
     a = np.array([0.5, lay.belt_y, lay.belt_top + 0.01])
     b = np.array([0.3, lay.belt_y + side * 0.5, lay.belt_top + 0.2])
     p = edge_point(lay, a, b, low=0.05)
@@ -54,7 +54,7 @@ def test_the_straight_way_crosses_the_near_edge_outside_the_belt_and_above_its_t
 
 def test_the_arc_round_the_base_crosses_the_edge_at_a_reach_between_its_ends():
     lay = cell_layout()
-    base = np.array(lay.zu12_base[:2], float)
+    base = np.array(lay.loader_base[:2], float)
     side = 1.0 if base[1] > lay.belt_y else -1.0
     a = np.array([0.6, lay.belt_y, 0.5])
     b = np.array([base[0] + 0.2, lay.belt_y + side * 0.45, 0.55])

@@ -600,7 +600,7 @@ def test_materials_faster_than_the_arm_wait_at_the_end_stop():
     layout = cell_layout()
     cell = FakeCell(layout, PAPER, gap=0.06)
     history = _watch_materials(cell)
-    p = run(cell, Settings(zu12_scaling=0.5))
+    p = run(cell, Settings(loader_scaling=0.5))
     assert p.result.status == 'completed' and p.result.missed == 0
     furthest = max(x for h in history.values() for _, x in h)
     assert furthest <= layout.belt_end_x - layout.material_size / 2 + 1e-9

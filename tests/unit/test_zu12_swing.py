@@ -73,7 +73,7 @@ def test_the_way_back_from_a_low_place_rises_over_it_before_it_swings_to_the_bel
     zu12.cup.released()
     hover = np.array([0.6, layout.belt_y, layout.belt_top + 0.1])
     crossing = edge_point(layout, hover, zu12.cup.above, pick_geometry.EDGE_CLEARANCE_M)
-    edge = run_.zu12.solve(crossing, model.DOWN, 'world', zu12.cup.above_q)
+    edge = run_.loader_arm.solve(crossing, model.DOWN, 'world', zu12.cup.above_q)
     assert over_the_belt(layout, zu12.cup.above_q, edge, 0.0)
     waypoints, _ = zu12.cup.from_release([Waypoint(edge)], edge)
     qs = [w.q for w in waypoints]

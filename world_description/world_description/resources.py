@@ -9,9 +9,16 @@ from world_description.errors import ResourceError
 __all__ = ['ResourceError', 'package_share', 'resolve_resource']
 
 
+PYBULLET_DATA = 'pybullet_data://'
+
+
 def resolve_resource(uri: str, base_dir: Optional[Path] = None) -> Path:
-    """Resolve ``package://pkg/rel``, ``file://`` or a path (relative to ``base_dir``, the
-    world file's directory, when given)."""
+    """Resolve ``package://pkg/rel``, ``pybullet_data://rel`` (a model PyBullet bundles, as
+    ``franka_panda/panda.urdf``), ``file://`` or a path (relative to ``base_dir``, the world
+    file's directory, when given)."""
+    if uri.startswith(PYBULLET_DATA):
+        import pybullet_data
+        return Path(pybullet_data.getDataPath()) / uri[len(PYBULLET_DATA):]
     if uri.startswith('package://'):
         package, _, rel = uri[len('package://'):].partition('/')
         return package_share(package) / rel

@@ -9,7 +9,7 @@ from typing import Any, Dict, Hashable, Tuple
 import yaml
 
 from world_description.errors import WorldConfigError
-from world_description.resources import resolve_resource
+from world_description.resources import PYBULLET_DATA, resolve_resource
 from world_description.world_schema import WorldConfig
 from world_description.world_sections import parse_world
 
@@ -57,7 +57,7 @@ def _absolute_resources(data: Dict[str, Any], base_dir: Path) -> Dict[str, Any]:
     from ``base_dir``, as the simulator resolves them: the mapping runs from anywhere."""
     def absolute(holder: Any, key: str) -> None:
         value = holder.get(key) if isinstance(holder, dict) else None
-        if isinstance(value, str) and not value.startswith('package://'):
+        if isinstance(value, str) and not value.startswith(('package://', PYBULLET_DATA)):
             rel = value[len('file://'):] if value.startswith('file://') else value
             if not Path(rel).is_absolute():
                 holder[key] = str(base_dir / rel)

@@ -77,7 +77,9 @@ class ControllerConfig:
 
 @dataclass(frozen=True)
 class SuctionConfig:
-    """A suction tool: grips the material whose face is within ``reach`` of ``link``'s origin."""
+    """A suction tool: grips the material whose face is within ``reach`` of its point (``link``'s
+    origin, moved by ``offset`` in the link's frame). An arm's tool: the chain from the robot's
+    base to it is the arm the coordinator plans for."""
 
     link: str
     reach: float = 0.01
@@ -85,6 +87,11 @@ class SuctionConfig:
     # The SetBool service that arms/releases it, relative to the robot's namespace; the
     # vacuum switch is published on <service>/holding and <service>/state.
     service: str = 'suction'
+    # The tool's point in ``link``'s frame [m] (a cup at the flange: its length along z), and
+    # whether the tool may turn freely about its z axis (a round cup: the arm's IK leaves its
+    # rotation about the axis free).
+    offset: Tuple[float, float, float] = (0.0, 0.0, 0.0)
+    free_yaw: bool = False
 
 
 @dataclass(frozen=True)

@@ -26,6 +26,7 @@ from world_description.perturbations import (
     TimingPerturbation,
 )
 from world_description.ros_names import MAX_TOKEN_LENGTH, relative_problem, token_problem
+from world_description.tool_section import suction_section
 from world_description.world_schema import (
     GRAVITY_RANGE,
     MAX_JOINT_POSITION,
@@ -43,7 +44,6 @@ from world_description.world_schema import (
     Pose,
     Reader,
     RobotConfig,
-    SuctionConfig,
     WorldConfig,
 )
 
@@ -194,18 +194,7 @@ def _robot(r: Reader, item: Any, i: int) -> RobotConfig:
         raise r.fail(where, 'drive', 'cannot drive a robot with a fixed base')
     suction = None
     if item.get('suction') is not None:
-        sw = where + '.suction'
-        r.only(item['suction'], sw, {'link', 'reach', 'max_payload', 'service'})
-        suction = SuctionConfig(r.string(item['suction'], 'link', sw),
-                                r.number(item['suction'], 'reach', sw, default=0.01, lo=1e-4,
-                                         hi=0.1),
-                                r.number(item['suction'], 'max_payload', sw, default=12.0,
-                                         lo=1e-3, hi=1000.0),
-                                r.string(item['suction'], 'service', sw, default='suction'))
-        if not (len(suction.service) <= MAX_TOKEN_LENGTH
-                and re.fullmatch(r'[a-z][a-z0-9_]*(/[a-z][a-z0-9_]*)*', suction.service)):
-            raise r.fail(sw, 'service', f'{suction.service[:80]!r} is not a relative ROS name '
-                         f'of at most {MAX_TOKEN_LENGTH} characters')
+        suction = suction_section(r, item['suction'], where + '.suction')
     laser = None
     if item.get('laser') is not None:
         if drive is None:

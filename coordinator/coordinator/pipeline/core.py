@@ -24,7 +24,7 @@ from coordinator.pipeline.model import (
     TransportState,
 )
 from coordinator.pipeline.record import EventLog
-from coordinator.pipeline.robots import Arm, BaseDrive, YoubotArm, youbot_limits, zu12_limits
+from coordinator.pipeline.robots import Arm, BaseDrive, YoubotArm, youbot_limits
 from coordinator.pipeline.traffic import Traffic
 from coordinator.pipeline.transport import Transport
 from trial_record.events import Event, EventKind, RunResult
@@ -47,11 +47,12 @@ class Pipeline:
         self.book = MaterialBook(layout, self.s, self.log)
         self.belt = BeltModel(layout, self.book.materials, self.clock, belt_ran_before)
         self.belt_stops = 0               # the belt stopped while loading (its queue full)
-        self.zu12 = Arm(layout.loader.name, zu12_limits(self.s), ports, self.s, self.clock,
-                        self.log)
-        self.loader = Loader(self.zu12, self.book, self.belt, self.log, layout, self.s, ports,
-                             loading=lambda: next((t.robot for t in self.transports
-                                                   if t.loading), None))
+        self.loader_arm = Arm(layout.loader.name,
+                              layout.loader.model.limits(self.s.loader_scaling), ports, self.s,
+                              self.clock, self.log)
+        self.loader = Loader(self.loader_arm, self.book, self.belt, self.log, layout, self.s,
+                             ports, loading=lambda: next((t.robot for t in self.transports
+                                                          if t.loading), None))
         # One youBot object per transport robot, each with its arm and its base; the traffic
         # rules between them.
         bases = {r.name: BaseDrive(r.name, ports, self.log, self.s) for r in layout.transports}
@@ -60,7 +61,7 @@ class Pipeline:
             YoubotArm(r.name, youbot_limits(self.s), ports, self.s, self.clock, self.log),
             self.book, self.log, layout, self.s, ports,
             loader_done=lambda: self.loader.state is LoaderState.DONE,
-            zu12_clear=self.loader.clear_of_the_plate, base=bases[r.name],
+            loader_clear=self.loader.clear_of_the_plate, base=bases[r.name],
             traffic=self.traffic) for r in layout.transports]
         self.transport = self.transports[0]
         self.youbot = self.transport.arm
@@ -90,7 +91,7 @@ class Pipeline:
         self.clock.now = obs.now
         try:
             if self.loader.state is LoaderState.START:
-                self.zu12.started(obs)
+                self.loader_arm.started(obs)
                 for t in self.transports:
                     t.arm.started(obs)
                 self.loader.start(obs)
@@ -173,7 +174,7 @@ class Pipeline:
             if (m.status == MaterialStatus.SEEN and not self.layout.end_stop
                     and m.position[0] > self.layout.belt_end_x):
                 self.book.give_up(obs.now, m, EventKind.MISSED, 'went off the belt end unpicked',
-                                  self.zu12.name)
+                                  self.loader_arm.name)
 
     def _on_belt_area(self, position: Vector) -> bool:
         """Whether a detection lies on the belt. The camera also sees beside it, and downstream
@@ -198,8 +199,8 @@ class Pipeline:
             status=status, completion_time=now - self.start_time, total=tally.total,
             identified=tally.identified, picked=tally.picked, delivered=tally.delivered,
             grasp_attempts=self.log.grasp_attempts, grasp_successes=self.log.grasp_successes,
-            zu12_grasp_attempts=self.log.grasps[self.zu12.name][0],
-            zu12_grasp_successes=self.log.grasps[self.zu12.name][1],
+            zu12_grasp_attempts=self.log.grasps[self.loader_arm.name][0],
+            zu12_grasp_successes=self.log.grasps[self.loader_arm.name][1],
             # (The paper's youBot: every transport robot's, together.)
             youbot_grasp_attempts=sum(self.log.grasps[t.robot][0] for t in self.transports),
             youbot_grasp_successes=sum(self.log.grasps[t.robot][1] for t in self.transports),

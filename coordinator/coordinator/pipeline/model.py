@@ -175,7 +175,7 @@ class Settings:
     pick_x: float = -0.6              # the Zu 12 picks materials downstream of this x [m]
     confirm_hits: int = 8             # frames a track needs before it is acted on
     max_retries: int = 1              # extra grasp attempts on a missed grasp
-    zu12_scaling: float = 1.0         # fraction of the Zu 12's joint speed limits
+    loader_scaling: float = 1.0       # fraction of the loader arm's joint speed limits
     youbot_scaling: float = 1.0
     arrive_tolerance: float = 0.03    # joint error [rad] that counts as arrived
     rest_speed: float = 0.05          # joint speed [rad/s] below which an arm is at rest

@@ -20,7 +20,7 @@ import numpy as np
 from cell_layout.layout import CellLayout
 from cell_layout.pick_geometry import over_the_belt
 from cell_layout.reach import youbot_holds, youbot_tool_quaternion
-from controllers import youbot_arm, zu12_arm
+from controllers import youbot_arm
 from controllers.arrays import Vector
 from controllers.bezier import BezierPath, Pose2D, key_poses_between
 from controllers.path_follower import PathFollower, PDGains, TurnLimits
@@ -224,13 +224,6 @@ class YoubotArm(Arm):
                        detail=f'{np.round(points[1 if len(points) > 1 else 0], 3).tolist()} via '
                               f'{np.round(points[-1], 3).tolist()} {why}')
         return None
-
-
-def zu12_limits(settings: Settings) -> JointLimits:
-    """The Zu 12's joint limits, the velocity scaled by its setting."""
-    return JointLimits(np.asarray(zu12_arm.JOINT_VELOCITY_LIMITS),
-                       np.asarray(zu12_arm.JOINT_ACCELERATION_LIMITS),
-                       np.asarray(zu12_arm.JOINT_JERK_LIMITS)).scaled(settings.zu12_scaling)
 
 
 def youbot_limits(settings: Settings) -> JointLimits:

@@ -75,9 +75,9 @@ class Transport(Machine):
 
     def __init__(self, arm: YoubotArm, book: MaterialBook, log: EventLog, layout: CellLayout,
                  settings: Settings, ports: Ports, loader_done: Callable[[], bool],
-                 zu12_clear: Callable[[float], bool], base: BaseDrive,
+                 loader_clear: Callable[[float], bool], base: BaseDrive,
                  traffic: Traffic) -> None:
-        """``loader_done`` and ``zu12_clear`` are the questions the youBot asks of the Zu 12:
+        """``loader_done`` and ``loader_clear`` are the questions the youBot asks of the Zu 12:
         whether it has nothing more to load, and whether its cup is clear of the plate at a
         time (the base may move). ``traffic``: the fleet's rules (a fleet of one: it starts
         at the loading pose, and nothing holds it back); ``base`` drives its base."""
@@ -86,7 +86,7 @@ class Transport(Machine):
         self.arm: YoubotArm = arm
         self.book, self.layout, self.ports = book, layout, ports
         self.room = Room(book, layout, settings)          # (a view: questions on the book)
-        self.loader_done, self.zu12_clear = loader_done, zu12_clear
+        self.loader_done, self.loader_clear = loader_done, loader_clear
         self.queue: List[Material] = []              # still to unload, the current one first
         self.base, self.traffic = base, traffic
         self.robot = arm.name
@@ -130,7 +130,7 @@ class Transport(Machine):
             m.plate == self.robot for m in self.book.with_status(MaterialStatus.PICKING)))
         if (not (self.loader_done() or self.room.load_complete(self.robot, bool(on_plate))
                  or idle)
-                or not self.zu12_clear(obs.now)):
+                or not self.loader_clear(obs.now)):
             return      # (nor while the Zu 12's cup is over the plate, or swinging home from it)
         order = [st.name for st in self.layout.stands]
         queue = sorted(on_plate, key=lambda m: (
