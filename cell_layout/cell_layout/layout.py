@@ -209,6 +209,10 @@ class CellLayout:
     more_sides: Tuple[PoolSide, ...] = ()
     # The conveyor drive's encoder: its resolution [m per count] (0: the cell has none).
     belt_encoder: float = 0.0
+    # The belt's upstream end (world x) [m], and the most upstream x from which the loader
+    # reaches a material to the belt's end (its pick window: loader_reach.py).
+    belt_start_x: float = -math.inf
+    pick_from: float = -math.inf
 
     @property
     def transport(self) -> CellRobot:

@@ -21,6 +21,7 @@ from cell_layout.fleet_routes import (
     obstacle_height,
     way_back,
 )
+from cell_layout.loader_reach import with_pick_window
 from cell_layout.layout import (
     ARM_CONTROLLER,
     PLATE_TOP_IN_BASE_M,
@@ -147,6 +148,7 @@ def layout_from_world(world: Any) -> CellLayout:
         belt_y=conv.position[1], belt_top=conv.position[2],
         belt_end_x=conv.position[0] + conv.length / 2, belt_speed=conv.belt_speed,
         belt_encoder=conv.encoder.resolution if conv.encoder is not None else 0.0,
+        belt_start_x=conv.position[0] - conv.length / 2,
         belt_width=conv.width,
         end_stop=conv.end_stop,
         material_size=mats.largest, manifest=dict(mats.counts),
@@ -177,6 +179,7 @@ def layout_from_world(world: Any) -> CellLayout:
     layout = replace(layout, regions=regions, stands=tuple(
         replace(st, serves=st.serves | frozenset(served.get(st.name, ()))) for st in stands))
     _check_capacity(layout)
+    layout = with_pick_window(layout)
     check_fleet(layout, world.obstacles, roles.loading is not None, world.conveyor)
     check_loader_base(layout, world.obstacles, world.conveyor)
     return layout

@@ -27,20 +27,24 @@ from controllers.arrays import Vector
 POSITION_TOLERANCE = 1e-9
 ROTATION_TOLERANCE = 1e-9
 # Iterations per start, and starts after the seed's (drawn within the limits).
-MAX_ITERATIONS = 40
+MAX_ITERATIONS = 100
 # A start is given up once its error has not halved in STALL_ITERATIONS iterations.
 STALL_ITERATIONS = 8
-RESTARTS = 60
+RESTARTS = 200
 # Damping: lambda = DAMPING_GAIN * |error|^2 + DAMPING_FLOOR (large steps damped, the last
 # ones Gauss-Newton), and at most MAX_STEP_RAD per joint per iteration.
 DAMPING_GAIN = 0.05
 DAMPING_FLOOR = 1e-10
 MAX_STEP_RAD = 1.0
-# The pull towards the preferred posture in the task's null space, per iteration.
-NULL_SPACE_GAIN = 0.2
-# ... while the error (position + rotation) is between these: far off, it slows the descent,
-# and the last steps converge on the task alone (quadratically) from where the pull left it.
-NULL_SPACE_FROM, NULL_SPACE_UNTIL = 1e-2, 1e-7
+# The pull towards the preferred posture in the task's null space: this share of the way
+# there per iteration, at most POSTURE_STEP_RAD a joint, once the error (position + rotation)
+# is below NULL_SPACE_FROM, until the pull moves no joint more than POSTURE_REST_RAD (or for
+# POSTURE_ITERATIONS at most).
+NULL_SPACE_GAIN = 1.0
+NULL_SPACE_FROM = 1e-2
+POSTURE_STEP_RAD = 0.3
+POSTURE_REST_RAD = 1e-4
+POSTURE_ITERATIONS = 60
 # The error's rows: angular x, y; linear x, y, z; angular z (dropped for a free yaw).
 _ROWS = np.array([3, 4, 0, 1, 2, 5])
 
@@ -60,7 +64,8 @@ class UrdfArm(FrameLookup):
     def __init__(self, urdf: Path, joint_names: Sequence[str], tool_link: str,
                  tool_offset: Vector = (0.0, 0.0, 0.0), free_yaw: bool = False,
                  floor: Optional[float] = None,
-                 reference_frames: Optional[Dict[str, np.ndarray]] = None) -> None:
+                 reference_frames: Optional[Dict[str, np.ndarray]] = None,
+                 preferred: Optional[Vector] = None) -> None:
         try:
             full = pin.buildModelFromUrdf(str(urdf))
         except (RuntimeError, ValueError) as exc:
@@ -109,6 +114,24 @@ class UrdfArm(FrameLookup):
         self.free_yaw, self.floor = free_yaw, floor
         self.reference_frames = {'base_link': np.eye(4), **(reference_frames or {})}
         self.dof = len(self.joint_names)
+        self._shoulder, self._reach = self._reach_bound()
+        # The posture the null space pulls towards (the arm's home; by default the middle of
+        # its limits): where the task leaves the arm free, it does not wander along a motion.
+        middle = (self.lower + self.upper) / 2
+        self.preferred = middle if preferred is None else np.clip(
+            np.asarray(preferred, float), self.lower, self.upper)
+
+    def _reach_bound(self) -> Tuple[np.ndarray, float]:
+        """The first joint's origin and how far from it the tool can be at most (the chain's
+        joint-to-joint distances, constant for revolute joints, plus each prismatic joint's
+        travel): a target further off is out of reach without a search."""
+        origins = self.joint_origins(np.clip(np.zeros(self.dof), self.lower, self.upper))
+        reach = float(np.sum(np.linalg.norm(np.diff(origins, axis=0), axis=1)))
+        for j in range(1, self.model.njoints):
+            if self.model.joints[j].shortname().startswith('JointModelP'):
+                reach += float(self.model.upperPositionLimit[j - 1]
+                               - self.model.lowerPositionLimit[j - 1])
+        return origins[0], reach
 
     # --- forward ------------------------------------------------------------------------------
     def _model_q(self, q: Vector) -> np.ndarray:
@@ -141,21 +164,25 @@ class UrdfArm(FrameLookup):
     # --- inverse ------------------------------------------------------------------------------
     def ik(self, target: np.ndarray, seed: Optional[Vector] = None) -> ArmSolution:
         """Joint positions within the limits that put the tool frame at ``target`` (4x4 in
-        base_link), from ``seed`` (else the middle of the limits) and, failing that, from
+        base_link), from ``seed`` (else the preferred posture) and, failing that, from
         restarts; a failure names why."""
         target = np.asarray(target, float)
         if target.shape != (4, 4) or not math.isfinite(float(target.sum())):
             return ArmSolution(False, reason='target must be a finite 4x4 pose')
+        far = float(np.linalg.norm(target[:3, 3] - self._shoulder))
+        if far > self._reach + 1e-9:
+            return ArmSolution(False, reason=f'out of reach: {far:.3f} m from the first joint, '
+                                             f'the arm reaches {self._reach:.3f} m')
         goal = pin.SE3(_orthonormal(target[:3, :3]), target[:3, 3].copy())
-        middle = (self.lower + self.upper) / 2
-        start = middle if seed is None else np.clip(np.asarray(seed, float), self.lower,
+        start = self.preferred if seed is None else np.clip(np.asarray(seed, float), self.lower,
                                                     self.upper)
-        prefer = self._model_q(start)
+        prefer = self._model_q(self.preferred)
+        first = self._model_q(start)
         rng = np.random.default_rng(_target_key(target))
         low, high = self._model_q(self.lower), self._model_q(self.upper)
         best: Tuple[float, str] = (math.inf, '')
         for attempt in range(RESTARTS + 1):
-            q0 = prefer if attempt == 0 else rng.uniform(low, high)
+            q0 = first if attempt == 0 else rng.uniform(low, high)
             q, error = self._descend(goal, q0, prefer, low, high)
             if error <= POSITION_TOLERANCE + ROTATION_TOLERANCE:
                 positions = q[self._index]
@@ -170,11 +197,15 @@ class UrdfArm(FrameLookup):
 
     def _descend(self, goal: pin.SE3, q: np.ndarray, prefer: np.ndarray, low: np.ndarray,
                  high: np.ndarray) -> Tuple[np.ndarray, float]:
-        """Damped least squares from ``q``: the posture and its error (position + rotation)."""
+        """Damped least squares from ``q``: the posture and its error (position + rotation).
+        An arm the task leaves free (more joints than its rows) is drawn towards ``prefer`` in
+        the task's null space once near the target, until that pull comes to rest (at most
+        POSTURE_ITERATIONS); then it converges on the task alone."""
         model, data, tool = self.model, self.data, self._tool
         rows = _ROWS[:5] if self.free_yaw else _ROWS
+        posture = len(rows) < self.dof
         error, history = math.inf, []
-        for _ in range(MAX_ITERATIONS):
+        for iteration in range(MAX_ITERATIONS):
             pin.computeJointJacobians(model, data, q)
             pin.updateFramePlacement(model, data, tool)
             here = data.oMf[tool]
@@ -183,27 +214,31 @@ class UrdfArm(FrameLookup):
             e = pin.log6(offset).vector
             lx, ly, lz, ax, ay, az = e.tolist()
             error = math.sqrt(lx * lx + ly * ly + lz * lz) + math.sqrt(ax * ax + ay * ay + az * az)
-            if error <= POSITION_TOLERANCE + ROTATION_TOLERANCE:
+            pulling = posture and error < NULL_SPACE_FROM and iteration < POSTURE_ITERATIONS
+            if error <= POSITION_TOLERANCE + ROTATION_TOLERANCE and not pulling:
                 break
-            history.append(error)
-            if len(history) > STALL_ITERATIONS and error > 0.5 * history[-STALL_ITERATIONS - 1]:
-                break
+            if not pulling:
+                history.append(error)
+                if (len(history) > STALL_ITERATIONS
+                        and error > 0.5 * history[-STALL_ITERATIONS - 1]):
+                    break
             jac = pin.Jlog6(offset.inverse()) @ pin.getFrameJacobian(model, data, tool,
                                                                      pin.LOCAL)
-            pull = prefer if NULL_SPACE_UNTIL < error < NULL_SPACE_FROM else None
-            step = self._step(jac[rows], e[rows], q, pull, low, high, error)
+            step = self._step(jac[rows], e[rows], q, prefer if pulling else None, low, high)
             biggest = float(np.abs(step).max())
+            if pulling and biggest < POSTURE_REST_RAD:
+                posture = False             # (at rest: the closest it comes to ``prefer``)
             if biggest > MAX_STEP_RAD:
                 step *= MAX_STEP_RAD / biggest
             q = np.clip(q + step, low, high)
         return q, error
 
     def _step(self, jt: np.ndarray, et: np.ndarray, q: np.ndarray, prefer: Optional[np.ndarray],
-              low: np.ndarray, high: np.ndarray, error: float) -> np.ndarray:
+              low: np.ndarray, high: np.ndarray) -> np.ndarray:
         """The damped least-squares step, joints at a limit that it would push further out
         left still (their columns dropped: the others take up the task), and, with
-        ``prefer``, the pull towards it in the task's null space, no joint pulled further than
-        the task's ``error`` (a pull moves the tool off the target by its square)."""
+        ``prefer``, the pull towards it in the task's null space (at most POSTURE_STEP_RAD a
+        joint)."""
         damping = DAMPING_GAIN * float(et @ et) + DAMPING_FLOOR
         j, free = jt, None
         for _ in range(3):
@@ -212,7 +247,8 @@ class UrdfArm(FrameLookup):
             if prefer is None:
                 step: np.ndarray = j.T @ np.linalg.solve(inner, et)
             else:
-                pull = np.clip(NULL_SPACE_GAIN * (prefer - q), -error, error)
+                pull = np.clip(NULL_SPACE_GAIN * (prefer - q), -POSTURE_STEP_RAD,
+                               POSTURE_STEP_RAD)
                 if free is not None:
                     pull *= free
                 step = pull + j.T @ np.linalg.solve(inner, et - j @ pull)

@@ -76,7 +76,8 @@ PARAMS = (
           'waits for its stamps)', 1.0, 1000.0),
     Param('belt_speed', -1.0, "Belt speed while running [m/s]; -1 takes the world file's",
           -1.0, 1.0),
-    Param('pick_x', -0.6, 'The Zu 12 picks materials on the belt downstream of this x [m]',
+    Param('pick_x', -0.6, 'The loader picks materials on the belt downstream of this x, or of '
+          'where its arm reaches the belt from if that is further [m]',
           -1.0, 1.0),
     Param('max_retries', 1, 'Extra grasp attempts after a missed grasp'),
     Param('drive_speed', Settings.drive_speed, "The path dummy's speed [m/s]", 0.05, 0.8),
@@ -195,7 +196,8 @@ class CoordinatorNode(Node):
         self.get_logger().info(
             f'{"lock-step" if self.synchronous else "real-time"} at {self.rate:g} Hz '
             f'({steps_per_tick} steps per decision); belt {layout.belt_speed:.3f} m/s, '
-            f'{layout.total} materials {layout.manifest}; picks from x = {self.settings.pick_x} m')
+            f'{layout.total} materials {layout.manifest}; picks from x = '
+            f'{max(self.settings.pick_x, layout.pick_from):.3f} m')
 
     def now(self) -> float:
         return self.observer.now()

@@ -168,7 +168,12 @@ def check_meshes(summary: UrdfSummary, base_dir: Optional[Path],
             try:
                 path = resolve(name)
             except (ValueError, KeyError, OSError) as exc:
-                raise UrdfProblem('not_found', f'mesh {name[:200]}: {exc}') from None
+                # PyBullet reads package://a/b as a/b beside the URDF (its bundled models'
+                # meshes are named so): found there, it is that file.
+                beside = None if base_dir is None else base_dir / name[len('package://'):]
+                if beside is None or not beside.is_file():
+                    raise UrdfProblem('not_found', f'mesh {name[:200]}: {exc}') from None
+                path = beside
         else:
             path = Path(name[len('file://'):] if name.startswith('file://') else name)
             if not path.is_absolute():

@@ -2,6 +2,7 @@
 object per robot) and the two machines, each given the parts it uses."""
 from __future__ import annotations
 
+from dataclasses import replace
 from typing import Dict, List, Optional
 
 import numpy as np
@@ -40,6 +41,9 @@ class Pipeline:
         run started (a real-time simulator started with its belt on, the coordinator later):
         what a frame showed before the start has ridden on since."""
         self.layout, self.ports, self.s = layout, ports, settings or Settings()
+        if layout.pick_from > self.s.pick_x:
+            # (The loader reaches the belt only from here on: it picks there.)
+            self.s = replace(self.s, pick_x=layout.pick_from)
         self.start_time = start_time
         self.result: Optional[RunResult] = None
         self.clock = Clock(start_time)
