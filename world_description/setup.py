@@ -12,6 +12,7 @@ setup(
         ('share/ament_index/resource_index/packages', ['resource/' + package_name]),
         ('share/' + package_name, ['package.xml']),
         ('share/' + package_name + '/worlds', glob('worlds/*.yaml')),
+        ('share/' + package_name + '/worlds/config', glob('worlds/config/*.yaml')),
     ],
     install_requires=['setuptools'],
     zip_safe=True,

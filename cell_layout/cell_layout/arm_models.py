@@ -7,14 +7,14 @@ from __future__ import annotations
 from dataclasses import dataclass
 from functools import lru_cache
 from pathlib import Path
-from typing import Any, Optional, Tuple
+from typing import Any, Dict, Optional, Tuple
 
 import numpy as np
 
 from controllers.arm_registry import ArmSpec, Kinematics, arm_kinematics
 from controllers.time_optimal import JointLimits
 from controllers.urdf_arm import UrdfArmError
-from world_description.joint_limits import JointLimitsError, load_acceleration_limits
+from world_description.joint_limits import JointLimitsError, load_joint_limits
 from world_description.resources import resolve_resource
 
 # The controller that moves a robot's arm (the simulator's joint group of that name).
@@ -32,9 +32,10 @@ class ArmModelError(ValueError):
 
 @dataclass(frozen=True)
 class ArmModel:
-    """An arm of the cell: its kinematic model and its joints' limits (velocity from the URDF,
-    acceleration from its controller's joint_limits file, jerk JERK_PER_ACCELERATION times
-    that)."""
+    """An arm of the cell: its kinematic model and its joints' limits for planning: velocity
+    from the URDF (or lower, from its controller's joint_limits file), acceleration and jerk
+    from that file (else ACCELERATION_PER_SPEED times the velocity, and JERK_PER_ACCELERATION
+    times that)."""
 
     spec: ArmSpec
     velocity: Tuple[float, ...]
@@ -83,22 +84,27 @@ def arm_model(robot: Any, base_dir: Optional[Path] = None, fixed: Optional[bool]
     tool = robot.suction
     fixed = robot.fixed_base if fixed is None else fixed
     pose = robot.pose
+    initial = dict(robot.initial_joint_positions)
+    home = tuple(initial[j] for j in arm.joints) if all(j in initial for j in arm.joints) \
+        else None
     spec = ArmSpec(resolve_resource(robot.urdf, base_dir), tuple(arm.joints), tool.link,
                    tuple(tool.offset), tool.free_yaw,
-                   (pose.x, pose.y, pose.z, pose.yaw) if fixed else None)
+                   (pose.x, pose.y, pose.z, pose.yaw) if fixed else None, preferred=home)
     try:
         kin = kinematics_of(spec)
     except UrdfArmError as exc:
         raise ArmModelError(f'robot {robot.name}: {exc}') from None
-    velocity = tuple(float(v) for v in kin.velocity_limits)
-    accelerations = {}
+    given: Dict[str, Dict[str, float]] = {}
     if arm.joint_limits:
         try:
-            accelerations = load_acceleration_limits(resolve_resource(arm.joint_limits,
-                                                                      base_dir))
+            given = load_joint_limits(resolve_resource(arm.joint_limits, base_dir))
         except JointLimitsError as exc:
             raise ArmModelError(f'robot {robot.name}: {exc}') from None
-    acceleration = tuple(accelerations.get(j, ACCELERATION_PER_SPEED * v)
+    urdf = [float(v) for v in kin.velocity_limits]
+    velocity = tuple(min(v, given.get(j, {}).get('velocity', v)) for j, v in zip(spec.joints,
+                                                                                  urdf))
+    acceleration = tuple(given.get(j, {}).get('acceleration', ACCELERATION_PER_SPEED * v)
                          for j, v in zip(spec.joints, velocity))
-    jerk = tuple(JERK_PER_ACCELERATION * a for a in acceleration)
+    jerk = tuple(given.get(j, {}).get('jerk', JERK_PER_ACCELERATION * a)
+                 for j, a in zip(spec.joints, acceleration))
     return ArmModel(spec, velocity, acceleration, jerk)

@@ -7,11 +7,12 @@ line naming the place; the destinations it sets materials on are checked slot by
 from __future__ import annotations
 
 from dataclasses import replace
+from typing import List, Optional, Tuple
 
 import numpy as np
 
 from cell_layout.layout import CellLayout, LayoutError, slot_in_world
-from cell_layout.reach import loader_misses
+from cell_layout.reach import loader_misses, loader_solution
 
 # Along the belt's centre line, every this far [m].
 WINDOW_STEP_M = 0.02
@@ -24,11 +25,18 @@ LIFT_OVER_BELT_M = 0.15
 LATERAL_M = 0.03
 # The shortest window the loader meets materials in on the move [m].
 MIN_WINDOW_M = 0.15
+# Following a material: a tool moving this fast (along the belt, or up: a pick's descent and
+# lift) takes at most this share of each joint's speed limit [m/s] (the rest: the planner's
+# acceleration; a pick descends at up to 0.33 m/s, and a belt in a study runs at 0.3 m/s),
+# measured over this step [m].
+FOLLOW_SPEED_M_S = 0.35
+FOLLOW_SHARE = 0.8
+FOLLOW_STEP_M = 0.005
 # A carried material over a plate slot: its bottom, and the straight descent's top [m].
 PLACE_HEIGHTS_M = (0.003, 0.15)
 
 
-def pick_points(layout: CellLayout, x: float) -> list:
+def pick_points(layout: CellLayout, x: float) -> List[np.ndarray]:
     """The world points the loader's tool passes through picking a material at ``x``."""
     top = layout.belt_top + layout.material_size
     lift = layout.belt_top + max(LIFT_OVER_BELT_M, 2 * layout.material_size)
@@ -37,25 +45,56 @@ def pick_points(layout: CellLayout, x: float) -> list:
 
 
 def pick_window(layout: CellLayout) -> float:
-    """The most upstream belt x from which the loader reaches every material downstream to
-    the belt's end; a LayoutError if it does not reach the end, or reaches less than
-    MIN_WINDOW_M of the belt."""
+    """The most upstream belt x from which the loader meets every material downstream to the
+    belt's end: it reaches it, and follows it there (a tool moving at FOLLOW_SPEED_M_S along
+    the belt or up) within FOLLOW_SHARE of its joints' speed limits. Near the edge of its
+    reach an arm is stretched out, and following a material needs joint speeds past its limits
+    (a Panda's first joint 5.8 rad/s at 1.9 m/s allowed, met 3 cm inside it). A LayoutError if
+    it does not meet one at the belt's end, or meets them along less than MIN_WINDOW_M."""
     end = layout.belt_end_x - layout.material_size / 2
     start = layout.belt_start_x + layout.material_size / 2
-    missed = loader_misses(layout, pick_points(layout, end))
-    if missed:
-        raise LayoutError(f'the loader {layout.loader.name} does not reach the belt\'s end '
-                          f'(a material at x = {end:.3f} m: {np.round(missed[0], 3).tolist()} '
-                          'with its tool pointing down)')
-    x = end
-    while x - WINDOW_STEP_M >= start and not loader_misses(layout, pick_points(
-            layout, x - WINDOW_STEP_M)):
+    seed = None
+    x = end + WINDOW_STEP_M
+    while x - WINDOW_STEP_M >= start - 1e-9:
+        why, seed = _meets(layout, x - WINDOW_STEP_M, seed)
+        if why:
+            if x > end:
+                raise LayoutError(f'the loader {layout.loader.name} does not meet a material '
+                                  f'at the belt\'s end (x = {end:.3f} m): {why}')
+            break
         x -= WINDOW_STEP_M
     if end - x < MIN_WINDOW_M - 1e-9:
-        raise LayoutError(f'the loader {layout.loader.name} reaches {end - x:.2f} m of the belt '
-                          f'(x = {x:.3f} to {end:.3f} m), less than the {MIN_WINDOW_M} m it '
-                          'meets materials in on the move')
+        raise LayoutError(f'the loader {layout.loader.name} meets materials along '
+                          f'{end - x:.2f} m of the belt (x = {x:.3f} to {end:.3f} m), less '
+                          f'than the {MIN_WINDOW_M} m it needs to pick them on the move')
     return float(x)
+
+
+def _meets(layout: CellLayout, x: float, seed: Optional[np.ndarray]
+           ) -> Tuple[str, Optional[np.ndarray]]:
+    """Why the loader does not meet a material at ``x`` ('' if it does), and its joints on
+    the material's top there (the next x's seed)."""
+    missed = loader_misses(layout, pick_points(layout, x))
+    if missed:
+        return (f'it does not reach {np.round(missed[0], 3).tolist()} with its tool pointing '
+                'down'), seed
+    model = layout.loader.model
+    on = np.array([x, layout.belt_y, layout.belt_top + layout.material_size])
+    q = loader_solution(layout, on, seed)
+    if q is None:
+        return 'no IK solution on the material', seed
+    limits = np.asarray(model.velocity)
+    for direction in ((FOLLOW_STEP_M, 0.0, 0.0), (0.0, 0.0, FOLLOW_STEP_M)):
+        q2 = loader_solution(layout, on + np.array(direction), q)
+        if q2 is None:
+            return 'no IK solution beside the material', seed
+        speeds = np.abs(q2 - q) / FOLLOW_STEP_M * FOLLOW_SPEED_M_S
+        k = int(np.argmax(speeds / limits))
+        if speeds[k] > FOLLOW_SHARE * limits[k]:
+            return (f'following it at {FOLLOW_SPEED_M_S} m/s takes {model.spec.joints[k]} '
+                    f'{speeds[k]:.2f} rad/s, above {FOLLOW_SHARE:.0%} of its '
+                    f'{limits[k]:.2f}'), seed
+    return '', q
 
 
 def check_plate(layout: CellLayout) -> None:

@@ -113,6 +113,19 @@ def loader_misses(layout: Any, points: Sequence[Vector]) -> List[np.ndarray]:
     return missed
 
 
+def loader_solution(layout: Any, point: Vector, seed: Optional[Vector] = None
+                    ) -> Optional[np.ndarray]:
+    """The layout's loader's joints with its tool pointing down at a world point, from
+    ``seed``; None where it does not reach."""
+    kin = layout.loader.model.kinematics
+    rot, origin = _world_to_base(layout.loader_base)
+    target = np.eye(4)
+    target[:3, :3] = rot @ _DOWN
+    target[:3, 3] = rot @ (np.asarray(point, float) - origin)
+    solution = kin.ik(target, seed)
+    return solution.positions if solution.success else None
+
+
 def tool_positions(layout: Any, q_a: Vector, q_b: Vector, samples: int = 24) -> np.ndarray:
     """Where the loader's tool passes in the world as its joints go in a straight line from
     ``q_a`` to ``q_b`` (``samples`` + 1 points, both ends)."""

@@ -21,7 +21,6 @@ from cell_layout.fleet_routes import (
     obstacle_height,
     way_back,
 )
-from cell_layout.loader_reach import with_pick_window
 from cell_layout.layout import (
     ARM_CONTROLLER,
     PLATE_TOP_IN_BASE_M,
@@ -37,6 +36,7 @@ from cell_layout.layout import (
     slot_grid,
     world_to_base,
 )
+from cell_layout.loader_reach import with_pick_window
 from controllers import youbot_arm
 from controllers.bezier import Pose2D
 from controllers.youbot_arm import ARM_BASE_IN_BASE_LINK_M

@@ -11,7 +11,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Callable, Dict, Optional, Sequence, Tuple, Union
+from typing import Callable, Dict, Optional, Tuple, Union
 
 import numpy as np
 
@@ -41,6 +41,9 @@ class ArmSpec:
     base_pose: Optional[Tuple[float, float, float, float]] = None
     # The floor's clearance asked of every joint but the first [m] (a fixed base on the floor).
     floor_clearance: float = 0.02
+    # The posture the generic solver keeps the arm nearest where the task leaves it free (its
+    # home; None: the middle of its limits).
+    preferred: Optional[Tuple[float, ...]] = None
     fast_paths: bool = field(default=True, compare=False)
 
 
@@ -76,7 +79,7 @@ def generic_kinematics(spec: ArmSpec) -> UrdfArm:
         frames['world'] = np.linalg.inv(planar_pose(*spec.base_pose))
         floor = -spec.base_pose[2] + spec.floor_clearance
     return UrdfArm(spec.urdf, spec.joints, spec.tool_link, spec.tool_offset, spec.free_yaw,
-                   floor, frames)
+                   floor, frames, spec.preferred)
 
 
 def arm_kinematics(spec: ArmSpec) -> Tuple[Kinematics, str]:
@@ -120,8 +123,3 @@ def same_kinematics(a: Kinematics, b: Kinematics,
         if float(np.abs(a.fk(q) - b.fk(q)).max()) > MATCH_TOLERANCE:
             return False
     return True
-
-
-def joint_limits_of(kin: Kinematics, names: Sequence[str]) -> Dict[str, Tuple[float, float]]:
-    """{joint: (lower, upper)} of the arm's joints."""
-    return {n: (float(lo), float(hi)) for n, lo, hi in zip(names, kin.lower, kin.upper)}

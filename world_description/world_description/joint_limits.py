@@ -4,7 +4,8 @@ joint_limits write it::
     joint_limits:
       arm_joint_1: {has_acceleration_limits: true, max_acceleration: 6.0}
 
-Only the acceleration limits are read (position, velocity and effort come from the URDF).
+The simulator reads the acceleration limits (position, velocity and effort come from the
+URDF); the cell's planner reads velocity (below the URDF's), acceleration and jerk limits.
 """
 from __future__ import annotations
 
@@ -22,11 +23,26 @@ class JointLimitsError(ValueError):
 
 
 MAX_FILE_BYTES = 1024 * 1024         # the project's are a few hundred bytes
-MAX_ACCELERATION = 1e4               # [rad/s^2 or m/s^2]
+MAX_ACCELERATION = 1e4               # [rad/s^2 or m/s^2] (and velocities [rad/s or m/s])
+MAX_JERK = 1e6                       # [rad/s^3 or m/s^3]
 
 
 def load_acceleration_limits(path: Path) -> Dict[str, float]:
     """{joint: max_acceleration} for the joints whose has_acceleration_limits is true."""
+    return {joint: values['acceleration']
+            for joint, values in load_joint_limits(path).items() if 'acceleration' in values}
+
+
+# The limits read, by their MoveIt names: has_<flag>, max_<key>.
+_LIMITS = (('velocity', 'has_velocity_limits', 'max_velocity'),
+           ('acceleration', 'has_acceleration_limits', 'max_acceleration'),
+           ('jerk', 'has_jerk_limits', 'max_jerk'))
+
+
+def load_joint_limits(path: Path) -> Dict[str, Dict[str, float]]:
+    """{joint: {'velocity' | 'acceleration' | 'jerk': limit}} for the limits whose has_*_limits
+    flag is true (a velocity limit here lowers the URDF's for planning: the simulator keeps
+    the URDF's)."""
     try:
         info = os.stat(path)
         if not stat.S_ISREG(info.st_mode) or info.st_size > MAX_FILE_BYTES:
@@ -38,20 +54,22 @@ def load_acceleration_limits(path: Path) -> Dict[str, float]:
     joints = data.get('joint_limits') if isinstance(data, dict) else None
     if not isinstance(joints, dict):
         raise JointLimitsError(f'{path}: needs a "joint_limits" mapping of joint names')
-    limits: Dict[str, float] = {}
+    limits: Dict[str, Dict[str, float]] = {}
     for joint, entry in joints.items():
         if not isinstance(entry, dict):
             raise JointLimitsError(f'{path}: joint_limits.{joint} must be a mapping')
-        flag = entry.get('has_acceleration_limits', False)
-        if not isinstance(flag, bool):
-            raise JointLimitsError(f'{path}: joint_limits.{joint}.has_acceleration_limits must '
-                                   f'be true or false, got {flag!r}')
-        if not flag:
-            continue
-        value = entry.get('max_acceleration')
-        if (isinstance(value, bool) or not isinstance(value, (int, float))
-                or not (math.isfinite(value) and 0.0 < value <= MAX_ACCELERATION)):
-            raise JointLimitsError(f'{path}: joint_limits.{joint}.max_acceleration must be a '
-                                   f'number within (0, {MAX_ACCELERATION:g}], got {value!r}')
-        limits[str(joint)] = float(value)
+        for name, has, key in _LIMITS:
+            flag = entry.get(has, False)
+            if not isinstance(flag, bool):
+                raise JointLimitsError(f'{path}: joint_limits.{joint}.{has} must be true or '
+                                       f'false, got {flag!r}')
+            if not flag:
+                continue
+            value = entry.get(key)
+            top = MAX_JERK if name == 'jerk' else MAX_ACCELERATION
+            if (isinstance(value, bool) or not isinstance(value, (int, float))
+                    or not (math.isfinite(value) and 0.0 < value <= top)):
+                raise JointLimitsError(f'{path}: joint_limits.{joint}.{key} must be a number '
+                                       f'within (0, {top:g}], got {value!r}')
+            limits.setdefault(str(joint), {})[name] = float(value)
     return limits
