@@ -11,7 +11,7 @@ from typing import Callable, List, Sequence, Tuple
 import numpy as np
 
 from cell_layout.layout import CellLayout
-from cell_layout.reach import tool_positions
+from cell_layout.reach import tool_points, tool_positions
 from controllers.arrays import Vector
 from controllers.pick_place import PickTiming
 
@@ -24,6 +24,11 @@ LIFT_LINE_STEP_M = 0.01
 # A swing of the Zu 12's joints keeps what its cup holds (or the cup) this far above anything
 # that can ride on the belt wherever it passes over the belt [m].
 SWING_CLEARANCE_M = 0.02
+# What the cup holds passes the materials at a place this far from them at least, as it comes
+# down onto its own slot [m] (the slots leave 1 cm between neighbours).
+NEIGHBOUR_CLEARANCE_M = 0.002
+# A motion's samples are checked at this many points between each two (joint-linear) [-].
+SWEEP_SUBSTEPS = 4
 # Two IK solutions a pick path's sample apart (50 ms) that differ by more than this in a joint
 # lie on two branches [rad].
 IK_JUMP_RAD = 0.5
@@ -117,3 +122,29 @@ def place_points(target: Vector, size: float, timing: PickTiming, set_down_rise:
     transfer = release.copy()
     transfer[2] = max(above[2], belt_top + 2 * size + timing.lift_height)
     return release, above, transfer
+
+
+def sweeps_into(lay: CellLayout, qs: Sequence[np.ndarray], neighbours: Sequence[Tuple[Vector,
+                float]], held: float) -> bool:
+    """Whether what the loader's cup holds (a cube of edge ``held``, the cup on its top) comes
+    nearer than NEIGHBOUR_CLEARANCE_M to one of ``neighbours`` (each a material's bottom
+    centre in the world, and its edge) as the joints go through ``qs`` (joint-linear between
+    them, SWEEP_SUBSTEPS points each). A motion planned through a point above its place without
+    stopping there (the time-optimal planner blends through it) comes down onto its slot on a
+    curve: coming in from the side, a 7-joint arm's overshot 1.1 cm past its slot's column and
+    pushed the material beside it 8 cm across the youBot's plate."""
+    if not neighbours or len(qs) == 0:
+        return False
+    dense = [np.asarray(qs[0], float)]
+    for a, b in zip(qs, qs[1:]):
+        a, b = np.asarray(a, float), np.asarray(b, float)
+        dense += [a + (b - a) * k / SWEEP_SUBSTEPS for k in range(1, SWEEP_SUBSTEPS + 1)]
+    cups = tool_points(lay, dense)
+    for centre, size in neighbours:
+        c = np.asarray(centre, float)
+        reach = (held + size) / 2 + NEIGHBOUR_CLEARANCE_M
+        near = ((np.abs(cups[:, 0] - c[0]) < reach) & (np.abs(cups[:, 1] - c[1]) < reach)
+                & (cups[:, 2] - held < c[2] + size + NEIGHBOUR_CLEARANCE_M))
+        if bool(np.any(near)):
+            return True
+    return False

@@ -126,6 +126,39 @@ def loader_solution(layout: Any, point: Vector, seed: Optional[Vector] = None
     return solution.positions if solution.success else None
 
 
+# Going straight down onto a place, no joint of the loader moves more than this for a
+# centimetre of the way [rad] (more: a jump to another branch of its IK on the way).
+DESCENT_STEP_M = 0.01
+DESCENT_JUMP_RAD = 0.2
+
+
+def loader_descends(layout: Any, bottom: Vector, rise: float) -> bool:
+    """Whether the layout's loader goes straight down from ``rise`` above a world point to
+    the point, its tool pointing down, on one branch of its IK (each centimetre's solution
+    seeded with the one above)."""
+    bottom = np.asarray(bottom, float)
+    q = loader_solution(layout, bottom + np.array([0.0, 0.0, rise]))
+    steps = max(1, int(math.ceil(rise / DESCENT_STEP_M - 1e-9)))
+    for k in range(1, steps + 1):
+        if q is None:
+            return False
+        nxt = loader_solution(layout, bottom + np.array([0.0, 0.0, rise * (1 - k / steps)]), q)
+        if nxt is None or float(np.max(np.abs(nxt - q))) > DESCENT_JUMP_RAD:
+            return False
+        q = nxt
+    return q is not None
+
+
+def tool_points(layout: Any, qs: Sequence[Vector]) -> np.ndarray:
+    """Where the loader's tool is in the world at each of the joint positions ``qs``."""
+    kin = layout.loader.model.kinematics
+    x, y, z, yaw = layout.loader_base
+    c, s = math.cos(yaw), math.sin(yaw)
+    rot = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])         # base -> world
+    origin = np.array([x, y, z])
+    return np.array([rot @ kin.fk(q)[:3, 3] + origin for q in qs]).reshape(-1, 3)
+
+
 def tool_positions(layout: Any, q_a: Vector, q_b: Vector, samples: int = 24) -> np.ndarray:
     """Where the loader's tool passes in the world as its joints go in a straight line from
     ``q_a`` to ``q_b`` (``samples`` + 1 points, both ends)."""

@@ -41,10 +41,12 @@ MAX_STEP_RAD = 1.0
 # is below NULL_SPACE_FROM, until the pull moves no joint more than POSTURE_REST_RAD (or for
 # POSTURE_ITERATIONS at most).
 NULL_SPACE_GAIN = 1.0
-NULL_SPACE_FROM = 1e-2
+NULL_SPACE_FROM, NULL_SPACE_UNTIL = 1e-2, 1e-7
 POSTURE_STEP_RAD = 0.3
 POSTURE_REST_RAD = 1e-4
 POSTURE_ITERATIONS = 60
+# Whether a seeded solve settles too (else: it keeps near its seed).
+SETTLE_FROM_SEED = True
 # The error's rows: angular x, y; linear x, y, z; angular z (dropped for a free yaw).
 _ROWS = np.array([3, 4, 0, 1, 2, 5])
 
@@ -183,7 +185,11 @@ class UrdfArm(FrameLookup):
         best: Tuple[float, str] = (math.inf, '')
         for attempt in range(RESTARTS + 1):
             q0 = first if attempt == 0 else rng.uniform(low, high)
-            q, error = self._descend(goal, q0, prefer, low, high)
+            # (From the seed, the arm moves little in the null space: a motion's successive
+            # solutions stay on one branch. From no seed or a restart, it settles nearest the
+            # preferred posture.)
+            q, error = self._descend(goal, q0, prefer, low, high,
+                                     settle=SETTLE_FROM_SEED or seed is None or attempt > 0)
             if error <= POSITION_TOLERANCE + ROTATION_TOLERANCE:
                 positions = q[self._index]
                 if self.above_floor(positions):
@@ -196,11 +202,14 @@ class UrdfArm(FrameLookup):
         return ArmSolution(False, reason=best[1])
 
     def _descend(self, goal: pin.SE3, q: np.ndarray, prefer: np.ndarray, low: np.ndarray,
-                 high: np.ndarray) -> Tuple[np.ndarray, float]:
+                 high: np.ndarray, settle: bool = True) -> Tuple[np.ndarray, float]:
         """Damped least squares from ``q``: the posture and its error (position + rotation).
         An arm the task leaves free (more joints than its rows) is drawn towards ``prefer`` in
-        the task's null space once near the target, until that pull comes to rest (at most
-        POSTURE_ITERATIONS); then it converges on the task alone."""
+        the task's null space once near the target: with ``settle``, until that pull comes to
+        rest (at most POSTURE_ITERATIONS); without, no joint further per iteration than the
+        task's error (a seed's posture kept but for a drift back towards ``prefer``: the
+        nearest point to ``prefer`` can jump as the target moves, 1 rad for a 1 cm step
+        down to the floor). Then it converges on the task alone."""
         model, data, tool = self.model, self.data, self._tool
         rows = _ROWS[:5] if self.free_yaw else _ROWS
         posture = len(rows) < self.dof
@@ -214,7 +223,8 @@ class UrdfArm(FrameLookup):
             e = pin.log6(offset).vector
             lx, ly, lz, ax, ay, az = e.tolist()
             error = math.sqrt(lx * lx + ly * ly + lz * lz) + math.sqrt(ax * ax + ay * ay + az * az)
-            pulling = posture and error < NULL_SPACE_FROM and iteration < POSTURE_ITERATIONS
+            pulling = (posture and error < NULL_SPACE_FROM and iteration < POSTURE_ITERATIONS
+                       and (settle or error > NULL_SPACE_UNTIL))
             if error <= POSITION_TOLERANCE + ROTATION_TOLERANCE and not pulling:
                 break
             if not pulling:
@@ -224,7 +234,8 @@ class UrdfArm(FrameLookup):
                     break
             jac = pin.Jlog6(offset.inverse()) @ pin.getFrameJacobian(model, data, tool,
                                                                      pin.LOCAL)
-            step = self._step(jac[rows], e[rows], q, prefer if pulling else None, low, high)
+            step = self._step(jac[rows], e[rows], q, prefer if pulling else None, low, high,
+                              POSTURE_STEP_RAD if settle else error)
             biggest = float(np.abs(step).max())
             if pulling and biggest < POSTURE_REST_RAD:
                 posture = False             # (at rest: the closest it comes to ``prefer``)
@@ -234,10 +245,10 @@ class UrdfArm(FrameLookup):
         return q, error
 
     def _step(self, jt: np.ndarray, et: np.ndarray, q: np.ndarray, prefer: Optional[np.ndarray],
-              low: np.ndarray, high: np.ndarray) -> np.ndarray:
+              low: np.ndarray, high: np.ndarray, pull_most: float = 0.0) -> np.ndarray:
         """The damped least-squares step, joints at a limit that it would push further out
         left still (their columns dropped: the others take up the task), and, with
-        ``prefer``, the pull towards it in the task's null space (at most POSTURE_STEP_RAD a
+        ``prefer``, the pull towards it in the task's null space (at most ``pull_most`` a
         joint)."""
         damping = DAMPING_GAIN * float(et @ et) + DAMPING_FLOOR
         j, free = jt, None
@@ -247,8 +258,7 @@ class UrdfArm(FrameLookup):
             if prefer is None:
                 step: np.ndarray = j.T @ np.linalg.solve(inner, et)
             else:
-                pull = np.clip(NULL_SPACE_GAIN * (prefer - q), -POSTURE_STEP_RAD,
-                               POSTURE_STEP_RAD)
+                pull = np.clip(NULL_SPACE_GAIN * (prefer - q), -pull_most, pull_most)
                 if free is not None:
                     pull *= free
                 step = pull + j.T @ np.linalg.solve(inner, et - j @ pull)

@@ -393,7 +393,9 @@ class Loader(Machine):
         if isinstance(way, str):
             return self._place_failed(obs, m, way)
         self.cup.adopt(*way.rise)
-        self.move(LoaderState.PLACE, obs, self.arm.plan(self.arm.q(obs), way.waypoints))
+        q = self.arm.q(obs)
+        self.move(LoaderState.PLACE, obs, self.planner.clear_way(
+            self.arm.plan(q, way.waypoints), way, lambda waypoints: self.arm.plan(q, waypoints)))
 
     def _place_failed(self, obs: Observation, m: Material, why: str) -> None:
         self.ports.grip(self.arm.name, False)

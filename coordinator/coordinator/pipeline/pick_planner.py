@@ -19,6 +19,7 @@ from cell_layout.pick_geometry import (
     lift_line,
     over_the_belt,
     place_points,
+    sweeps_into,
 )
 from controllers.bezier import Pose2D
 from controllers.pick_place import PickTiming, follow_pick
@@ -41,6 +42,7 @@ from coordinator.pipeline.model import (
     REAIM_TOLERANCE_M,
     SETTLE_S,
     Material,
+    MaterialStatus,
     Observation,
     Points,
     Settings,
@@ -65,6 +67,14 @@ class PlaceWay:
     above: np.ndarray             # above the place (x, y, z)
     above_q: np.ndarray
     onto_plate: bool
+    # The materials at the place already (bottom centre, edge), and the held one's edge.
+    neighbours: List[Tuple[np.ndarray, float]] = field(default_factory=list)
+    held: float = 0.0
+
+    def stopping_above(self) -> List[Waypoint]:
+        """The same way, at rest above the place before it goes straight down (a way that
+        blends through that point can come down onto the place on a curve)."""
+        return [replace(w, stop=True) if w.q is self.above_q else w for w in self.waypoints]
 
     @property
     def rise(self) -> Tuple[np.ndarray, np.ndarray, np.ndarray, bool]:
@@ -336,7 +346,9 @@ class PickPlanner:
                    pick.waypoints[:-1] + [Waypoint(pick.q_lift, stop=crowded,
                                                    min_time=pick.timing.lift)])
         try:
-            whole = self._motion(obs, through + place_way.waypoints, pick)
+            whole = self.clear_way(
+                self._motion(obs, through + place_way.waypoints, pick), place_way,
+                lambda way: self._motion(obs, through + way, pick))
         except PlanError:
             return None                 # (the place is planned at the lift point then)
         ahead = Ahead(place_way, pick.q_lift, pick.points[-1][0])
@@ -390,5 +402,33 @@ class PickPlanner:
                 if over_the_belt(self.layout, q_edge, q_above, size) else [])
         return PlaceWay([Waypoint(q_edge, stop=False), *over, Waypoint(q_above, stop=False),
                          Waypoint(q_release, hold=SETTLE_S, min_time=t.place_descend)],
-                        q_transfer, above, q_above, onto_plate)
+                        q_transfer, above, q_above, onto_plate,
+                        self._neighbours(m, onto_plate, youbot_pose), size)
+
+    def _neighbours(self, m: Material, onto_plate: bool, youbot_pose: Optional[Pose2D]
+                    ) -> List[Tuple[np.ndarray, float]]:
+        """The materials at ``m``'s place already (or kept for one): their bottom centres in
+        the world and their edges."""
+        lay = self.layout
+        if onto_plate:
+            if youbot_pose is None:
+                return []
+            taken = self.room.plate_taken(m.plate, but=m)
+            return [(slot_in_world(youbot_pose, lay.plate_slots[k], lay.youbot_base_z,
+                                   lay.size_of(color)), lay.size_of(color))
+                    for k, color in taken.items()]
+        region = lay.region_of(m.color)
+        return [(np.asarray(region.slots[x.place], float), x.size)
+                for x in self.book.materials.values()
+                if x is not m and x.place >= 0 and lay.destination(x.color) == region.name
+                and x.status is MaterialStatus.PLACED]
+
+    def clear_way(self, motion: Points, way: PlaceWay, replan: Callable[[List[Waypoint]],
+                  Points]) -> Points:
+        """``motion`` (planned through ``way``), or, where what the cup holds would come near a
+        material at the place on it (sweeps_into), the motion ``replan`` plans through the way
+        at rest above the place."""
+        if not sweeps_into(self.layout, [p[1] for p in motion], way.neighbours, way.held):
+            return motion
+        return replan(way.stopping_above())
 
