@@ -43,9 +43,11 @@ class ArmModel:
     jerk: Tuple[float, ...]
 
     def limits(self, scaling: float = 1.0) -> JointLimits:
-        """The planner's limits, the velocity scaled by ``scaling``."""
+        """The planner's limits, the velocity scaled by ``scaling``, the positions the URDF's."""
+        kin = self.kinematics
         return JointLimits(np.asarray(self.velocity), np.asarray(self.acceleration),
-                           np.asarray(self.jerk)).scaled(scaling)
+                           np.asarray(self.jerk), np.asarray(kin.lower, float),
+                           np.asarray(kin.upper, float)).scaled(scaling)
 
     @property
     def kinematics(self) -> Kinematics:

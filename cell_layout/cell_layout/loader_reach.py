@@ -12,14 +12,11 @@ from typing import List, Optional, Tuple
 import numpy as np
 
 from cell_layout.layout import CellLayout, LayoutError, slot_in_world
+from cell_layout.pick_geometry import CELL_TIMING, place_points
 from cell_layout.reach import loader_misses, loader_solution
 
 # Along the belt's centre line, every this far [m].
 WINDOW_STEP_M = 0.02
-# The tool's heights over a material's top the pick passes through [m]: on it, the hover
-# (PickTiming.hover), the lift (PickTiming.lift_height over the belt, a 50 mm material).
-PICK_HEIGHTS_M = (0.0, 0.10)
-LIFT_OVER_BELT_M = 0.15
 # A material may lie this far off the belt's centre line (the source's lateral jitter, and
 # more) [m].
 LATERAL_M = 0.03
@@ -32,16 +29,14 @@ MIN_WINDOW_M = 0.15
 FOLLOW_SPEED_M_S = 0.35
 FOLLOW_SHARE = 0.8
 FOLLOW_STEP_M = 0.005
-# A carried material over a plate slot: its bottom, and the straight descent's top [m].
-PLACE_HEIGHTS_M = (0.003, 0.15)
 
 
 def pick_points(layout: CellLayout, x: float) -> List[np.ndarray]:
     """The world points the loader's tool passes through picking a material at ``x``."""
     top = layout.belt_top + layout.material_size
-    lift = layout.belt_top + max(LIFT_OVER_BELT_M, 2 * layout.material_size)
-    return [np.array([x, layout.belt_y + dy, z]) for dy in (-LATERAL_M, 0.0, LATERAL_M)
-            for z in (*(top + h for h in PICK_HEIGHTS_M), lift)]
+    heights = (0.0, CELL_TIMING.hover, CELL_TIMING.lift_height)  # (on it, hover, lift)
+    return [np.array([x, layout.belt_y + dy, top + h]) for dy in (-LATERAL_M, 0.0, LATERAL_M)
+            for h in heights]
 
 
 def pick_window(layout: CellLayout) -> float:
@@ -99,15 +94,16 @@ def _meets(layout: CellLayout, x: float, seed: Optional[np.ndarray]
 
 def check_plate(layout: CellLayout) -> None:
     """A LayoutError unless the loader reaches each of the plate's slots it fills with a
-    carried material, at the loading pose (the first youBot's home)."""
+    carried material, at the loading pose (the first youBot's home): where it lets go, above
+    that, and the transfer point it swings in and out through (pick_geometry.place_points)."""
     carried = [r.size for r in layout.rules.values() if r.route == 'carry']
     if not carried:
         return
     size = max(carried)
     for k, slot in enumerate(layout.plate_slots):
-        base = slot_in_world(layout.youbot_home, slot, layout.youbot_base_z, size)
-        points = [base + np.array([0.0, 0.0, size + h]) for h in PLACE_HEIGHTS_M]
-        missed = loader_misses(layout, points)
+        missed = loader_misses(layout, place_points(
+            slot_in_world(layout.youbot_home, slot, layout.youbot_base_z, size), size,
+            CELL_TIMING, 0.0, layout.belt_top))
         if missed:
             raise LayoutError(f'the loader {layout.loader.name} does not reach the youBot\'s '
                               f'plate at the loading pose: slot {k} at '

@@ -15,6 +15,11 @@ from cell_layout.reach import tool_points, tool_positions
 from controllers.arrays import Vector
 from controllers.pick_place import PickTiming
 
+# The cell's pick and place timing: the shortest times of the moves near a material (the
+# time-optimal plan may take longer), gentle enough that the cup and the fingers do not knock
+# it, and the heights over it (the coordinator's Settings.timing).
+CELL_TIMING = PickTiming(hover=0.06, descend=0.3, dwell=0.15, lift=0.2, lift_height=0.07,
+                         place_descend=0.15, place_height=0.07)
 # The Zu 12 crosses the belt's near edge this far outside it, with what it carries (or its
 # empty cup) at least this far above the belt's top [m].
 EDGE_CLEARANCE_M = 0.05

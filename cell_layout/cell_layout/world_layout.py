@@ -429,6 +429,7 @@ def _region(layout: CellLayout, obstacle: Any, name: str) -> Tuple[Region, str]:
     """A destination's region and its slots, each checked in reach of the robot that sets a
     material down there (a LayoutError if none is), and the stand the youBot unloads there from
     (a carried class's destination other than the pool: the nearer stand)."""
+    from cell_layout.pick_geometry import CELL_TIMING, place_points
     from cell_layout.reach import loader_descends, loader_reaches
     ox, oy, oz = obstacle.position
     if abs(math.sin(2 * obstacle.yaw)) > 1e-9:
@@ -454,9 +455,11 @@ def _region(layout: CellLayout, obstacle: Any, name: str) -> Tuple[Region, str]:
     if routes == {'place'}:
         slots = slot_grid((ox, oy), (hx, hy), top, size, (ox, oy))
         lift = size + 0.01
-        # (Each slot the loader reaches, and goes straight down onto from above it.)
+        # (Each slot the loader reaches, at the transfer point over it too, and goes straight
+        # down onto from above it.)
         slots = tuple(p for p in slots if loader_reaches(
-            layout, [p + np.array([0.0, 0.0, lift]), p + np.array([0.0, 0.0, lift + 0.07])])
+            layout, [p + np.array([0.0, 0.0, lift]), p + np.array([0.0, 0.0, lift + 0.07]),
+                     place_points(p, size, CELL_TIMING, 0.0, layout.belt_top)[2]])
             and loader_descends(layout, p + np.array([0.0, 0.0, lift]), PLACE_RISE_M))
         if not slots:
             raise LayoutError(f'destination {name} is out of the reach of the loader '

@@ -32,6 +32,8 @@ SAMPLE_PERIOD_S = 0.05
 # Plans stay this far inside the limits: the position motors add a small correction to the
 # planned speed while they follow it, and the measured speed must stay within the limit.
 LIMIT_MARGIN = 0.98
+# A profile may pass a joint's position limit by this much [rad or m].
+POSITION_TOLERANCE = 1e-6
 # The speeds tried at a pass-through waypoint, as multiples of the first guess (the smaller of
 # the average speeds of the rest-to-rest segments around it): the one that gives the shortest
 # pair of segments around the waypoint is kept.
@@ -57,12 +59,25 @@ class JointLimits:
     velocity: np.ndarray          # [rad/s] per joint
     acceleration: np.ndarray      # [rad/s^2]
     jerk: np.ndarray              # [rad/s^3]
+    # The positions a profile keeps within (None: not checked). A profile through a waypoint
+    # without stopping can swing past both its ends: one that leaves them is not used.
+    lower: Optional[np.ndarray] = None
+    upper: Optional[np.ndarray] = None
 
     def scaled(self, fraction: float) -> 'JointLimits':
         """The same limits with the velocity scaled (acceleration and jerk kept)."""
         if not 0.0 < fraction <= 1.0:
             raise PlanError(f'velocity scaling must be within (0, 1], got {fraction}')
-        return JointLimits(np.asarray(self.velocity) * fraction, self.acceleration, self.jerk)
+        return JointLimits(np.asarray(self.velocity) * fraction, self.acceleration, self.jerk,
+                           self.lower, self.upper)
+
+    def contain(self, trajectory: Trajectory) -> bool:
+        """Whether a profile keeps every joint within its position limits (if given)."""
+        if self.lower is None or self.upper is None:
+            return True
+        return all(lo - POSITION_TOLERANCE <= e.min and e.max <= hi + POSITION_TOLERANCE
+                   for e, lo, hi in zip(trajectory.position_extrema, self.lower.tolist(),
+                                        self.upper.tolist()))
 
 
 @dataclass(frozen=True)
@@ -120,7 +135,9 @@ def _profile(q0: np.ndarray, v0: np.ndarray, q1: np.ndarray, v1: np.ndarray,
         result = otg.calculate(inp, trajectory)
     except Exception:               # ruckig.RuckigError: a state outside the limits
         return None
-    return trajectory if result == Result.Working else None
+    if result != Result.Working or not limits.contain(trajectory):
+        return None
+    return trajectory
 
 
 def rest_to_rest_time(q0: ArrayLike, q1: ArrayLike, limits: JointLimits) -> float:

@@ -31,6 +31,8 @@ MAX_ITERATIONS = 100
 # A start is given up once its error has not halved in STALL_ITERATIONS iterations.
 STALL_ITERATIONS = 8
 RESTARTS = 200
+# Solutions stay this far inside each joint's position limits [rad or m].
+LIMIT_MARGIN_RAD = 0.02
 # Damping: lambda = DAMPING_GAIN * |error|^2 + DAMPING_FLOOR (large steps damped, the last
 # ones Gauss-Newton), and at most MAX_STEP_RAD per joint per iteration.
 DAMPING_GAIN = 0.05
@@ -181,7 +183,10 @@ class UrdfArm(FrameLookup):
         prefer = self._model_q(self.preferred)
         first = self._model_q(start)
         rng = np.random.default_rng(_target_key(target))
-        low, high = self._model_q(self.lower), self._model_q(self.upper)
+        # (Solutions keep LIMIT_MARGIN_RAD inside the limits: a motion planned through one at
+        # a limit overshoots it between its samples.)
+        margin = np.minimum(LIMIT_MARGIN_RAD, (self.upper - self.lower) / 4)
+        low, high = self._model_q(self.lower + margin), self._model_q(self.upper - margin)
         best: Tuple[float, str] = (math.inf, '')
         for attempt in range(RESTARTS + 1):
             q0 = first if attempt == 0 else rng.uniform(low, high)

@@ -17,6 +17,7 @@ from typing import (
 
 import numpy as np
 
+from cell_layout.pick_geometry import CELL_TIMING
 from controllers.arrays import Vector
 from controllers.bezier import Pose2D
 from controllers.path_follower import PathFollower
@@ -198,10 +199,9 @@ class Settings:
     plan_latency: float = 0.0
     drive_accel: float = 0.8          # [m/s^2]
     # The shortest times of the moves near a material (the time-optimal plan may take longer):
-    # gentle enough that the cup and the fingers do not knock it.
-    timing: PickTiming = PickTiming(hover=0.06, descend=0.3, dwell=0.15, lift=0.2,
-                                    lift_height=0.07, place_descend=0.15,
-                                    place_height=0.07)
+    # gentle enough that the cup and the fingers do not knock it (the layout checks the
+    # loader's reach with the same).
+    timing: PickTiming = CELL_TIMING
 
 
 class MaterialStatus(str, Enum):
