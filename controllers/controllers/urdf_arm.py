@@ -183,27 +183,29 @@ class UrdfArm(FrameLookup):
         prefer = self._model_q(self.preferred)
         first = self._model_q(start)
         rng = np.random.default_rng(_target_key(target))
-        # (Solutions keep LIMIT_MARGIN_RAD inside the limits: a motion planned through one at
-        # a limit overshoots it between its samples.)
-        margin = np.minimum(LIMIT_MARGIN_RAD, (self.upper - self.lower) / 4)
-        low, high = self._model_q(self.lower + margin), self._model_q(self.upper - margin)
         best: Tuple[float, str] = (math.inf, '')
-        for attempt in range(RESTARTS + 1):
-            q0 = first if attempt == 0 else rng.uniform(low, high)
-            # (From the seed, the arm moves little in the null space: a motion's successive
-            # solutions stay on one branch. From no seed or a restart, it settles nearest the
-            # preferred posture.)
-            q, error = self._descend(goal, q0, prefer, low, high,
-                                     settle=SETTLE_FROM_SEED or seed is None or attempt > 0)
-            if error <= POSITION_TOLERANCE + ROTATION_TOLERANCE:
+        # Solutions keep LIMIT_MARGIN_RAD inside the limits (a motion planned through one at a
+        # limit overshoots it between its samples); a pose reached only nearer its limits is
+        # solved within them, from fewer starts.
+        inner = np.minimum(LIMIT_MARGIN_RAD, (self.upper - self.lower) / 4)
+        for margin, starts in ((inner, RESTARTS + 1), (0.0 * inner, RESTARTS // 4 + 1)):
+            low, high = self._model_q(self.lower + margin), self._model_q(self.upper - margin)
+            for attempt in range(starts):
+                q0 = first if attempt == 0 else rng.uniform(low, high)
+                # (From the seed, the arm moves little in the null space: a motion's
+                # successive solutions stay on one branch. From no seed or a restart, it
+                # settles nearest the preferred posture.)
+                q, error = self._descend(goal, q0, prefer, low, high,
+                                         settle=SETTLE_FROM_SEED or seed is None or attempt > 0)
+                if error > POSITION_TOLERANCE + ROTATION_TOLERANCE:
+                    best = min(best, (error, f'out of reach within the joint limits (nearest: '
+                                             f'{error:.3g} off)'))
+                    continue
                 positions = q[self._index]
                 if self.above_floor(positions):
                     return self._answer(positions, target)
                 best = min(best, (0.0, f'every solution found puts a joint below the floor '
                                        f'({self.floor:.3f} m in base_link)'))
-            else:
-                best = min(best, (error, f'out of reach within the joint limits (nearest: '
-                                         f'{error:.3g} off, after {attempt + 1} starts)'))
         return ArmSolution(False, reason=best[1])
 
     def _descend(self, goal: pin.SE3, q: np.ndarray, prefer: np.ndarray, low: np.ndarray,
