@@ -1,5 +1,5 @@
-"""The figures of issues 12 ("Trials at scale"), 37 (what-if studies) and 63 (the closed loop's
-cost) from this `make bench` run, beside their goals.
+"""The figures of issues 12 ("Trials at scale"), 37 (what-if studies), 63 (the closed loop's
+cost) and 64 (the generic IK) from this `make bench` run, beside their goals.
 
 Reads the JSON the benchmarks of this run wrote to bench/results/ (files older than
 ``--since``, the run's start, are refused: every figure comes from the same run) and prints
@@ -39,6 +39,7 @@ def rows(since: float, results: Path = RESULTS) -> List[Row]:
     kinematics = _load('bench_kinematics.json', since, results)
     closed = _load('bench_closed_loop.json', since, results)
     laser = _load('bench_laser.json', since, results)
+    arm_ik = _load('bench_arm_ik.json', since, results)
     return [
         _row('CPU per simulated second, the nodes measured when filed: cut', '>= 3x', pipeline,
              lambda d: d['cpu_cut_vs_filed'], '{:.2f}x', lambda v: v >= 3.0),
@@ -72,6 +73,15 @@ def rows(since: float, results: Path = RESULTS) -> List[Row]:
              closed, lambda d: d['ratio'], '{:.3f}', lambda v: v <= 1.05),
         _row("a youBot's laser scanner and localization, CPU per simulated second", '<= 1.05',
              laser, lambda d: d['ratio'], '{:.3f}', lambda v: v <= 1.05),
+        # (Issue 64: the generic IK from a URDF.)
+        _row('generic IK: poses the analytic solvers reach, missed (Zu 12 + youBot arm)', '0',
+             arm_ik, lambda d: sum(d[a]['poses'] - d[a]['reached'] for a in ('zu12', 'youbot')),
+             '{:.0f}', lambda v: v == 0),
+        _row('generic IK, 7-joint Panda, median from a random seed', '<= 1 ms', arm_ik,
+             lambda d: d['panda']['random seed']['median_ms'], '{:.3f} ms', lambda v: v <= 1.0),
+        _row('generic IK, 7-joint Panda, median along a motion', '<= 1 ms', arm_ik,
+             lambda d: d['panda']['along a motion']['median_ms'], '{:.3f} ms',
+             lambda v: v <= 1.0),
     ]
 
 

@@ -6,7 +6,7 @@ tests (tests/unit/test_pick_geometry.py)."""
 from __future__ import annotations
 
 import math
-from typing import Callable, List, Sequence, Tuple
+from typing import Callable, List, Optional, Sequence, Tuple
 
 import numpy as np
 
@@ -130,11 +130,13 @@ def place_points(target: Vector, size: float, timing: PickTiming, set_down_rise:
 
 
 def sweeps_into(lay: CellLayout, qs: Sequence[np.ndarray], neighbours: Sequence[Tuple[Vector,
-                float]], held: float) -> bool:
+                float]], held: float, from_height: Optional[float] = None) -> bool:
     """Whether what the loader's cup holds (a cube of edge ``held``, the cup on its top) comes
     nearer than NEIGHBOUR_CLEARANCE_M to one of ``neighbours`` (each a material's bottom
     centre in the world, and its edge) as the joints go through ``qs`` (joint-linear between
-    them, SWEEP_SUBSTEPS points each). A motion planned through a point above its place without
+    them, SWEEP_SUBSTEPS points each), from the last point where the cup is ``from_height`` or
+    higher on (the way in to the place: not the rise from the last place, which begins on a
+    neighbour's top). A motion planned through a point above its place without
     stopping there (the time-optimal planner blends through it) comes down onto its slot on a
     curve: coming in from the side, a 7-joint arm's overshot 1.1 cm past its slot's column and
     pushed the material beside it 8 cm across the youBot's plate."""
@@ -145,6 +147,9 @@ def sweeps_into(lay: CellLayout, qs: Sequence[np.ndarray], neighbours: Sequence[
         a, b = np.asarray(a, float), np.asarray(b, float)
         dense += [a + (b - a) * k / SWEEP_SUBSTEPS for k in range(1, SWEEP_SUBSTEPS + 1)]
     cups = tool_points(lay, dense)
+    if from_height is not None:
+        high = np.nonzero(cups[:, 2] >= from_height)[0]
+        cups = cups[int(high[-1]):] if len(high) else cups
     for centre, size in neighbours:
         c = np.asarray(centre, float)
         reach = (held + size) / 2 + NEIGHBOUR_CLEARANCE_M

@@ -19,7 +19,7 @@ WORLDS = sorted(p.name for p in Path(resolve_resource('package://world_descripti
 
 def test_there_are_example_cells():
     assert {'cell_four_classes.yaml', 'cell_mixed_sizes.yaml', 'cell_two_trips.yaml',
-            'cell_two_youbots.yaml', 'cell_laser_youbot.yaml'} <= set(WORLDS)
+            'cell_two_youbots.yaml', 'cell_laser_youbot.yaml', 'cell_panda.yaml'} <= set(WORLDS)
 
 
 @pytest.mark.parametrize('name', WORLDS)
@@ -43,6 +43,10 @@ def test_an_example_cell_completes_with_every_material_at_its_destination(name, 
              and 'slot' in e[5]]
     assert len(slots) == len(set(slots))
     roles = loaded.roles
+    # The loader (any arm: the Panda's cell's is PyBullet's Franka Emika Panda) never driven
+    # past a joint's speed limit.
+    assert not [j for j in result['joints_driven_past'] if j['robot'] == roles.loader], \
+        result['joints_driven_past']
     if len(roles.transports) > 1:
         # A fleet: every youBot carried, and no two bases ever came nearer than the cell's
         # clearance, by the simulator's ground truth at every physics step.

@@ -54,6 +54,9 @@ from coordinator.pipeline.room import Room
 # What the Zu 12 lifts out of the end stop's queue rises this far over the tallest material
 # that can stand next to it before it swings away [m].
 QUEUE_SWING_CLEARANCE_M = 0.05
+# The way in to a place is checked from where the cup was last this little below the point
+# above the place, or higher [m].
+ABOVE_TOLERANCE_M = 0.005
 # A material met at rest in the end stop's queue is met this long after its belt pause began,
 # and that no sooner than it came to rest there [s].
 QUEUE_REST_S = 0.1
@@ -416,11 +419,11 @@ class PickPlanner:
             taken = self.room.plate_taken(m.plate, but=m)
             return [(slot_in_world(youbot_pose, lay.plate_slots[k], lay.youbot_base_z,
                                    lay.size_of(color)), lay.size_of(color))
-                    for k, color in taken.items()]
+                    for k, color in taken.items() if k != m.slot]
         region = lay.region_of(m.color)
         return [(np.asarray(region.slots[x.place], float), x.size)
                 for x in self.book.materials.values()
-                if x is not m and x.place >= 0 and lay.destination(x.color) == region.name
+                if x.id != m.id and x.place >= 0 and lay.destination(x.color) == region.name
                 and x.status is MaterialStatus.PLACED]
 
     def clear_way(self, motion: Points, way: PlaceWay, replan: Callable[[List[Waypoint]],
@@ -428,7 +431,8 @@ class PickPlanner:
         """``motion`` (planned through ``way``), or, where what the cup holds would come near a
         material at the place on it (sweeps_into), the motion ``replan`` plans through the way
         at rest above the place."""
-        if not sweeps_into(self.layout, [p[1] for p in motion], way.neighbours, way.held):
+        if not sweeps_into(self.layout, [p[1] for p in motion], way.neighbours, way.held,
+                           float(way.above[2]) - ABOVE_TOLERANCE_M):
             return motion
         return replan(way.stopping_above())
 
