@@ -15,6 +15,10 @@ from world_description.world_config import load_world
 
 WORLDS = sorted(p.name for p in Path(resolve_resource('package://world_description/worlds'))
                 .glob('cell_*.yaml'))
+# The belt speed a cell is run at, where not run_trials' draw (0.10-0.16 m/s): the Panda's cell
+# at the speed issue 64 asks of it. (Faster, PyBullet's Panda drives its wrist's joint 5 past
+# its speed limit as it follows a material: 4 of 8 delivered at 0.157 m/s; docs/known-limits.md.)
+BELT_SPEEDS = {'cell_panda.yaml': 0.12}
 
 
 def test_there_are_example_cells():
@@ -26,8 +30,11 @@ def test_there_are_example_cells():
 def test_an_example_cell_completes_with_every_material_at_its_destination(name, tmp_path):
     world = f'package://world_description/worlds/{name}'
     out = tmp_path / 'campaign'
+    speed = [f'{BELT_SPEEDS[name]}'] * 2 if name in BELT_SPEEDS else []
     run = subprocess.run([shutil.which('run_trials'), '--world', world, '--trials', '1',
-                          '--seed0', '7', '--out', str(out)], capture_output=True, text=True)
+                          '--seed0', '7', '--out', str(out),
+                          *(['--belt-speed', *speed] if speed else [])],
+                         capture_output=True, text=True)
     assert 'Traceback' not in run.stdout + run.stderr
     result = json.loads((out / 'trial_000' / 'result.json').read_text())
     assert result['status'] == 'completed', (result['message'], result['not_at_destination'])
