@@ -21,7 +21,7 @@ from controllers.bezier import Pose2D
 from controllers.youbot_arm import ARM_BASE_IN_BASE_LINK_M
 
 # The youBot's load plate: its top face above base_link [m] (plate_joint z + its thickness) and
-# the slots the Zu 12 fills, in base_link. The youBot's arm cannot turn straight back (joint 1
+# the slots the loader fills, in base_link. The youBot's arm cannot turn straight back (joint 1
 # stops at 169 deg), so the slots sit in two rows along the plate's sides.
 PLATE_TOP_IN_BASE_M = 0.046 + 0.01
 # The plate's slots (base_link x, y): two rows, one each side, from the near end towards the back
@@ -31,7 +31,7 @@ PLATE_ROWS_Y_M = (0.11, -0.11)
 PLATE_NEAR_X_M, PLATE_FAR_X_M = -0.065, -0.245
 PLATE_PITCH_MIN_M = 0.06
 # Carried materials stand at least this far apart on the youBot's plate [m]: with 6 mm between
-# 54 mm materials, the Zu 12 knocked a neighbour as it set one down, and the youBot found no
+# 54 mm materials, the loader knocked a neighbour as it set one down, and the youBot found no
 # lift off the plate that kept clear of them.
 PLATE_GAP_M = 0.01
 
@@ -67,7 +67,7 @@ class Rule:
     """A material class's rule: where it goes, and how (world_description.material_classes)."""
     name: str
     destination: str                    # a region: an obstacle of the world
-    route: str                          # 'place' (by the Zu 12) or 'carry' (by the youBot)
+    route: str                          # 'place' (by the loader) or 'carry' (by the youBot)
     size: float                         # cube edge [m]
     mass: float                         # [kg]
 
@@ -245,7 +245,7 @@ class CellLayout:
         return sum(self.manifest.values())
 
     def plate_bound(self) -> int:
-        """Materials the Zu 12 puts on the youBot (those its route carries)."""
+        """Materials the loader puts on the youBot (those its route carries)."""
         return sum(n for name, n in self.manifest.items() if self.carried(name))
 
     def rule(self, name: str) -> Rule:
@@ -307,7 +307,7 @@ class CellLayout:
                     and st.side == side)
 
     def slot_order(self, name: str, robot: str = '') -> List[int]:
-        """The plate slots in the order the Zu 12 fills them for a material of class ``name``
+        """The plate slots in the order the loader fills them for a material of class ``name``
         (on transport ``robot``'s plate): the row unloaded where it goes first (its side's first
         stand's row for the pool, the serving stand's row for another destination), the near
         slots first."""

@@ -1,4 +1,4 @@
-"""The geometry of the Zu 12's picks and places (no ROS, no state): where its way crosses the
+"""The geometry of the loader's picks and places (no ROS, no state): where its way crosses the
 belt's near edge, whether a swing of its joints passes low over the belt, the straight lift out
 of a queue, the points over a place, and whether two IK solutions lie on one branch. The
 coordinator's loader (coordinator/pipeline/loader.py) plans with these; each has its own unit
@@ -20,13 +20,13 @@ from controllers.pick_place import PickTiming
 # it, and the heights over it (the coordinator's Settings.timing).
 CELL_TIMING = PickTiming(hover=0.06, descend=0.3, dwell=0.15, lift=0.2, lift_height=0.07,
                          place_descend=0.15, place_height=0.07)
-# The Zu 12 crosses the belt's near edge this far outside it, with what it carries (or its
+# The loader crosses the belt's near edge this far outside it, with what it carries (or its
 # empty cup) at least this far above the belt's top [m].
 EDGE_CLEARANCE_M = 0.05
 # A lift out of the end stop's queue keeps to the straight line up through a point this often
 # [m].
 LIFT_LINE_STEP_M = 0.01
-# A swing of the Zu 12's joints keeps what its cup holds (or the cup) this far above anything
+# A swing of the loader's joints keeps what its cup holds (or the cup) this far above anything
 # that can ride on the belt wherever it passes over the belt [m].
 SWING_CLEARANCE_M = 0.02
 # What the cup holds passes the materials at a place this far from them at least, as it comes
@@ -71,7 +71,7 @@ def edge_point(lay: CellLayout, a: Vector, b: Vector, low: float,
                arc: bool = False) -> np.ndarray:
     """Where the way from ``a`` (over the belt) to ``b`` (beside it) crosses the belt's near
     edge, EDGE_CLEARANCE_M outside it, and at least ``low`` above its top. The way is the
-    straight line, or with ``arc`` the arc round the Zu 12's base (angle, reach and height
+    straight line, or with ``arc`` the arc round the loader's base (angle, reach and height
     changing evenly): the way its joints go, turning joint 1, when both ends lie at about the
     same reach. The straight line between two such points passes nearer the base, and the
     joints that set the reach pull in to the crossing and out again."""
@@ -93,7 +93,7 @@ def edge_point(lay: CellLayout, a: Vector, b: Vector, low: float,
 
 
 def over_the_belt(lay: CellLayout, q_a: np.ndarray, q_b: np.ndarray, held: float) -> bool:
-    """Whether the Zu 12's joints going straight from ``q_a`` to ``q_b`` bring what its cup
+    """Whether the loader's joints going straight from ``q_a`` to ``q_b`` bring what its cup
     holds (``held``: its size; 0 for the empty cup) over the belt lower than SWING_CLEARANCE_M
     above the tallest material that rides on it. (From the stop to a ground place 2 cm further
     out than the paper's, the way from the edge bulged 13 cm back out over the belt, 5 cm above

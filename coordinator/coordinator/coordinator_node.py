@@ -2,11 +2,12 @@
 graph through its observer (observer.py: what it sees, the run's clock, lock-step) and its
 ports (ros_ports.py: what it does), and reports the scored result.
 
-Inputs: ``/detections`` (vision_node), ``/zu12/joint_states``, ``/youbot/joint_states``,
-``/youbot/odom``, the grip states of the Zu 12's cup and the youBot's gripper; for the score
-only, the simulator's ground truth ``/cell/materials``. Outputs: arm trajectories, the grip
-services, ``/youbot/cmd_vel``, the belt speed (the simulator's ``belt_speed`` parameter), IK
-through ``/zu12/solve_ik`` and ``/youbot/solve_ik``; ``~/events`` and ``~/state`` (latched).
+Inputs (each robot in its namespace, as the world names it; the paper's ``/zu12`` and
+``/youbot``): ``/detections`` (vision_node), each arm's ``joint_states``, each youBot's
+``odom``, the grip states of the loader's cup and the youBot's gripper; for the score only,
+the simulator's ground truth ``/cell/materials``. Outputs: arm trajectories, the grip
+services, each youBot's ``cmd_vel``, the belt speed (the simulator's ``belt_speed``
+parameter), IK through each arm's ``solve_ik``; ``~/events`` and ``~/state`` (latched).
 
 Real-time mode follows the simulator's clock (``use_sim_time:=true``). Lock-step mode
 (``synchronous:=true``, with the simulator started the same way) keeps its own time, the step

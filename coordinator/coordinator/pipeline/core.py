@@ -138,7 +138,7 @@ class Pipeline:
     def _belt_wanted(self, now: float) -> bool:
         """The belt runs at a uniform speed from the start until loading is over, unless what
         waits for the youBot would overflow it: the end stop's queue reaching back to the pick
-        point, or (without a stop) a material the Zu 12 cannot take now near the belt's end."""
+        point, or (without a stop) a material the loader cannot take now near the belt's end."""
         if self.loader.state in (LoaderState.HOME, LoaderState.DONE):
             return False
         return not (self.loader.pauses_belt(now) or self._overflow())
@@ -182,7 +182,7 @@ class Pipeline:
 
     def _on_belt_area(self, position: Vector) -> bool:
         """Whether a detection lies on the belt. The camera also sees beside it, and downstream
-        of the pick point, where the Zu 12 lifts materials and carries them to their places: a
+        of the pick point, where the loader lifts materials and carries them to their places: a
         material in the cup is not a new one. A new material is confirmed where it enters the
         view, upstream of the pick point (``_see``)."""
         return bool(abs(position[1] - self.layout.belt_y) <= self.layout.belt_width / 2)

@@ -1,4 +1,5 @@
-"""The loader: the Zu 12 picks materials off the running belt and sets them down."""
+"""The loader: the arm that picks materials off the running belt and sets them down (any arm:
+its model is the layout's)."""
 from __future__ import annotations
 
 import functools
@@ -63,7 +64,7 @@ LOADER_TRANSITIONS = transition_table({
 
 
 class Loader(Machine):
-    """The Zu 12: picks materials off the running belt (meeting each where it will be, and
+    """The loader: picks materials off the running belt (meeting each where it will be, and
     moving with it while the cup is on it); a class it places itself onto its destination once
     it has ridden to the end stop, the carried ones onto the youBot's plate."""
 
@@ -75,7 +76,7 @@ class Loader(Machine):
     def __init__(self, arm: Arm, book: MaterialBook, belt: BeltModel, log: EventLog,
                  layout: CellLayout, settings: Settings, ports: Ports,
                  loading: Callable[[], Optional[str]]) -> None:
-        """``loading``: the question the Zu 12 asks of the youBots, which of them waits at
+        """``loading``: the question the loader asks of the youBots, which of them waits at
         the loading pose for its load (None: none)."""
         super().__init__(arm, log, settings, LoaderState.START)
         self.book, self.belt, self.layout, self.ports = book, belt, layout, ports
@@ -138,14 +139,14 @@ class Loader(Machine):
                 and self.cup.clear(now))
 
     def loadable(self, m: Material) -> bool:
-        """Whether the Zu 12 may put ``m`` onto the youBot's plate now: it waits at home, and
+        """Whether the loader may put ``m`` onto the youBot's plate now: it waits at home, and
         has a slot for it."""
         robot = self.loading()
         return robot is not None and bool(self.room.plate_slots(m, robot))
 
     def _next(self, waiting: Sequence[Material]) -> Optional[Material]:
         """The next material to pick: the most downstream one bound for the youBot's plate (the
-        youBot waits for them); one the Zu 12 places itself once the end stop holds it (it
+        youBot waits for them); one the loader places itself once the end stop holds it (it
         rides to the end)."""
         ride = self.layout.end_stop
         # (The youBot takes a load only while it waits at home, with room on its plate: the

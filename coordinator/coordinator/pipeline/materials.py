@@ -53,7 +53,7 @@ class MaterialBook:
         return m
 
     def picking(self, m: Material) -> None:
-        """The Zu 12 is on its way to it."""
+        """The loader is on its way to it."""
         m.status = MaterialStatus.PICKING
 
     def attempt(self, m: Material) -> None:
@@ -90,11 +90,11 @@ class MaterialBook:
         m.slot, m.plate = slot, plate
 
     def placed(self, m: Material) -> None:
-        """Set down on its destination by the Zu 12."""
+        """Set down on its destination by the loader."""
         m.status = MaterialStatus.PLACED
 
     def loaded_on_plate(self, m: Material) -> None:
-        """Set down on the youBot's plate by the Zu 12."""
+        """Set down on the youBot's plate by the loader."""
         m.status = MaterialStatus.ON_PLATE
         self.loaded += 1
 

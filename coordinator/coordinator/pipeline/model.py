@@ -173,7 +173,7 @@ class Ports(Protocol):
 
 @dataclass(frozen=True)
 class Settings:
-    pick_x: float = -0.6              # the Zu 12 picks materials downstream of this x [m]
+    pick_x: float = -0.6              # the loader picks materials downstream of this x [m]
     confirm_hits: int = 8             # frames a track needs before it is acted on
     max_retries: int = 1              # extra grasp attempts on a missed grasp
     loader_scaling: float = 1.0       # fraction of the loader arm's joint speed limits
@@ -208,9 +208,9 @@ class MaterialStatus(str, Enum):
     """Where a material is in the run, as the coordinator believes (the ground truth decides the
     result: trial_record.scoring)."""
     SEEN = 'seen'                 # confirmed on the belt; waits to be picked
-    PICKING = 'picking'           # the Zu 12 is on its way to it, or has it
+    PICKING = 'picking'           # the loader is on its way to it, or has it
     ON_PLATE = 'on_plate'         # on the youBot's plate
-    PLACED = 'placed'             # set down on its destination by the Zu 12
+    PLACED = 'placed'             # set down on its destination by the loader
     DELIVERED = 'delivered'       # set down or dropped there by the youBot
     FAILED = 'failed'             # given up (the event says why)
     MISSED = 'missed'             # went off the belt's end unpicked
@@ -232,7 +232,7 @@ class Material:
     attempts: int = 0
     slot: int = -1
     failure: str = ''
-    picked: bool = False          # lifted off the belt by the Zu 12
+    picked: bool = False          # lifted off the belt by the loader
     last_seen: float = -math.inf  # when a frame last showed it
     unload_attempts: int = 0
     # The vision's detection that confirmed it, as reported: its colour and where the frame
@@ -266,7 +266,7 @@ class Tally:
     take them from here."""
     total: int                    # materials in the batch
     identified: int               # confirmed by the vision
-    picked: int                   # lifted off the belt by the Zu 12
+    picked: int                   # lifted off the belt by the loader
     delivered: int                # at their destination (placed or delivered)
     missed: int
     failed: int
@@ -303,7 +303,7 @@ class Motion:
 
 
 class LoaderState(Enum):
-    """The Zu 12's states: wait for the front material at the pick point; pick it (down onto it
+    """The loader's states: wait for the front material at the pick point; pick it (down onto it
     with the cup switched on), lift it, take it down to its place, release it and rise; retreat
     after a failure; home and done once loading is over. Each motion's end is judged from joint
     feedback, and the next one is planned from there."""

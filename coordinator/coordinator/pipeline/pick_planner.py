@@ -1,4 +1,4 @@
-"""How the Zu 12 meets a material on the moving belt and takes it to its place (no ROS): the
+"""How the loader meets a material on the moving belt and takes it to its place (no ROS): the
 pick's motion (over it at a first guess, then met where the belt will have taken it, down, on
 it while the cup seals, up), the lift out of the end stop's queue, and the way onto its place.
 The loader (loader.py) decides what to pick and when; this plans it, with the arm's IK and the
@@ -51,7 +51,7 @@ from coordinator.pipeline.model import (
 from coordinator.pipeline.robots import Arm, CupPlace
 from coordinator.pipeline.room import Room
 
-# What the Zu 12 lifts out of the end stop's queue rises this far over the tallest material
+# What the loader lifts out of the end stop's queue rises this far over the tallest material
 # that can stand next to it before it swings away [m].
 QUEUE_SWING_CLEARANCE_M = 0.05
 # The way in to a place is checked from where the cup was last this little below the point
@@ -129,7 +129,7 @@ class PickPlan:
 
 
 class PickPlanner:
-    """Plans the Zu 12's picks and places; keeps the last pick's lift point."""
+    """Plans the loader's picks and places; keeps the last pick's lift point."""
 
     def __init__(self, arm: Arm, book: MaterialBook, belt: BeltModel, cup: CupPlace,
                  layout: CellLayout, settings: Settings,
@@ -318,7 +318,7 @@ class PickPlanner:
 
     def solve_along(self, path: Any, lift: np.ndarray, seed: np.ndarray
                      ) -> Optional[List[np.ndarray]]:
-        """Joints along a pick's path and at its lift point, on one IK branch: near the Zu 12's
+        """Joints along a pick's path and at its lift point, on one IK branch: near the loader's
         base its elbow can flip between two samples (a path the planner refuses, "joint 3
         acceleration -320"); then the whole path is solved again from its end backwards, on
         the branch the end is on. None if neither is continuous."""

@@ -3,7 +3,7 @@ state, and there is one object per robot:
 - ``Arm``: an arm's limits, home, plans and the motion it follows, its arrival, its IK through
   the port (``YoubotArm`` solves a path at one tool tilt). A second arm of a kind is a second
   object.
-- ``CupPlace``: where the Zu 12's cup last let go (on the youBot's plate or a destination), and
+- ``CupPlace``: where the loader's cup last let go (on the youBot's plate or a destination), and
   the way up from there: the loader's next motion, whatever it is, first holds still while the
   material falls free and rises straight up over the place.
 - ``BaseDrive``: the youBot's base on its way, a Bezier path from where it is through the

@@ -77,7 +77,7 @@ class Transport(Machine):
                  settings: Settings, ports: Ports, loader_done: Callable[[], bool],
                  loader_clear: Callable[[float], bool], base: BaseDrive,
                  traffic: Traffic) -> None:
-        """``loader_done`` and ``loader_clear`` are the questions the youBot asks of the Zu 12:
+        """``loader_done`` and ``loader_clear`` are the questions the youBot asks of the loader:
         whether it has nothing more to load, and whether its cup is clear of the plate at a
         time (the base may move). ``traffic``: the fleet's rules (a fleet of one: it starts
         at the loading pose, and nothing holds it back); ``base`` drives its base."""
@@ -118,7 +118,7 @@ class Transport(Machine):
 
     @property
     def loading(self) -> bool:
-        """Whether the youBot waits at home for its load (the Zu 12 may load its plate)."""
+        """Whether the youBot waits at home for its load (the loader may load its plate)."""
         return self.state is TransportState.WAIT_LOAD and not self.base.driving
 
     def _wait_load(self, obs: Observation) -> None:
@@ -131,7 +131,7 @@ class Transport(Machine):
         if (not (self.loader_done() or self.room.load_complete(self.robot, bool(on_plate))
                  or idle)
                 or not self.loader_clear(obs.now)):
-            return      # (nor while the Zu 12's cup is over the plate, or swinging home from it)
+            return      # (nor while the loader's cup is over the plate, or swinging home from it)
         order = [st.name for st in self.layout.stands]
         queue = sorted(on_plate, key=lambda m: (
             order.index(self.planner.stand_for(m)), self.layout.destination(m.color) != POOL,
