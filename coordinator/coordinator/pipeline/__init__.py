@@ -5,8 +5,9 @@ detections, picks each material off the running belt with the suction cup, sets 
 class's rule has it place down on their destination's next free slot, and loads the ones the
 youBot carries onto its plate. The transport (the youBot) waits for its load, drives along
 Bezier paths with a PD follower, unloads with its arm (into the pool from over its wall, onto
-any other destination's next free slot) and drives home. Both arms end at their start poses. Which class goes where is
-the world file's (cell_layout.layout's rules): no class is named here.
+any other destination's next free slot) and drives home. Both arms end at their start poses.
+Which class goes where is the world file's (cell_layout.layout's rules): no class is named
+here.
 
 The machine acts through ``Ports`` (IK, trajectories, suction, belt, base twist, events) and
 sees the world through ``Observation``; the node implements both over ROS, tests fake them.
