@@ -163,3 +163,30 @@ def test_a_robot_without_an_arm_is_refused():
     robot = replace(world.robot('zu12'), controllers=())
     with pytest.raises(ArmModelError, match='robot zu12: it has no arm_controller'):
         arm_model(robot, WORLDS)
+
+
+def test_the_loader_is_known_by_its_model_only_through_the_registry():
+    """No module of the controller, the cell's layout, the studies or the IK node imports an
+    arm's own kinematics or names the Zu 12 in its code: the loader's model comes from the
+    world through the registry (controllers/arm_registry.py). (The transport is still the
+    youBot: issue 65.)"""
+    import ast
+    root = Path(__file__).resolve().parents[2]
+    model_modules = {'controllers.zu12_arm', 'controllers.zu12_kinematics', 'controllers.zu12_ik'}
+    found = []
+    for package in ('coordinator', 'cell_layout', 'studies', 'arm_kinematics'):
+        for path in (root / package / package).rglob('*.py'):
+            tree = ast.parse(path.read_text())
+            for node in ast.walk(tree):
+                names = []
+                if isinstance(node, ast.ImportFrom) and node.module:
+                    names = [node.module] + [f'{node.module}.{a.name}' for a in node.names]
+                elif isinstance(node, ast.Import):
+                    names = [a.name for a in node.names]
+                elif isinstance(node, ast.Name):
+                    names = [node.id]
+                elif isinstance(node, ast.Attribute):
+                    names = [node.attr]
+                bad = [n for n in names if n in model_modules or 'zu12' in n.lower()]
+                found += [f'{path.relative_to(root)}:{node.lineno}: {n}' for n in bad]
+    assert found == []
