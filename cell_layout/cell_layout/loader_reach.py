@@ -7,13 +7,13 @@ line naming the place; the destinations it sets materials on are checked slot by
 from __future__ import annotations
 
 from dataclasses import replace
-from typing import List, Optional, Tuple
+from typing import List, Optional, Sequence, Tuple
 
 import numpy as np
 
 from cell_layout.layout import CellLayout, LayoutError, slot_in_world
 from cell_layout.pick_geometry import CELL_TIMING, place_points
-from cell_layout.reach import loader_misses, loader_solution
+from cell_layout.reach import loader_descends, loader_misses, loader_reaches, loader_solution
 
 # Along the belt's centre line, every this far [m].
 WINDOW_STEP_M = 0.02
@@ -114,3 +114,20 @@ def with_pick_window(layout: CellLayout) -> CellLayout:
     """The layout with its pick window and the plate checked against the loader's reach."""
     check_plate(layout)
     return replace(layout, pick_from=pick_window(layout))
+
+
+# The straight descent onto a place is checked from this far over it [m].
+PLACE_RISE_M = 0.15
+
+
+def loader_place_slots(layout: CellLayout, slots: Sequence[np.ndarray], size: float
+                       ) -> Tuple[np.ndarray, ...]:
+    """Those of a destination's slots (surface points) the loader serves with a material of
+    edge ``size``: it reaches over it (and the transfer point above it) with its tool down, and
+    goes straight down onto it from PLACE_RISE_M without its joints jumping (a slot where a
+    7-joint arm changes its posture on the way down is left out)."""
+    lift = size + 0.01
+    return tuple(p for p in slots if loader_reaches(
+        layout, [p + np.array([0.0, 0.0, lift]), p + np.array([0.0, 0.0, lift + 0.07]),
+                 place_points(p, size, CELL_TIMING, 0.0, layout.belt_top)[2]])
+        and loader_descends(layout, p + np.array([0.0, 0.0, lift]), PLACE_RISE_M))

@@ -179,10 +179,9 @@ def layout_from_world(world: Any) -> CellLayout:
     layout = replace(layout, regions=regions, stands=tuple(
         replace(st, serves=st.serves | frozenset(served.get(st.name, ()))) for st in stands))
     _check_capacity(layout)
-    layout = with_pick_window(layout)
     check_fleet(layout, world.obstacles, roles.loading is not None, world.conveyor)
     check_loader_base(layout, world.obstacles, world.conveyor)
-    return layout
+    return with_pick_window(layout)
 
 
 def _stands(pool: Any, rules: Dict[str, Rule]) -> Tuple[UnloadStand, ...]:
@@ -429,8 +428,7 @@ def _region(layout: CellLayout, obstacle: Any, name: str) -> Tuple[Region, str]:
     """A destination's region and its slots, each checked in reach of the robot that sets a
     material down there (a LayoutError if none is), and the stand the youBot unloads there from
     (a carried class's destination other than the pool: the nearer stand)."""
-    from cell_layout.pick_geometry import CELL_TIMING, place_points
-    from cell_layout.reach import loader_descends, loader_reaches
+    from cell_layout.loader_reach import loader_place_slots
     ox, oy, oz = obstacle.position
     if abs(math.sin(2 * obstacle.yaw)) > 1e-9:
         raise LayoutError(f'destination {name} is turned {math.degrees(obstacle.yaw):.0f} deg: '
@@ -453,14 +451,8 @@ def _region(layout: CellLayout, obstacle: Any, name: str) -> Tuple[Region, str]:
         return Region(name, (ox, oy), (hx, hy), top, drops, drop=True), ''
 
     if routes == {'place'}:
-        slots = slot_grid((ox, oy), (hx, hy), top, size, (ox, oy))
-        lift = size + 0.01
-        # (Each slot the loader reaches, at the transfer point over it too, and goes straight
-        # down onto from above it.)
-        slots = tuple(p for p in slots if loader_reaches(
-            layout, [p + np.array([0.0, 0.0, lift]), p + np.array([0.0, 0.0, lift + 0.07]),
-                     place_points(p, size, CELL_TIMING, 0.0, layout.belt_top)[2]])
-            and loader_descends(layout, p + np.array([0.0, 0.0, lift]), PLACE_RISE_M))
+        slots = loader_place_slots(layout, slot_grid((ox, oy), (hx, hy), top, size, (ox, oy)),
+                                   size)
         if not slots:
             raise LayoutError(f'destination {name} is out of the reach of the loader '
                               f'{layout.loader.name} (its base at {layout.loader_base[:2]}, '
@@ -485,8 +477,6 @@ def _region(layout: CellLayout, obstacle: Any, name: str) -> Tuple[Region, str]:
     return Region(name, (ox, oy), (hx, hy), top, tuple(reached)), stand.name
 
 
-# The straight descent onto a place starts this far over it (PickTiming.place_height) [m].
-PLACE_RISE_M = 0.15
 # The largest material the youBot carries [m].
 CARRIED_MAX_M = 0.06
 
