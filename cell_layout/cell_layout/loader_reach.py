@@ -7,7 +7,7 @@ line naming the place; the destinations it sets materials on are checked slot by
 from __future__ import annotations
 
 from dataclasses import replace
-from typing import List, Optional, Sequence, Tuple
+from typing import Dict, List, Optional, Sequence, Set, Tuple
 
 import numpy as np
 
@@ -39,7 +39,25 @@ def pick_points(layout: CellLayout, x: float) -> List[np.ndarray]:
             for h in heights]
 
 
+# Each loader's pick window and plate check, by what they depend on: a cell's layout is read
+# by every node and tool, many times in a study (the scan takes a quarter of a second).
+_WINDOWS: Dict[Tuple[object, ...], float] = {}
+_PLATES: Set[Tuple[object, ...]] = set()
+_MEMO_MAX = 256
+
+
 def pick_window(layout: CellLayout) -> float:
+    """pick_window_of, remembered for the loader and the belt (a refusal is not)."""
+    key = (layout.loader, layout.loader_base, layout.belt_y, layout.belt_top,
+           layout.belt_end_x, layout.belt_start_x, layout.material_size)
+    if key not in _WINDOWS:
+        if len(_WINDOWS) >= _MEMO_MAX:
+            _WINDOWS.clear()
+        _WINDOWS[key] = pick_window_of(layout)
+    return _WINDOWS[key]
+
+
+def pick_window_of(layout: CellLayout) -> float:
     """The most upstream belt x from which the loader meets every material downstream to the
     belt's end: it reaches it, and follows it there (a tool moving at FOLLOW_SPEED_M_S along
     the belt or up) within FOLLOW_SHARE of its joints' speed limits. Near the edge of its
@@ -93,6 +111,19 @@ def _meets(layout: CellLayout, x: float, seed: Optional[np.ndarray]
 
 
 def check_plate(layout: CellLayout) -> None:
+    """check_plate_of, remembered for the loader, the loading pose and the plate's slots (a
+    refusal is not)."""
+    carried = max((r.size for r in layout.rules.values() if r.route == 'carry'), default=0.0)
+    key = (layout.loader, layout.loader_base, layout.youbot_home, layout.youbot_base_z,
+           layout.plate_slots, carried, layout.belt_top)
+    if key not in _PLATES:
+        check_plate_of(layout)
+        if len(_PLATES) >= _MEMO_MAX:
+            _PLATES.clear()
+        _PLATES.add(key)
+
+
+def check_plate_of(layout: CellLayout) -> None:
     """A LayoutError unless the loader reaches each of the plate's slots it fills with a
     carried material, at the loading pose (the first youBot's home): where it lets go, above
     that, and the transfer point it swings in and out through (pick_geometry.place_points)."""
