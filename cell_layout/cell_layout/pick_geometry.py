@@ -130,9 +130,10 @@ def place_points(target: Vector, size: float, timing: PickTiming, set_down_rise:
 
 
 def sweeps_into(lay: CellLayout, qs: Sequence[np.ndarray], neighbours: Sequence[Tuple[Vector,
-                float]], held: float, from_height: Optional[float] = None) -> bool:
+                float]], held: float, from_height: Optional[float] = None,
+                clearance: float = NEIGHBOUR_CLEARANCE_M) -> bool:
     """Whether what the loader's cup holds (a cube of edge ``held``, the cup on its top) comes
-    nearer than NEIGHBOUR_CLEARANCE_M to one of ``neighbours`` (each a material's bottom
+    nearer than ``clearance`` to one of ``neighbours`` (each a material's bottom
     centre in the world, and its edge) as the joints go through ``qs`` (joint-linear between
     them, SWEEP_SUBSTEPS points each), from the last point where the cup is ``from_height`` or
     higher on (the way in to the place: not the rise from the last place, which begins on a
@@ -152,9 +153,9 @@ def sweeps_into(lay: CellLayout, qs: Sequence[np.ndarray], neighbours: Sequence[
         cups = cups[int(high[-1]):] if len(high) else cups
     for centre, size in neighbours:
         c = np.asarray(centre, float)
-        reach = (held + size) / 2 + NEIGHBOUR_CLEARANCE_M
+        reach = (held + size) / 2 + clearance
         near = ((np.abs(cups[:, 0] - c[0]) < reach) & (np.abs(cups[:, 1] - c[1]) < reach)
-                & (cups[:, 2] - held < c[2] + size + NEIGHBOUR_CLEARANCE_M))
+                & (cups[:, 2] - held < c[2] + size + clearance))
         if bool(np.any(near)):
             return True
     return False

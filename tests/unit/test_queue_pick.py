@@ -1,14 +1,16 @@
 """The Zu 12 meets a material that comes to rest in the end stop's queue once it rests there,
-not on the move into it (real Zu 12 IK)."""
+not on the move into it; a swing from a low lift clears what rides on the belt (real Zu 12
+IK)."""
 import numpy as np
 import pytest
-from test_zu12_swing import _cell
+from test_zu12_swing import READY, _cell
 
+from cell_layout.reach import tool_points
 from controllers.pick_place import PickTiming
 from coordinator.pipeline import Material, pick_planner
 from coordinator.pipeline.clock import Clock
 from coordinator.pipeline.materials import BeltModel
-from coordinator.pipeline.model import QUEUE_LIFT_PAUSE_LEAD_S
+from coordinator.pipeline.model import DOWN, QUEUE_LIFT_PAUSE_LEAD_S
 
 
 def test_a_material_about_to_come_to_rest_in_the_queue_is_met_at_rest_there():
@@ -92,3 +94,51 @@ def test_the_belt_pauses_for_a_lift_only_with_a_material_behind():
     belt = run_.belt
     assert belt.crowded(orange, 0.0) and not belt.crowded(orange, 0.0, behind=True)
     assert belt.crowded(purple, 0.0) and belt.crowded(purple, 0.0, behind=True)
+
+
+def _swing(zu12, layout, start, end, steps=12):
+    """The joints as the cup goes in a straight line from ``start`` to ``end`` (world), one
+    sample a tenth of a second."""
+    q, points = READY, []
+    for k in range(steps + 1):
+        q = zu12.arm.solve(start + (end - start) * k / steps, DOWN, 'world', q)
+        assert q is not None
+        points.append((0.1 * k, q, np.zeros(6), np.zeros(6)))
+    return points
+
+
+def test_a_swing_from_a_low_lift_into_a_material_on_the_belt_rises_straight_up_first():
+    """Lifted 4 cm off the belt 11 cm behind a purple riding ahead of it, a Panda's swing to
+    the plate went downstream, 1-2 cm over the purple's top as planned, lower as the arm
+    followed it: what its cup held dragged the purple 12 cm along and off the belt, and the
+    shock drove its wrist past its speed limit. A way from the lift point
+    that comes within SWING_CLEARANCE_M (2 cm) of a material on the belt (where the belt has
+    it at the way's start or a second on) rises straight up first, until what the cup holds
+    passes that far over the tallest material that can ride on the belt; one that keeps clear
+    goes as planned."""
+    layout, run_, zu12, purple, orange = _two_at_the_stop()
+    run_.materials.pop(2)
+    purple.position = np.array([layout.belt_end_x - 0.2, layout.belt_y, 0.425])
+    held = Material(3, 'orange', np.zeros(3), 0.0, 3, size=0.05)
+    planner = zu12.planner
+    top = layout.belt_top
+    # (What the cup holds 1.5 cm over the purple's top: clear of it, as planned.)
+    lift = np.array([purple.position[0] - 0.11, layout.belt_y, top + 0.05 + 0.05 + 0.015])
+    planner.lift_point = lift
+    belt = run_.belt
+    belt.running = False                               # (the purple where it is)
+    low = _swing(zu12, layout, lift, lift + np.array([0.2, -0.02, 0.0]))
+    up = planner.rise_over_belt(held, low, low[0][1])
+    assert len(up) == 1
+    cup = tool_points(layout, [up[0].q])[0]
+    assert cup[:2] == pytest.approx(lift[:2], abs=1e-6)
+    assert cup[2] - held.size >= top + layout.material_size + pick_planner.QUEUE_SWING_CLEARANCE_M
+    # Up first, then over: clear.
+    high = _swing(zu12, layout, cup, cup + np.array([0.2, -0.02, 0.0]))
+    assert planner.rise_over_belt(held, high, high[0][1]) == []
+    # Sideways, away from the purple: clear too.
+    away = _swing(zu12, layout, lift, lift + np.array([-0.05, -0.25, 0.01]))
+    assert planner.rise_over_belt(held, away, away[0][1]) == []
+    # Nothing on the belt: as planned.
+    run_.materials.pop(1)
+    assert planner.rise_over_belt(held, low, low[0][1]) == []

@@ -14,6 +14,7 @@ import numpy as np
 from cell_layout.layout import CellLayout, slot_in_world
 from cell_layout.pick_geometry import (
     EDGE_CLEARANCE_M,
+    SWING_CLEARANCE_M,
     continuous,
     edge_point,
     lift_line,
@@ -50,6 +51,7 @@ from coordinator.pipeline.model import (
 )
 from coordinator.pipeline.robots import Arm, CupPlace
 from coordinator.pipeline.room import Room
+from trial_record.events import EventKind
 
 # What the loader lifts out of the end stop's queue rises this far over the tallest material
 # that can stand next to it before it swings away [m].
@@ -352,11 +354,49 @@ class PickPlanner:
             whole = self.clear_way(
                 self._motion(obs, through + place_way.waypoints, pick), place_way,
                 lambda way: self._motion(obs, through + way, pick))
+            lifted = pick.contact + pick.timing.dwell
+            up = self.rise_over_belt(m, [p for p in whole if p[0] >= lifted], pick.q_lift)
+            if up:
+                through = through[:-1] + [replace(through[-1], stop=True)] + up
+                whole = self.clear_way(
+                    self._motion(obs, through + place_way.waypoints, pick), place_way,
+                    lambda way: self._motion(obs, through + way, pick))
         except PlanError:
             return None                 # (the place is planned at the lift point then)
         ahead = Ahead(place_way, pick.q_lift, pick.points[-1][0])
         pick.points = whole
         return ahead
+
+    def rise_over_belt(self, m: Material, motion: Points, seed: np.ndarray) -> List[Waypoint]:
+        """Where ``motion`` (from the lift point of ``m``'s pick) would carry what the cup
+        holds within SWING_CLEARANCE_M of a material on the belt (where the belt has it at the
+        motion's start and a second on: one the end stop holds stays there), the way straight
+        up from the lift point first, at rest QUEUE_SWING_CLEARANCE_M over the tallest
+        material that can ride on the belt; else nothing. Lifted off the belt behind a purple
+        (riding on it, or held at the end stop), a Panda's swing to its plate went downstream
+        first, 1-2 cm over the purple's top as planned and lower as its arm followed: what it
+        held dragged the purple off the belt, the shock drove its wrist past its speed limit,
+        and the motion was aborted."""
+        lay = self.layout
+        if not motion or self.lift_point is None:
+            return []
+        qs = [p[1] for p in motion]
+        t0 = motion[0][0]
+        ahead = next((o for o in self.belt.on_belt() if o is not m and sweeps_into(
+            lay, qs, [(np.array([*self.belt.track(o)(t)[:2], lay.belt_top]), o.size)
+                      for t in (t0, t0 + 1.0)], m.size, clearance=SWING_CLEARANCE_M)),
+            None)
+        if ahead is None:
+            return []
+        high = np.array(self.lift_point, float)
+        high[2] = max(high[2], lay.belt_top + lay.material_size + m.size
+                      + QUEUE_SWING_CLEARANCE_M)
+        q_high = self.arm.solve(high, DOWN, 'world', seed)
+        if q_high is not None:
+            self.arm.log.event(self.arm.clock.now, EventKind.REPLANNED, self.arm.name, m,
+                               f'up {high[2] - self.lift_point[2]:.3f} m first: its swing '
+                               f'came near {ahead.color} material {ahead.id} on the belt')
+        return [] if q_high is None else [Waypoint(q_high)]
 
     def place_way(self, m: Material, lift: Optional[np.ndarray], youbot_pose: Optional[Pose2D],
                    seed: np.ndarray) -> Union['PlaceWay', str]:
