@@ -19,6 +19,7 @@ from cell_layout.arm_models import ArmModel
 from controllers.arrays import Vector
 from controllers.bezier import Pose2D
 from controllers.youbot_arm import ARM_BASE_IN_BASE_LINK_M
+from world_description.world_schema import LIFT_SWING_CLEARANCE_M
 
 # The youBot's load plate: its top face above base_link [m] (plate_joint z + its thickness) and
 # the slots the loader fills, in base_link. The youBot's arm cannot turn straight back (joint 1
@@ -237,6 +238,9 @@ class CellLayout:
             return self.youbot_home
         return self.parks[[r.name for r in self.transports].index(robot)]
     end_stop: bool = False              # materials accumulate at the end instead of falling off
+    # What the loader's cup holds keeps this far from what is on the belt or at its end as it
+    # swings on from a lift point [m] (the world's cell.swing_clearance).
+    swing_clearance: float = LIFT_SWING_CLEARANCE_M
     # The youBot plate's slots for the largest carried class (plate_grid).
     plate_slots: Tuple[Tuple[float, float], ...] = PLATE_SLOTS_IN_BASE_M
 

@@ -6,7 +6,7 @@ tests (tests/unit/test_pick_geometry.py)."""
 from __future__ import annotations
 
 import math
-from typing import Callable, List, Optional, Sequence, Tuple
+from typing import Any, Callable, List, Optional, Sequence, Tuple
 
 import numpy as np
 
@@ -14,6 +14,7 @@ from cell_layout.layout import CellLayout
 from cell_layout.reach import tool_points, tool_positions
 from controllers.arrays import Vector
 from controllers.pick_place import PickTiming
+from world_description.world_schema import END_STOP_HEIGHT_M, END_STOP_THICKNESS_M
 
 # The cell's pick and place timing: the shortest times of the moves near a material (the
 # time-optimal plan may take longer), gentle enough that the cup and the fingers do not knock
@@ -32,6 +33,8 @@ SWING_CLEARANCE_M = 0.02
 # What the cup holds passes the materials at a place this far from them at least, as it comes
 # down onto its own slot [m] (the slots leave 1 cm between neighbours).
 NEIGHBOUR_CLEARANCE_M = 0.002
+# Faces this near (or overlapping by as little) touch; they do not cross [m].
+TOUCHING_M = 1e-3
 # A motion's samples are checked at this many points between each two (joint-linear) [-].
 SWEEP_SUBSTEPS = 4
 # Two IK solutions a pick path's sample apart (50 ms) that differ by more than this in a joint
@@ -143,11 +146,7 @@ def sweeps_into(lay: CellLayout, qs: Sequence[np.ndarray], neighbours: Sequence[
     pushed the material beside it 8 cm across the youBot's plate."""
     if not neighbours or len(qs) == 0:
         return False
-    dense = [np.asarray(qs[0], float)]
-    for a, b in zip(qs, qs[1:]):
-        a, b = np.asarray(a, float), np.asarray(b, float)
-        dense += [a + (b - a) * k / SWEEP_SUBSTEPS for k in range(1, SWEEP_SUBSTEPS + 1)]
-    cups = tool_points(lay, dense)
+    cups = _swept(lay, qs)
     if from_height is not None:
         high = np.nonzero(cups[:, 2] >= from_height)[0]
         cups = cups[int(high[-1]):] if len(high) else cups
@@ -159,3 +158,57 @@ def sweeps_into(lay: CellLayout, qs: Sequence[np.ndarray], neighbours: Sequence[
         if bool(np.any(near)):
             return True
     return False
+
+
+def _swept(lay: CellLayout, qs: Sequence[np.ndarray]) -> np.ndarray:
+    """Where the loader's tool passes as its joints go through ``qs`` (joint-linear between
+    them, SWEEP_SUBSTEPS points each)."""
+    dense = [np.asarray(qs[0], float)]
+    for a, b in zip(qs, qs[1:]):
+        a, b = np.asarray(a, float), np.asarray(b, float)
+        dense += [a + (b - a) * k / SWEEP_SUBSTEPS for k in range(1, SWEEP_SUBSTEPS + 1)]
+    return tool_points(lay, dense)
+
+
+def end_stop_box(lay: CellLayout) -> Optional[Tuple[np.ndarray, np.ndarray]]:
+    """The belt's end stop (its lowest and highest corners in the world), None without one."""
+    if not lay.end_stop:
+        return None
+    half = lay.belt_width / 2
+    return (np.array([lay.belt_end_x, lay.belt_y - half, lay.belt_top]),
+            np.array([lay.belt_end_x + END_STOP_THICKNESS_M, lay.belt_y + half,
+                      lay.belt_top + END_STOP_HEIGHT_M]))
+
+
+def tallest_on_belt(lay: CellLayout) -> float:
+    """How high above the belt's top the tallest thing on it or at its end reaches [m]: its
+    largest material, or its end stop."""
+    return max(lay.material_size, END_STOP_HEIGHT_M if lay.end_stop else 0.0)
+
+
+def sweeps_into_box(lay: CellLayout, qs: Sequence[np.ndarray], box: Tuple[Vector, Vector],
+                    held: float, clearance: float) -> bool:
+    """Whether what the loader's cup holds (a cube of edge ``held``, the cup on its top) comes
+    within ``clearance`` below the top of the box (its lowest and highest corners, world
+    axes) while over it, as the joints go through ``qs`` (joint-linear between them). Beside
+    the box counts as clear, however near: a material lifted from against the end stop's
+    face rises along it."""
+    if len(qs) == 0:
+        return False
+    cups = _swept(lay, qs)
+    lo, hi = (np.asarray(c, float) for c in box)
+    half = held / 2 - TOUCHING_M
+    near = ((cups[:, 0] + half > lo[0]) & (cups[:, 0] - half < hi[0])
+            & (cups[:, 1] + half > lo[1]) & (cups[:, 1] - half < hi[1])
+            & (cups[:, 2] - held - clearance < hi[2]) & (cups[:, 2] > lo[2]))
+    return bool(np.any(near))
+
+
+def from_waypoint(motion: Sequence[Tuple[float, np.ndarray, Any, Any]], q: np.ndarray,
+                  after: float) -> List[Tuple[float, np.ndarray, Any, Any]]:
+    """A planned motion's samples (time, joints, ...) from where it is at ``q`` (one of its
+    waypoints: sampled exactly) after time ``after`` on; without such a sample, from
+    ``after`` on."""
+    at = next((k for k, p in enumerate(motion) if p[0] >= after
+               and np.allclose(p[1], q, atol=1e-9)), None)
+    return list(motion[at:]) if at is not None else [p for p in motion if p[0] >= after]

@@ -150,7 +150,7 @@ def layout_from_world(world: Any) -> CellLayout:
         belt_encoder=conv.encoder.resolution if conv.encoder is not None else 0.0,
         belt_start_x=conv.position[0] - conv.length / 2,
         belt_width=conv.width,
-        end_stop=conv.end_stop,
+        end_stop=conv.end_stop, swing_clearance=roles.swing_clearance,
         material_size=mats.largest, manifest=dict(mats.counts),
         youbot_home=home, youbot_base_z=yb.z, loader_base=(zu.x, zu.y, zu.z, zu.yaw),
         rules=rules, stands=stands,

@@ -24,11 +24,10 @@ from controllers.conveyor import Item, advance
 from controllers.transforms import matrix_to_quaternion
 from world_description.perturbations import MaterialDraw, PerturbationDraws
 from world_description.world_config import ConveyorConfig, MaterialsConfig
+from world_description.world_schema import END_STOP_HEIGHT_M, END_STOP_THICKNESS_M
 
 BELT_THICKNESS_M = 0.04
 BELT_COLOR = (0.15, 0.15, 0.17, 1.0)
-END_STOP_THICKNESS_M = 0.02
-END_STOP_HEIGHT_M = 0.06            # above the belt's top
 END_STOP_COLOR = (0.8, 0.7, 0.1, 1.0)
 STAND_COLOR = (0.45, 0.47, 0.5, 1.0)
 

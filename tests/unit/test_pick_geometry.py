@@ -15,13 +15,17 @@ from cell_layout.pick_geometry import (
     continuous,
     crossing,
     edge_point,
+    end_stop_box,
     lift_line,
     over_the_belt,
     place_points,
     polar,
+    sweeps_into_box,
+    tallest_on_belt,
 )
 from controllers.pick_place import PickTiming
 from coordinator.pipeline.model import DOWN
+from world_description.world_schema import END_STOP_HEIGHT_M
 
 
 def test_crossing_finds_the_first_sign_change_or_the_nearer_end():
@@ -82,6 +86,46 @@ def test_a_swing_low_over_the_belt_is_seen_and_one_high_above_it_is_not():
     # comes down among what rides on the belt.
     just = q_at(lay.belt_top + lay.material_size + 0.03)
     assert not over_the_belt(lay, just, just, 0.0) and over_the_belt(lay, just, just, 0.1)
+
+
+def test_a_swing_over_the_end_stop_low_is_seen_and_one_clear_of_it_is_not():
+    """The end stop is a wall 6 cm high across the belt's end, higher than the materials it
+    holds: lifted 4-5 cm and swung on downstream, what a Panda held scraped over it. A swing
+    with what the cup holds over the stop's top, or beside it, clears it."""
+    from dataclasses import replace
+    lay, ik = cell_layout(), Zu12IK()
+    assert lay.end_stop
+    lo, hi = end_stop_box(lay)
+    assert lo[0] == pytest.approx(lay.belt_end_x) and hi[2] == pytest.approx(
+        lay.belt_top + END_STOP_HEIGHT_M)
+    assert hi[1] - lo[1] == pytest.approx(lay.belt_width)
+    assert tallest_on_belt(lay) == pytest.approx(max(END_STOP_HEIGHT_M, lay.material_size))
+    assert end_stop_box(replace(lay, end_stop=False)) is None
+    held = 0.05
+
+    def along(z, y=lay.belt_y):
+        qs, seed = [], READY
+        for x in np.linspace(lay.belt_end_x - 0.1, lay.belt_end_x + 0.06, 9):
+            q, why = ik.solve('zu12', [x, y, z], DOWN, 'world', seed)
+            assert q is not None, why
+            qs.append(q)
+            seed = q
+        return qs
+
+    top = lay.belt_top + END_STOP_HEIGHT_M
+    assert sweeps_into_box(lay, along(top + held + 0.005), (lo, hi), held, 0.02)
+    assert not sweeps_into_box(lay, along(top + held + 0.03), (lo, hi), held, 0.02)
+    assert sweeps_into_box(lay, along(top + held + 0.03), (lo, hi), held, 0.04)
+    # Beside the belt, or straight up along the stop's face: clear, however low.
+    beside = lay.belt_y - lay.belt_width / 2 - held / 2 - 0.001
+    assert not sweeps_into_box(lay, along(top, beside), (lo, hi), held, 0.02)
+    face = lay.belt_end_x - held / 2 - 0.001
+    up = []
+    for z in np.linspace(lay.belt_top + held, top + held + 0.05, 6):
+        q, why = ik.solve('zu12', [face, lay.belt_y, z], DOWN, 'world', READY)
+        assert q is not None, why
+        up.append(q)
+    assert not sweeps_into_box(lay, up, (lo, hi), held, 0.02)
 
 
 def test_the_lift_line_steps_straight_up_at_most_a_centimetre_apart():

@@ -176,6 +176,16 @@ class BeltEncoderConfig:
     rate: float = 10.0
 
 
+# A belt's end stop (ConveyorConfig.end_stop): a wall across the belt's end, this thick along
+# the belt and this high above its top [m] (a little higher than the materials it holds).
+END_STOP_THICKNESS_M = 0.02
+END_STOP_HEIGHT_M = 0.06
+# What the loader's cup holds keeps this far from what is on the belt or at its end as it
+# swings on from a lift point, by default [m] (CellRoles.swing_clearance): its planned way
+# must not touch them.
+LIFT_SWING_CLEARANCE_M = 0.0
+
+
 @dataclass(frozen=True)
 class ConveyorConfig:
     """A belt: a box whose top surface carries what lies on it along its x axis (at ``yaw``)."""
@@ -239,13 +249,17 @@ class CellRoles:
     pose), how near two bases may come (``clearance``, between their footprints [m]), and how
     many materials a transport sets off with at most (``trip_load``; 0: a full plate).
     ``youbots``: how many of the transports take part, the first ones (default all); the
-    others (``left_out``) are left out of the world, and the cameras they carry with them."""
+    others (``left_out``) are left out of the world, and the cameras they carry with them.
+    ``swing_clearance``: how far what the loader's cup holds keeps from the materials on the
+    belt and its end stop as it swings on from a lift point [m] (default 0: its planned way
+    does not touch them; more for an arm that follows its plans less closely)."""
     loader: str = 'zu12'
     transports: Tuple[str, ...] = ('youbot',)
     loading: Optional[Tuple[float, float, float]] = None    # None: the first transport's start
     clearance: float = 0.1
     trip_load: int = 0
     left_out: Tuple[str, ...] = ()
+    swing_clearance: float = LIFT_SWING_CLEARANCE_M
 
 
 @dataclass(frozen=True)

@@ -29,6 +29,7 @@ from world_description.ros_names import MAX_TOKEN_LENGTH, relative_problem, toke
 from world_description.tool_section import suction_section
 from world_description.world_schema import (
     GRAVITY_RANGE,
+    LIFT_SWING_CLEARANCE_M,
     MAX_JOINT_POSITION,
     MAX_SIZE_M,
     TURN_RAD,
@@ -99,7 +100,7 @@ def _cell(r: Reader, item: Any, robots: List[RobotConfig]) -> CellRoles:
     robot with a drive and a gripper, no robot in two roles."""
     where = 'cell'
     r.only(item, where, {'loader', 'transports', 'loading', 'clearance', 'trip_load',
-                         'youbots'})
+                         'youbots', 'swing_clearance'})
     by_name = {rb.name: rb for rb in robots}
     loader = r.name(item, 'loader', where)
     arm = by_name.get(loader)
@@ -138,8 +139,10 @@ def _cell(r: Reader, item: Any, robots: List[RobotConfig]) -> CellRoles:
     if count < len(names) and loading is None:
         raise r.fail(where, 'youbots', f'leaves out {names[count:]}: a fleet smaller than its '
                      'transports needs its loading pose (cell.loading)')
+    swing = r.number(item, 'swing_clearance', where, default=LIFT_SWING_CLEARANCE_M, lo=0.0,
+                     hi=0.2)
     return CellRoles(loader, tuple(names[:count]), loading, clearance, trip_load,
-                     tuple(names[count:]))
+                     tuple(names[count:]), swing)
 
 
 def _robot(r: Reader, item: Any, i: int) -> RobotConfig:

@@ -395,13 +395,10 @@ class Loader(Machine):
             return self._place_failed(obs, m, way)
         self.cup.adopt(*way.rise)
         q = self.arm.q(obs)
-        motion = self.planner.clear_way(self.arm.plan(q, way.waypoints), way,
-                                        lambda waypoints: self.arm.plan(q, waypoints))
-        up = self.planner.rise_over_belt(m, motion, q)
-        if up:
-            motion = self.planner.clear_way(self.arm.plan(q, up + way.waypoints), way,
-                                            lambda waypoints: self.arm.plan(q, up + waypoints))
-        self.move(LoaderState.PLACE, obs, motion)
+        self.move(LoaderState.PLACE, obs, self.planner.clear_of_belt(
+            m, q, lambda up: self.planner.clear_way(
+                self.arm.plan(q, up + way.waypoints), way,
+                lambda waypoints: self.arm.plan(q, up + waypoints))))
 
     def _place_failed(self, obs: Observation, m: Material, why: str) -> None:
         self.ports.grip(self.arm.name, False)

@@ -14,13 +14,16 @@ import numpy as np
 from cell_layout.layout import CellLayout, slot_in_world
 from cell_layout.pick_geometry import (
     EDGE_CLEARANCE_M,
-    SWING_CLEARANCE_M,
     continuous,
     edge_point,
+    end_stop_box,
+    from_waypoint,
     lift_line,
     over_the_belt,
     place_points,
     sweeps_into,
+    sweeps_into_box,
+    tallest_on_belt,
 )
 from controllers.bezier import Pose2D
 from controllers.pick_place import PickTiming, follow_pick
@@ -56,6 +59,9 @@ from trial_record.events import EventKind
 # What the loader lifts out of the end stop's queue rises this far over the tallest material
 # that can stand next to it before it swings away [m].
 QUEUE_SWING_CLEARANCE_M = 0.05
+# A way from the lift point that passes too near what is on the belt rises first, by that much
+# more at each try, at most this many times.
+RISE_LEVELS = 3
 # The way in to a place is checked from where the cup was last this little below the point
 # above the place, or higher [m].
 ABOVE_TOLERANCE_M = 0.005
@@ -350,53 +356,66 @@ class PickPlanner:
         through = (pick.waypoints if pick.waypoints[-1].direct else   # (straight up: _lift_way)
                    pick.waypoints[:-1] + [Waypoint(pick.q_lift, stop=crowded,
                                                    min_time=pick.timing.lift)])
+        lifted = pick.contact + pick.timing.dwell
+
+        def planned(up: List[Waypoint]) -> Points:
+            way_in = through if not up else through[:-1] + [replace(through[-1], stop=True),
+                                                             *up]
+            return self.clear_way(self._motion(obs, way_in + place_way.waypoints, pick),
+                                  place_way, lambda way: self._motion(obs, way_in + way, pick))
         try:
-            whole = self.clear_way(
-                self._motion(obs, through + place_way.waypoints, pick), place_way,
-                lambda way: self._motion(obs, through + way, pick))
-            lifted = pick.contact + pick.timing.dwell
-            up = self.rise_over_belt(m, [p for p in whole if p[0] >= lifted], pick.q_lift)
-            if up:
-                through = through[:-1] + [replace(through[-1], stop=True)] + up
-                whole = self.clear_way(
-                    self._motion(obs, through + place_way.waypoints, pick), place_way,
-                    lambda way: self._motion(obs, through + way, pick))
+            whole = self.clear_of_belt(m, pick.q_lift, planned, lifted)
         except PlanError:
             return None                 # (the place is planned at the lift point then)
         ahead = Ahead(place_way, pick.q_lift, pick.points[-1][0])
         pick.points = whole
         return ahead
 
-    def rise_over_belt(self, m: Material, motion: Points, seed: np.ndarray) -> List[Waypoint]:
-        """Where ``motion`` (from the lift point of ``m``'s pick) would carry what the cup
-        holds within SWING_CLEARANCE_M of a material on the belt (where the belt has it at the
-        motion's start and a second on: one the end stop holds stays there), the way straight
-        up from the lift point first, at rest QUEUE_SWING_CLEARANCE_M over the tallest
-        material that can ride on the belt; else nothing. Lifted off the belt behind a purple
-        (riding on it, or held at the end stop), a Panda's swing to its plate went downstream
-        first, 1-2 cm over the purple's top as planned and lower as its arm followed: what it
-        held dragged the purple off the belt, the shock drove its wrist past its speed limit,
-        and the motion was aborted."""
-        lay = self.layout
-        if not motion or self.lift_point is None:
-            return []
-        qs = [p[1] for p in motion]
-        t0 = motion[0][0]
-        ahead = next((o for o in self.belt.on_belt() if o is not m and sweeps_into(
-            lay, qs, [(np.array([*self.belt.track(o)(t)[:2], lay.belt_top]), o.size)
-                      for t in (t0, t0 + 1.0)], m.size, clearance=SWING_CLEARANCE_M)),
-            None)
-        if ahead is None:
-            return []
-        high = np.array(self.lift_point, float)
-        high[2] = max(high[2], lay.belt_top + lay.material_size + m.size
-                      + QUEUE_SWING_CLEARANCE_M)
-        q_high = self.arm.solve(high, DOWN, 'world', seed)
-        if q_high is not None:
+    def clear_of_belt(self, m: Material, q_lift: np.ndarray,
+                      planned: Callable[[List[Waypoint]], Points], lifted: float = -math.inf
+                      ) -> Points:
+        """The motion ``planned`` plans from ``m``'s lift point (the points from ``lifted``
+        on; ``planned(up)`` goes through ``up`` first, at rest), kept the cell's swing
+        clearance from the belt's end stop and the materials on the belt (where the belt has
+        them at its start and a second on): where it is not, it goes straight up from the lift
+        point first, what the cup holds QUEUE_SWING_CLEARANCE_M over the tallest thing on the
+        belt or at its end, and as much higher again, up to RISE_LEVELS times, until the way on
+        from there is clear (a Panda's low swings had knocked materials and the end stop;
+        docs/pipeline.md)."""
+        motion = planned([])
+        after = from_waypoint(motion, q_lift, lifted)
+        lay, lift = self.layout, self.lift_point
+        for level in range(1, RISE_LEVELS + 1):
+            near = self._near_on_belt(m, after)
+            if not near or lift is None:
+                return motion
+            high = np.array(lift, float)
+            high[2] = max(high[2], lay.belt_top + tallest_on_belt(lay) + m.size
+                          + level * QUEUE_SWING_CLEARANCE_M)
+            q_high = self.arm.solve(high, DOWN, 'world', q_lift)
+            if q_high is None:
+                return motion
+            motion = planned([Waypoint(q_high)])
+            after = from_waypoint(motion, q_high, lifted)
             self.arm.log.event(self.arm.clock.now, EventKind.REPLANNED, self.arm.name, m,
-                               f'up {high[2] - self.lift_point[2]:.3f} m first: its swing '
-                               f'came near {ahead.color} material {ahead.id} on the belt')
-        return [] if q_high is None else [Waypoint(q_high)]
+                               f'up {high[2] - lift[2]:.3f} m first: its swing came near '
+                               f'{near}')
+        return motion
+
+    def _near_on_belt(self, m: Material, motion: Points) -> str:
+        """What on the belt or at its end ``motion`` carries what the cup holds within the
+        cell's swing clearance of ('': nothing)."""
+        if not motion:
+            return ''
+        lay, qs, t0 = self.layout, [p[1] for p in motion], motion[0][0]
+        stop = end_stop_box(lay)
+        if stop is not None and sweeps_into_box(lay, qs, stop, m.size, lay.swing_clearance):
+            return 'the end stop'
+        return next((f'{o.color} material {o.id} on the belt' for o in self.belt.on_belt()
+                     if o is not m and sweeps_into(lay, qs, [
+                         (np.array([*self.belt.track(o)(t)[:2], lay.belt_top]), o.size)
+                         for t in (t0, t0 + 1.0)], m.size, clearance=lay.swing_clearance)),
+                    '')
 
     def place_way(self, m: Material, lift: Optional[np.ndarray], youbot_pose: Optional[Pose2D],
                    seed: np.ndarray) -> Union['PlaceWay', str]:
