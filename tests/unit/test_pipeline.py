@@ -330,7 +330,9 @@ def run(cell: FakeCell, settings: Optional[Settings] = None, limit: float = 600.
     # (The fake cell's joints are the tool's position, not the Zu 12's: the way on from a lift
     # point, which is checked against the belt by the arm's forward kinematics, has nothing to
     # be checked against here; test_queue_pick.py checks it with the Zu 12's.)
-    pipeline.loader.planner._near_on_belt = lambda m, motion: ''
+    planner = pipeline.loader.planner
+    planner.clear_of_belt = lambda m, q, way, plan, lifted=0.0: planner.clear_way(
+        plan(way.waypoints), way, plan)
     obs = cell.step()
     while not pipeline.finished:
         pipeline.tick(obs)

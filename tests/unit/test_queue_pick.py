@@ -1,12 +1,15 @@
 """The Zu 12 meets a material that comes to rest in the end stop's queue once it rests there,
 not on the move into it; a swing from a low lift clears what rides on the belt (real Zu 12
 IK)."""
+import math
 from dataclasses import replace
 
 import numpy as np
 import pytest
 from test_zu12_swing import READY, _cell
 
+from cell_layout import lift_swing
+from cell_layout.lift_swing import rise_first
 from cell_layout.pick_geometry import tallest_on_belt
 from cell_layout.reach import tool_points
 from controllers.pick_place import PickTiming
@@ -117,52 +120,57 @@ def test_a_swing_from_a_low_lift_into_a_material_on_the_belt_rises_straight_up_f
     shock drove its wrist past its speed limit. A way from the lift point that comes within
     the cell's swing clearance (2 cm here) of a material on the belt (where the belt has it at
     the way's start or a second on) rises straight up first, until what the cup holds passes
-    QUEUE_SWING_CLEARANCE_M over the tallest thing on the belt or at its end, and higher
-    while the way on from there is not clear; one that keeps clear goes as planned."""
+    RISE_OVER_M over the tallest thing on the belt or at its end, and higher while the way on
+    from there is not clear; one that keeps clear goes as planned."""
     layout, run_, zu12, purple, orange = _two_at_the_stop()
     run_.materials.pop(2)
+    layout = replace(layout, swing_clearance=0.02)
     purple.position = np.array([layout.belt_end_x - 0.2, layout.belt_y, 0.425])
     held = Material(3, 'orange', np.zeros(3), 0.0, 3, size=0.05)
-    planner = zu12.planner
-    planner.layout = layout = replace(layout, swing_clearance=0.02)
-    top = layout.belt_top
+    belt, top = run_.belt, layout.belt_top
+    belt.running = False                               # (the purple where it is)
     # (What the cup holds 1.5 cm over the purple's top: clear of it, as planned.)
     lift = np.array([purple.position[0] - 0.11, layout.belt_y, top + 0.05 + 0.05 + 0.015])
-    planner.lift_point = lift
-    run_.belt.running = False                          # (the purple where it is)
     asked = []
+
+    def riding(t):
+        return [(f'{o.color} {o.id}', [(np.array([*belt.track(o)(t)[:2], top]), o.size)])
+                for o in belt.on_belt()]
+
+    def solve(point, seed):
+        return zu12.arm.solve(point, DOWN, 'world', seed)
 
     def planned(along):
         """A way from where the cup is (after the rise, if any) along ``along``."""
         def way(up):
             asked.append(up)
-            start = tool_points(layout, [up[-1].q])[0] if up else lift
+            start = tool_points(layout, [up[-1]])[0] if up else lift
             rise = _swing(zu12, layout, lift, start, 3) if up else []
             return rise + [(p[0] + 1.0, *p[1:]) for p in _swing(zu12, layout, start,
                                                                   start + along)]
         return way
 
+    def rises(along):
+        asked.clear()
+        return rise_first(layout, lift, held.size, READY, planned(along), riding, solve,
+                          -math.inf)
+
     downstream = np.array([0.2, -0.02, 0.0])
-    motion = planner.clear_of_belt(held, READY, planned(downstream))
+    motion, why = rises(downstream)
+    assert why == ['up 0.045 m first: its swing came near purple 1']   # (over the stop's 6 cm)
     assert len(asked) == 2 and len(asked[1]) == 1       # up once, and clear from there
-    cup = tool_points(layout, [asked[1][0].q])[0]
+    cup = tool_points(layout, [asked[1][0]])[0]
     assert cup[:2] == pytest.approx(lift[:2], abs=1e-6)
     assert cup[2] - held.size == pytest.approx(
-        top + tallest_on_belt(layout) + pick_planner.QUEUE_SWING_CLEARANCE_M)
+        top + tallest_on_belt(layout) + lift_swing.RISE_OVER_M)
     assert np.allclose(motion[-1][1], _swing(zu12, layout, cup, cup + downstream)[-1][1])
     # A way on that dips back down near the purple from there: higher again, then given up
     # (the last one planned goes).
-    asked.clear()
-    planner.clear_of_belt(held, READY, planned(downstream + [0.0, 0.0, -0.3]))
-    assert len(asked) == 1 + pick_planner.RISE_LEVELS
-    heights = [tool_points(layout, [up[0].q])[0][2] for up in asked[1:]]
-    assert np.allclose(np.diff(heights), pick_planner.QUEUE_SWING_CLEARANCE_M)
-    # Sideways, away from the purple: as planned.
-    asked.clear()
-    planner.clear_of_belt(held, READY, planned(np.array([-0.05, -0.25, 0.0])))
-    assert asked == [[]]
-    # Nothing on the belt: as planned.
+    _, why = rises(downstream + [0.0, 0.0, -0.3])
+    assert len(asked) == 1 + lift_swing.RISE_LEVELS == 1 + len(why)
+    heights = [tool_points(layout, [up[0]])[0][2] for up in asked[1:]]
+    assert np.allclose(np.diff(heights), lift_swing.RISE_OVER_M)
+    # Sideways, away from the purple, or nothing on the belt: as planned.
+    assert rises(np.array([-0.05, -0.25, 0.0]))[1] == [] and asked == [[]]
     run_.materials.pop(1)
-    asked.clear()
-    planner.clear_of_belt(held, READY, planned(downstream))
-    assert asked == [[]]
+    assert rises(downstream)[1] == [] and asked == [[]]

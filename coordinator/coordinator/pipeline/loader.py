@@ -396,9 +396,7 @@ class Loader(Machine):
         self.cup.adopt(*way.rise)
         q = self.arm.q(obs)
         self.move(LoaderState.PLACE, obs, self.planner.clear_of_belt(
-            m, q, lambda up: self.planner.clear_way(
-                self.arm.plan(q, up + way.waypoints), way,
-                lambda waypoints: self.arm.plan(q, up + waypoints))))
+            m, q, way, lambda waypoints: self.arm.plan(q, waypoints)))
 
     def _place_failed(self, obs: Observation, m: Material, why: str) -> None:
         self.ports.grip(self.arm.name, False)

@@ -12,18 +12,15 @@ from typing import Any, Callable, List, Optional, Tuple, Union
 import numpy as np
 
 from cell_layout.layout import CellLayout, slot_in_world
+from cell_layout.lift_swing import PlaceWay, rise_first
 from cell_layout.pick_geometry import (
     EDGE_CLEARANCE_M,
     continuous,
     edge_point,
-    end_stop_box,
-    from_waypoint,
     lift_line,
     over_the_belt,
     place_points,
     sweeps_into,
-    sweeps_into_box,
-    tallest_on_belt,
 )
 from controllers.bezier import Pose2D
 from controllers.pick_place import PickTiming, follow_pick
@@ -59,38 +56,12 @@ from trial_record.events import EventKind
 # What the loader lifts out of the end stop's queue rises this far over the tallest material
 # that can stand next to it before it swings away [m].
 QUEUE_SWING_CLEARANCE_M = 0.05
-# A way from the lift point that passes too near what is on the belt rises first, by that much
-# more at each try, at most this many times.
-RISE_LEVELS = 3
 # The way in to a place is checked from where the cup was last this little below the point
 # above the place, or higher [m].
 ABOVE_TOLERANCE_M = 0.005
 # A material met at rest in the end stop's queue is met this long after its belt pause began,
 # and that no sooner than it came to rest there [s].
 QUEUE_REST_S = 0.1
-
-
-@dataclass
-class PlaceWay:
-    """A held material's way onto its place (joints), and the rise from there."""
-    waypoints: List[Waypoint]     # from the lift point: over the belt's edge, above, down
-    then: np.ndarray              # where the cup rises to over the place (not to a pick)
-    above: np.ndarray             # above the place (x, y, z)
-    above_q: np.ndarray
-    onto_plate: bool
-    # The materials at the place already (bottom centre, edge), and the held one's edge.
-    neighbours: List[Tuple[np.ndarray, float]] = field(default_factory=list)
-    held: float = 0.0
-
-    def stopping_above(self) -> List[Waypoint]:
-        """The same way, at rest above the place before it goes straight down (a way that
-        blends through that point can come down onto the place on a curve)."""
-        return [replace(w, stop=True) if w.q is self.above_q else w for w in self.waypoints]
-
-    @property
-    def rise(self) -> Tuple[np.ndarray, np.ndarray, np.ndarray, bool]:
-        """What the cup adopts for its rise from the place (CupPlace.adopt)."""
-        return self.then, self.above, self.above_q, self.onto_plate
 
 
 @dataclass
@@ -356,66 +327,33 @@ class PickPlanner:
         through = (pick.waypoints if pick.waypoints[-1].direct else   # (straight up: _lift_way)
                    pick.waypoints[:-1] + [Waypoint(pick.q_lift, stop=crowded,
                                                    min_time=pick.timing.lift)])
-        lifted = pick.contact + pick.timing.dwell
-
-        def planned(up: List[Waypoint]) -> Points:
-            way_in = through if not up else through[:-1] + [replace(through[-1], stop=True),
-                                                             *up]
-            return self.clear_way(self._motion(obs, way_in + place_way.waypoints, pick),
-                                  place_way, lambda way: self._motion(obs, way_in + way, pick))
         try:
-            whole = self.clear_of_belt(m, pick.q_lift, planned, lifted)
+            whole = self.clear_of_belt(m, pick.q_lift, place_way, lambda way: self._motion(
+                obs, through + way, pick), pick.contact + pick.timing.dwell)
         except PlanError:
             return None                 # (the place is planned at the lift point then)
         ahead = Ahead(place_way, pick.q_lift, pick.points[-1][0])
         pick.points = whole
         return ahead
 
-    def clear_of_belt(self, m: Material, q_lift: np.ndarray,
-                      planned: Callable[[List[Waypoint]], Points], lifted: float = -math.inf
+    def clear_of_belt(self, m: Material, q_lift: np.ndarray, way: 'PlaceWay',
+                      plan: Callable[[List[Waypoint]], Points], lifted: float = -math.inf
                       ) -> Points:
-        """The motion ``planned`` plans from ``m``'s lift point (the points from ``lifted``
-        on; ``planned(up)`` goes through ``up`` first, at rest), kept the cell's swing
-        clearance from the belt's end stop and the materials on the belt (where the belt has
-        them at its start and a second on): where it is not, it goes straight up from the lift
-        point first, what the cup holds QUEUE_SWING_CLEARANCE_M over the tallest thing on the
-        belt or at its end, and as much higher again, up to RISE_LEVELS times, until the way on
-        from there is clear (a Panda's low swings had knocked materials and the end stop;
-        docs/pipeline.md)."""
-        motion = planned([])
-        after = from_waypoint(motion, q_lift, lifted)
-        lay, lift = self.layout, self.lift_point
-        for level in range(1, RISE_LEVELS + 1):
-            near = self._near_on_belt(m, after)
-            if not near or lift is None:
-                return motion
-            high = np.array(lift, float)
-            high[2] = max(high[2], lay.belt_top + tallest_on_belt(lay) + m.size
-                          + level * QUEUE_SWING_CLEARANCE_M)
-            q_high = self.arm.solve(high, DOWN, 'world', q_lift)
-            if q_high is None:
-                return motion
-            motion = planned([Waypoint(q_high)])
-            after = from_waypoint(motion, q_high, lifted)
-            self.arm.log.event(self.arm.clock.now, EventKind.REPLANNED, self.arm.name, m,
-                               f'up {high[2] - lift[2]:.3f} m first: its swing came near '
-                               f'{near}')
+        """The motion ``plan`` plans through ``way`` from ``m``'s lift point (at ``lifted``),
+        clear of what is on the belt and at its end (cell_layout/lift_swing.py)."""
+        def planned(up: List[np.ndarray]) -> Points:
+            first = [Waypoint(q) for q in up]
+            return self.clear_way(plan(first + way.waypoints), way,
+                                  lambda waypoints: plan(first + waypoints))
+        motion, rises = rise_first(
+            self.layout, self.lift_point, m.size, q_lift, planned,
+            lambda t: [(f'{o.color} material {o.id} on the belt', [(np.array(
+                [*self.belt.track(o)(t)[:2], self.layout.belt_top]), o.size)])
+                for o in self.belt.on_belt() if o is not m],
+            lambda point, seed: self.arm.solve(point, DOWN, 'world', seed), lifted)
+        for why in rises:
+            self.arm.log.event(self.arm.clock.now, EventKind.REPLANNED, self.arm.name, m, why)
         return motion
-
-    def _near_on_belt(self, m: Material, motion: Points) -> str:
-        """What on the belt or at its end ``motion`` carries what the cup holds within the
-        cell's swing clearance of ('': nothing)."""
-        if not motion:
-            return ''
-        lay, qs, t0 = self.layout, [p[1] for p in motion], motion[0][0]
-        stop = end_stop_box(lay)
-        if stop is not None and sweeps_into_box(lay, qs, stop, m.size, lay.swing_clearance):
-            return 'the end stop'
-        return next((f'{o.color} material {o.id} on the belt' for o in self.belt.on_belt()
-                     if o is not m and sweeps_into(lay, qs, [
-                         (np.array([*self.belt.track(o)(t)[:2], lay.belt_top]), o.size)
-                         for t in (t0, t0 + 1.0)], m.size, clearance=lay.swing_clearance)),
-                    '')
 
     def place_way(self, m: Material, lift: Optional[np.ndarray], youbot_pose: Optional[Pose2D],
                    seed: np.ndarray) -> Union['PlaceWay', str]:
