@@ -11,7 +11,9 @@ be). A pose counts as reached when the generic solution's own forward kinematics
 For the Franka Emika Panda (PyBullet's bundled URDF, 7 joints, no analytic solver): POSES poses
 drawn the same way, solved from three seeds: a posture drawn over the limits, none (the middle
 of the limits), and the posture 1 cm of tool travel before (a motion's successive solutions).
-Median and 95th percentile times per pose; the goal: median <= 1 ms.
+Median and 95th percentile times per pose; the goal: median <= 1 ms. The machine's speed is
+timed before and after (pinocchio's calls of one IK iteration): this machine's speed varies
+by half from hour to hour, and the IK's times with it.
 
     python3 bench/bench_arm_ik.py [--poses 10000]
 """
@@ -102,11 +104,31 @@ def _panda(poses, rng):
     return out
 
 
+def _machine_speed() -> float:
+    """This machine's speed as the IK meets it: one iteration's calls into pinocchio (the
+    Panda's joint Jacobians, its tool's placement and Jacobian) [us], so that a median taken
+    on a slower or busier machine can be read against the figures in docs/benchmarks.md."""
+    kin = generic_kinematics(ArmSpec(PANDA, tuple(f'panda_joint{i}' for i in range(1, 8)),
+                                     'panda_link8', (0.0, 0.0, 0.1)))
+    model, data, q = kin.model, kin.data, (kin.lower + kin.upper) / 2
+    frame = model.getFrameId('arm_tool')
+    rounds = []
+    for _ in range(5):
+        start = time.perf_counter()
+        for _ in range(2000):
+            pin.computeJointJacobians(model, data, q)
+            pin.updateFramePlacement(model, data, frame)
+            pin.getFrameJacobian(model, data, frame, pin.LOCAL)
+        rounds.append((time.perf_counter() - start) / 2000 * 1e6)
+    return float(np.median(rounds))
+
+
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
     parser.add_argument('--poses', type=int, default=10000)
     args = parser.parse_args()
     rng = np.random.default_rng(64)
+    before = _machine_speed()
     zu12 = Zu12Kinematics('suction_tcp')
     youbot = YoubotKinematics('gripper_tcp')
     result = {
@@ -117,6 +139,9 @@ def main() -> int:
                            args.poses, rng),
         'panda': _panda(args.poses, rng),
     }
+    result['machine_us'] = {'before': before, 'after': _machine_speed()}
+    print(f'this machine: pinocchio\'s calls of one IK iteration took {before:.2f} us before '
+          f'and {result["machine_us"]["after"]:.2f} us after (quiet, fast: about 1.1 us)')
     median = result['panda']['random seed']['median_ms']
     every = all(result[a]['reached'] == result[a]['poses'] for a in ('zu12', 'youbot'))
     print(f'goals: every pose the analytic solvers reach, reached: {"met" if every else "NOT met"}'

@@ -6,17 +6,19 @@ as the URDF gives them.
 Forward kinematics is pinocchio's. Inverse kinematics is damped least squares (Levenberg-
 Marquardt on the pose error's SE(3) log, steps clipped to the joint limits), seeded from the
 given posture; an arm with more joints than the task needs (a 7-joint arm; a 6-joint arm whose
-tool is free to turn about its axis, as a suction cup is) moves in the task's null space
-towards a preferred posture: the seed, so that successive solutions along a motion stay on
-one branch. Where the seed does not converge, the search restarts from postures drawn from a
-generator seeded by the target, so the same request always gives the same answer.
+tool is free to turn about its axis, as a suction cup is) then moves in the task's null space
+to the posture nearest a preferred one (its home) on the branch the seed leads to, so that
+successive solutions along a motion stay on one branch and do not wander. Where the seed does
+not converge, the search starts again from the preferred posture, then from postures drawn
+from a generator seeded by the target, so the same request always gives the same answer.
 """
 from __future__ import annotations
 
 import math
 from pathlib import Path
-from typing import Dict, List, Optional, Sequence, Tuple
+from typing import Dict, List, Optional, Sequence, Tuple, Union
 
+import eigenpy
 import numpy as np
 import pinocchio as pin
 
@@ -26,10 +28,12 @@ from controllers.arrays import Vector
 # Converged: the tool within these of the target [m, rad] (promised: 1e-6 of each).
 POSITION_TOLERANCE = 1e-9
 ROTATION_TOLERANCE = 1e-9
-# Iterations per start, and starts after the seed's (drawn within the limits).
+# Iterations per start, and starts after the seed's (the preferred posture, then postures
+# drawn within the limits).
 MAX_ITERATIONS = 100
-# A start is given up once its error has not halved in STALL_ITERATIONS iterations.
-STALL_ITERATIONS = 8
+# A start is given up once its error has not halved in STALL_ITERATIONS iterations of the
+# task alone in a row.
+STALL_ITERATIONS = 5
 RESTARTS = 200
 # Solutions stay this far inside each joint's position limits [rad or m].
 LIMIT_MARGIN_RAD = 0.02
@@ -38,19 +42,20 @@ LIMIT_MARGIN_RAD = 0.02
 DAMPING_GAIN = 0.05
 DAMPING_FLOOR = 1e-10
 MAX_STEP_RAD = 1.0
-# The pull towards the preferred posture in the task's null space: this share of the way
-# there per iteration, at most POSTURE_STEP_RAD a joint, once the error (position + rotation)
-# is below NULL_SPACE_FROM, until the pull moves no joint more than POSTURE_REST_RAD (or for
-# POSTURE_ITERATIONS at most).
+# The pull towards the preferred posture in the task's null space, once the error (position
+# + rotation) is below NULL_SPACE_FROM: the way there projected on the null space, times a
+# gain (NULL_SPACE_GAIN at first, then the secant's within MIN_PULL_GAIN and MAX_PULL_GAIN,
+# _pull_gain), at most POSTURE_STEP_RAD a joint, until it moves no joint more than
+# POSTURE_REST_RAD (or for POSTURE_ITERATIONS at most).
 NULL_SPACE_GAIN = 1.0
-NULL_SPACE_FROM, NULL_SPACE_UNTIL = 1e-2, 1e-7
+NULL_SPACE_FROM = 1e-2
 POSTURE_STEP_RAD = 0.3
 POSTURE_REST_RAD = 1e-4
 POSTURE_ITERATIONS = 60
-# Whether a seeded solve settles too (else: it keeps near its seed).
-SETTLE_FROM_SEED = True
-# The error's rows: angular x, y; linear x, y, z; angular z (dropped for a free yaw).
-_ROWS = np.array([3, 4, 0, 1, 2, 5])
+MIN_PULL_GAIN, MAX_PULL_GAIN = 0.5, 20.0
+
+_FACTORED = eigenpy.ComputationInfo.Success
+_EYE3 = np.eye(3)
 
 
 class UrdfArmError(ValueError):
@@ -182,22 +187,30 @@ class UrdfArm(FrameLookup):
                                                     self.upper)
         prefer = self._model_q(self.preferred)
         first = self._model_q(start)
-        rng = np.random.default_rng(_target_key(target))
+        rng: Optional[np.random.Generator] = None
         best: Tuple[float, str] = (math.inf, '')
+        nearest: Tuple[float, np.ndarray] = (math.inf, first)
         # Solutions keep LIMIT_MARGIN_RAD inside the limits (a motion planned through one at a
         # limit overshoots it between its samples); a pose reached only nearer its limits is
-        # solved within them, from fewer starts.
+        # solved within them, from the nearest posture found within the margin and fewer
+        # starts.
         inner = np.minimum(LIMIT_MARGIN_RAD, (self.upper - self.lower) / 4)
         for margin, starts in ((inner, RESTARTS + 1), (0.0 * inner, RESTARTS // 4 + 1)):
             low, high = self._model_q(self.lower + margin), self._model_q(self.upper - margin)
             for attempt in range(starts):
-                q0 = first if attempt == 0 else rng.uniform(low, high)
-                # (From the seed, the arm moves little in the null space: a motion's
-                # successive solutions stay on one branch. From no seed or a restart, it
-                # settles nearest the preferred posture.)
-                q, error = self._descend(goal, q0, prefer, low, high,
-                                         settle=SETTLE_FROM_SEED or seed is None or attempt > 0)
+                # (The seed first: a motion's successive solutions stay on one branch. Then
+                # the preferred posture, then postures drawn from a generator seeded by the
+                # target.)
+                if attempt == 0:
+                    q0 = first if margin is inner else nearest[1]
+                elif attempt == 1 and seed is not None:
+                    q0 = np.minimum(np.maximum(prefer, low), high)
+                else:
+                    rng = rng or np.random.default_rng(_target_key(target))
+                    q0 = rng.uniform(low, high)
+                q, error = self._descend(goal, q0, prefer, low, high)
                 if error > POSITION_TOLERANCE + ROTATION_TOLERANCE:
+                    nearest = min(nearest, (error, q), key=lambda n: n[0])
                     best = min(best, (error, f'out of reach within the joint limits (nearest: '
                                              f'{error:.3g} off)'))
                     continue
@@ -209,74 +222,93 @@ class UrdfArm(FrameLookup):
         return ArmSolution(False, reason=best[1])
 
     def _descend(self, goal: pin.SE3, q: np.ndarray, prefer: np.ndarray, low: np.ndarray,
-                 high: np.ndarray, settle: bool = True) -> Tuple[np.ndarray, float]:
+                 high: np.ndarray) -> Tuple[np.ndarray, float]:
         """Damped least squares from ``q``: the posture and its error (position + rotation).
         An arm the task leaves free (more joints than its rows) is drawn towards ``prefer`` in
-        the task's null space once near the target: with ``settle``, until that pull comes to
-        rest (at most POSTURE_ITERATIONS); without, no joint further per iteration than the
-        task's error (a seed's posture kept but for a drift back towards ``prefer``: the
-        nearest point to ``prefer`` can jump as the target moves, 1 rad for a 1 cm step
-        down to the floor). Then it converges on the task alone."""
+        the task's null space once near the target, until that pull comes to rest (at most
+        POSTURE_ITERATIONS): the posture nearest ``prefer`` on the branch the start leads to,
+        whatever the start on it, so that a motion's successive solutions do not wander.
+        Then it converges on the task alone. (Written for speed: an iteration is some twenty
+        calls into pinocchio and numpy, bench/bench_arm_ik.py.)"""
         model, data, tool = self.model, self.data, self._tool
-        rows = _ROWS[:5] if self.free_yaw else _ROWS
-        posture = len(rows) < self.dof
-        error, history = math.inf, []
+        rows = 5 if self.free_yaw else 6        # (pinocchio's log6: linear, then angular z last)
+        posture = rows < self.dof
+        tolerance = POSITION_TOLERANCE + ROTATION_TOLERANCE
+        error = math.inf
+        history: List[float] = []      # (the task's errors, its own iterations in a row)
+        gain, last = NULL_SPACE_GAIN, None
         for iteration in range(MAX_ITERATIONS):
             pin.computeJointJacobians(model, data, q)
             pin.updateFramePlacement(model, data, tool)
             here = data.oMf[tool]
-            aim = _turned_to(goal, here) if self.free_yaw else goal
-            offset = here.actInv(aim)
+            offset = here.actInv(_turned_to(goal, here) if self.free_yaw else goal)
             e = pin.log6(offset).vector
             lx, ly, lz, ax, ay, az = e.tolist()
             error = math.sqrt(lx * lx + ly * ly + lz * lz) + math.sqrt(ax * ax + ay * ay + az * az)
-            pulling = (posture and error < NULL_SPACE_FROM and iteration < POSTURE_ITERATIONS
-                       and (settle or error > NULL_SPACE_UNTIL))
-            if error <= POSITION_TOLERANCE + ROTATION_TOLERANCE and not pulling:
+            pulling = posture and error < NULL_SPACE_FROM and iteration < POSTURE_ITERATIONS
+            if error <= tolerance and not pulling:
                 break
-            if not pulling:
+            if pulling:
+                history.clear()     # (a stall is told on the task's own iterations in a row)
+            else:
                 history.append(error)
                 if (len(history) > STALL_ITERATIONS
                         and error > 0.5 * history[-STALL_ITERATIONS - 1]):
                     break
             jac = pin.Jlog6(offset.inverse()) @ pin.getFrameJacobian(model, data, tool,
                                                                      pin.LOCAL)
-            step = self._step(jac[rows], e[rows], q, prefer if pulling else None, low, high,
-                              POSTURE_STEP_RAD if settle else error)
-            biggest = float(np.abs(step).max())
+            squared = lx * lx + ly * ly + lz * lz + ax * ax + ay * ay + (
+                0.0 if self.free_yaw else az * az)
+            damping = DAMPING_GAIN * squared + DAMPING_FLOOR
+            if pulling:
+                step, null = self._step(jac[:rows], e[:rows], damping, q, prefer, low, high,
+                                        POSTURE_STEP_RAD, gain)
+            else:
+                step, null = self._step(jac[:rows], e[:rows], damping, q, None, low, high)
+            biggest = max(-float(step.min()), float(step.max()))
             if pulling and biggest < POSTURE_REST_RAD:
                 posture = False             # (at rest: the closest it comes to ``prefer``)
+            elif pulling and null is not None:
+                gain, last = _pull_gain(q, null, last), (q, null)
             if biggest > MAX_STEP_RAD:
                 step *= MAX_STEP_RAD / biggest
-            q = np.clip(q + step, low, high)
+            q = np.minimum(np.maximum(q + step, low), high)
         return q, error
 
-    def _step(self, jt: np.ndarray, et: np.ndarray, q: np.ndarray, prefer: Optional[np.ndarray],
-              low: np.ndarray, high: np.ndarray, pull_most: float = 0.0) -> np.ndarray:
-        """The damped least-squares step, joints at a limit that it would push further out
-        left still (their columns dropped: the others take up the task), and, with
-        ``prefer``, the pull towards it in the task's null space (at most ``pull_most`` a
-        joint)."""
-        damping = DAMPING_GAIN * float(et @ et) + DAMPING_FLOOR
-        j, free = jt, None
+    def _step(self, jt: np.ndarray, et: np.ndarray, damping: float, q: np.ndarray,
+              prefer: Optional[np.ndarray], low: np.ndarray, high: np.ndarray,
+              pull_most: float = 0.0,
+              gain: float = NULL_SPACE_GAIN) -> Tuple[np.ndarray, Optional[np.ndarray]]:
+        """The damped least-squares step (``damping`` on the diagonal), joints at a limit
+        that it would push further out left still (their columns dropped: the others take up
+        the task), and, with ``prefer``, the way to it projected on the task's null space,
+        times ``gain`` (scaled down to move no joint further than ``pull_most``). With the
+        step, that projection (at a gain of one)."""
+        pull = None if prefer is None else prefer - q
+        at_low, at_high = q <= low, q >= high
+        limited = bool((at_low | at_high).any())
+        j, free, null = jt, None, None
         for _ in range(3):
             inner = j @ j.T
             inner.flat[::inner.shape[0] + 1] += damping
-            if prefer is None:
-                step: np.ndarray = j.T @ np.linalg.solve(inner, et)
-            else:
-                pull = np.clip(NULL_SPACE_GAIN * (prefer - q), -pull_most, pull_most)
+            factor = _spd_factor(inner)
+            step: np.ndarray = j.T @ factor.solve(et)
+            if pull is not None:
                 if free is not None:
-                    pull *= free
-                step = pull + j.T @ np.linalg.solve(inner, et - j @ pull)
-            blocked = ((q <= low) & (step < 0.0)) | ((q >= high) & (step > 0.0))
+                    pull = pull * free
+                null = pull - j.T @ factor.solve(j @ pull)
+                most = max(-float(null.min()), float(null.max()))
+                step = step + null * min(gain, pull_most / most) if most > 0.0 else step
+            if not limited:
+                break
+            blocked = (at_low & (step < 0.0)) | (at_high & (step > 0.0))
             if free is not None:
                 blocked &= free
             if not blocked.any():
                 break
             free = ~blocked if free is None else free & ~blocked
             j = jt * free
-        return step
+        return step, null
 
     def _answer(self, positions: np.ndarray, target: np.ndarray) -> ArmSolution:
         reached = self.fk(positions)
@@ -289,6 +321,41 @@ class UrdfArm(FrameLookup):
         return ArmSolution(True, positions.copy(), '', position_error, rotation_error)
 
 
+def _pull_gain(q: np.ndarray, null: np.ndarray,
+               last: Optional[Tuple[np.ndarray, np.ndarray]]) -> float:
+    """The null-space pull's gain for its next step: the settle is a descent of the distance
+    to the preferred posture along the self-motion, ``null`` its way down at ``q`` and
+    ``last`` the posture and way of the pull before. A gain of one is the whole way where the
+    self-motion is straight; it curves, and the step that takes it the rest of the way is
+    the secant's (Barzilai and Borwein's), kept within MIN_PULL_GAIN and MAX_PULL_GAIN."""
+    if last is None:
+        return NULL_SPACE_GAIN
+    moved, turned = q - last[0], last[1] - null
+    curvature = float(moved @ turned)
+    if curvature <= 0.0:
+        return MAX_PULL_GAIN
+    return min(MAX_PULL_GAIN, max(MIN_PULL_GAIN, float(moved @ moved) / curvature))
+
+
+class _LuSolve:
+    """numpy's general solve, for a matrix that rounding leaves not positive definite."""
+
+    def __init__(self, matrix: np.ndarray) -> None:
+        self.matrix = matrix
+
+    def solve(self, rhs: np.ndarray) -> np.ndarray:
+        out: np.ndarray = np.linalg.solve(self.matrix, rhs)
+        return out
+
+
+def _spd_factor(matrix: np.ndarray) -> Union[eigenpy.LLT, _LuSolve]:
+    """``matrix`` (symmetric positive definite: damped) factored once for the solves of one
+    step: by Cholesky (a fifth of numpy's general solve's time on 6x6), by LU where rounding
+    leaves it not positive definite."""
+    llt = eigenpy.LLT(matrix)
+    return llt if llt.info() == _FACTORED else _LuSolve(matrix)
+
+
 def _ancestors(model: pin.Model, joint: int) -> List[int]:
     out = []
     while joint > 0:
@@ -298,6 +365,12 @@ def _ancestors(model: pin.Model, joint: int) -> List[int]:
 
 
 def _orthonormal(rotation: np.ndarray) -> np.ndarray:
+    """The rotation nearest ``rotation`` (a target's rotation may come rounded)."""
+    (a, b, c), (d, e, f), (g, h, i) = rotation.tolist()
+    if (a * (e * i - f * h) - b * (d * i - f * g) + c * (d * h - e * g) > 0.0
+            and float(np.abs(rotation @ rotation.T - _EYE3).max()) < 1e-12):
+        same: np.ndarray = rotation.copy()      # (a rotation already: as given)
+        return same
     u, _, vt = np.linalg.svd(rotation)
     out: np.ndarray = u @ vt
     if np.linalg.det(out) < 0.0:
