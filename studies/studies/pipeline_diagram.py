@@ -18,8 +18,9 @@ from coordinator.pipeline.transport import TRANSPORT_TRANSITIONS
 
 BEGIN = '<!-- pipeline_diagram: begin (generated; do not edit) -->'
 END = '<!-- pipeline_diagram: end -->'
-MACHINES = (('loader (the Zu 12)', LoaderState, LOADER_TRANSITIONS, LoaderState.START),
-            ('transport (the youBot)', TransportState, TRANSPORT_TRANSITIONS,
+MACHINES = (('loader (any arm; the paper\'s Zu 12)', LoaderState, LOADER_TRANSITIONS,
+             LoaderState.START),
+            ('transport (each youBot)', TransportState, TRANSPORT_TRANSITIONS,
              TransportState.WAIT_LOAD))
 
 

@@ -56,7 +56,7 @@ def test_the_controller_talks_to_the_robots_the_world_names():
     assert p.result.status == 'completed' and p.result.delivered == 8
     robots = {e.robot for e in cell.events}
     assert {'arm', 'carrier'} <= robots and not robots & {'zu12', 'youbot'}
-    assert p.result.zu12_grasp_successes == 8 and p.result.youbot_grasp_successes == 7
+    assert p.result.loader_grasp_successes == 8 and p.result.transport_grasp_successes == 7
 
 
 class Renamed:

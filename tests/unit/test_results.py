@@ -3,6 +3,7 @@ import csv
 import importlib.util
 import json
 import re
+from dataclasses import replace
 
 import cv2
 import numpy as np
@@ -12,7 +13,7 @@ from coordinator.pipeline import RunResult
 from studies.campaign import write_csv
 from studies.plan import trial_plan
 from studies.report import STATE_COLORS, activity, summary_rows, write_report
-from trial_record.result import RunInfo, TrialResult
+from trial_record.result import ResultError, RunInfo, TrialResult
 from trial_record.scoring import (
     IdentificationCheck,
     at_destination,
@@ -83,18 +84,45 @@ def test_score_takes_handling_from_ground_truth_not_from_the_coordinator(regions
 def test_the_rates_split_as_the_paper_splits_them(regions):
     # The Zu 12 picked 8 in 9 attempts; the youBot unloaded in 7 of 8; of the 7 materials on
     # its plate one orange ended outside the pool.
-    r = _result(zu12_grasp_attempts=9, zu12_grasp_successes=8, youbot_grasp_attempts=8,
-                youbot_grasp_successes=7, loaded=7)
+    r = _result(loader_grasp_attempts=9, loader_grasp_successes=8, transport_grasp_attempts=8,
+                transport_grasp_successes=7, loaded=7)
     truth = ([('purple', np.array([-0.5, 0.3, 0.027])), ('blue', ON_PLATFORM)]
              + [('orange', IN_POOL + [0.01 * k, 0, 0.0]) for k in range(5)]
              + [('orange', np.array([1.0, 0.0, 0.025]))])
     out = score(r, truth, [True] * 8, regions)
-    assert out.zu12_grasp_rate == pytest.approx(8 / 9)
-    assert out.youbot_grasp_rate == pytest.approx(7 / 8)
+    assert out.loader_grasp_rate == pytest.approx(8 / 9)
+    assert out.transport_grasp_rate == pytest.approx(7 / 8)
     assert out.transport_rate == pytest.approx(6 / 7)
     assert out.handling_success_rate == pytest.approx(7 / 8)
     # Nothing loaded: no transport to rate, not a division by zero.
     assert score(_result(), truth, [True] * 8, regions).transport_rate == 0.0
+
+
+def test_results_name_roles_and_robots_and_read_the_records_that_named_the_models():
+    """The grasps per role (the paper's split: its Zu 12 was the loader, its youBot the
+    transport) and per robot; a record written before, with the models' names, reads as the
+    roles'; a record that has both, or a robot with more successes than attempts, or a role
+    the cell has not, is refused naming the field."""
+    old = {'status': 'completed', 'zu12_grasp_attempts': 9, 'zu12_grasp_successes': 8,
+           'youbot_grasp_attempts': 7, 'youbot_grasp_successes': 7, 'zu12_grasp_rate': 8 / 9,
+           'youbot_grasp_rate': 1.0}
+    r = TrialResult.from_dict(old)
+    assert (r.loader_grasp_attempts, r.loader_grasp_successes, r.loader_grasp_rate) == (
+        9, 8, 8 / 9)
+    assert (r.transport_grasp_attempts, r.transport_grasp_rate) == (7, 1.0)
+    assert r.robot_grasps is None and 'robot_grasps' not in r.to_dict()
+    with pytest.raises(ResultError, match='has both zu12_grasp_attempts and '
+                                          'loader_grasp_attempts'):
+        TrialResult.from_dict({**old, 'loader_grasp_attempts': 9})
+    mine = {'arm': {'role': 'loader', 'attempts': 9, 'successes': 8},
+            'carrier': {'role': 'transport', 'attempts': 7, 'successes': 7}}
+    back = TrialResult.from_dict(json.loads(replace(r, robot_grasps=mine).to_json()))
+    assert back.robot_grasps == mine
+    for bad, fragment in (({'role': 'loader', 'attempts': 1, 'successes': 2}, 'more than its'),
+                          ({'role': 'welder', 'attempts': 1, 'successes': 1}, 'role'),
+                          ({'role': 'loader', 'attempts': 1}, 'successes')):
+        with pytest.raises(ResultError, match=fragment):
+            TrialResult.from_dict({'status': 'completed', 'robot_grasps': {'arm': bad}})
 
 
 def test_the_peak_joint_speed_is_the_largest_fraction_of_any_joints_limit():
@@ -150,11 +178,14 @@ def test_summary_and_report(tmp_path):
 
 
 def test_the_report_draws_each_robots_activity_over_the_median_trial(tmp_path):
-    """The timeline: a lane for the belt, the Zu 12 and the youBot, a bar per state, drawn for
-    the trial of median completion time, from the state changes its result lists."""
+    """The timeline: a lane for the belt, the loader (by its robot's name) and the youBot, a
+    bar per state, drawn for the trial of median completion time, from the state changes its
+    result lists."""
     trials = []
     for k, end in enumerate((70.0, 60.0, 80.0)):
         trials.append({
+            'robot_grasps': {'panda': {'role': 'loader', 'attempts': 9, 'successes': 8},
+                             'youbot': {'role': 'transport', 'attempts': 7, 'successes': 7}},
             'trial': k, 'scenario_seed': k, 'belt_speed': 0.12, 'status': 'completed',
             'completion_time': end, 'identification_rate': 1.0, 'grasp_success_rate': 1.0,
             'handling_success_rate': 1.0, 'youbot_path': [], 'materials': [],
@@ -169,10 +200,15 @@ def test_the_report_draws_each_robots_activity_over_the_median_trial(tmp_path):
     trials = [TrialResult.from_dict(t) for t in trials]
     lanes = activity(trials[0])
     assert lanes['belt'] == [(0.0, 30.0, 'running')]
-    assert lanes['Zu 12'][-1] == (30.0, 33.0, 'home')         # nothing drawn once done
+    assert lanes['panda'][-1] == (30.0, 33.0, 'home')         # nothing drawn once done
     assert lanes['youBot'][1] == (31.0, 40.0, 'drive')
     report = write_report(trials, tmp_path, {'note': 'three trials'}).read_text()
     assert '![timeline](timeline.png)' in report
+    assert ('panda (loader) 24 of 27 (88.9 %); youbot (transport) 21 of 21 (100.0 %).'
+            in report)
+    # (A record from before robots were told apart: its loader's lane is the role's.)
+    trials[0].robot_grasps = None
+    assert activity(trials[0])['loader'][-1] == (30.0, 33.0, 'home')
     img = cv2.imread(str(tmp_path / 'timeline.png'))
     assert img is not None
 
@@ -202,7 +238,7 @@ def test_a_fleets_report_has_a_lane_a_path_and_a_row_per_youbot(tmp_path):
                    [10.0, 'alpha', 'drive'], [0.0, 'beta', 'wait_bay'],
                    [20.0, 'beta', 'drive'], [50.0, 'beta', 'done']]}) for k in range(3)]
     lanes = activity(trials[0])
-    assert set(lanes) == {'belt', 'Zu 12', 'alpha', 'beta'}
+    assert set(lanes) == {'belt', 'loader', 'alpha', 'beta'}
     assert lanes['beta'] == [(0.0, 20.0, 'wait_bay'), (20.0, 50.0, 'drive')]
     # Before its first change of state a youBot waits at its park.
     trials[1].states[1:3] = [[5.0, 'alpha', 'wait_load'], [10.0, 'alpha', 'drive']]

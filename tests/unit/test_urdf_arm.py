@@ -166,15 +166,16 @@ def test_a_robot_without_an_arm_is_refused():
 
 
 def test_the_loader_is_known_by_its_model_only_through_the_registry():
-    """No module of the controller, the cell's layout, the studies or the IK node imports an
-    arm's own kinematics or names the Zu 12 in its code: the loader's model comes from the
-    world through the registry (controllers/arm_registry.py). (The transport is still the
-    youBot: issue 65.)"""
+    """No module of the controller, the cell's layout, the studies, the results or the IK
+    node imports an arm's own kinematics or names the Zu 12 in its code (a name, an attribute,
+    a keyword, a field): the loader's model comes from the world through the registry
+    (controllers/arm_registry.py), and results name roles and robots. (The transport is still
+    the youBot: issue 65.)"""
     import ast
     root = Path(__file__).resolve().parents[2]
     model_modules = {'controllers.zu12_arm', 'controllers.zu12_kinematics', 'controllers.zu12_ik'}
     found = []
-    for package in ('coordinator', 'cell_layout', 'studies', 'arm_kinematics'):
+    for package in ('coordinator', 'cell_layout', 'studies', 'arm_kinematics', 'trial_record'):
         for path in (root / package / package).rglob('*.py'):
             tree = ast.parse(path.read_text())
             for node in ast.walk(tree):
@@ -187,6 +188,10 @@ def test_the_loader_is_known_by_its_model_only_through_the_registry():
                     names = [node.id]
                 elif isinstance(node, ast.Attribute):
                     names = [node.attr]
+                elif isinstance(node, ast.keyword) and node.arg:
+                    names = [node.arg]
+                elif isinstance(node, (ast.arg, ast.FunctionDef, ast.ClassDef)):
+                    names = [node.arg if isinstance(node, ast.arg) else node.name]
                 bad = [n for n in names if n in model_modules or 'zu12' in n.lower()]
                 found += [f'{path.relative_to(root)}:{node.lineno}: {n}' for n in bad]
     assert found == []

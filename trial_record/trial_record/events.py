@@ -56,7 +56,7 @@ class RunResult:
     completion_time: float             # sim time from start to both robots home [s]
     total: int
     identified: int                    # materials the vision reported with a colour
-    picked: int                        # materials the Zu 12 lifted off the belt
+    picked: int                        # materials the loader lifted off the belt
     delivered: int                     # materials at their destination (as the machine saw it)
     grasp_attempts: int                # both arms
     grasp_successes: int
@@ -64,12 +64,14 @@ class RunResult:
     failed: int
     message: str = ''
     materials: List[Dict[str, Any]] = field(default_factory=list)
-    # Per arm, as the paper splits its rates: the Zu 12's picks, the youBot's unloads.
-    zu12_grasp_attempts: int = 0
-    zu12_grasp_successes: int = 0
-    youbot_grasp_attempts: int = 0
-    youbot_grasp_successes: int = 0
-    loaded: int = 0                    # materials the Zu 12 set down on the youBot's plate
+    # Per role, as the paper splits its rates: the loader's picks (the paper's Zu 12), the
+    # transports' unloads (its youBot); and per robot (name: role, attempts, successes).
+    loader_grasp_attempts: int = 0
+    loader_grasp_successes: int = 0
+    transport_grasp_attempts: int = 0
+    transport_grasp_successes: int = 0
+    robot_grasps: Dict[str, Dict[str, Any]] = field(default_factory=dict)
+    loaded: int = 0                    # materials the loader set down on a youBot's plate
     trips: int = 0                     # loads the youBot set off with
     belt_stops: int = 0                # times the belt stopped while loading (a full queue)
     # Several youBots: per youBot, its trips, the materials it set off with (carried) and those

@@ -40,7 +40,7 @@ CSV_FIELDS = ('trial', 'scenario_seed', 'belt_speed', 'status', 'completion_time
               'grasp_successes', 'missed', 'failed', 'wall_time', 'parameters', 'message')
 # The rates, each within 0..1 (NaN: a record no run made).
 RATES = ('identification_rate', 'grasp_success_rate', 'handling_success_rate',
-         'zu12_grasp_rate', 'youbot_grasp_rate', 'transport_rate')
+         'loader_grasp_rate', 'transport_grasp_rate', 'transport_rate')
 # Metadata a record of the first layout kept at its top level (read into ``run``).
 _FLAT_RUN_KEYS = ('trial', 'code', 'wall_time', 'cpu_seconds', 'node', 'ray_node', 'niceness',
                   'bag')
@@ -51,13 +51,20 @@ STATUSES = ('completed', 'incomplete', 'timeout', 'node_timeout', 'error', 'inte
 DID_NOT_RUN = ('error', 'node_timeout', 'interrupted')
 MODES = ('', 'lock-step', 'real-time')
 COUNTS = ('total', 'identified', 'picked', 'delivered', 'grasp_attempts', 'grasp_successes',
-          'missed', 'failed', 'zu12_grasp_attempts', 'zu12_grasp_successes',
-          'youbot_grasp_attempts', 'youbot_grasp_successes', 'loaded', 'trips', 'belt_stops',
-          'identified_correct', 'handled_verified')
+          'missed', 'failed', 'loader_grasp_attempts', 'loader_grasp_successes',
+          'transport_grasp_attempts', 'transport_grasp_successes', 'loaded', 'trips',
+          'belt_stops', 'identified_correct', 'handled_verified')
 # Counts that are parts of others (the rates divide one by the other).
-_PARTS = (('grasp_successes', 'grasp_attempts'), ('zu12_grasp_successes', 'zu12_grasp_attempts'),
-          ('youbot_grasp_successes', 'youbot_grasp_attempts'), ('identified_correct', 'total'),
-          ('handled_verified', 'total'))
+_PARTS = (('grasp_successes', 'grasp_attempts'),
+          ('loader_grasp_successes', 'loader_grasp_attempts'),
+          ('transport_grasp_successes', 'transport_grasp_attempts'),
+          ('identified_correct', 'total'), ('handled_verified', 'total'))
+# The names records kept before the results named roles, not the paper's robot models (read
+# as the roles' names: the loader was the paper's Zu 12, the transport its youBot).
+_LEGACY_KEYS = {f'{model}_grasp_{what}': f'{role}_grasp_{what}'
+                for model, role in (('zu12', 'loader'), ('youbot', 'transport'))
+                for what in ('attempts', 'successes', 'rate')}
+ROLES = ('loader', 'transport')
 MAX_MESSAGE = 100_000               # characters of a result's message (longer ones are cut)
 MAX_TRIAL = 1_000_000               # a trial's number in its plan
 MAX_SEED = 2 ** 31 - 1              # (the simulator's scenario_seed is a 32-bit integer)
@@ -113,10 +120,10 @@ class TrialResult:
     grasp_successes: int = 0
     missed: int = 0
     failed: int = 0
-    zu12_grasp_attempts: int = 0
-    zu12_grasp_successes: int = 0
-    youbot_grasp_attempts: int = 0
-    youbot_grasp_successes: int = 0
+    loader_grasp_attempts: int = 0
+    loader_grasp_successes: int = 0
+    transport_grasp_attempts: int = 0
+    transport_grasp_successes: int = 0
     loaded: int = 0
     trips: int = 0
     belt_stops: int = 0
@@ -126,8 +133,8 @@ class TrialResult:
     identification_rate: float = math.nan
     grasp_success_rate: float = math.nan
     handling_success_rate: float = math.nan
-    zu12_grasp_rate: float = math.nan
-    youbot_grasp_rate: float = math.nan
+    loader_grasp_rate: float = math.nan
+    transport_grasp_rate: float = math.nan
     transport_rate: float = math.nan
     not_at_destination: List[Dict[str, Any]] = field(default_factory=list)
     # What the run went through.
@@ -145,6 +152,10 @@ class TrialResult:
     # A cell with several youBots: each one's share (scoring.fleet_shares): trips, carried,
     # delivered, distance [m], busy and waiting [s], and its path (as youbot_path).
     transports: Optional[Dict[str, Dict[str, Any]]] = None
+    # Each robot's grasps, by its name: its role (loader or transport), attempts, successes
+    # (a loader's picks off the belt, a transport's unloads of its plate). None: a record
+    # written before robots were told apart.
+    robot_grasps: Optional[Dict[str, Dict[str, Any]]] = None
     youbot_path: List[List[float]] = field(default_factory=list)
     events: List[List[Any]] = field(default_factory=list)
     states: List[List[Any]] = field(default_factory=list)
@@ -191,7 +202,7 @@ class TrialResult:
 
     def to_dict(self) -> Dict[str, Any]:
         out = asdict(self)
-        for key in ('odometry_age', 'closest_bases', 'transports'):
+        for key in ('odometry_age', 'closest_bases', 'transports', 'robot_grasps'):
             if out[key] is None:
                 del out[key]
         return out
@@ -229,6 +240,11 @@ class TrialResult:
                                       f'{run[key]!r:.40}')
                 run[key] = data.pop(key)
         data.pop('cpu_seconds_self', None)
+        for legacy, key in _LEGACY_KEYS.items():
+            if legacy in data:
+                if key in data:
+                    raise ResultError(f'{what}: has both {legacy} and {key} (its name now)')
+                data[key] = data.pop(legacy)
         try:
             return cls(**_outcome(Fields(data, what)), run=_run_info(Fields(run, f'{what}: run')))
         except ResultError:
@@ -278,6 +294,33 @@ def _outcome(f: Fields) -> Dict[str, Any]:
                                 'robots': list(robots)}
     if f.has('transports') and f.data['transports'] is not None:
         out['transports'] = _transports(f)
+    if f.has('robot_grasps') and f.data['robot_grasps'] is not None:
+        out['robot_grasps'] = _robot_grasps(f)
+    return out
+
+
+def _robot_name(f: Fields, key: str, robot: Any) -> str:
+    if not isinstance(robot, str) or not 0 < len(robot) <= 256:
+        raise f.fail(key, f'name {str(robot)[:40]!r}, which is no robot\'s name')
+    return robot
+
+
+def _robot_grasps(f: Fields) -> Dict[str, Dict[str, Any]]:
+    robots = f.record('robot_grasps', {})
+    if len(robots.data) > MAX_ROBOTS + 1:
+        raise f.fail('robot_grasps', f'are of {len(robots.data)} robots, more than '
+                     f'{MAX_ROBOTS + 1}')
+    out = {}
+    for robot in robots.data:
+        r = robots.record(_robot_name(f, 'robot_grasps', robot))
+        r.only(('role', 'attempts', 'successes'))
+        grasps: Dict[str, Any] = {'role': r.text('role', choices=ROLES),
+                                  'attempts': r.integer('attempts', 0, MAX_COUNT),
+                                  'successes': r.integer('successes', 0, MAX_COUNT)}
+        if grasps['successes'] > grasps['attempts']:
+            raise r.fail('successes', f'are {grasps["successes"]}, more than its attempts '
+                         f'({grasps["attempts"]})')
+        out[robot] = grasps
     return out
 
 
@@ -287,9 +330,7 @@ def _transports(f: Fields) -> Dict[str, Dict[str, Any]]:
         raise f.fail('transports', f'are {len(shares.data)} youBots, not 1 to {MAX_ROBOTS}')
     out = {}
     for robot in shares.data:
-        if not isinstance(robot, str) or not 0 < len(robot) <= 256:
-            raise f.fail('transports', f'name {str(robot)[:40]!r}, which is no robot\'s name')
-        r = shares.record(robot)
+        r = shares.record(_robot_name(f, 'transports', robot))
         r.only(('trips', 'carried', 'delivered', 'distance', 'busy', 'waiting', 'path'))
         share: Dict[str, Any] = {key: r.integer(key, 0, MAX_COUNT)
                                  for key in ('trips', 'carried', 'delivered')}

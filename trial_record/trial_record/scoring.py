@@ -11,9 +11,10 @@ Definitions (docs/pipeline.md repeats them):
 - handling success rate: materials resting at their destination at the end / materials in the
   batch (each class's destination by the world's rules: resting on the region's top face, not
   on another material);
-- split as the paper's columns: the Zu 12's grasp rate (its picks) and the youBot's grasp rate
-  (its unloads); the youBot's transport rate: materials loaded onto its plate that rest at
-  their destination / materials loaded onto its plate;
+- split as the paper's columns, by role: the loader's grasp rate (its picks; the paper's
+  Zu 12) and the transports' grasp rate (their unloads; its youBot), and each robot's; the
+  transport rate: materials loaded onto a plate that rest at their destination / materials
+  loaded onto a plate;
 - completion time: simulated seconds from the start until both robots are back at their start
   poses (or the run ended).
 """
@@ -301,9 +302,10 @@ def score(result: RunResult, final_truth: Sequence[TruePose], identifications: S
               if k not in ('status', 'message', 'transports')}
     return TrialResult(
         status=status, message=message, **counts, not_at_destination=missing,
-        # The paper's split: the Zu 12's recognition and grasps, the youBot's transport.
-        zu12_grasp_rate=_rate(result.zu12_grasp_successes, result.zu12_grasp_attempts),
-        youbot_grasp_rate=_rate(result.youbot_grasp_successes, result.youbot_grasp_attempts),
+        # The paper's split by role: the loader's grasps, the transports' unloads and carrying.
+        loader_grasp_rate=_rate(result.loader_grasp_successes, result.loader_grasp_attempts),
+        transport_grasp_rate=_rate(result.transport_grasp_successes,
+                                   result.transport_grasp_attempts),
         transport_rate=_rate(min(plate_bound, result.loaded), result.loaded),
         identified_correct=correct, handled_verified=handled,
         identification_rate=correct / total,

@@ -203,11 +203,13 @@ class Pipeline:
             status=status, completion_time=now - self.start_time, total=tally.total,
             identified=tally.identified, picked=tally.picked, delivered=tally.delivered,
             grasp_attempts=self.log.grasp_attempts, grasp_successes=self.log.grasp_successes,
-            zu12_grasp_attempts=self.log.grasps[self.loader_arm.name][0],
-            zu12_grasp_successes=self.log.grasps[self.loader_arm.name][1],
+            loader_grasp_attempts=self.log.grasps[self.loader_arm.name][0],
+            loader_grasp_successes=self.log.grasps[self.loader_arm.name][1],
             # (The paper's youBot: every transport robot's, together.)
-            youbot_grasp_attempts=sum(self.log.grasps[t.robot][0] for t in self.transports),
-            youbot_grasp_successes=sum(self.log.grasps[t.robot][1] for t in self.transports),
+            transport_grasp_attempts=sum(self.log.grasps[t.robot][0] for t in self.transports),
+            transport_grasp_successes=sum(self.log.grasps[t.robot][1] for t in self.transports),
+            robot_grasps=self.log.by_robot({self.loader_arm.name: 'loader', **{
+                t.robot: 'transport' for t in self.transports}}),
             loaded=self.book.loaded, trips=sum(t.trips for t in self.transports),
             belt_stops=self.belt_stops,
             missed=tally.missed, failed=tally.failed, message=message,

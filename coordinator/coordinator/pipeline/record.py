@@ -2,7 +2,7 @@
 the counts the result takes from them (grasps per arm). The only writer of both."""
 from __future__ import annotations
 
-from typing import Dict, List, Optional
+from typing import Any, Dict, List, Mapping, Optional
 
 from coordinator.pipeline.model import Material, Ports
 from trial_record.events import Event, EventKind
@@ -30,3 +30,8 @@ class EventLog:
     @property
     def grasp_successes(self) -> int:
         return sum(s for _, s in self.grasps.values())
+
+    def by_robot(self, roles: Mapping[str, str]) -> Dict[str, Dict[str, Any]]:
+        """Each robot's grasps (``roles``: its role by its name)."""
+        return {robot: {'role': role, 'attempts': self.grasps[robot][0],
+                        'successes': self.grasps[robot][1]} for robot, role in roles.items()}
