@@ -32,11 +32,15 @@ FOLLOW_STEP_M = 0.005
 
 
 def pick_points(layout: CellLayout, x: float) -> List[np.ndarray]:
-    """The world points the loader's tool passes through picking a material at ``x``."""
+    """The world points the loader's tool passes through picking a material at ``x``: on it,
+    lifted over it, and hovering where the material was when the descent began (upstream by
+    its travel over the descent, at the fastest belt the cell follows)."""
     top = layout.belt_top + layout.material_size
-    heights = (0.0, CELL_TIMING.hover, CELL_TIMING.lift_height)  # (on it, hover, lift)
-    return [np.array([x, layout.belt_y + dy, top + h]) for dy in (-LATERAL_M, 0.0, LATERAL_M)
-            for h in heights]
+    lead = FOLLOW_SPEED_M_S * CELL_TIMING.descend
+    # (along, up): on it, the hover, the lift
+    offsets = ((0.0, 0.0), (-lead, CELL_TIMING.hover), (0.0, CELL_TIMING.lift_height))
+    return [np.array([x + along, layout.belt_y + dy, top + up])
+            for dy in (-LATERAL_M, 0.0, LATERAL_M) for along, up in offsets]
 
 
 # Each loader's pick window and plate check, by what they depend on: a cell's layout is read
