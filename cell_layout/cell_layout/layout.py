@@ -19,7 +19,7 @@ from cell_layout.arm_models import ArmModel
 from controllers.arrays import Vector
 from controllers.bezier import Pose2D
 from controllers.youbot_arm import ARM_BASE_IN_BASE_LINK_M
-from world_description.world_schema import LIFT_SWING_CLEARANCE_M
+from world_description.world_schema import LIFT_SWING_CLEARANCE_M, LINK_CLEARANCE_M
 
 # The youBot's load plate: its top face above base_link [m] (plate_joint z + its thickness) and
 # the slots the loader fills, in base_link. The youBot's arm cannot turn straight back (joint 1
@@ -214,6 +214,12 @@ class CellLayout:
     # reaches a material to the belt's end (its pick window: loader_reach.py).
     belt_start_x: float = -math.inf
     pick_from: float = -math.inf
+    # The world's fixed boxes (name, centre, half sizes, yaw), and how near the loader's links
+    # may come to them and to the conveyor on its swings [m] (the world's cell.link_clearance;
+    # below 0: not checked; link_clearance.py).
+    fixed: Tuple[Tuple[str, Tuple[float, float, float], Tuple[float, float, float], float],
+                 ...] = ()
+    link_clearance: float = LINK_CLEARANCE_M
 
     @property
     def transport(self) -> CellRobot:

@@ -19,6 +19,7 @@ from typing import Any, Callable, List, Optional, Sequence, Tuple
 import numpy as np
 
 from cell_layout.layout import CellLayout
+from cell_layout.link_clearance import link_clearance
 from cell_layout.pick_geometry import (
     end_stop_box,
     from_waypoint,
@@ -73,8 +74,10 @@ def near_on_belt(lay: CellLayout, motion: Points, held: float, riding: Sequence[
     stop = end_stop_box(lay)
     if stop is not None and sweeps_into_box(lay, qs, stop, held, lay.swing_clearance):
         return 'the end stop'
-    return next((name for name, where in riding
+    near = next((name for name, where in riding
                  if sweeps_into(lay, qs, where, held, clearance=lay.swing_clearance)), '')
+    links = link_clearance(lay)
+    return near or (links.strikes(qs) if links is not None else '')
 
 
 def rise_first(lay: CellLayout, lift: Optional[Vector], held: float, q_lift: np.ndarray,

@@ -151,6 +151,7 @@ def layout_from_world(world: Any) -> CellLayout:
         belt_start_x=conv.position[0] - conv.length / 2,
         belt_width=conv.width,
         end_stop=conv.end_stop, swing_clearance=roles.swing_clearance,
+        link_clearance=roles.link_clearance,
         material_size=mats.largest, manifest=dict(mats.counts),
         youbot_home=home, youbot_base_z=yb.z, loader_base=(zu.x, zu.y, zu.z, zu.yaw),
         rules=rules, stands=stands,
@@ -167,6 +168,10 @@ def layout_from_world(world: Any) -> CellLayout:
         via_back=way_back(stands, home),
         loader=loader, transports=transports, clearance=roles.clearance,
         trip_load=roles.trip_load, more_sides=more_sides,
+        fixed=tuple((o.name or f'obstacle {k}', tuple(o.position),
+                     tuple(v / 2 for v in o.size), o.yaw)
+                    for k, o in enumerate(world.obstacles)
+                    if o.shape == 'box' and o.collision and len(o.size) == 3),
         parks=tuple((r.pose.x, r.pose.y, r.pose.yaw) for r in map(world.robot, (
             t.name for t in transports))) if _parks_apart(roles.loading, yb, transports)
         else ())

@@ -73,6 +73,8 @@ def test_the_example_fleet_is_laid_out_and_a_fleet_of_one_is_the_papers():
     assert layout.swing_clearance == 0.0
     panda = load_world(PAPER.parent / 'cell_panda.yaml')
     assert layout_from_world(panda).swing_clearance == 0.05
+    # Its links' clearance: the schema's default (they do not touch the cell).
+    assert layout.link_clearance == 0.0
     # Each unloads at a side of the pool of its own: the first at the west (the paper's), the
     # second at the east.
     assert [st.name for st in layout.stands_of('youbot')] == ['pool_left', 'pool_right']
@@ -162,7 +164,8 @@ def test_the_clearance_and_the_trip_load_are_checked_like_every_number():
     from world_description.world_config import WorldConfigError
     for key, value in (('clearance', -0.1), ('clearance', 2.0), ('trip_load', 2.5),
                        ('trip_load', -1), ('swing_clearance', -0.01),
-                       ('swing_clearance', 0.5), ('swing_clearance', 'high')):
+                       ('swing_clearance', 0.5), ('swing_clearance', 'high'),
+                       ('link_clearance', -0.01), ('link_clearance', 0.3)):
         data = two_youbots()
         data['cell'][key] = value
         with pytest.raises(WorldConfigError, match=f'cell.{key}'):

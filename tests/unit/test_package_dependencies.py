@@ -30,9 +30,9 @@ PYTHON_KEYS = {
     're2': 'python3-google-re2-pip', 'optuna': 'python3-optuna-pip',
     'SALib': 'python3-salib-pip', 'scipy': 'python3-scipy', 'matplotlib': 'python3-matplotlib',
     'pybullet_data': 'python3-pybullet-pip',
-    # (pinocchio and its Python bindings' base, eigenpy, are ROS packages of the
-    # distribution: their keys are their names.)
-    'pinocchio': 'pinocchio', 'eigenpy': 'eigenpy',
+    # (pinocchio, its Python bindings' base eigenpy and its collision library coal are ROS
+    # packages of the distribution: their keys are their names.)
+    'pinocchio': 'pinocchio', 'eigenpy': 'eigenpy', 'coal': 'coal',
 }
 # Modules that come with rclpy or the interface packages, declared by their ROS package name.
 ROS_MODULES = {'rclpy', 'rcl_interfaces', 'builtin_interfaces', 'ament_index_python',

@@ -184,6 +184,9 @@ END_STOP_HEIGHT_M = 0.06
 # swings on from a lift point, by default [m] (CellRoles.swing_clearance): its planned way
 # must not touch them.
 LIFT_SWING_CLEARANCE_M = 0.0
+# The loader's links keep this far from the conveyor and the world's boxes on those swings, by
+# default [m] (CellRoles.link_clearance; cell_layout/link_clearance.py).
+LINK_CLEARANCE_M = 0.0
 
 
 @dataclass(frozen=True)
@@ -252,7 +255,9 @@ class CellRoles:
     others (``left_out``) are left out of the world, and the cameras they carry with them.
     ``swing_clearance``: how far what the loader's cup holds keeps from the materials on the
     belt and its end stop as it swings on from a lift point [m] (default 0: its planned way
-    does not touch them; more for an arm that follows its plans less closely)."""
+    does not touch them; more for an arm that follows its plans less closely).
+    ``link_clearance``: how far the loader's links keep from the conveyor and the world's boxes
+    on those swings [m] (default 0: they do not touch them)."""
     loader: str = 'zu12'
     transports: Tuple[str, ...] = ('youbot',)
     loading: Optional[Tuple[float, float, float]] = None    # None: the first transport's start
@@ -260,6 +265,7 @@ class CellRoles:
     trip_load: int = 0
     left_out: Tuple[str, ...] = ()
     swing_clearance: float = LIFT_SWING_CLEARANCE_M
+    link_clearance: float = LINK_CLEARANCE_M
 
 
 @dataclass(frozen=True)

@@ -30,6 +30,7 @@ from world_description.tool_section import suction_section
 from world_description.world_schema import (
     GRAVITY_RANGE,
     LIFT_SWING_CLEARANCE_M,
+    LINK_CLEARANCE_M,
     MAX_JOINT_POSITION,
     MAX_SIZE_M,
     TURN_RAD,
@@ -100,7 +101,7 @@ def _cell(r: Reader, item: Any, robots: List[RobotConfig]) -> CellRoles:
     robot with a drive and a gripper, no robot in two roles."""
     where = 'cell'
     r.only(item, where, {'loader', 'transports', 'loading', 'clearance', 'trip_load',
-                         'youbots', 'swing_clearance'})
+                         'youbots', 'swing_clearance', 'link_clearance'})
     by_name = {rb.name: rb for rb in robots}
     loader = r.name(item, 'loader', where)
     arm = by_name.get(loader)
@@ -141,8 +142,9 @@ def _cell(r: Reader, item: Any, robots: List[RobotConfig]) -> CellRoles:
                      'transports needs its loading pose (cell.loading)')
     swing = r.number(item, 'swing_clearance', where, default=LIFT_SWING_CLEARANCE_M, lo=0.0,
                      hi=0.2)
+    links = r.number(item, 'link_clearance', where, default=LINK_CLEARANCE_M, lo=0.0, hi=0.2)
     return CellRoles(loader, tuple(names[:count]), loading, clearance, trip_load,
-                     tuple(names[count:]), swing)
+                     tuple(names[count:]), swing, links)
 
 
 def _robot(r: Reader, item: Any, i: int) -> RobotConfig:
