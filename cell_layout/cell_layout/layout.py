@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import Any, Dict, FrozenSet, List, Optional, Set, Tuple
+from typing import Any, Dict, FrozenSet, List, Optional, Sequence, Set, Tuple
 
 import numpy as np
 
@@ -386,3 +386,11 @@ def world_to_base(pose: Pose2D, point: Vector) -> np.ndarray:
     c, s = math.cos(yaw), math.sin(yaw)
     dx, dy = point[0] - x, point[1] - y
     return np.array([c * dx + s * dy, -s * dx + c * dy, point[2]])
+
+
+def fixed_boxes(obstacles: Sequence[Any]) -> Tuple[Tuple[str, Tuple[float, float, float],
+                                                         Tuple[float, float, float], float], ...]:
+    """The world's fixed boxes that collide (CellLayout.fixed): name, centre, half sizes, yaw."""
+    return tuple((o.name or f'obstacle {k}', tuple(o.position), tuple(v / 2 for v in o.size),
+                  o.yaw) for k, o in enumerate(obstacles)
+                 if o.shape == 'box' and o.collision and len(o.size) == 3)

@@ -32,6 +32,7 @@ from cell_layout.layout import (
     Region,
     Rule,
     UnloadStand,
+    fixed_boxes,
     plate_grid,
     slot_grid,
     world_to_base,
@@ -167,11 +168,7 @@ def layout_from_world(world: Any) -> CellLayout:
         via_turn=((side_x - 0.3, py - 0.12, 0.0),),
         via_back=way_back(stands, home),
         loader=loader, transports=transports, clearance=roles.clearance,
-        trip_load=roles.trip_load, more_sides=more_sides,
-        fixed=tuple((o.name or f'obstacle {k}', tuple(o.position),
-                     tuple(v / 2 for v in o.size), o.yaw)
-                    for k, o in enumerate(world.obstacles)
-                    if o.shape == 'box' and o.collision and len(o.size) == 3),
+        trip_load=roles.trip_load, more_sides=more_sides, fixed=fixed_boxes(world.obstacles),
         parks=tuple((r.pose.x, r.pose.y, r.pose.yaw) for r in map(world.robot, (
             t.name for t in transports))) if _parks_apart(roles.loading, yb, transports)
         else ())

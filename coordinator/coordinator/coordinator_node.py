@@ -37,6 +37,7 @@ from sim_interfaces.msg import PipelineState
 
 from cell_layout.joint_speeds import speed_limits
 from cell_layout.layout import CellLayout, LayoutError
+from cell_layout.link_clearance import link_clearance
 from cell_layout.scan_map import localizers
 from cell_layout.world_layout import layout_from_world, with_extra_materials
 from controllers.lockstep import CommandCounter
@@ -120,6 +121,7 @@ def _layout(world: WorldConfig, p: Dict) -> CellLayout:
         layout = dataclasses.replace(layout, belt_speed=float(p['belt_speed']))
     if layout.belt_speed <= 0.0:
         raise CoordinatorError('the belt speed must be > 0 to bring materials')
+    link_clearance(layout)      # (its collision model built now, not on the first swing)
     return layout
 
 
