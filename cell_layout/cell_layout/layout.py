@@ -25,6 +25,9 @@ from world_description.world_schema import LIFT_SWING_CLEARANCE_M, LINK_CLEARANC
 # the slots the loader fills, in base_link. The youBot's arm cannot turn straight back (joint 1
 # stops at 169 deg), so the slots sit in two rows along the plate's sides.
 PLATE_TOP_IN_BASE_M = 0.046 + 0.01
+# The youBot's arm upright (the datasheet's candle pose) while the base drives home, and while
+# it waits there to be loaded.
+YOUBOT_CARRY_Q = np.zeros(5)
 # The plate's slots (base_link x, y): two rows, one each side, from the near end towards the back
 # (the youBot's arm reaches no further), a material's size and PLATE_GAP_M apart but never
 # nearer than PLATE_PITCH_MIN_M: four a row up to 50 mm (the paper's), three above.

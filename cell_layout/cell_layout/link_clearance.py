@@ -20,7 +20,8 @@ import numpy as np
 import pinocchio as pin
 import pybullet_data
 
-from cell_layout.layout import CellLayout
+from cell_layout.layout import YOUBOT_CARRY_Q, CellLayout
+from cell_layout.reach import loader_solution
 from controllers.arm_registry import ArmSpec
 from world_description.world_schema import END_STOP_HEIGHT_M, END_STOP_THICKNESS_M
 
@@ -28,6 +29,13 @@ from world_description.world_schema import END_STOP_HEIGHT_M, END_STOP_THICKNESS
 # and 80 % of its width (sim_bridge/cell.py) [m].
 BELT_THICKNESS_M = 0.04
 STAND_SHARE = (0.95, 0.8)
+# Where a place's way strikes something, the loader's other IK branches tried: from its home,
+# then from this many postures drawn within its joint limits (the same every run: drawn by a
+# generator of BRANCH_SEED).
+BRANCH_TRIES = 24
+BRANCH_SEED = 64
+# A way through postures is checked at this many samples along each stretch between two.
+STRETCH_SAMPLES = 6
 # A box: its name, centre (world), half sizes, yaw.
 Box = Tuple[str, Tuple[float, float, float], Tuple[float, float, float], float]
 
@@ -52,18 +60,56 @@ def conveyor_boxes(lay: CellLayout) -> List[Box]:
     return out
 
 
+# A fixed thing as coal checks it: its name, its placement in the world, its shape.
+Solid = Tuple[str, pin.SE3, coal.CollisionGeometry]
+
+
+def box_solids(boxes: Sequence[Box]) -> List[Solid]:
+    """Boxes (name, centre, half sizes, yaw) as solids."""
+    return [(name, pin.SE3(pin.utils.rpyToMatrix(0.0, 0.0, yaw), np.asarray(centre, float)),
+             coal.Box(*(2.0 * np.asarray(half, float)))) for name, centre, half, yaw in boxes]
+
+
+def _collision_model(urdf: str) -> Tuple[pin.Model, pin.GeometryModel]:
+    model = pin.buildModelFromUrdf(urdf)
+    return model, pin.buildGeomFromUrdf(model, urdf, pin.GeometryType.COLLISION,
+                                        package_dirs=[pybullet_data.getDataPath(),
+                                                      str(Path(urdf).parent)])
+
+
+def _link(geometry_name: str) -> str:
+    """A URDF link's name from its collision geometry's (pinocchio appends _<k>)."""
+    return geometry_name.rsplit('_', 1)[0]
+
+
+def transport_solids(lay: CellLayout) -> List[Solid]:
+    """The first transport robot's links where it is loaded: at the loading pose on its wheels,
+    its arm in the carry posture it waits in (an iiwa's forearm struck a youBot's upright arm
+    lowering a material onto its plate)."""
+    arm = lay.transport.arm
+    if arm is None:
+        return []
+    model, geometry = _collision_model(str(arm.spec.urdf))
+    q = pin.neutral(model)
+    for name, value in zip(arm.spec.joints, YOUBOT_CARRY_Q):
+        if model.existJointName(name):
+            q[model.joints[model.getJointId(name)].idx_q] = value
+    data, geometry_data = model.createData(), geometry.createData()
+    pin.updateGeometryPlacements(model, data, geometry, geometry_data, q)
+    x, y, yaw = lay.youbot_home
+    base = pin.SE3(pin.utils.rpyToMatrix(0.0, 0.0, yaw), np.array([x, y, lay.youbot_base_z]))
+    return [(f'{lay.transport.name}\'s {_link(g.name)}', base * geometry_data.oMg[k],
+             g.geometry) for k, g in enumerate(geometry.geometryObjects)]
+
+
 class LinkClearance:
-    """The arm's moving links (their URDF collision geometry) against ``boxes`` (world), its
+    """The arm's moving links (their URDF collision geometry) against ``solids`` (world), its
     base where ``spec.base_pose`` stands; ``clearance``: nearer than this counts [m]."""
 
-    def __init__(self, spec: ArmSpec, boxes: Sequence[Box], clearance: float) -> None:
+    def __init__(self, spec: ArmSpec, solids: Sequence[Solid], clearance: float) -> None:
         if spec.base_pose is None:
             raise ValueError('a link check needs the arm\'s base pose in the world')
-        urdf = str(spec.urdf)
-        full = pin.buildModelFromUrdf(urdf)
-        geometry = pin.buildGeomFromUrdf(full, urdf, pin.GeometryType.COLLISION,
-                                         package_dirs=[pybullet_data.getDataPath(),
-                                                       str(Path(urdf).parent)])
+        full, geometry = _collision_model(str(spec.urdf))
         others = [full.getJointId(n) for n in full.names[1:] if n not in spec.joints]
         if others:
             self.model, self.geometry = pin.buildReducedModel(full, geometry, others,
@@ -74,11 +120,9 @@ class LinkClearance:
         base = pin.SE3(pin.utils.rpyToMatrix(0.0, 0.0, yaw), np.array([x, y, z]))
         links = [k for k, g in enumerate(self.geometry.geometryObjects) if g.parentJoint > 0]
         self.names: Dict[int, str] = {k: self.geometry.geometryObjects[k].name for k in links}
-        for name, centre, half, box_yaw in boxes:
-            where = base.actInv(pin.SE3(pin.utils.rpyToMatrix(0.0, 0.0, box_yaw),
-                                        np.asarray(centre, float)))
+        for name, where, shape in solids:
             k = self.geometry.addGeometryObject(pin.GeometryObject(
-                name, 0, 0, where, coal.Box(*(2.0 * np.asarray(half, float)))))
+                name, 0, 0, base.actInv(where), shape))
             self.names[k] = name
             for link in links:
                 self.geometry.addCollisionPair(pin.CollisionPair(link, k))
@@ -88,8 +132,8 @@ class LinkClearance:
         self._index = np.array([self.model.getJointId(n) - 1 for n in spec.joints])
 
     def strikes(self, postures: Sequence[np.ndarray]) -> str:
-        """The first link within the clearance of a box along ``postures`` (the arm's joints,
-        in the spec's order), as 'link on box'; '' if none."""
+        """The first link within the clearance of a solid along ``postures`` (the arm's
+        joints, in the spec's order), as 'link on solid'; '' if none."""
         q = np.empty(self.model.nq)
         for posture in postures:
             q[self._index] = posture
@@ -98,7 +142,7 @@ class LinkClearance:
                 for pair, result in zip(self.geometry.collisionPairs,
                                         self.geometry_data.collisionResults):
                     if result.isCollision():
-                        return (f'{self.names[pair.first].rsplit("_", 1)[0]} on the '
+                        return (f'{_link(self.names[pair.first])} on the '
                                 f'{self.names[pair.second]}')
         return ''
 
@@ -113,12 +157,75 @@ def link_clearance(lay: CellLayout) -> Optional[LinkClearance]:
         return None
     spec = lay.loader.model.spec
     boxes = tuple(conveyor_boxes(lay)) + tuple(lay.fixed)
-    key = (spec, boxes, lay.link_clearance)
+    key = (spec, boxes, lay.link_clearance, lay.transport.arm, lay.youbot_home,
+           lay.youbot_base_z)
     if key not in _CHECKS:
         if len(_CHECKS) >= 64:
             _CHECKS.clear()
-        check: Optional[LinkClearance] = LinkClearance(spec, boxes, lay.link_clearance)
+        check: Optional[LinkClearance] = LinkClearance(
+            spec, box_solids(boxes) + transport_solids(lay), lay.link_clearance)
         if check is not None and not check.names:
             check = None
         _CHECKS[key] = check
     return _CHECKS[key]
+
+
+def way_postures(qs: Sequence[np.ndarray]) -> List[np.ndarray]:
+    """Postures along the joints' way through ``qs``, each stretch straight in joint space
+    (STRETCH_SAMPLES a stretch)."""
+    out = [np.asarray(qs[0], float)]
+    for a, b in zip(qs, qs[1:]):
+        a, b = np.asarray(a, float), np.asarray(b, float)
+        out += [a + (b - a) * s for s in np.linspace(0.0, 1.0, STRETCH_SAMPLES + 1)[1:]]
+    return out
+
+
+def way_strikes(lay: CellLayout, qs: Sequence[np.ndarray]) -> str:
+    """What a link strikes along the loader's way through ``qs`` ('' if nothing, or the cell
+    asks no check)."""
+    links = link_clearance(lay)
+    return links.strikes(way_postures(qs)) if links is not None else ''
+
+
+def _branch_starts(lay: CellLayout, seed: Optional[np.ndarray]) -> List[Optional[np.ndarray]]:
+    kin = lay.loader.model.kinematics
+    home = lay.loader.model.spec.preferred
+    lower, upper = np.asarray(kin.lower, float), np.asarray(kin.upper, float)
+    rng = np.random.default_rng(BRANCH_SEED)
+    return [seed, None if home is None else np.array(home, float),
+            *(rng.uniform(lower, upper) for _ in range(BRANCH_TRIES))]
+
+
+def clear_branch(lay: CellLayout, points: Sequence[np.ndarray],
+                 seed: Optional[np.ndarray] = None) -> Tuple[Optional[List[np.ndarray]], str]:
+    """The loader's joints with its tool pointing down at each of ``points`` (world), each
+    solved from the one before, on an IK branch whose links keep clear along the way through
+    them (way_strikes): the branch ``seed`` leads to first, then its home's, then those of
+    BRANCH_TRIES postures within its joint limits. (None, why) where it reaches none of them
+    so, why naming what the first branch's links strike ('' where it does not reach)."""
+    first = ''
+    for start in _branch_starts(lay, seed):
+        qs: List[np.ndarray] = []
+        for point in points:
+            q = loader_solution(lay, point, qs[-1] if qs else start)
+            if q is None:
+                break
+            qs.append(q)
+        if len(qs) < len(points):
+            continue
+        hit = way_strikes(lay, qs)
+        if not hit:
+            return qs, ''
+        first = first or hit
+    return None, first
+
+
+def other_branch(lay: CellLayout, points: Sequence[np.ndarray],
+                 qs: Optional[Sequence[np.ndarray]]) -> Optional[np.ndarray]:
+    """Where the loader's way through ``qs`` (its joints at ``points``, and maybe at more
+    after them) strikes something: its joints at the first point on a branch whose way keeps
+    clear (clear_branch); None where the way is clear, or no branch is, or ``qs`` is None."""
+    if qs is None or not way_strikes(lay, qs[:len(points)]):
+        return None
+    clear, _ = clear_branch(lay, points, np.asarray(qs[0], float))
+    return None if clear is None else clear[0]

@@ -7,11 +7,12 @@ line naming the place; the destinations it sets materials on are checked slot by
 from __future__ import annotations
 
 from dataclasses import replace
-from typing import Dict, List, Optional, Sequence, Set, Tuple
+from typing import Dict, List, Optional, Sequence, Tuple
 
 import numpy as np
 
 from cell_layout.layout import CellLayout, LayoutError, slot_in_world
+from cell_layout.link_clearance import clear_branch
 from cell_layout.pick_geometry import CELL_TIMING, place_points
 from cell_layout.reach import loader_descends, loader_misses, loader_reaches, loader_solution
 
@@ -46,7 +47,7 @@ def pick_points(layout: CellLayout, x: float) -> List[np.ndarray]:
 # Each loader's pick window and plate check, by what they depend on: a cell's layout is read
 # by every node and tool, many times in a study (the scan takes a quarter of a second).
 _WINDOWS: Dict[Tuple[object, ...], float] = {}
-_PLATES: Set[Tuple[object, ...]] = set()
+_PLATES: Dict[Tuple[object, ...], Tuple[Tuple[float, float], ...]] = {}
 _MEMO_MAX = 256
 
 
@@ -114,55 +115,87 @@ def _meets(layout: CellLayout, x: float, seed: Optional[np.ndarray]
     return '', q
 
 
-def check_plate(layout: CellLayout) -> None:
-    """check_plate_of, remembered for the loader, the loading pose and the plate's slots (a
-    refusal is not)."""
+def clear_plate_slots(layout: CellLayout) -> Tuple[Tuple[float, float], ...]:
+    """clear_plate_slots_of, remembered for the loader, the loading pose, the plate's slots and
+    what the links are checked against (a refusal is not)."""
     carried = max((r.size for r in layout.rules.values() if r.route == 'carry'), default=0.0)
     key = (layout.loader, layout.loader_base, layout.youbot_home, layout.youbot_base_z,
-           layout.plate_slots, carried, layout.belt_top)
+           layout.plate_slots, carried, layout.belt_top, layout.transport.arm, layout.fixed,
+           layout.link_clearance, layout.belt_y, layout.belt_end_x, layout.belt_start_x,
+           layout.belt_width, layout.end_stop)
     if key not in _PLATES:
-        check_plate_of(layout)
         if len(_PLATES) >= _MEMO_MAX:
             _PLATES.clear()
-        _PLATES.add(key)
+        _PLATES[key] = clear_plate_slots_of(layout)
+    return _PLATES[key]
 
 
-def check_plate_of(layout: CellLayout) -> None:
-    """A LayoutError unless the loader reaches each of the plate's slots it fills with a
-    carried material, at the loading pose (the first youBot's home): where it lets go, above
-    that, and the transfer point it swings in and out through (pick_geometry.place_points)."""
+def clear_plate_slots_of(layout: CellLayout) -> Tuple[Tuple[float, float], ...]:
+    """The plate's slots the loader fills with a carried material at the loading pose (the
+    first youBot's home), its links keeping clear on the way down on some branch of its IK
+    (link_clearance.clear_branch; the others are left out: an xArm 6's upper arm struck the
+    conveyor lowering onto the plate's far corner). A LayoutError unless it reaches each slot
+    (where it lets go, above that, and the transfer point it swings in and out through:
+    pick_geometry.place_points), or where its links strike something over every slot."""
     carried = [r.size for r in layout.rules.values() if r.route == 'carry']
     if not carried:
-        return
-    size = max(carried)
+        return layout.plate_slots
+    size, clear, struck = max(carried), [], ''
+    home = layout.loader.model.spec.preferred
     for k, slot in enumerate(layout.plate_slots):
-        missed = loader_misses(layout, place_points(
-            slot_in_world(layout.youbot_home, slot, layout.youbot_base_z, size), size,
-            CELL_TIMING, 0.0, layout.belt_top))
+        points = place_points(slot_in_world(layout.youbot_home, slot, layout.youbot_base_z, size),
+                              size, CELL_TIMING, 0.0, layout.belt_top)
+        missed = loader_misses(layout, points)
         if missed:
             raise LayoutError(f'the loader {layout.loader.name} does not reach the youBot\'s '
                               f'plate at the loading pose: slot {k} at '
                               f'{np.round(missed[0], 3).tolist()} with its tool pointing down')
+        qs, hit = clear_branch(layout, points[::-1], None if home is None else np.array(home))
+        if qs is None:
+            struck = struck or f'slot {k}: its {hit}'
+        else:
+            clear.append(slot)
+    if not clear:
+        raise LayoutError(f'the loader {layout.loader.name} sets nothing onto the youBot\'s '
+                          f'plate at the loading pose with its links clear on any IK branch '
+                          f'({struck})')
+    return tuple(clear)
 
 
 def with_pick_window(layout: CellLayout) -> CellLayout:
-    """The layout with its pick window and the plate checked against the loader's reach."""
-    check_plate(layout)
-    return replace(layout, pick_from=pick_window(layout))
+    """The layout with its pick window, and the plate's slots the loader fills (checked
+    against the loader's reach and its links)."""
+    return replace(layout, plate_slots=clear_plate_slots(layout), pick_from=pick_window(layout))
 
 
 # The straight descent onto a place is checked from this far over it [m].
 PLACE_RISE_M = 0.15
 
 
-def loader_place_slots(layout: CellLayout, slots: Sequence[np.ndarray], size: float
+def loader_place_slots(layout: CellLayout, name: str, slots: Sequence[np.ndarray], size: float
                        ) -> Tuple[np.ndarray, ...]:
-    """Those of a destination's slots (surface points) the loader serves with a material of
-    edge ``size``: it reaches over it (and the transfer point above it) with its tool down, and
+    """Those of destination ``name``'s slots (surface points) the loader serves with a material
+    of edge ``size``: it reaches over it (and the transfer point above it) with its tool down,
     goes straight down onto it from PLACE_RISE_M without its joints jumping (a slot where a
-    7-joint arm changes its posture on the way down is left out)."""
-    lift = size + 0.01
-    return tuple(p for p in slots if loader_reaches(
-        layout, [p + np.array([0.0, 0.0, lift]), p + np.array([0.0, 0.0, lift + 0.07]),
-                 place_points(p, size, CELL_TIMING, 0.0, layout.belt_top)[2]])
-        and loader_descends(layout, p + np.array([0.0, 0.0, lift]), PLACE_RISE_M))
+    7-joint arm changes its posture on the way down is left out), and its links keep clear on
+    the way down on some branch of its IK (link_clearance.clear_branch). A LayoutError where it
+    serves none, saying why."""
+    lift, served, struck = size + 0.01, [], ''
+    home = layout.loader.model.spec.preferred
+    for p in slots:
+        points = place_points(p, size, CELL_TIMING, 0.0, layout.belt_top)
+        if not (loader_reaches(layout, [p + np.array([0.0, 0.0, lift]),
+                                        p + np.array([0.0, 0.0, lift + 0.07]), points[2]])
+                and loader_descends(layout, p + np.array([0.0, 0.0, lift]), PLACE_RISE_M)):
+            continue
+        qs, hit = clear_branch(layout, points[::-1], None if home is None else np.array(home))
+        if qs is None:
+            struck = struck or hit
+        else:
+            served.append(p)
+    if not served:
+        raise LayoutError(
+            f'destination {name} is out of the reach of the loader {layout.loader.name} ('
+            + (f'its {struck} over each slot it reaches, on every IK branch)' if struck else
+               f'its base at {layout.loader_base[:2]}, the tool pointing down)'))
+    return tuple(served)

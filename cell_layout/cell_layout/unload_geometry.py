@@ -19,8 +19,6 @@ from controllers.youbot_kinematics import YoubotKinematics
 
 # A motion's samples: (absolute time [s], joint positions, velocities, accelerations).
 Points = List[Tuple[float, np.ndarray, np.ndarray, np.ndarray]]
-# The youBot's arm upright (the datasheet's candle pose) while the base drives home.
-YOUBOT_CARRY_Q = np.zeros(5)
 # The youBot's fingertips reach 10.4 mm beyond gripper_tcp: it grasps a material's top face with
 # the TCP this far above it, so that the fingertips do not push the material away.
 YOUBOT_GRASP_STANDOFF_M = GRASP_STANDOFF_M

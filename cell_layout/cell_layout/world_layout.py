@@ -172,6 +172,7 @@ def layout_from_world(world: Any) -> CellLayout:
         parks=tuple((r.pose.x, r.pose.y, r.pose.yaw) for r in map(world.robot, (
             t.name for t in transports))) if _parks_apart(roles.loading, yb, transports)
         else ())
+    check_loader_base(layout, world.obstacles, world.conveyor)     # (before its links' checks)
     regions: Dict[str, Region] = {}
     served: Dict[str, Set[str]] = {}
     for dest in sorted({r.destination for r in rules.values()}):
@@ -182,7 +183,6 @@ def layout_from_world(world: Any) -> CellLayout:
         replace(st, serves=st.serves | frozenset(served.get(st.name, ()))) for st in stands))
     _check_capacity(layout)
     check_fleet(layout, world.obstacles, roles.loading is not None, world.conveyor)
-    check_loader_base(layout, world.obstacles, world.conveyor)
     return with_pick_window(layout)
 
 
@@ -453,13 +453,8 @@ def _region(layout: CellLayout, obstacle: Any, name: str) -> Tuple[Region, str]:
         return Region(name, (ox, oy), (hx, hy), top, drops, drop=True), ''
 
     if routes == {'place'}:
-        slots = loader_place_slots(layout, slot_grid((ox, oy), (hx, hy), top, size, (ox, oy)),
-                                   size)
-        if not slots:
-            raise LayoutError(f'destination {name} is out of the reach of the loader '
-                              f'{layout.loader.name} (its base at {layout.loader_base[:2]}, '
-                              'the tool pointing down)')
-        return Region(name, (ox, oy), (hx, hy), top, slots), ''
+        return Region(name, (ox, oy), (hx, hy), top, loader_place_slots(
+            layout, name, slot_grid((ox, oy), (hx, hy), top, size, (ox, oy)), size)), ''
     stand = min((st for st in layout.stands if st.side == 0),
                 key=lambda st: math.hypot(st.pose[0] - ox, st.pose[1] - oy))
     slots = slot_grid((ox, oy), (hx, hy), top, size, stand.pose[:2])

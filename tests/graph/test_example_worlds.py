@@ -5,6 +5,7 @@ import json
 import re
 import shutil
 import subprocess
+import time
 from collections import Counter
 from pathlib import Path
 
@@ -26,19 +27,59 @@ def test_there_are_example_cells():
             'cell_two_youbots.yaml', 'cell_laser_youbot.yaml', 'cell_panda.yaml'} <= set(WORLDS)
 
 
-@pytest.mark.parametrize('name', WORLDS)
-def test_an_example_cell_completes_with_every_material_at_its_destination(name, tmp_path):
-    world = f'package://world_description/worlds/{name}'
-    out = tmp_path / 'campaign'
+# The cells' trials run this many at a time, each campaign on DDS domains of its own from
+# DOMAIN_BASE on (lock-step trials: a trial's result does not depend on the machine's load).
+AT_ONCE = 2
+DOMAIN_BASE = 200
+
+
+def _start(name, out, log, lane):
+    """A one-trial campaign of example cell ``name`` into ``out``, printing into ``log``."""
     speed = [f'{BELT_SPEEDS[name]}'] * 2 if name in BELT_SPEEDS else []
-    run = subprocess.run([shutil.which('run_trials'), '--world', world, '--trials', '1',
-                          '--seed0', '7', '--out', str(out),
-                          *(['--belt-speed', *speed] if speed else [])],
-                         capture_output=True, text=True)
-    assert 'Traceback' not in run.stdout + run.stderr
+    with open(log, 'w') as sink:
+        return subprocess.Popen(
+            [shutil.which('run_trials'), '--world', f'package://world_description/worlds/{name}',
+             '--trials', '1', '--seed0', '7', '--out', str(out), '--bar', 'off',
+             '--domain-base', str(DOMAIN_BASE + 10 * lane),
+             *(['--belt-speed', *speed] if speed else [])],
+            stdout=sink, stderr=subprocess.STDOUT, text=True)
+
+
+@pytest.fixture(scope='module')
+def campaigns(tmp_path_factory):
+    """Each example cell's one-trial campaign (run_trials, as a user runs it), AT_ONCE at a
+    time: name -> (its output directory, its exit code, what it printed)."""
+    root = tmp_path_factory.mktemp('examples')
+    waiting, running, done = list(WORLDS), {}, {}
+    try:
+        while waiting or running:
+            for lane in set(range(AT_ONCE)) - {v[1] for v in running.values()}:
+                if waiting:
+                    name = waiting.pop(0)
+                    (root / name).mkdir()
+                    log = root / name / 'run_trials.log'
+                    running[name] = (_start(name, root / name / 'campaign', log, lane), lane)
+            for name, (proc, _) in list(running.items()):
+                if proc.poll() is not None:
+                    done[name] = (root / name / 'campaign', proc.returncode,
+                                  (root / name / 'run_trials.log').read_text())
+                    del running[name]
+            time.sleep(0.5)
+    finally:
+        for proc, _ in running.values():
+            proc.kill()
+            proc.wait()
+    return done
+
+
+@pytest.mark.parametrize('name', WORLDS)
+def test_an_example_cell_completes_with_every_material_at_its_destination(name, campaigns):
+    world = f'package://world_description/worlds/{name}'
+    out, code, printed = campaigns[name]
+    assert 'Traceback' not in printed
     result = json.loads((out / 'trial_000' / 'result.json').read_text())
     assert result['status'] == 'completed', (result['message'], result['not_at_destination'])
-    assert run.returncode == 0, run.stdout[-2000:] + run.stderr[-2000:]
+    assert code == 0, printed[-4000:]
     loaded = load_world(resolve_resource(world))
     materials = loaded.materials
     # Every material of every class, each where its class's rule puts it.

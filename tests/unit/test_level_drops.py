@@ -12,9 +12,9 @@ from test_cell_rules import world
 from test_material_classes import PAPER_CLASSES as PAPER
 from test_pipeline import _YoubotIK
 
-from cell_layout.layout import world_to_base
+from cell_layout.layout import YOUBOT_CARRY_Q, world_to_base
 from cell_layout.reach import _youbot_solutions, youbot_holds
-from cell_layout.unload_geometry import YOUBOT_CARRY_Q, grip_points
+from cell_layout.unload_geometry import grip_points
 from cell_layout.world_layout import layout_from_world
 from coordinator.pipeline import Material, Pipeline, Settings
 from coordinator.pipeline.unload_planner import SLIDE_MIN_M

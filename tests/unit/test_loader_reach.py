@@ -45,8 +45,13 @@ def _moved(name, x, y):
 
 @pytest.mark.parametrize('x, y, fragment', [
     # Too far from the belt: refused at its end, with the point it does not reach.
-    (0.45, 0.0, r"the loader panda does not meet a material at the belt's end \(x = 0.675 m\): "
-                r"it does not reach \[0.675, 0.72, 0.45\] with its tool pointing down"),
+    (0.45, 0.1, r"the loader panda does not meet a material at the belt's end \(x = 0.675 m\): "
+                r"it does not reach \[0.675, 0.75, 0.52\] with its tool pointing down"),
+    # Its base column beside the target's stand: on every branch of its IK its first link is
+    # inside the stand (the link check, with the arm's collision model).
+    (0.45, 0.0, r'destination ground_target is out of the reach of the loader panda \(its '
+                r'panda_link1 on the purple_stand over each slot it reaches, on every IK '
+                r'branch\)'),
     # Far from everything: the first place found out of its reach.
     (-0.9, 0.2, r'destination ground_target is out of the reach of the loader panda \(its base '
                 r'at \(-0.9, 0.2\)'),

@@ -11,8 +11,8 @@ from test_cell_rules import world
 from test_material_classes import PAPER_CLASSES as PAPER
 from test_pipeline import _YoubotIK, observation
 
+from cell_layout.layout import YOUBOT_CARRY_Q
 from cell_layout.reach import youbot_holds
-from cell_layout.unload_geometry import YOUBOT_CARRY_Q
 from cell_layout.world_layout import (
     STAND_SLIDE_MAX_M,
     YOUBOT_HALF_LENGTH_M,

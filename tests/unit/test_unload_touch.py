@@ -13,8 +13,9 @@ from test_cell_rules import world
 from test_material_classes import PAPER_CLASSES as PAPER
 from test_pipeline import _YoubotIK, observation
 
+from cell_layout.layout import YOUBOT_CARRY_Q
 from cell_layout.reach import youbot_tool_quaternion
-from cell_layout.unload_geometry import YOUBOT_CARRY_Q, YOUBOT_FK
+from cell_layout.unload_geometry import YOUBOT_FK
 from cell_layout.world_layout import layout_from_world
 from coordinator.pipeline import Material, Pipeline, Settings
 from coordinator.pipeline.model import ArmReading, Observation, TransportState

@@ -15,12 +15,9 @@ Every state has a deadline; a missed grasp is retried, then reported; a material
 the belt end is reported; a port that stops answering (``NodeTimeout``) ends the run. The run
 always ends with a ``RunResult``.
 """
+from cell_layout.layout import YOUBOT_CARRY_Q
 from cell_layout.reach import youbot_tool_quaternion
-from cell_layout.unload_geometry import (
-    YOUBOT_CARRY_Q,
-    YOUBOT_GRASP_STANDOFF_M,
-    clear_of_the_plate,
-)
+from cell_layout.unload_geometry import YOUBOT_GRASP_STANDOFF_M, clear_of_the_plate
 from coordinator.pipeline.core import Pipeline
 from coordinator.pipeline.loader import Loader
 from coordinator.pipeline.model import (

@@ -13,6 +13,7 @@ import numpy as np
 
 from cell_layout.layout import CellLayout, slot_in_world
 from cell_layout.lift_swing import PlaceWay, rise_first
+from cell_layout.link_clearance import other_branch
 from cell_layout.pick_geometry import (
     EDGE_CLEARANCE_M,
     continuous,
@@ -391,7 +392,9 @@ class PickPlanner:
         edge = (transfer if lift is None else
                 edge_point(lay, lift, above, 2 * size + EDGE_CLEARANCE_M, arc=True) if onto_plate
                 else edge_point(lay, lift, above, size + EDGE_CLEARANCE_M))
-        qs = self.arm.solve_path([transfer, above, release, edge], seed)
+        qs = self.arm.solve_path(points := [transfer, above, release, edge], seed)
+        other = other_branch(lay, points[:3], qs)           # (where its links strike something)
+        qs = (None if other is None else self.arm.solve_path(points, other)) or qs
         if qs is None:
             return 'no IK solution for the place path'
         q_transfer, q_above, q_release, q_edge = qs

@@ -7,10 +7,9 @@ from typing import Callable, List, Optional, Sequence
 import numpy as np
 
 from cell_layout.fleet_routes import way_between, way_off, way_to_park
-from cell_layout.layout import POOL, CellLayout
+from cell_layout.layout import POOL, YOUBOT_CARRY_Q, CellLayout
 from cell_layout.unload_geometry import (
     DROP_REACH_TOLERANCE_M,
-    YOUBOT_CARRY_Q,
     UnloadPath,
     clear_of_the_plate,
     short_of,
