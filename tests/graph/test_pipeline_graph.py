@@ -4,6 +4,7 @@ import json
 import math
 import os
 import random
+from concurrent.futures import ThreadPoolExecutor
 
 import pytest
 from rcl_interfaces.srv import GetParameters
@@ -27,15 +28,15 @@ def cell_layout() -> CellLayout:
 
 @pytest.fixture(scope='module')
 def two_runs(tmp_path_factory):
-    """The same seeded scenario twice, one after the other, on two fresh DDS domains, with
-    every core kept busy by another process: lock-step must not depend on the machine's load
-    (nor on the order in which DDS delivers, see test_lockstep_graph.py)."""
+    """The same seeded scenario twice, both at once, on two fresh DDS domains, with every core
+    kept busy by another process too: lock-step must not depend on the machine's load (nor on
+    the order in which DDS delivers, see test_lockstep_graph.py)."""
     out = tmp_path_factory.mktemp('pipeline')
     base = int(os.environ.get('ROS_DOMAIN_ID', '0'))
     domains = random.Random(base).sample([d for d in range(100, 160) if d != base], 2)
-    with cpu_load():
-        results = [run_trial(k, SEED, BELT, domains[k], out, wall_timeout=900.0)
-                   for k in range(2)]
+    with cpu_load(), ThreadPoolExecutor(2) as both:
+        results = list(both.map(lambda k: run_trial(k, SEED, BELT, domains[k], out,
+                                                     wall_timeout=900.0), range(2)))
     # Each trial's record as its result.json holds it, written once, by the runner: what
     # run_trial returned, with the run's metadata in a block of its own (the coordinator's
     # hand-over file gone).
