@@ -214,7 +214,7 @@ class UrdfArm(FrameLookup):
                     best = min(best, (error, f'out of reach within the joint limits (nearest: '
                                              f'{error:.3g} off)'))
                     continue
-                positions = self._nearest_turn(q[self._index], start, margin)
+                positions = q[self._index]
                 if self.above_floor(positions):
                     return self._answer(positions, target)
                 best = min(best, (0.0, f'every solution found puts a joint below the floor '
@@ -309,20 +309,6 @@ class UrdfArm(FrameLookup):
             free = ~blocked if free is None else free & ~blocked
             j = jt * free
         return step, null
-
-    def _nearest_turn(self, positions: np.ndarray, seed: np.ndarray,
-                      margin: np.ndarray) -> np.ndarray:
-        """``positions`` with each joint whose range spans more than a turn turned by whole
-        turns to the angle nearest ``seed``'s that lies within its limits (less ``margin``):
-        the same pose. (An xArm 6's first joint, +-2 pi, was solved 4.7 rad round the long
-        way from a seed 1.6 rad short of the same pose, and its upper arm swung through the
-        conveyor.)"""
-        out = positions.copy()
-        for j in np.flatnonzero(self.upper - self.lower > 2 * math.pi):
-            turned = out[j] + 2 * math.pi * round((seed[j] - out[j]) / (2 * math.pi))
-            if self.lower[j] + margin[j] <= turned <= self.upper[j] - margin[j]:
-                out[j] = turned
-        return out
 
     def _answer(self, positions: np.ndarray, target: np.ndarray) -> ArmSolution:
         reached = self.fk(positions)
