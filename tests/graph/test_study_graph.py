@@ -27,15 +27,16 @@ def _search_file(tmp_path: Path, world: Path) -> Path:
     """Minimise the completion time over the belt speed and the camera's pixel noise, with
     every material handled at a 90 % lower bound... over two trials a setting that bound is at
     most 0.51: no setting can meet it. So each setting is decided (failed) after its first two
-    trials, and the sampler's proposals run until the budget is spent: two settings, each two
-    trials at once, one on each node."""
+    trials, and the sampler's proposals run until the budget is spent: three settings, each
+    two trials at once, one on each node. (With two settings, the stop could fall where only
+    one trial was left to run after it, on one node: the resumed run's spread was not shown.)"""
     path = tmp_path / 'search.yaml'
     path.write_text(yaml.safe_dump({
         'question': 'the quickest setting', 'world': str(world), 'seed': 5,
         'factors': {'belt_speed': {'low': 0.10, 'high': 0.20, 'step': 0.01},
                     'perturbations.camera.pixel_noise': {'low': 0, 'high': 4}},
         'search': {'minimise': 'completion_time', 'trials_per_setting': 2,
-                   'first_trials': 2, 'budget': 4, 'explore': 4,
+                   'first_trials': 2, 'budget': 6, 'explore': 4,
                    'subject_to': {'response': 'handling', 'at_least': 0.9}}}))
     return path
 
@@ -90,13 +91,13 @@ def test_a_study_on_two_ray_nodes_stopped_half_way_resumes(tmp_path, small_world
         cluster.shutdown()
     assert resumed.returncode == 0, resumed.stdout[-3000:] + resumed.stderr[-3000:]
     rows = _rows(out)
-    assert len(rows) == 4 and {r['status'] for r in rows} <= {'completed', 'incomplete'}
+    assert len(rows) == 6 and {r['status'] for r in rows} <= {'completed', 'incomplete'}
     report = (out / 'study.md').read_text()
     assert f'{len(kept)} taken from this directory' in report, report[:600]
-    assert 'no setting of the 2 tried meets the constraint' in report
+    assert 'no setting of the 3 tried meets the constraint' in report
     # Each setting's two trials ran side by side, one on each node.
     nodes = {json.loads((out / f'trial_{k:03d}' / 'result.json').read_text())['run']['ray_node']
-             for k in range(4) if k not in kept}
+             for k in range(6) if k not in kept}
     assert len(nodes) == 2
     # The trials of the stop were taken, not run again: their results are as they were.
     for row in rows:
